@@ -1,0 +1,115 @@
+"""The `mech2spice` command line.  Command names and JSON fields are a contract: keep them stable."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+from .errors import Mech2SpiceError
+
+
+def _jsonable(o):
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items() if not str(k).startswith("_") and k != "run"}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _jsonable(o.tolist())
+    if isinstance(o, (np.floating, float)):
+        return None if not np.isfinite(o) else float(o)
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.bool_,)):
+        return bool(o)
+    return o
+
+
+def _print_json(data) -> None:
+    print(json.dumps(_jsonable(data), indent=2))
+
+
+def _log(args):
+    quiet = getattr(args, "json", False)
+    t0 = time.time()
+    return (lambda msg: None) if quiet else (lambda msg: print(f"[{time.time() - t0:6.1f}s] {msg}",
+                                                               file=sys.stderr, flush=True))
+
+
+# --- gate ----------------------------------------------------------------------
+def cmd_gate(args) -> int:
+    from . import characterise
+    from .params import load_params
+    p = load_params(args.params)
+    out = characterise.characterise(p, quick=args.quick, log=_log(args))
+    if args.report:
+        from .report_gate import write_gate_report
+        write_gate_report(out, args.report, log=_log(args))
+    out["pass"] = bool(out.get("switches")) and out.get("min_margin", -1) > 0 and all(
+        r["pass"] for r in out.get("requirements", {}).values())
+    if args.json:
+        _print_json(out)
+    else:
+        _print_gate(out)
+    return 0
+
+
+def _print_gate(out: dict) -> None:
+    print(f"parameters: {out['params']['name']}   omega = {out['params']['omega']:.6g} rad/s")
+    if out.get("diverged"):
+        print(f"RK4 diverged: {out['diverged']}")
+        return
+    print("truth table (RK4, amplitudes in u_R):")
+    for r in out["truth_table"]:
+        logic = "invalid" if r["logic"] is None else r["logic"]
+        print(f"  {r['inputs'][0]}{r['inputs'][1]} -> {r['output_amplitude']:.4f}  logic {logic}  "
+              f"(NOR = {r['expected']}, margin {r['margin']:+.3f})")
+    print(f"gate switches: {'yes' if out['switches'] else 'NO'}")
+    print(f"RK4 vs steady state: {out['rk4_vs_steady']:.2e} u_R; "
+          f"halving the RK4 step changes outputs by {out['step_halving_change']:.1e} u_R")
+    print(f"min margin over valid inputs (steady state): {out['min_margin']:+.4f} of a band "
+          f"at inputs {out['min_margin_detail'].get('at_inputs')}")
+    if "omega_scan" in out:
+        s = out["omega_scan"]
+        print(f"scan over omega: largest channel amplitude {s['max_channel_amplitude']:.3g} u_R, "
+              f"largest 00-vs-11 contrast {s['max_switch_contrast']:.2e} u_R (at omega = {s['at_omega']:.3g})")
+    if "delay_periods" in out:
+        print(f"delay: {out['delay_periods']:.0f} periods per gate (mean), {out['delay_max_periods']:.0f} max")
+    for name, r in out.get("requirements", {}).items():
+        print(f"  [{'pass' if r['pass'] else 'FAIL'}] {name}: {r['figure']}")
+
+
+# --- parser --------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="mech2spice",
+        description="Verilog -> networks of nonlinear mechanical NOR gates -> RK4 / envelope / ngspice.")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    g = sub.add_parser("gate", help="characterise the NOR gate against the paper's six requirements",
+                       description="Characterise the mechanical NOR gate: truth table decoded from RK4, "
+                                   "steady-state map and margin, cascade, delay, fan-out, requirements.")
+    g.add_argument("--params", default="default", help="'default', 'printed' (Appendix A) or a JSON file")
+    g.add_argument("--quick", action="store_true", help="shorter runs (about 1 minute)")
+    g.add_argument("--report", metavar="DIR", help="also write DIR/gate.md and PNG figures")
+    g.add_argument("--json", action="store_true", help="machine-readable output")
+    g.set_defaults(func=cmd_gate)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except Mech2SpiceError as e:
+        print(f"mech2spice: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("mech2spice: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

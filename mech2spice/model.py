@@ -1,0 +1,172 @@
+"""The one mechanical model that every backend (RK4, envelope, ngspice) reads.
+
+Equations of motion, for each degree of freedom (DOF) i:
+
+    m_i u_i'' = - sum_j K_ij u_j - sum_j C_ij u_j' + F_i(t) + f_i^NL
+
+* K, C are symmetric: the diagonal holds each DOF's *total* stiffness/damping
+  (its local value plus every coupling spring/dashpot attached to it), the
+  off-diagonals hold -k / -c of each coupling.  Local values = total - couplings
+  and may be negative, as the paper allows.
+* Quadratic couplings come from the potential  V = gamma * u_f^2 * u_s
+  (u_f an oscillating DOF, u_s a slow one) with a *signed* gamma:
+      force on u_f: -2 gamma u_f u_s,   force on u_s: -gamma u_f^2.
+  The paper's eqs. 1-4 are gamma = +gamma_IG (gate-insulator) and
+  gamma = -gamma_IC (channel-insulator).
+* Drives are F(t) = a(t) sin(omega t + phase) on one DOF each; a(t) is the
+  drive's amplitude, constant unless a stimulus schedule overrides it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+
+from .errors import Mech2SpiceError
+
+
+@dataclass
+class Drive:
+    dof: int
+    amplitude: float
+    phase: float = 0.0
+    name: str = ""
+
+
+@dataclass
+class MechModel:
+    omega: float
+    names: list[str] = field(default_factory=list)
+    mass: list[float] = field(default_factory=list)
+    k_total: list[float] = field(default_factory=list)
+    c_total: list[float] = field(default_factory=list)
+    slow: list[bool] = field(default_factory=list)      # True for insulators (not oscillating at omega)
+    springs: list[tuple[int, int, float]] = field(default_factory=list)
+    dashpots: list[tuple[int, int, float]] = field(default_factory=list)
+    quads: list[tuple[int, int, float]] = field(default_factory=list)   # (fast, slow, signed gamma)
+    drives: list[Drive] = field(default_factory=list)
+    probes: dict[str, int] = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)              # builder's bookkeeping (gates, ports, ...)
+
+    # --- building -----------------------------------------------------------
+    def add_dof(self, name: str, m: float, k: float, c: float, slow: bool = False) -> int:
+        if name in self._index:
+            raise Mech2SpiceError(f"duplicate degree of freedom '{name}'")
+        if m <= 0 or k <= 0:
+            raise Mech2SpiceError(
+                f"DOF '{name}': mass {m:g} and total stiffness {k:g} must be positive "
+                "(a negative total stiffness makes the oscillator unstable)")
+        self.names.append(name)
+        self.mass.append(m)
+        self.k_total.append(k)
+        self.c_total.append(c)
+        self.slow.append(slow)
+        self._index[name] = len(self.names) - 1
+        self._invalidate()
+        return len(self.names) - 1
+
+    def add_spring(self, i: int, j: int, k: float) -> None:
+        self.springs.append((i, j, k))
+        self._invalidate()
+
+    def add_dashpot(self, i: int, j: int, c: float) -> None:
+        self.dashpots.append((i, j, c))
+        self._invalidate()
+
+    def add_quad(self, fast: int, slow: int, gamma: float) -> None:
+        if self.slow[fast] or not self.slow[slow]:
+            raise Mech2SpiceError(
+                f"quadratic coupling must join an oscillating DOF to a slow one, got "
+                f"'{self.names[fast]}' -> '{self.names[slow]}'")
+        self.quads.append((fast, slow, gamma))
+        self._invalidate()
+
+    def add_drive(self, dof: int, amplitude: float, phase: float = 0.0, name: str = "") -> int:
+        self.drives.append(Drive(dof, amplitude, phase, name or self.names[dof]))
+        self._invalidate()
+        return len(self.drives) - 1
+
+    def add_probe(self, name: str, dof: int) -> None:
+        self.probes[name] = dof
+
+    def index(self, name: str) -> int:
+        return self._index[name]
+
+    @cached_property
+    def _index(self) -> dict[str, int]:
+        return {n: i for i, n in enumerate(self.names)}
+
+    def _invalidate(self) -> None:
+        for key in ("K", "C", "k_local", "c_local", "arrays"):
+            self.__dict__.pop(key, None)
+
+    # --- derived arrays -----------------------------------------------------
+    @property
+    def n(self) -> int:
+        return len(self.names)
+
+    @cached_property
+    def arrays(self) -> dict[str, np.ndarray]:
+        q = np.array(self.quads, dtype=float).reshape(-1, 3)
+        return {
+            "mass": np.array(self.mass), "k_total": np.array(self.k_total),
+            "c_total": np.array(self.c_total), "slow": np.array(self.slow, bool),
+            "quad_fast": q[:, 0].astype(int), "quad_slow": q[:, 1].astype(int), "quad_gamma": q[:, 2],
+            "drive_dof": np.array([d.dof for d in self.drives], int),
+            "drive_amp": np.array([d.amplitude for d in self.drives], float),
+            "drive_phase": np.array([d.phase for d in self.drives], float),
+        }
+
+    def _coupling_matrix(self, total: list[float], links) -> sp.csr_matrix:
+        """Symmetric matrix with totals on the diagonal and -k_ij off it."""
+        rows, cols, vals = [np.arange(self.n)], [np.arange(self.n)], [np.array(total, float)]
+        for i, j, k in links:
+            rows += [[i], [j]]
+            cols += [[j], [i]]
+            vals += [[-k], [-k]]
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(self.n, self.n))
+
+    @cached_property
+    def K(self) -> sp.csr_matrix:
+        return self._coupling_matrix(self.k_total, self.springs)
+
+    @cached_property
+    def C(self) -> sp.csr_matrix:
+        return self._coupling_matrix(self.c_total, self.dashpots)
+
+    def _local(self, total: list[float], links) -> np.ndarray:
+        local = np.array(total, float)
+        for i, j, k in links:
+            local[i] -= k
+            local[j] -= k
+        return local
+
+    @cached_property
+    def k_local(self) -> np.ndarray:
+        """Each DOF's own spring to ground: total minus attached coupling springs (may be negative)."""
+        return self._local(self.k_total, self.springs)
+
+    @cached_property
+    def c_local(self) -> np.ndarray:
+        return self._local(self.c_total, self.dashpots)
+
+    def counts(self) -> dict[str, int]:
+        """Element counts in the paper's convention."""
+        return {"oscillators": self.n, "linear_springs": len(self.springs),
+                "nonlinear_springs": len(self.quads), "dashpots": len(self.dashpots)}
+
+    def check(self) -> None:
+        """Reject models no backend could run sensibly."""
+        a = self.arrays
+        for key in ("mass", "k_total", "c_total"):
+            bad = np.flatnonzero(~np.isfinite(a[key]))
+            if bad.size:
+                raise Mech2SpiceError(f"DOF '{self.names[bad[0]]}': {key} is not finite")
+        neg = np.flatnonzero(a["c_total"] < 0)
+        if neg.size:
+            raise Mech2SpiceError(
+                f"DOF '{self.names[neg[0]]}': total damping {a['c_total'][neg[0]]:g} is negative "
+                "(the oscillator would grow without bound)")

@@ -1,0 +1,146 @@
+"""Gate parameters, drive frequency and logic bands.
+
+Stiffness and damping here are *totals* as one oscillator sees them inside a
+network; the model subtracts what coupling springs and dashpots contribute to
+get each oscillator's local value.  Damping is given as a quality factor:
+c = m * sqrt(k_total / m) / Q.
+
+Two sets ship with the package:
+  * ``printed`` - Appendix A of the paper as printed (no drive frequency given;
+    we use the channel's natural frequency). It does not switch: see reports/gate.md.
+  * ``default`` - the working set from ../shared/reference/gate-operating-point.md,
+    re-verified by this package (``mech2spice gate``).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+
+from .errors import Mech2SpiceError
+
+# Logic bands, as fractions of F_R (inputs) or u_R (outputs).
+BAND0 = (0.365, 0.67)
+BAND1 = (0.92, 1.025)
+NOMINAL0 = 0.5      # a constant logical '0' is a force of 0.5 F_R
+NOMINAL1 = 0.97
+
+
+@dataclass(frozen=True)
+class GateParams:
+    m_g: float = 0.2
+    q_g: float = 200.0
+    k_g: float = 467.6433
+    m_i: float = 1.0
+    q_i: float = 1.5
+    k_i: float = 0.7345
+    m_c: float = 6.0
+    q_c: float = 200.0
+    k_c: float = 14311.8
+    gamma_ig: float = 9.894
+    gamma_ic: float = 578.15
+    f_r: float = 0.7
+    u_r: float = 0.0182
+    f_c: float = 1.326
+    omega: float = 48.754145
+    name: str = "default"
+
+    # --- derived quantities -------------------------------------------------
+    @property
+    def period(self) -> float:
+        return 2 * math.pi / self.omega
+
+    @property
+    def k_couple(self) -> float:
+        """Coupling spring k = F_R/u_R: an output amplitude in a band gives an input force in the same band."""
+        return self.f_r / self.u_r
+
+    @property
+    def c_couple(self) -> float:
+        """Coupling dashpot k/omega: same force magnitude as the spring, 90 degrees ahead."""
+        return self.k_couple / self.omega
+
+    def damping(self, m: float, k: float, q: float) -> float:
+        return m * math.sqrt(k / m) / q
+
+    @property
+    def c_g(self) -> float:
+        return self.damping(self.m_g, self.k_g, self.q_g)
+
+    @property
+    def c_i(self) -> float:
+        return self.damping(self.m_i, self.k_i, self.q_i)
+
+    @property
+    def c_c(self) -> float:
+        return self.damping(self.m_c, self.k_c, self.q_c)
+
+    def force(self, level: float) -> float:
+        """Drive force for a logic level given as a fraction of F_R."""
+        return level * self.f_r
+
+    def validate(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name != "name" and not (isinstance(v, (int, float)) and math.isfinite(v)):
+                raise Mech2SpiceError(f"gate parameter {f.name} = {v!r} is not a finite number")
+        for name in ("m_g", "m_i", "m_c", "q_g", "q_i", "q_c", "k_g", "k_i", "k_c", "omega", "f_r", "u_r"):
+            if getattr(self, name) <= 0:
+                raise Mech2SpiceError(f"gate parameter {name} = {getattr(self, name)} must be positive")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+PRINTED = GateParams(
+    k_g=25.582, k_i=0.394784, q_c=1.5, gamma_ig=12.0, gamma_ic=6.0,
+    # The paper never states omega; the channel's natural frequency is the
+    # only choice that gives the channel any resonant gain.
+    omega=math.sqrt(14311.8 / 6.0), name="printed")
+DEFAULT = GateParams()
+
+PRESETS = {"default": DEFAULT, "printed": PRINTED}
+
+
+def load_params(spec: str | None) -> GateParams:
+    """'default', 'printed', or a JSON file with any subset of the fields (rest from default)."""
+    if spec is None or spec in PRESETS:
+        return PRESETS[spec or "default"]
+    path = Path(spec)
+    try:
+        data = json.loads(path.read_text())
+    except OSError as e:
+        raise Mech2SpiceError(f"cannot read parameter file {spec}: {e.strerror}") from None
+    except json.JSONDecodeError as e:
+        raise Mech2SpiceError(f"parameter file {spec} is not valid JSON: {e.msg} (line {e.lineno})") from None
+    known = {f.name for f in fields(GateParams)}
+    unknown = set(data) - known
+    if unknown:
+        raise Mech2SpiceError(f"parameter file {spec}: unknown field(s) {', '.join(sorted(unknown))}")
+    p = replace(DEFAULT, **{"name": path.stem, **data})
+    p.validate()
+    return p
+
+
+def band_of(x: float) -> int | None:
+    """0, 1, or None (ambiguous) for an amplitude/force given in units of u_R / F_R."""
+    if BAND0[0] <= x <= BAND0[1]:
+        return 0
+    if BAND1[0] <= x <= BAND1[1]:
+        return 1
+    return None
+
+
+def margin(x: float, expected: int | None = None) -> float:
+    """Signed distance to the nearest edge of the band (expected, or x's own), as a fraction of band width.
+
+    Positive inside the band, negative outside (how far out, in band widths)."""
+    if expected is None:
+        expected = band_of(x)
+        if expected is None:
+            lo0, hi0 = BAND0
+            lo1, hi1 = BAND1
+            return -min(abs(x - lo0), abs(x - hi0), abs(x - lo1), abs(x - hi1)) / (hi0 - lo0)
+    lo, hi = BAND1 if expected else BAND0
+    return min(x - lo, hi - x) / (hi - lo)

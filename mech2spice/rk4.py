@@ -1,0 +1,165 @@
+"""Reference integrator: fixed-step classical RK4 over the mechanical model.
+
+Vectorised over a batch (state arrays are (n_dof, B)); all linear forces,
+quadratic couplings and drives are one sparse mat-vec per stage.  The step is
+a whole fraction of the drive period so every period holds the same samples;
+each probe is demodulated on the fly (amplitude and phase at omega, and its
+mean) over every whole period.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .errors import DivergenceError, Mech2SpiceError
+from .model import MechModel
+from .stimulus import Stimulus
+
+DEFAULT_STEPS_PER_PERIOD = 80   # 40 (the paper's 0.025 periods) leaves a 1e-3 u_R error; see reports/gate.md
+
+
+@dataclass
+class Run:
+    """Result of an integration; amplitudes are complex phasors A with u = Re(A e^{i omega t})."""
+    probe_names: list[str]
+    period: float
+    t_end: np.ndarray                 # (P,) time at the end of each recorded period
+    amp: np.ndarray                   # (P, n_probes, B) complex
+    mean: np.ndarray                  # (P, n_probes, B)
+    x: np.ndarray                     # final displacements (n, B)
+    v: np.ndarray                     # final velocities (n, B)
+    t: float                          # final time
+    traces: np.ndarray | None = None  # (S, n_probes, B) raw samples if asked for
+    trace_t: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+    def probe(self, name: str) -> int:
+        return self.probe_names.index(name)
+
+    def amplitude(self, name: str) -> np.ndarray:
+        """|A| per period, (P, B)."""
+        return np.abs(self.amp[:, self.probe(name), :])
+
+
+def force_matrix(model: MechModel) -> sp.csr_matrix:
+    """A such that  m * a = A @ [x; v; u_f u_s; u_f^2; drive forces]."""
+    a = model.arrays
+    n, nq, nd = model.n, len(model.quads), len(model.drives)
+    qi = np.arange(nq)
+    Qf = sp.csr_matrix((-2 * a["quad_gamma"], (a["quad_fast"], qi)), shape=(n, nq))
+    Qs = sp.csr_matrix((-a["quad_gamma"], (a["quad_slow"], qi)), shape=(n, nq))
+    D = sp.csr_matrix((np.ones(nd), (a["drive_dof"], np.arange(nd))), shape=(n, nd))
+    return sp.hstack([-model.K, -model.C, Qf, Qs, D]).tocsr()
+
+
+def default_blowup(model: MechModel) -> float:
+    p = model.meta.get("params")
+    return 1e3 * (p.u_r if p is not None else 1.0)
+
+
+class _Rhs:
+    """Acceleration for a state; built once per model."""
+
+    def __init__(self, model: MechModel):
+        a = model.arrays
+        self.A = force_matrix(model)
+        self.inv_m = (1.0 / a["mass"])[:, None]
+        self.qf, self.qs = a["quad_fast"], a["quad_slow"]
+
+    def __call__(self, x, v, drive):
+        uf = x[self.qf]
+        z = np.concatenate([x, v, uf * x[self.qs], uf * uf, drive])
+        return (self.A @ z) * self.inv_m
+
+
+def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT_STEPS_PER_PERIOD,
+              stimulus: Stimulus | None = None, state: tuple[np.ndarray, np.ndarray] | None = None,
+              start_period: int = 0, probes: list[str] | None = None, trace_every: int = 0,
+              blowup: float | None = None, progress: bool = False) -> Run:
+    """Integrate `periods` drive periods from `start_period` (state at rest unless given)."""
+    model.check()
+    stimulus = stimulus or Stimulus.constant(model)
+    B, N = stimulus.batch, int(steps_per_period)
+    if N < 4:
+        raise Mech2SpiceError("RK4 needs at least 4 steps per drive period")
+    T = 2 * math.pi / model.omega
+    h = T / N
+    rhs = _Rhs(model)
+    names = list(probes or model.probes)
+    pidx = np.array([model.probes[p] if p in model.probes else model.index(p) for p in names], int)
+    blowup = blowup or default_blowup(model)
+
+    # Drive phase tables for the three distinct stage times of step j (periodic in N).
+    a = model.arrays
+    ph = a["drive_phase"][None, :]
+    j = np.arange(N + 1)[:, None]
+    sin_full = np.sin(model.omega * j * h + ph)[..., None]              # (N+1, nd, 1)
+    sin_half = np.sin(model.omega * (j[:-1] + 0.5) * h + ph)[..., None]  # (N, nd, 1)
+    demod = np.exp(-1j * model.omega * (np.arange(1, N + 1) * h))        # samples at step ends
+
+    x, v = (np.zeros((model.n, B)), np.zeros((model.n, B))) if state is None else \
+        (np.array(state[0], float), np.array(state[1], float))
+    amp = np.zeros((periods, len(names), B), complex)
+    mean = np.zeros((periods, len(names), B))
+    traces, trace_t = [], []
+    t = start_period * T
+    amps, t_next = stimulus.at(t), stimulus.next_change(t)
+
+    bar = _progress(periods, progress)
+    for k in range(periods):
+        acc = np.zeros((len(names), B), complex)
+        acc0 = np.zeros((len(names), B))
+        for s in range(N):
+            t = (start_period + k) * T + s * h
+            if t >= t_next - 1e-9 * h:
+                amps, t_next = stimulus.at(t + 1e-9 * h), stimulus.next_change(t + 1e-9 * h)
+            d0, dh, d1 = amps * sin_full[s], amps * sin_half[s], amps * sin_full[s + 1]
+            k1v = rhs(x, v, d0)
+            x2, v2 = x + 0.5 * h * v, v + 0.5 * h * k1v
+            k2v = rhs(x2, v2, dh)
+            x3, v3 = x + 0.5 * h * v2, v + 0.5 * h * k2v
+            k3v = rhs(x3, v3, dh)
+            x4, v4 = x + h * v3, v + h * k3v
+            k4v = rhs(x4, v4, d1)
+            x = x + (h / 6) * (v + 2 * v2 + 2 * v3 + v4)
+            v = v + (h / 6) * (k1v + 2 * k2v + 2 * k3v + k4v)
+            xp = x[pidx]
+            acc += xp * demod[s]
+            acc0 += xp
+            if trace_every and s % trace_every == 0:
+                traces.append(xp.copy())
+                trace_t.append(t + h)
+        amp[k] = acc * (2.0 / N)
+        mean[k] = acc0 / N
+        _check_blowup(model, x, (start_period + k + 1) * T, T, blowup)
+        bar.update(1)
+    bar.close()
+    t_end = (start_period + 1 + np.arange(periods)) * T
+    return Run(names, T, t_end, amp, mean, x, v, (start_period + periods) * T,
+               np.array(traces) if traces else None, np.array(trace_t) if trace_t else None)
+
+
+def _check_blowup(model: MechModel, x: np.ndarray, t: float, T: float, bound: float) -> None:
+    mag = np.abs(x).max(axis=1)
+    bad = ~np.isfinite(mag) | (mag > bound)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DivergenceError(model.names[i], t, T, float(mag[i]))
+
+
+class _NoBar:
+    def update(self, n):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress(total: int, enabled: bool):
+    if not enabled:
+        return _NoBar()
+    from tqdm import tqdm
+    return tqdm(total=total, unit="period", leave=False)

@@ -1,0 +1,467 @@
+"""The mechanical model as an ngspice circuit (mobility analogy) and its netlist.
+
+Analogy (force = current, velocity = voltage), two nodes per DOF u:
+    node v:  C = m (mass), conductance c_local to ground (damper), VCCS k_local * V(x) to ground
+             (spring), drives and couplings as currents into the node;
+    node x:  a 1 F capacitor fed by the VCCS V(v), so V(x) = integral of velocity = u.
+Coupling springs are one VCCS k * (V(x_i) - V(x_j)) between v_i and v_j, dashpots one conductance
+between v_i and v_j, quadratic couplings B current sources in the V(x) nodes.  The DOF's own element
+carries the LOCAL value (total minus attached couplings, may be negative); with the coupling elements
+the circuit's matrices are exactly the model's K and C (totals on the diagonal).
+
+Prewarp (default): the trapezoidal rule at a fixed step h answers a sinusoid at omega exactly as the
+continuous circuit would at omega' = (2/h) tan(omega h / 2).  For Q = 200 oscillators that warp is
+fatal at ordinary steps (T/40: +21 % amplitude, -42 degrees phase on a lone oscillator).  Scaling every
+capacitor of an oscillating DOF by w = (omega h/2) / tan(omega h/2) makes each capacitor's discrete
+admittance at omega exactly i*omega*C, so the linear response at the drive frequency is exact
+whatever h (measured: -0.2 % / 0.00 deg at T/40).  Slow DOFs (insulators) keep w = 1.
+See reports/speed_accuracy.md for the measurements behind the defaults.
+
+Emission is hierarchical: the library (``subckt_library``) defines m2s_osc, m2s_nor2, m2s_couple,
+m2s_drive and m2s_pairdrive; gate blocks of ``model.meta["gates"]`` become m2s_nor2 instances, every
+other DOF an m2s_osc instance, so any MechModel can be emitted.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import Mech2SpiceError
+from .model import MechModel
+from .params import DEFAULT, GateParams
+from .stimulus import Stimulus
+
+METHODS = ("trap", "gear")
+
+
+@dataclass(frozen=True)
+class SpiceOptions:
+    method: str = "trap"             # trap | gear (gear = BDF, numerically damped; see the report)
+    max_step_periods: float = 1 / 40  # max (and, in steady state, actual) step, in drive periods
+    reltol: float = 1e-3
+    abstol: float = 1e-12             # currents (forces), ngspice default
+    chgtol: float = 1e-14
+    vntol: float = 1e-9               # displacements are ~1e-2, so ngspice's default 1e-6 V is too loose
+    prewarp: bool = True              # trap only: exact phasor response at omega (see module doc)
+    maxord: int = 2                   # gear order
+
+    def validate(self) -> None:
+        if self.method not in METHODS:
+            raise Mech2SpiceError(f"ngspice method '{self.method}' unknown (use {' or '.join(METHODS)})")
+        if not 0 < self.max_step_periods <= 0.25:
+            raise Mech2SpiceError("max_step_periods must be in (0, 0.25] drive periods")
+        for name in ("reltol", "abstol", "chgtol", "vntol"):
+            if not getattr(self, name) > 0:
+                raise Mech2SpiceError(f"SpiceOptions.{name} must be positive")
+        if not 1 <= self.maxord <= 6:
+            raise Mech2SpiceError("maxord must be 1..6")
+
+    def warp(self, omega: float) -> float:
+        """Capacitor scale making trapezoidal steps of max_step exact at omega (1 without prewarp)."""
+        if not self.prewarp or self.method != "trap":
+            return 1.0
+        half = math.pi * self.max_step_periods      # omega * h / 2
+        return half / math.tan(half)
+
+
+# --- names -------------------------------------------------------------------
+_UNSAFE = re.compile(r"[^a-z0-9_]+")
+
+
+class Namer:
+    """Maps user names to SPICE-safe stems: [a-z0-9_] only (ngspice lowercases), unique, letter first."""
+
+    def __init__(self):
+        self.used: set[str] = set()
+
+    def __call__(self, name: str) -> str:
+        stem = _UNSAFE.sub("_", str(name).lower()).strip("_")[:40] or "n"
+        if not stem[0].isalpha():
+            stem = "n" + stem
+        out, k = stem, 1
+        while out in self.used:
+            k += 1
+            out = f"{stem}_{k}"
+        self.used.add(out)
+        return out
+
+
+def comment_text(text: str) -> str:
+    """Free text made safe for a comment line: printable ASCII, no newline, no card."""
+    return re.sub(r"[^A-Za-z0-9_ .,:;=+\-()'\[\]/]", "?", ascii(str(text))[1:-1])[:120]
+
+
+def num(x: float) -> str:
+    """A number ngspice reads back exactly (repr; never a unit suffix)."""
+    x = float(x)
+    if not math.isfinite(x):
+        raise Mech2SpiceError(f"cannot emit non-finite value {x} into a netlist")
+    return repr(x)
+
+
+# --- the subcircuit library ------------------------------------------------------
+OSC = """\
+* m2s_osc: one mechanical oscillator, mobility analogy.
+*   V(v) = velocity, V(x) = displacement; forces are currents injected into v.
+*   m u'' = -k u - c u' + forces;  k, c are LOCAL values (may be negative).
+*   w scales both capacitors (trapezoidal prewarp, see mech2spice.spice); w = 1 for slow DOFs.
+.subckt m2s_osc x v params: m=1 k=1 c=0 w={warp}
+Cm v 0 {m*w}
+Gc v 0 v 0 {c}
+Gk v 0 x 0 {k}
+Cx x 0 {w}
+Gx 0 x v 0 1
+.ends m2s_osc
+"""
+
+NOR2 = """\
+* m2s_nor2: one NOR gate block (paper Fig. 3c).
+*   Channel C (driven by the source), insulator I (slow), and per logical input n = 1, 2 a
+*   spring-coupled gate ns and a dashpot-coupled gate nd.
+* Ports: xc vc        channel displacement, velocity (the output)
+*        asrc         source amplitude (a voltage): force V(asrc)*sin(omega*time+psrc) on the channel
+*        x1s v1s v1d  input 1: spring gate displacement, velocity; dashpot gate velocity
+*        x2s v2s v2d  input 2
+* Params: m*, k*, c* per oscillator, k and c LOCAL (total minus attached couplings); defaults are an
+*   unconnected gate's totals.  g* are the signed gammas of V = g u_f^2 u_i (gci = -gamma_ic).
+.subckt m2s_nor2 xc vc asrc x1s v1s v1d x2s v2s v2d
++ params: mc={m_c} kc={k_c} cc={c_c} mi={m_i} ki={k_i} ci={c_i}
++ m1s={m_g} k1s={k_g} c1s={c_g} m1d={m_g} k1d={k_g} c1d={c_g}
++ m2s={m_g} k2s={k_g} c2s={c_g} m2d={m_g} k2d={k_g} c2d={c_g}
++ gci={-gamma_ic} g1s={gamma_ig} g1d={gamma_ig} g2s={gamma_ig} g2d={gamma_ig} psrc=0
+Xc xc vc m2s_osc m={mc} k={kc} c={cc}
+Xi xi vi m2s_osc m={mi} k={ki} c={ci} w=1
+X1s x1s v1s m2s_osc m={m1s} k={k1s} c={c1s}
+X1d x1d v1d m2s_osc m={m1d} k={k1d} c={c1d}
+X2s x2s v2s m2s_osc m={m2s} k={k2s} c={c2s}
+X2d x2d v2d m2s_osc m={m2d} k={k2d} c={c2d}
+* quadratic couplings: force -2 g u_f u_i on each fast DOF, -sum g u_f^2 on the insulator
+Bc vc 0 I = 2*gci*V(xc)*V(xi)
+B1s v1s 0 I = 2*g1s*V(x1s)*V(xi)
+B1d v1d 0 I = 2*g1d*V(x1d)*V(xi)
+B2s v2s 0 I = 2*g2s*V(x2s)*V(xi)
+B2d v2d 0 I = 2*g2d*V(x2d)*V(xi)
+Bi vi 0 I = gci*V(xc)*V(xc) + g1s*V(x1s)*V(x1s) + g1d*V(x1d)*V(x1d) + g2s*V(x2s)*V(x2s) + g2d*V(x2d)*V(x2d)
+Bsrc 0 vc I = V(asrc)*sin(omega*time+psrc)
+.ends m2s_nor2
+"""
+
+COUPLE = """\
+* m2s_couple: an upstream channel (xc, vc) driving a gate pair: spring k to the spring gate (xs, vs),
+*   dashpot c to the dashpot gate (vd).  One VCCS per link injects into both ends (action = reaction).
+.subckt m2s_couple xc vc xs vs vd params: k={k_couple} c={c_couple}
+Gk vc vs xc xs {k}
+Gc vc vd vc vd {c}
+.ends m2s_couple
+"""
+
+DRIVE = """\
+* m2s_drive: force V(amp)*sin(omega*time+ph) into the velocity node v.
+.subckt m2s_drive v amp params: ph=0
+B1 0 v I = V(amp)*sin(omega*time+ph)
+.ends m2s_drive
+"""
+
+PAIRDRIVE = """\
+* m2s_pairdrive: an external (or constant-level) input on a gate pair: the spring gate gets
+*   V(amps)*sin(omega*time+ps), the dashpot gate V(ampd)*sin(omega*time+pd), pd = ps + pi/2, as an
+*   upstream channel would drive them.  Amplitudes are voltages (DC for a constant level, PWL for a
+*   schedule).
+.subckt m2s_pairdrive vs vd amps ampd params: ps=0 pd=1.5707963267948966
+Bs 0 vs I = V(amps)*sin(omega*time+ps)
+Bd 0 vd I = V(ampd)*sin(omega*time+pd)
+.ends m2s_pairdrive
+"""
+
+SUBCKTS = {"m2s_osc.subckt": OSC, "m2s_nor2.subckt": NOR2, "m2s_couple.subckt": COUPLE,
+           "m2s_drive.subckt": DRIVE, "m2s_pairdrive.subckt": PAIRDRIVE}
+PARAMS_FILE = "m2s_params.inc"
+
+
+def param_values(p: GateParams, omega: float | None = None, warp: float = 1.0) -> dict[str, float]:
+    """The global .param set the library reads (c_* derived from Q, couplings from F_R/u_R)."""
+    return {"omega": p.omega if omega is None else omega, "warp": warp,
+            "m_g": p.m_g, "k_g": p.k_g, "c_g": p.c_g, "m_i": p.m_i, "k_i": p.k_i, "c_i": p.c_i,
+            "m_c": p.m_c, "k_c": p.k_c, "c_c": p.c_c, "gamma_ig": p.gamma_ig, "gamma_ic": p.gamma_ic,
+            "f_c": p.f_c, "f_r": p.f_r, "u_r": p.u_r, "k_couple": p.k_couple, "c_couple": p.c_couple}
+
+
+def params_text(values: dict[str, float], header: str) -> str:
+    lines = [f"* {header}"]
+    lines += [f".param {k}={num(v)}" for k, v in values.items()]
+    return "\n".join(lines) + "\n"
+
+
+def subckt_library(p: GateParams = DEFAULT) -> dict[str, str]:
+    """filename -> text: the .param set of `p` and the five generic subcircuits."""
+    head = f"mech2spice gate parameters '{comment_text(p.name)}' (c = m sqrt(k/m)/Q; warp=1: no prewarp)"
+    return {PARAMS_FILE: params_text(param_values(p), head), **SUBCKTS}
+
+
+def write_subckt_library(directory, p: GateParams = DEFAULT) -> list[Path]:
+    """Write the library files into `directory` (created); returns their paths, sorted."""
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    out = []
+    for name, text in sorted(subckt_library(p).items()):
+        path = d / name
+        path.write_text(text, encoding="ascii", newline="\n")
+        out.append(path)
+    return out
+
+
+# --- netlist emission ------------------------------------------------------------
+@dataclass
+class _Plan:
+    """Which model elements the hierarchical instances already cover."""
+    gates: list                     # GateBlocks emitted as m2s_nor2
+    internal: dict[int, str]        # DOF -> hierarchical x node for probes (inside an m2s_nor2)
+    in_gate: set[int]               # DOFs emitted inside an m2s_nor2
+    quads: set[int]                 # indices of model.quads covered
+    drives: set[int]                # indices of model.drives covered
+    springs: set[int]
+    dashpots: set[int]
+
+
+def _nor_quads(model: MechModel, g) -> dict[int, int] | None:
+    """DOF -> quad index for the five quads an m2s_nor2 holds, or None if the block is not one."""
+    if len(g.inputs) != 2:
+        return None
+    fast = [g.channel, *[d for pair in g.inputs for d in pair]]
+    found = {}
+    for qi, (f, s, _) in enumerate(model.quads):
+        if s == g.insulator and f in fast and f not in found:
+            found[f] = qi
+    return found if len(found) == 5 else None
+
+
+def _plan(model: MechModel) -> _Plan:
+    plan = _Plan([], {}, set(), set(), set(), set(), set())
+    for g in model.meta.get("gates", []):
+        q = _nor_quads(model, g)
+        if q is None or not _gate_is_closed(model, g, set(q.values())):
+            continue                                       # emitted DOF by DOF instead
+        plan.gates.append(g)
+        plan.quads |= set(q.values())
+        plan.in_gate |= {g.channel, g.insulator, *[d for pair in g.inputs for d in pair]}
+    return plan
+
+
+def _gate_is_closed(model: MechModel, g, own_quads: set[int]) -> bool:
+    """True if nothing outside the block touches its internal nodes (insulator, dashpot-gate x)."""
+    hidden_x = {g.insulator, g.inputs[0][1], g.inputs[1][1]}
+    for qi, (f, s, _) in enumerate(model.quads):
+        if qi not in own_quads and ({f, s} & hidden_x):
+            return False
+    if any({i, j} & hidden_x for i, j, _ in model.springs):
+        return False
+    if any(g.insulator in (i, j) for i, j, _ in model.dashpots):
+        return False
+    return not any(d.dof == g.insulator for d in model.drives)
+
+
+class _Emitter:
+    def __init__(self, model: MechModel, periods: int, stimulus: Stimulus | None, batch_index: int,
+                 options: SpiceOptions):
+        self.m, self.periods, self.opt = model, int(periods), options
+        self.p: GateParams = model.meta.get("params", DEFAULT)
+        self.T = 2 * math.pi / model.omega
+        self.h = options.max_step_periods * self.T
+        self.warp = options.warp(model.omega)
+        self.namer = Namer()
+        self.stem = [self.namer(n) for n in model.names]
+        self.plan = _plan(model)
+        self.lines: list[str] = []
+        self.amp_nodes: dict[tuple, str] = {}
+        self.amp_lines: list[str] = []
+        self.stimulus, self.b = stimulus, batch_index
+
+    def x(self, i: int) -> str:
+        return f"x_{self.stem[i]}"
+
+    def v(self, i: int) -> str:
+        return f"v_{self.stem[i]}"
+
+    def probe_node(self, i: int) -> str:
+        return self.plan.internal.get(i, self.x(i))
+
+    # -- drive amplitudes: one voltage source per distinct schedule
+    def schedule(self, d: int) -> tuple[tuple[float, float], ...]:
+        if self.stimulus is None:
+            return ((0.0, self.m.drives[d].amplitude),)
+        s = self.stimulus
+        if not 0 <= self.b < s.batch:
+            raise Mech2SpiceError(f"batch index {self.b} out of range (stimulus has {s.batch})")
+        if s.amps.shape[1] != len(self.m.drives):
+            raise Mech2SpiceError(f"stimulus has {s.amps.shape[1]} drives, model {len(self.m.drives)}")
+        pts, last = [], None
+        for t, a in zip(s.times, s.amps[:, d, self.b]):
+            if t < self.periods * self.T and a != last:
+                pts.append((float(t), float(a)))
+                last = a
+        return tuple(pts)
+
+    def amp_node(self, d: int) -> str:
+        sched = self.schedule(d)
+        if sched not in self.amp_nodes:
+            node = f"a_{self.namer(self.m.drives[d].name or 'drive')}"
+            self.amp_nodes[sched] = node
+            self.amp_lines.append(f"V{node} {node} 0 {self._source(sched)}")
+        return self.amp_nodes[sched]
+
+    def _source(self, sched) -> str:
+        if len(sched) == 1:
+            return f"DC {num(sched[0][1])}"
+        ramp = 1e-3 * self.T        # a step change, resolved by ngspice's breakpoints
+        pts = [f"0 {num(sched[0][1])}"]
+        for (t0, a0), (t1, a1) in zip(sched, sched[1:]):
+            pts += [f"{num(t1)} {num(a0)}", f"{num(t1 + ramp)} {num(a1)}"]
+        return "PWL(" + " ".join(pts) + ")"
+
+    # -- blocks
+    def gate(self, g) -> None:
+        m = self.m
+        inst = f"xg_{self.namer(g.name)}"
+        (s1, d1), (s2, d2) = g.inputs
+        src = [k for k, d in enumerate(m.drives) if d.dof == g.channel][:1]
+        self.plan.drives |= set(src)
+        asrc = self.amp_node(src[0]) if src else "0"
+        ports = [self.x(g.channel), self.v(g.channel), asrc, self.x(s1), self.v(s1), self.v(d1),
+                 self.x(s2), self.v(s2), self.v(d2)]
+        self.plan.internal.update({g.insulator: f"{inst}.xi", d1: f"{inst}.x1d", d2: f"{inst}.x2d"})
+        over = self._gate_overrides(g, src)
+        self.lines.append(f"{inst} {' '.join(ports)} m2s_nor2" + "".join(f" {k}={v}" for k, v in over))
+
+    def _gate_overrides(self, g, src) -> list[tuple[str, str]]:
+        """Instance params that differ from the library defaults (locals, non-default values)."""
+        p, m = self.p, self.m
+        (s1, d1), (s2, d2) = g.inputs
+        roles = {"c": (g.channel, p.m_c, p.k_c, p.c_c), "i": (g.insulator, p.m_i, p.k_i, p.c_i),
+                 "1s": (s1, p.m_g, p.k_g, p.c_g), "1d": (d1, p.m_g, p.k_g, p.c_g),
+                 "2s": (s2, p.m_g, p.k_g, p.c_g), "2d": (d2, p.m_g, p.k_g, p.c_g)}
+        out = []
+        for r, (i, m0, k0, c0) in roles.items():
+            for key, val, ref in (("m", m.mass[i], m0), ("k", m.k_local[i], k0), ("c", m.c_local[i], c0)):
+                if not math.isclose(val, ref, rel_tol=1e-13, abs_tol=0.0):
+                    out.append((f"{key}{r}", num(val)))
+        gam = {f: gm for f, s, gm in m.quads if s == g.insulator}
+        for key, dof, ref in (("gci", g.channel, -p.gamma_ic), ("g1s", s1, p.gamma_ig),
+                              ("g1d", d1, p.gamma_ig), ("g2s", s2, p.gamma_ig), ("g2d", d2, p.gamma_ig)):
+            if gam[dof] != ref:
+                out.append((key, num(gam[dof])))
+        if src and m.drives[src[0]].phase != 0.0:
+            out.append(("psrc", num(m.drives[src[0]].phase)))
+        return out
+
+    def couplings(self) -> None:
+        """Channel -> gate-pair spring+dashpot links as m2s_couple; the rest as single elements."""
+        m = self.m
+        pairs = [pair for g in self.plan.gates for pair in g.inputs]
+        for s, d in pairs:
+            ks = [(n, i if j == s else j) for n, (i, j, _) in enumerate(m.springs) if s in (i, j)
+                  and n not in self.plan.springs]
+            cs = [(n, i if j == d else j) for n, (i, j, _) in enumerate(m.dashpots) if d in (i, j)
+                  and n not in self.plan.dashpots]
+            match = [(a, b) for a in ks for b in cs if a[1] == b[1]]
+            if not match:
+                continue
+            (nk, up), (nc, _) = match[0]
+            self.plan.springs.add(nk)
+            self.plan.dashpots.add(nc)
+            k, c = m.springs[nk][2], m.dashpots[nc][2]
+            over = "".join(f" {n}={num(v)}" for n, v, ref in (("k", k, self.p.k_couple), ("c", c, self.p.c_couple))
+                           if not math.isclose(v, ref, rel_tol=1e-13))
+            self.lines.append(f"Xc_{self.namer('c_' + m.names[s])} {self.x(up)} {self.v(up)} {self.x(s)} "
+                              f"{self.v(s)} {self.v(d)} m2s_couple{over}")
+        for n, (i, j, k) in enumerate(m.springs):
+            if n not in self.plan.springs:
+                self.lines.append(f"Gk_{n} {self.v(i)} {self.v(j)} {self.x(i)} {self.x(j)} {num(k)}")
+        for n, (i, j, c) in enumerate(m.dashpots):
+            if n not in self.plan.dashpots:
+                self.lines.append(f"Gc_{n} {self.v(i)} {self.v(j)} {self.v(i)} {self.v(j)} {num(c)}")
+
+    def oscillators(self) -> None:
+        m = self.m
+        for i in range(m.n):
+            if i in self.plan.in_gate:
+                continue
+            w = " w=1" if m.slow[i] else ""
+            self.lines.append(f"Xo_{self.stem[i]} {self.x(i)} {self.v(i)} m2s_osc m={num(m.mass[i])} "
+                              f"k={num(m.k_local[i])} c={num(m.c_local[i])}{w}")
+        for n, (f, s, g) in enumerate(m.quads):
+            if n not in self.plan.quads:
+                self.lines.append(f"Bqf_{n} {self.v(f)} 0 I = {num(2 * g)}*V({self.x(f)})*V({self.x(s)})")
+                self.lines.append(f"Bqs_{n} {self.v(s)} 0 I = {num(g)}*V({self.x(f)})*V({self.x(f)})")
+
+    def drives(self) -> None:
+        """External pair drives as m2s_pairdrive, every other drive as m2s_drive."""
+        m = self.m
+        free = [k for k in range(len(m.drives)) if k not in self.plan.drives]
+        for g in self.plan.gates:
+            for s, d in g.inputs:
+                ds = [k for k in free if m.drives[k].dof == s]
+                dd = [k for k in free if m.drives[k].dof == d]
+                if len(ds) == 1 and len(dd) == 1:
+                    a, b = ds[0], dd[0]
+                    free = [k for k in free if k not in (a, b)]
+                    self.lines.append(
+                        f"Xd_{self.namer('d_' + m.drives[a].name)} {self.v(s)} {self.v(d)} {self.amp_node(a)} "
+                        f"{self.amp_node(b)} m2s_pairdrive ps={num(m.drives[a].phase)} pd={num(m.drives[b].phase)}")
+        for k in free:
+            d = m.drives[k]
+            self.lines.append(f"Xd_{self.namer('d_' + d.name)} {self.v(d.dof)} {self.amp_node(k)} "
+                              f"m2s_drive ph={num(d.phase)}")
+
+    def analysis(self) -> list[str]:
+        o = self.opt
+        opts = f".options method={o.method} reltol={num(o.reltol)} abstol={num(o.abstol)} " \
+               f"chgtol={num(o.chgtol)} vntol={num(o.vntol)}"
+        if o.method == "gear":
+            opts += f" maxord={o.maxord}"
+        # a quarter period past the end keeps ngspice's final short steps out of the last period
+        tstop = (self.periods + 0.25) * self.T
+        out = [opts, f".tran {num(self.h)} {num(tstop)} 0 {num(self.h)} uic"]
+        nodes = [f"v({self.probe_node(i)})" for i in self.m.probes.values()]
+        for k in range(0, len(nodes), 8):
+            out.append(".save " + " ".join(nodes[k:k + 8]))
+        return out
+
+    def netlist(self, title: str) -> str:
+        m, o = self.m, self.opt
+        for g in self.plan.gates:
+            self.gate(g)
+        self.couplings()
+        self.oscillators()
+        self.drives()
+        head = [f"* {comment_text(title or 'mech2spice netlist')}",
+                f"* mech2spice: {m.n} DOFs, {len(self.plan.gates)} NOR blocks, {self.periods} periods of "
+                f"T = {num(self.T)}; method={o.method}, max step {num(o.max_step_periods)} T, prewarp w = "
+                f"{num(self.warp)}",
+                "* DOF -> displacement node:"]
+        head += [f"*   {comment_text(n)} -> {self.probe_node(i)}" for i, n in enumerate(m.names)]
+        body = [params_text(param_values(self.p, m.omega, self.warp), "parameters").rstrip("\n")]
+        body += [t.rstrip("\n") for t in SUBCKTS.values()]
+        body += ["* --- circuit", *self.lines, "* --- drive amplitudes", *self.amp_lines, *self.analysis(), ".end"]
+        return "\n".join(head + body) + "\n"
+
+
+def emit(model: MechModel, periods: int, stimulus: Stimulus | None = None, batch_index: int = 0,
+         options: SpiceOptions = SpiceOptions(), title: str = "") -> str:
+    """A self-contained netlist: `ngspice -b file.cir` runs it (add `-r out.raw` for the data)."""
+    return emit_with_probes(model, periods, stimulus, batch_index, options, title)[0]
+
+
+def emit_with_probes(model: MechModel, periods: int, stimulus: Stimulus | None = None, batch_index: int = 0,
+                     options: SpiceOptions = SpiceOptions(), title: str = "") -> tuple[str, list[str]]:
+    """The netlist and the raw-file vector name of each probe (model.probes order)."""
+    model.check()
+    options.validate()
+    if periods < 1:
+        raise Mech2SpiceError("periods must be at least 1")
+    e = _Emitter(model, periods, stimulus, batch_index, options)
+    text = e.netlist(title)
+    return text, [f"v({e.probe_node(i)})".lower() for i in model.probes.values()]

@@ -1,0 +1,404 @@
+"""Verilog -> Yosys -> a networkx netlist of 2-input NOR gates, plus netlist hygiene.
+
+Graph conventions (nodes are strings, attribute ``kind``):
+
+* ``input``  -- one per input port bit, named ``p[i]`` (attrs ``port``, ``bit``).
+* ``const``  -- exactly ``const0`` / ``const1``, present only while something uses them.
+* ``nor``    -- a 2-input NOR gate ``g<N>``; exactly two in-edges with edge attr ``pin`` 0 and 1.
+  A NOT is ``NOR(x, const0)``.  Optional attr ``net``: the Yosys net it drives (for messages).
+* ``output`` -- one per output port bit, named ``p[i]`` (attrs ``port``, ``bit``); one in-edge.
+
+Edges run driver -> sink.  Bit ``i`` of a port is bit ``i`` of its value (LSB = 0), i.e.
+Yosys's bit order; for an ascending range such as ``[0:3]`` that is HDL index ``3 - i``.
+
+Documented choices: Yosys's ``x`` constants and undriven nets become 0 (any value is a valid
+refinement of "don't care"); constant nodes are not subject to the fan-out limit (they are
+the mechanical ground/bias, not a driven signal).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import networkx as nx
+
+from .errors import Mech2SpiceError
+from . import yosys
+
+__all__ = ["Netlist", "synthesize", "build_netlist", "clean", "propagate_constants",
+           "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
+
+
+@dataclass
+class Netlist:
+    top: str
+    graph: nx.DiGraph
+    inputs: dict[str, int]    # port name -> width, in declaration order
+    outputs: dict[str, int]   # port name -> width, in declaration order
+
+    def gates(self) -> list[str]:
+        """NOR gates in topological order (level by level, by gate number within a level)."""
+        g = self.graph
+        return [n for level in nx.topological_generations(g)
+                for n in sorted(level, key=_gate_key) if g.nodes[n]["kind"] == "nor"]
+
+    def fanout(self, node) -> int:
+        return self.graph.out_degree(node)
+
+
+def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -> Netlist:
+    """Synthesize the Verilog file ``path`` into a clean NOR-only Netlist."""
+    path = Path(path)
+    _check_source(path, _read_source(path))
+    if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
+        raise Mech2SpiceError(f"invalid top module name {top!r}")
+    name, module = _run_yosys(path, top)
+    return clean(build_netlist(name, module), max_fanout=max_fanout)
+
+
+def clean(netlist: Netlist, *, max_fanout: int | None = None) -> Netlist:
+    """Apply the hygiene passes in order and renumber gates g0.. in topological order."""
+    g = netlist.graph
+    propagate_constants(g)
+    remove_dead_gates(g)
+    check_loops(g, netlist.top)
+    buffer_feedthroughs(g)
+    limit_fanout(g, max_fanout)
+    netlist.graph = _renumbered(g)
+    return netlist
+
+
+# --------------------------------------------------------------------------- running Yosys
+
+def _read_source(path: Path) -> str:
+    try:
+        return path.read_bytes().decode("utf-8", errors="replace")
+    except OSError as err:
+        raise Mech2SpiceError(f"cannot read Verilog file {path}: {err.strerror or err}") from None
+
+
+_COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
+
+
+def _check_source(path: Path, text: str) -> None:
+    """Reject `initial` blocks: Yosys silently turns them into constants, a NOR net has no reset."""
+    blanked = _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
+    m = re.search(r"\binitial\b", blanked)
+    if m:
+        line = blanked.count("\n", 0, m.start()) + 1
+        raise Mech2SpiceError(f"{path}, line {line}: `initial` blocks are not supported "
+                              "(a NOR-gate network has no power-up values)")
+
+
+def _flow(source: str, top: str | None) -> str:
+    """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python)."""
+    read = "read_verilog -sv" if source.endswith(".sv") else "read_verilog"
+    return "\n".join([
+        f'{read} "{source}"',
+        f"hierarchy -check -top {top}" if top else "hierarchy -check -auto-top",
+        "proc", "flatten",
+        "tribuf",                                   # z-drivers -> $tribuf cells we can spot
+        "tee -q -o tristate.txt select -list t:$tribuf",
+        "synth -flatten" + (f" -top {top}" if top else ""),
+        "dffunmap",                                 # enables/resets -> plain flip-flops + logic
+        "abc -g NOR", "opt_clean",
+        "abc -g NOR", "opt_clean",                  # a 2nd pass trims e.g. comparator4 39 -> 36
+        "write_json netlist.json", ""])
+
+
+def _run_yosys(path: Path, top: str | None) -> tuple[str, dict]:
+    """Run the flow in a scratch folder; return (top module name, its Yosys JSON module)."""
+    with tempfile.TemporaryDirectory(prefix="mech2spice_yosys_") as tmp:
+        # A relative path works for both yowasp (which maps /tmp elsewhere) and `include`s.
+        rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
+        result = yosys.run_script(_flow(rel, top), tmp)
+        if result.returncode != 0:
+            msg = yosys.error_line(result).replace(rel, str(path))
+            raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
+                                  else f"yosys error: {path}: {msg}")
+        tristate = (Path(tmp) / "tristate.txt").read_text().split()
+        if tristate:
+            raise Mech2SpiceError(f"{path}: tri-state ('z') drivers are not supported "
+                                  f"({_src_of(tristate[0], rel, path)})")
+        out = Path(tmp) / "netlist.json"
+        if not out.exists():
+            raise Mech2SpiceError(f"yosys wrote no netlist for {path} (its run stopped early)")
+        modules = json.loads(out.read_text())["modules"]
+    return _pick_top(modules, top, path)
+
+
+def _src_of(cell: str, rel: str, path: Path) -> str:
+    """Turn Yosys's 'mod/$ternary$FILE:LINE$7' into 'line LINE', else the raw cell name."""
+    m = re.search(r":(\d+)\$\d+$", cell)
+    return f"line {m.group(1)}" if m else cell.replace(rel, str(path))
+
+
+def _pick_top(modules: dict, top: str | None, path: Path) -> tuple[str, dict]:
+    if top is not None and top in modules:
+        return top, modules[top]
+    for name, mod in modules.items():
+        if int(str(mod.get("attributes", {}).get("top", "0")), 2) == 1:
+            return name, mod
+    if not modules:
+        raise Mech2SpiceError(f"{path}: no Verilog module found")
+    if len(modules) == 1:
+        return next(iter(modules.items()))
+    raise Mech2SpiceError(f"{path}: cannot tell the top module; pass top=")
+
+
+# --------------------------------------------------------------------------- JSON -> graph
+
+# Cell type -> (node kind, input pins in pin order, output pin).  None = tied to const0.
+# A future latch is one more entry here, e.g. "$_DLATCH_P_": ("latch", ("D", "E"), "Q").
+_CELLS = {
+    "$_NOR_": ("nor", ("A", "B"), "Y"),
+    "$_NOT_": ("nor", ("A", None), "Y"),
+}
+_SEQUENTIAL = re.compile(r"^\$_?(?:\w*dff\w*|\w*dlatch\w*|sr|ff|mem\w*)(?:_|$)", re.I)
+_NAMED = {"$print": "$display/$write", "$check": "assert/assume/cover"}
+
+
+def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
+    """The graph node kind and pin layout for one Yosys cell type (None: skip); errors for the rest."""
+    if cell_type in _CELLS:
+        return _CELLS[cell_type]
+    if cell_type == "$scopeinfo":               # flatten's record of the hierarchy: no logic
+        return None
+    if _SEQUENTIAL.match(cell_type):
+        raise Mech2SpiceError(f"module {top} contains a flip-flop/latch ({cell_type}): "
+                              "clocked designs are not supported by synth yet "
+                              "(combinational logic only)")
+    what = _NAMED.get(cell_type, f"cell type {cell_type}")
+    raise Mech2SpiceError(f"module {top}: {what} is not supported (only logic that maps "
+                          "to NOR gates)")
+
+
+def build_netlist(top: str, module: dict) -> Netlist:
+    """Build the raw (pre-hygiene) graph from a Yosys JSON module."""
+    g = nx.DiGraph()
+    inputs, outputs, driver = _add_inputs(g, top, module)
+    if not outputs:
+        raise Mech2SpiceError(f"module {top} has no output ports: nothing to synthesize")
+    cells = _add_cells(g, top, module, driver)
+    names = _net_names(module)
+    for node, (pins, out_net) in cells.items():
+        g.nodes[node]["net"] = names.get(out_net, f"${out_net}")
+        _connect_gate(g, node, [_source(g, b, driver, top) for b in pins])
+    for port, bits in _ports(module, "output"):
+        for i, bit in enumerate(bits):
+            node = f"{port}[{i}]"
+            g.add_node(node, kind="output", port=port, bit=i)
+            g.add_edge(_source(g, bit, driver, top), node)
+    return Netlist(top, g, inputs, outputs)
+
+
+def _ports(module: dict, direction: str):
+    return [(p, info["bits"]) for p, info in module["ports"].items()
+            if info["direction"] == direction]
+
+
+def _add_inputs(g: nx.DiGraph, top: str, module: dict):
+    """Input nodes; port widths in declaration order; net id -> driving node."""
+    bad = [p for p, info in module["ports"].items() if info["direction"] not in ("input", "output")]
+    if bad:
+        raise Mech2SpiceError(f"module {top}: inout port '{bad[0]}' is not supported")
+    driver: dict[int, str] = {}
+    for port, bits in _ports(module, "input"):
+        for i, bit in enumerate(bits):
+            g.add_node(f"{port}[{i}]", kind="input", port=port, bit=i)
+            driver[bit] = f"{port}[{i}]"
+    inputs = {p: len(b) for p, b in _ports(module, "input")}
+    outputs = {p: len(b) for p, b in _ports(module, "output")}
+    return inputs, outputs, driver
+
+
+def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict) -> dict:
+    """One node per cell (named g<N>); returns node -> (input bits, output net)."""
+    cells = {}
+    for cell in module["cells"].values():
+        mapped = map_cell(cell["type"], top)
+        if mapped is None:
+            continue
+        kind, pins, out_pin = mapped
+        node = f"g{len(cells)}"
+        out_net = cell["connections"][out_pin][0]
+        if out_net in driver:
+            raise Mech2SpiceError(f"module {top}: net {out_net} has more than one driver")
+        g.add_node(node, kind=kind)
+        driver[out_net] = node
+        cells[node] = ([cell["connections"][p][0] if p else "0" for p in pins], out_net)
+    return cells
+
+
+def _net_names(module: dict) -> dict:
+    """Net id -> readable name, public (user) names winning over Yosys's generated ones."""
+    names = {}
+    for name, info in sorted(module["netnames"].items(), key=lambda kv: -kv[1]["hide_name"]):
+        for i, bit in enumerate(info["bits"]):
+            names[bit] = name if len(info["bits"]) == 1 else f"{name}[{i}]"
+    return names
+
+
+def _source(g: nx.DiGraph, bit, driver: dict, top: str) -> str:
+    """The node driving a JSON bit: a net id or one of the constants '0', '1', 'x', 'z'."""
+    if bit == "z":
+        raise Mech2SpiceError(f"module {top}: tri-state ('z') drivers are not supported")
+    if bit == "1":
+        return _const(g, 1)
+    return driver.get(bit) or _const(g, 0)     # '0', 'x' and undriven nets read as 0
+
+
+def _const(g: nx.DiGraph, value: int) -> str:
+    name = f"const{value}"
+    if name not in g:
+        g.add_node(name, kind="const")
+    return name
+
+
+def _connect_gate(g: nx.DiGraph, node: str, sources: list[str]) -> None:
+    """Wire a NOR; NOR(x, x) becomes NOR(x, 0), and NOR(0, 0) is marked fixed at 1."""
+    a, b = sources
+    if a == b:
+        b = _const(g, 0)
+    if a == b:                                  # both const0: a DiGraph cannot hold it
+        g.nodes[node]["fixed"] = 1
+        return
+    g.add_edge(a, node, pin=0)
+    g.add_edge(b, node, pin=1)
+
+
+# --------------------------------------------------------------------------- hygiene
+
+def _kind(g: nx.DiGraph, node) -> str:
+    return g.nodes[node]["kind"]
+
+
+def _fixed(g: nx.DiGraph, node) -> int | None:
+    """A NOR's constant output if its inputs force one, else None."""
+    if "fixed" in g.nodes[node]:
+        return g.nodes[node]["fixed"]
+    return 0 if g.has_edge("const1", node) else None
+
+
+def propagate_constants(g: nx.DiGraph) -> None:
+    """Replace NOR gates with a fixed output by const nodes: NOR(x,1)=0, NOR(0,0)=1."""
+    todo = [n for n in g if _kind(g, n) == "nor" and _fixed(g, n) is not None]
+    while todo:
+        node = todo.pop()
+        if node not in g or _fixed(g, node) is None:
+            continue
+        value = _fixed(g, node)
+        sinks = [(s, attrs) for s, attrs in g[node].items() if s != node]
+        g.remove_node(node)
+        const = _const(g, value)
+        for sink, attrs in sinks:
+            if g.has_edge(const, sink):         # NOR(c, c): the sink is fixed at 1 - c
+                g.remove_edges_from(list(g.in_edges(sink)))
+                g.nodes[sink]["fixed"] = 1 - value
+            else:
+                g.add_edge(const, sink, **attrs)
+            if _kind(g, sink) == "nor":
+                todo.append(sink)
+
+
+def remove_dead_gates(g: nx.DiGraph) -> None:
+    """Drop gates and constants outside every output's fan-in cone (inputs always stay)."""
+    live = set()
+    stack = [n for n in g if _kind(g, n) == "output"]
+    while stack:
+        node = stack.pop()
+        if node not in live:
+            live.add(node)
+            stack.extend(g.predecessors(node))
+    g.remove_nodes_from([n for n in list(g) if _kind(g, n) in ("nor", "const") and n not in live])
+
+
+def check_loops(g: nx.DiGraph, top: str = "") -> None:
+    """Raise if the gates form a combinational loop, naming its gates and nets."""
+    try:
+        cycle = [u for u, _ in nx.find_cycle(g)]
+    except nx.NetworkXNoCycle:
+        return
+    hops = [f"{n} (net {g.nodes[n]['net']})" if not g.nodes[n].get("net", "$").startswith("$")
+            else n for n in cycle]
+    raise Mech2SpiceError(f"combinational loop in module {top}: " + " -> ".join(hops)
+                          + f" -> {cycle[0]}; break it with a register or remove the feedback")
+
+
+def _new_gate(g: nx.DiGraph) -> str:
+    n = g.graph.get("next_gate")
+    if n is None:
+        n = 1 + max((_gate_key(x)[0] for x in g if _kind(g, x) == "nor"), default=-1)
+    g.graph["next_gate"] = n + 1
+    return f"g{n}"
+
+
+def _buffer(g: nx.DiGraph, src: str) -> str:
+    """Add NOR(NOR(src, 0), 0), a non-inverting copy of src; returns its output gate."""
+    first, second = _new_gate(g), _new_gate(g)
+    for gate, a in ((first, src), (second, first)):
+        g.add_node(gate, kind="nor")
+        g.add_edge(a, gate, pin=0)
+        g.add_edge(_const(g, 0), gate, pin=1)
+    return second
+
+
+def buffer_feedthroughs(g: nx.DiGraph) -> None:
+    """Outputs wired straight to an input port get a buffer (one shared per input bit)."""
+    copies: dict[str, str] = {}
+    for out in [n for n in g if _kind(g, n) == "output"]:
+        (src,) = g.predecessors(out)
+        if _kind(g, src) == "input":
+            if src not in copies:
+                copies[src] = _buffer(g, src)
+            g.remove_edge(src, out)
+            g.add_edge(copies[src], out)
+
+
+def limit_fanout(g: nx.DiGraph, max_fanout: int | None) -> None:
+    """Give every input/gate driving more than max_fanout sinks a tree of buffer pairs."""
+    if max_fanout is None:
+        return
+    if max_fanout < 2:
+        raise Mech2SpiceError(f"max_fanout must be at least 2 (got {max_fanout}): "
+                              "a buffer pair cannot widen a fan-out of 1")
+    for node in [n for n in g if _kind(g, n) in ("input", "nor")]:
+        if g.out_degree(node) > max_fanout:
+            sinks = list(g[node].items())
+            g.remove_edges_from([(node, s) for s, _ in sinks])
+            _fan_out(g, node, sinks, max_fanout)
+
+
+def _fan_out(g: nx.DiGraph, src: str, sinks: list, k: int) -> None:
+    """Drive sinks from src, at most k per driver: split into k groups, buffer the big ones."""
+    if len(sinks) <= k:
+        g.add_edges_from((src, s, attrs) for s, attrs in sinks)
+        return
+    for i in range(k):
+        group = sinks[i * len(sinks) // k:(i + 1) * len(sinks) // k]
+        if len(group) == 1:
+            g.add_edge(src, group[0][0], **group[0][1])
+        else:
+            _fan_out(g, _buffer(g, src), group, k)
+
+
+def _gate_key(name: str) -> tuple:
+    m = re.fullmatch(r"g(\d+)", str(name))
+    return (int(m.group(1)), "") if m else (-1, str(name))
+
+
+def _renumbered(g: nx.DiGraph) -> nx.DiGraph:
+    """Copy with gates named g0.. in Netlist.gates() order; nodes listed inputs, consts, gates, outputs."""
+    order = Netlist("", g, {}, {}).gates()
+    mapping = {old: f"g{i}" for i, old in enumerate(order)}
+    h = nx.DiGraph()
+    for kind in ("input", "const", "nor", "output"):
+        nodes = order if kind == "nor" else [n for n in g if _kind(g, n) == kind]
+        h.add_nodes_from((mapping.get(n, n), g.nodes[n]) for n in nodes)
+    h.add_edges_from((mapping.get(u, u), mapping.get(v, v), d) for u, v, d in g.edges(data=True))
+    return h

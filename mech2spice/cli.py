@@ -81,6 +81,66 @@ def _print_gate(out: dict) -> None:
         print(f"  [{'pass' if r['pass'] else 'FAIL'}] {name}: {r['figure']}")
 
 
+# --- synth / simulate ------------------------------------------------------------
+def _netlist(args):
+    from .synth import synthesize
+    return synthesize(args.design, top=args.top, max_fanout=getattr(args, "max_fanout", None))
+
+
+def cmd_synth(args) -> int:
+    from . import network
+    from .params import load_params
+    nl = _netlist(args)
+    model = network.build(nl, load_params(args.params))
+    out = {"top": nl.top, "gates": len(nl.gates()), "latches": 0, **model.counts(),
+           "inputs": nl.inputs, "outputs": nl.outputs, "logic_depth": network.logic_depth(nl)}
+    if args.json:
+        _print_json(out)
+    else:
+        print(f"{out['top']}: {out['gates']} NOR gates, logic depth {out['logic_depth']}")
+        print(f"  {out['oscillators']} oscillators, {out['linear_springs']} linear springs, "
+              f"{out['nonlinear_springs']} nonlinear springs, {out['dashpots']} dashpots")
+        print(f"  inputs  {out['inputs']}\n  outputs {out['outputs']}")
+    return 0
+
+
+def _parse_sets(items: list[str]) -> dict[str, int]:
+    values = {}
+    for item in items or []:
+        port, sep, val = item.partition("=")
+        if not sep or not port:
+            raise Mech2SpiceError(f"--set expects PORT=INT, got '{item}'")
+        try:
+            values[port.strip()] = int(val, 0)
+        except ValueError:
+            raise Mech2SpiceError(f"--set {port}: '{val}' is not an integer") from None
+    return values
+
+
+def cmd_simulate(args) -> int:
+    from . import simulate
+    from .params import load_params
+    nl = _netlist(args)
+    values = _parse_sets(args.set)
+    if args.backend == "logic":
+        from .logic import pack_inputs
+        pack_inputs(nl, values)
+        res = simulate.run_logic(nl, values)
+    else:
+        res = simulate.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
+                                    steps=args.steps, progress=not args.json and sys.stderr.isatty())[0]
+    res["inputs"] = values
+    if args.json:
+        _print_json(res)
+    else:
+        for port, v in res["outputs"].items():
+            print(f"{port} = {'invalid' if v is None else v}")
+        for bit, a in res["amplitudes"].items():
+            print(f"  {bit}: {a:.4f} u_R -> {'invalid' if res['bits'][bit] is None else res['bits'][bit]}")
+        print(f"backend {res['backend']}, {res['periods']} periods, {res['wall_s']:.1f} s, valid: {res['valid']}")
+    return 0 if res["valid"] else 1
+
+
 # --- parser --------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
@@ -96,6 +156,32 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--report", metavar="DIR", help="also write DIR/gate.md and PNG figures")
     g.add_argument("--json", action="store_true", help="machine-readable output")
     g.set_defaults(func=cmd_gate)
+
+    def design_args(sp):
+        sp.add_argument("design", help="Verilog file")
+        sp.add_argument("--top", help="top module (default: the only/auto-detected top)")
+        sp.add_argument("--params", default="default", help="gate parameters: default, printed or a JSON file")
+        sp.add_argument("--max-fanout", type=int, default=None,
+                        help="insert NOR-pair buffers so no gate drives more loads (fan-out 3 is verified)")
+        sp.add_argument("--json", action="store_true", help="machine-readable output")
+
+    s = sub.add_parser("synth", help="synthesise Verilog to mechanical NOR gates and count elements",
+                       description="Verilog -> Yosys -> NOR netlist -> mechanical model; prints element counts "
+                                   "in the paper's convention (6 oscillators and 5 nonlinear springs per gate; "
+                                   "one spring + one dashpot per gate-to-gate connection).")
+    design_args(s)
+    s.set_defaults(func=cmd_synth)
+
+    s = sub.add_parser("simulate", help="simulate a design and decode its outputs",
+                       description="Apply input values (unset inputs are 0), simulate until the outputs settle "
+                                   "(or --periods), and decode each output bit from its amplitude. A bit outside "
+                                   "both bands is reported invalid, never rounded; the exit code is 1 then.")
+    design_args(s)
+    s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
+    s.add_argument("--backend", default="rk4", choices=["logic", "rk4", "ngspice"])
+    s.add_argument("--periods", type=int, default=None, help="simulate exactly this many drive periods")
+    s.add_argument("--steps", type=int, default=None, help="RK4 steps per drive period (default 80)")
+    s.set_defaults(func=cmd_simulate)
     return ap
 
 

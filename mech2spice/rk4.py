@@ -75,6 +75,7 @@ class _Rhs:
         return (self.A @ z) * self.inv_m
 
 
+@np.errstate(over="ignore", invalid="ignore")     # a blow-up is caught per period with a clear error
 def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT_STEPS_PER_PERIOD,
               stimulus: Stimulus | None = None, state: tuple[np.ndarray, np.ndarray] | None = None,
               start_period: int = 0, probes: list[str] | None = None, trace_every: int = 0,

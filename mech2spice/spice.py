@@ -272,8 +272,9 @@ class _Emitter:
         self.T = 2 * math.pi / model.omega
         self.h = options.max_step_periods * self.T
         self.warp = options.warp(model.omega)
-        self.namer = Namer()
-        self.stem = [self.namer(n) for n in model.names]
+        # one namer per prefix: stems are unique within a prefix, prefixes keep kinds apart
+        self.namer = {k: Namer() for k in ("dof", "gate", "couple", "drive", "amp")}
+        self.stem = [self.namer["dof"](n) for n in model.names]
         self.plan = _plan(model)
         self.lines: list[str] = []
         self.amp_nodes: dict[tuple, str] = {}
@@ -305,27 +306,30 @@ class _Emitter:
                 last = a
         return tuple(pts)
 
-    def amp_node(self, d: int) -> str:
+    def amp_node(self, d: int, share: int | None = None) -> str:
+        """The amplitude node of drive d (an editable source per drive; a pair's twin drive `share`
+        reuses the node when its schedule is the same)."""
         sched = self.schedule(d)
-        if sched not in self.amp_nodes:
-            node = f"a_{self.namer(self.m.drives[d].name or 'drive')}"
-            self.amp_nodes[sched] = node
+        key = (d if share is None else share, sched)
+        if key not in self.amp_nodes:
+            node = f"a_{self.namer['amp'](self.m.drives[d].name or 'drive')}"
+            self.amp_nodes[key] = node
             self.amp_lines.append(f"V{node} {node} 0 {self._source(sched)}")
-        return self.amp_nodes[sched]
+        return self.amp_nodes[key]
 
     def _source(self, sched) -> str:
         if len(sched) == 1:
             return f"DC {num(sched[0][1])}"
-        ramp = 1e-3 * self.T        # a step change, resolved by ngspice's breakpoints
+        ramp = 1e-3 * self.T        # a step change centred on t1 (ngspice steps onto both corners)
         pts = [f"0 {num(sched[0][1])}"]
         for (t0, a0), (t1, a1) in zip(sched, sched[1:]):
-            pts += [f"{num(t1)} {num(a0)}", f"{num(t1 + ramp)} {num(a1)}"]
+            pts += [f"{num(t1 - ramp / 2)} {num(a0)}", f"{num(t1 + ramp / 2)} {num(a1)}"]
         return "PWL(" + " ".join(pts) + ")"
 
     # -- blocks
     def gate(self, g) -> None:
         m = self.m
-        inst = f"xg_{self.namer(g.name)}"
+        inst = f"xg_{self.namer['gate'](g.name)}"
         (s1, d1), (s2, d2) = g.inputs
         src = [k for k, d in enumerate(m.drives) if d.dof == g.channel][:1]
         self.plan.drives |= set(src)
@@ -375,7 +379,7 @@ class _Emitter:
             k, c = m.springs[nk][2], m.dashpots[nc][2]
             over = "".join(f" {n}={num(v)}" for n, v, ref in (("k", k, self.p.k_couple), ("c", c, self.p.c_couple))
                            if not math.isclose(v, ref, rel_tol=1e-13))
-            self.lines.append(f"Xc_{self.namer('c_' + m.names[s])} {self.x(up)} {self.v(up)} {self.x(s)} "
+            self.lines.append(f"Xc_{self.namer['couple'](m.names[s])} {self.x(up)} {self.v(up)} {self.x(s)} "
                               f"{self.v(s)} {self.v(d)} m2s_couple{over}")
         for n, (i, j, k) in enumerate(m.springs):
             if n not in self.plan.springs:
@@ -409,11 +413,11 @@ class _Emitter:
                     a, b = ds[0], dd[0]
                     free = [k for k in free if k not in (a, b)]
                     self.lines.append(
-                        f"Xd_{self.namer('d_' + m.drives[a].name)} {self.v(s)} {self.v(d)} {self.amp_node(a)} "
-                        f"{self.amp_node(b)} m2s_pairdrive ps={num(m.drives[a].phase)} pd={num(m.drives[b].phase)}")
+                        f"Xd_{self.namer['drive'](m.drives[a].name)} {self.v(s)} {self.v(d)} {self.amp_node(a)} "
+                        f"{self.amp_node(b, share=a)} m2s_pairdrive ps={num(m.drives[a].phase)} pd={num(m.drives[b].phase)}")
         for k in free:
             d = m.drives[k]
-            self.lines.append(f"Xd_{self.namer('d_' + d.name)} {self.v(d.dof)} {self.amp_node(k)} "
+            self.lines.append(f"Xd_{self.namer['drive'](d.name)} {self.v(d.dof)} {self.amp_node(k)} "
                               f"m2s_drive ph={num(d.phase)}")
 
     def analysis(self) -> list[str]:
@@ -426,6 +430,11 @@ class _Emitter:
         tstop = (self.periods + 0.25) * self.T
         out = [opts, f".tran {num(self.h)} {num(tstop)} 0 {num(self.h)} uic"]
         nodes = [f"v({self.probe_node(i)})" for i in self.m.probes.values()]
+        # .four gives a standalone `ngspice -b` run its output (amplitude at the drive frequency over
+        # the last period, printed); with -r ngspice ignores it and writes the raw file instead
+        freq = num(self.m.omega / (2 * math.pi))
+        for k in range(0, len(nodes), 8):
+            out.append(f".four {freq} " + " ".join(nodes[k:k + 8]))
         for k in range(0, len(nodes), 8):
             out.append(".save " + " ".join(nodes[k:k + 8]))
         return out

@@ -1,0 +1,26 @@
+# Quick start (fresh Debian, as root):  make demo   |   make test
+PY ?= python3
+
+.PHONY: setup demo test test-all reports subckts
+
+setup:  ## install ngspice (Debian) and the package with its Python dependencies
+	@dpkg -s ngspice libngspice0 >/dev/null 2>&1 || \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq ngspice libngspice0)
+	$(PY) -m pip install -q --root-user-action=ignore -e '.[test]'
+
+demo: setup  ## the main job end to end: gate characterisation, adder from Verilog on RK4, reports
+	mech2spice gate --report reports
+	mech2spice synth verilog/adder2.v
+	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend logic
+	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend rk4
+	$(PY) -m mech2spice.report_adder reports
+
+test: setup  ## the CI suite (long physical runs marked slow are left out)
+	$(PY) -m pytest -q -m "not slow"
+
+test-all: setup
+	$(PY) -m pytest -q
+
+reports: setup  ## regenerate every report in reports/
+	mech2spice gate --report reports
+	$(PY) -m mech2spice.report_adder reports

@@ -1,0 +1,305 @@
+"""Running emitted netlists under ngspice and reading the results back as an `rk4.Run`.
+
+Default path: a subprocess `ngspice -b -r out.raw file.cir` in a temporary directory (binary raw file,
+streamed to disk by ngspice, read here with a header parse + np.frombuffer).  ngspice's own time
+points are used as they are: with the max step binding (it does in steady state, see
+reports/speed_accuracy.md) they form a uniform grid of T/N, and summing N samples per period against
+e^{-i omega t_j} is then an exact demodulation of the integrator's samples, as in rk4.py.  Where the
+grid is not uniform (start-up, amplitude steps) each sample is weighted by its share of the time axis.
+
+Second path, for interactive use: PySpice's shared-library mode (`run_pyspice`).
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DivergenceError, Mech2SpiceError, ToolMissingError
+from .model import MechModel
+from .rk4 import Run, default_blowup
+from .spice import Namer, SpiceOptions, emit_with_probes
+from .stimulus import Stimulus
+
+MISSING = "ngspice not found: apt-get install -y ngspice libngspice0"
+
+
+def find_ngspice() -> str:
+    exe = shutil.which("ngspice")
+    if exe is None:
+        raise ToolMissingError(MISSING)
+    return exe
+
+
+# --- raw files ---------------------------------------------------------------------
+def read_raw(path) -> tuple[list[str], np.ndarray]:
+    """Vector names and data (points, vectors) of a binary real raw file; a run cut short keeps
+    the whole rows it wrote."""
+    data = Path(path).read_bytes()
+    mark = data.find(b"Binary:\n")
+    if mark < 0:
+        raise Mech2SpiceError(f"{path}: not a binary ngspice raw file (no 'Binary:' section)")
+    lines = data[:mark].decode("ascii", "replace").splitlines()
+    head = dict(line.split(":", 1) for line in lines if ":" in line and not line.startswith("\t"))
+    if "complex" in head.get("Flags", ""):
+        raise Mech2SpiceError(f"{path}: complex raw data is not supported")
+    nvar = int(head["No. Variables"])
+    at = next(k for k, line in enumerate(lines) if line.startswith("Variables:"))
+    names = [lines[at + 1 + j].split()[1].lower() for j in range(nvar)]
+    values = np.frombuffer(data, dtype="<f8", offset=mark + 8)
+    rows = values.size // nvar
+    return names, values[: rows * nvar].reshape(rows, nvar)
+
+
+def demodulate(t: np.ndarray, x: np.ndarray, omega: float, periods: int):
+    """Per-period phasor A (u = Re(A e^{i omega t})) and mean of samples x (S, n) at times t (S,).
+
+    Each sample stands for its cell (half-way to its neighbours); a cell crossing a period edge
+    kT is split between the two periods.  On a uniform grid of N = T/h points this is exactly the
+    N-point DFT of the samples (the two halves of a split cell carry samples one period apart), the
+    same demodulation as rk4.py; elsewhere (start-up, amplitude steps) it is the midpoint rule."""
+    T = 2 * math.pi / omega
+    mid = (t[1:] + t[:-1]) / 2
+    lo, hi = np.concatenate([t[:1], mid]), np.concatenate([mid, t[-1:]])
+    klo, khi = np.floor(lo / T).astype(int), np.floor(hi / T).astype(int)
+    edge = khi * T
+    w_lo = np.where(klo == khi, hi - lo, edge - lo)      # the part of each cell in period klo
+    w_hi = np.where(klo == khi, 0.0, hi - edge)          # and in period khi
+    rot = np.exp(-1j * omega * t)
+    amp = np.zeros((periods, x.shape[1]), complex)
+    mean = np.zeros((periods, x.shape[1]))
+    for k, w in ((klo, w_lo), (khi, w_hi)):
+        keep = (k >= 0) & (k < periods)
+        k, w, z = k[keep], w[keep], x[keep] * (w[keep] * rot[keep])[:, None]
+        for j in range(x.shape[1]):   # bincount takes real weights, one column at a time
+            amp[:, j] += np.bincount(k, z[:, j].real, periods) + 1j * np.bincount(k, z[:, j].imag, periods)
+            mean[:, j] += np.bincount(k, w * x[keep, j], periods)
+    return amp * (2 / T), mean / T
+
+
+# --- errors --------------------------------------------------------------------------
+_ERR = re.compile(r"(^|\s)(error\b|timestep too small|fatal)", re.I)
+_MORE = re.compile(r"trouble|aborted|interrupted|line\s*\d", re.I)
+
+
+def _ngspice_message(log: str) -> str | None:
+    """The first error line ngspice printed (with its 'trouble with node'/'aborted' follow-ups) as one line."""
+    lines = [s.strip() for s in log.splitlines()]
+    for n, line in enumerate(lines):
+        if _ERR.search(line):
+            more = [s for s in lines[n + 1:n + 3] if _MORE.search(s) and not _ERR.search(s)]
+            return " ".join([line, *more])[:400]
+    return None
+
+
+def _node_dof(model: MechModel, node: str) -> str | None:
+    """DOF name of a top-level x_/v_ node (the emitter's stems are a pure function of the names)."""
+    namer = Namer()
+    stems = {namer(n): n for n in model.names}
+    kind, _, stem = node.lower().partition("_")
+    return stems.get(stem) if kind in ("x", "v") else None
+
+
+def check_divergence(model: MechModel, t: np.ndarray, x: np.ndarray, probe_dofs: list[int],
+                     T: float) -> None:
+    """DivergenceError at the first sample where a probe is non-finite or beyond the blow-up bound."""
+    bad = ~np.isfinite(x) | (np.abs(x) > default_blowup(model))
+    if bad.any():
+        row = int(np.flatnonzero(bad.any(axis=1))[0])
+        col = int(np.flatnonzero(bad[row])[0])
+        raise DivergenceError(model.names[probe_dofs[col]], float(t[row]), T, float(abs(x[row, col])))
+
+
+def _fail(model: MechModel, msg: str, names: list[str], data: np.ndarray, vecs: list[str]):
+    """The error for a failed run: DivergenceError if the probes blew up or ngspice's step collapsed
+    (naming the node's DOF), else Mech2SpiceError with ngspice's message."""
+    T = 2 * math.pi / model.omega
+    dofs = list(model.probes.values())
+    if data.ndim == 2 and data.shape[0] and all(v in names for v in vecs):
+        check_divergence(model, data[:, 0], data[:, [names.index(v) for v in vecs]], dofs, T)
+    m = re.search(r"timestep too small;\s*time\s*=\s*([0-9.eE+-]+)", msg, re.I)
+    if m:
+        node = re.search(r'trouble with node\s+"?([\w.]+)', msg)
+        dof = _node_dof(model, node.group(1)) if node else None
+        dof = dof or (model.names[dofs[0]] if dofs else model.names[0])
+        last = float(np.abs(data[-1, 1:]).max()) if data.ndim == 2 and data.size else math.nan
+        return DivergenceError(dof, float(m.group(1)), T, last)
+    return Mech2SpiceError(msg)
+
+
+# --- running ---------------------------------------------------------------------------
+def run_netlist(text: str, workdir=None, timeout: float | None = None) -> tuple[list[str], np.ndarray, str]:
+    """Run a netlist under `ngspice -b -r`; returns (vector names, data, log).  Raises
+    Mech2SpiceError with ngspice's message on an error (the data of a run cut short is in .data)."""
+    exe = find_ngspice()
+    with tempfile.TemporaryDirectory(prefix="m2s_ng_") as tmp:
+        d = Path(workdir or tmp)
+        cir, raw = d / "circuit.cir", d / "out.raw"
+        cir.write_text(text, encoding="ascii")
+        try:
+            proc = subprocess.run([exe, "-b", "-r", str(raw), str(cir)], cwd=d, capture_output=True,
+                                  text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+        except subprocess.TimeoutExpired:
+            raise Mech2SpiceError(f"ngspice did not finish within {timeout:g} s") from None
+        log = proc.stdout + "\n" + proc.stderr
+        msg = _ngspice_message(proc.stderr) or _ngspice_message(proc.stdout)
+        names, data = read_raw(raw) if raw.exists() and raw.stat().st_size else ([], np.zeros((0, 0)))
+    if proc.returncode != 0 or msg:
+        err = Mech2SpiceError(f"ngspice failed (exit {proc.returncode}): {msg or 'no message'}")
+        err.names, err.data, err.log = names, data, log
+        raise err
+    if data.shape[0] < 2:
+        raise Mech2SpiceError("ngspice wrote no data (raw file empty)")
+    return names, data, log
+
+
+def run(model: MechModel, periods: int, stimulus: Stimulus | None = None,
+        options: SpiceOptions = SpiceOptions(), batch_index: int = 0, timeout: float | None = None,
+        keep_netlist: str | Path | None = None) -> Run:
+    """Simulate `periods` drive periods of one batch member under ngspice (subprocess)."""
+    text, vecs = emit_with_probes(model, periods, stimulus, batch_index, options)
+    if keep_netlist:
+        Path(keep_netlist).write_text(text, encoding="ascii")
+    t0 = time.perf_counter()
+    try:
+        names, data, log = run_netlist(text, timeout=timeout)
+    except Mech2SpiceError as e:
+        raise _fail(model, str(e), getattr(e, "names", []), getattr(e, "data", np.zeros((0, 0))), vecs) from None
+    wall = time.perf_counter() - t0
+    return to_run(model, periods, names, data, vecs, options, {"wall_s": wall, "backend": "ngspice"})
+
+
+def to_run(model: MechModel, periods: int, names: list[str], data: np.ndarray, vecs: list[str],
+           options: SpiceOptions, extra: dict) -> Run:
+    missing = [v for v in vecs if v not in names]
+    if missing or names[:1] != ["time"]:
+        raise Mech2SpiceError(f"ngspice raw file lacks {missing or ['time']}")
+    T = 2 * math.pi / model.omega
+    t, x = data[:, 0], data[:, [names.index(v) for v in vecs]]
+    dofs = list(model.probes.values())
+    check_divergence(model, t, x, dofs, T)
+    h = options.max_step_periods * T
+    amp, mean = demodulate(t, x, model.omega, periods)
+    dt = np.diff(t)
+    extra = {**extra, "points": int(t.size),
+             "uniform_fraction": float(np.mean(np.abs(dt - h) < 1e-6 * h)) if dt.size else 0.0}
+    xf = np.zeros((model.n, 1))
+    end = np.searchsorted(t, periods * T * (1 + 1e-12))      # last sample at or before the end
+    xf[dofs, 0] = x[max(end - 1, 0)]
+    return Run(list(model.probes), T, (1 + np.arange(periods)) * T, amp[:, :, None], mean[:, :, None],
+               xf, np.zeros((model.n, 1)), periods * T, extra=extra)
+
+
+def run_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
+              options: SpiceOptions = SpiceOptions(), workers: int | None = None,
+              timeout: float | None = None) -> Run:
+    """Every batch member of `stimulus` as its own ngspice process (up to `workers` at a time, default
+    the CPU count: ngspice itself is single-threaded); results stacked along the batch axis."""
+    B = stimulus.batch if stimulus is not None else 1
+    workers = max(1, min(B, workers or os.cpu_count() or 1))
+    with ThreadPoolExecutor(workers) as pool:
+        runs = list(pool.map(lambda b: run(model, periods, stimulus, options, b, timeout), range(B)))
+    first = runs[0]
+    return Run(first.probe_names, first.period, first.t_end,
+               np.concatenate([r.amp for r in runs], axis=2), np.concatenate([r.mean for r in runs], axis=2),
+               np.concatenate([r.x for r in runs], axis=1), np.concatenate([r.v for r in runs], axis=1),
+               first.t, extra={"wall_s": [r.extra["wall_s"] for r in runs], "backend": "ngspice"})
+
+
+# --- PySpice shared mode (interactive use) ------------------------------------------------
+def find_libngspice() -> str:
+    """Path of libngspice.so.0 from the loader cache (Debian ships no unversioned libngspice.so,
+    which is the name PySpice 1.5 asks for)."""
+    try:
+        out = subprocess.run(["ldconfig", "-p"], capture_output=True, text=True, timeout=30).stdout
+    except (OSError, subprocess.SubprocessError):
+        out = ""
+    m = re.search(r"libngspice\.so(?:\.\d+)*\s.*=>\s*(\S+)", out)
+    if m is None:
+        raise ToolMissingError("libngspice not found: apt-get install -y ngspice libngspice0")
+    return m.group(1)
+
+
+_SHARED = None
+
+
+def _shared():
+    """One NgSpiceShared instance per process (the library keeps global state)."""
+    global _SHARED
+    if _SHARED is None:
+        import logging
+        lib = find_libngspice()
+        os.environ["NGSPICE_LIBRARY_PATH"] = lib         # read by PySpice at import
+        logging.getLogger("PySpice").setLevel(logging.ERROR)  # "Unsupported Ngspice version 39"
+        try:
+            from PySpice.Spice.NgSpice.Shared import NgSpiceShared
+        except ImportError as e:
+            raise ToolMissingError(f"PySpice not importable: {e}; pip install PySpice") from None
+        NgSpiceShared.LIBRARY_PATH = lib                  # in case PySpice was imported earlier
+        _SHARED = NgSpiceShared.new_instance()
+    return _SHARED
+
+
+def _vector(ng, plot: str, name: str) -> np.ndarray:
+    """A real vector straight from ngGet_Vec_Info (PySpice's Plot needs a Simulation object)."""
+    from PySpice.Spice.NgSpice.Shared import ffi
+    info = ng._ngspice_shared.ngGet_Vec_Info(f"{plot}.{name}".encode())
+    if info == ffi.NULL or info.v_realdata == ffi.NULL:
+        raise Mech2SpiceError(f"ngspice (shared) has no real vector {name}")
+    return np.frombuffer(ffi.buffer(info.v_realdata, info.v_length * 8), dtype=np.float64).copy()
+
+
+def run_pyspice(model: MechModel, periods: int, stimulus: Stimulus | None = None,
+                options: SpiceOptions = SpiceOptions(), batch_index: int = 0) -> Run:
+    """As `run`, through libngspice in this process (PySpice 1.5 shared mode): no files, no
+    subprocess.  Not thread-safe (one library instance per process)."""
+    text, vecs = emit_with_probes(model, periods, stimulus, batch_index, options)
+    t0 = time.perf_counter()
+    try:
+        names, data = run_netlist_shared(text, vecs)
+    except Mech2SpiceError as e:
+        raise _fail(model, str(e), getattr(e, "names", []), getattr(e, "data", np.zeros((0, 0))), vecs) from None
+    return to_run(model, periods, names, data, vecs, options,
+                  {"wall_s": time.perf_counter() - t0, "backend": "ngspice-shared"})
+
+
+def run_netlist_shared(text: str, vecs: list[str]) -> tuple[list[str], np.ndarray]:
+    """Load and run a netlist in the shared library; returns (["time", *vecs], data).  Errors are
+    read from ngspice's own output (PySpice 1.5 raises bare NameError/NgSpiceCommandError)."""
+    ng = _shared()
+    ng.clear_output()
+    try:
+        ng.load_circuit(text)
+        ng.run()
+    except Exception:          # the message is in ngspice's stderr, read below
+        pass
+    msg = _ngspice_message("\n".join([ng.stderr, ng.stdout]))
+    plot = ng.last_plot
+    names, data = ["time", *vecs], np.zeros((0, 0))
+    try:
+        if plot.startswith("tran"):
+            data = np.stack([_vector(ng, plot, n) for n in ["time", *[v[2:-1] for v in vecs]]], axis=1)
+    finally:
+        _release(ng, plot)
+    if msg or not data.size:
+        err = Mech2SpiceError(f"ngspice (shared) failed: {msg or 'no transient results'}")
+        err.names, err.data = names, data
+        raise err
+    return names, data
+
+
+def _release(ng, plot: str) -> None:
+    """Free the plot and the circuit so repeated runs do not accumulate."""
+    for cmd in ([f"destroy {plot}"] if plot.startswith("tran") else []) + ["remcirc"]:
+        try:
+            ng.exec_command(cmd)
+        except Exception:
+            pass

@@ -1,0 +1,119 @@
+"""Run a synthesised design on a backend and decode its outputs from amplitudes.
+
+Physical backends run in chunks until every output has settled (amplitude
+change over the last window below a tolerance and inside a band) or the
+period budget is spent.  A bit outside both bands is reported as invalid,
+never rounded.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import logic, network, rk4
+from .errors import Mech2SpiceError
+from .params import GateParams, band_of, margin
+from .synth import Netlist
+
+BACKENDS = ("logic", "rk4", "ngspice")
+SETTLE_TOL = 2e-3        # u_R change over SETTLE_WINDOW periods that counts as settled
+SETTLE_WINDOW = 100
+CHUNK = 100
+
+
+def period_budget(netlist: Netlist) -> int:
+    """Enough periods for the slowest measured gate delay (~225) through the deepest path, plus settling."""
+    return 800 + 300 * network.logic_depth(netlist)
+
+
+def decode(netlist: Netlist, amplitudes: dict[str, float], const: dict[str, int]) -> dict:
+    """bits / outputs / valid / min_margin from output amplitudes (u_R)."""
+    bits, margins = {}, []
+    for bit in logic.output_bits(netlist):
+        if bit in const:
+            bits[bit] = const[bit]
+            continue
+        b = band_of(amplitudes[bit])
+        bits[bit] = b
+        margins.append(margin(amplitudes[bit], b))
+    outputs = {}
+    for port, width in netlist.outputs.items():
+        vals = [bits[f"{port}[{i}]"] for i in range(width)]
+        outputs[port] = None if None in vals else sum(v << i for i, v in enumerate(vals))
+    return {"outputs": outputs, "bits": bits, "valid": all(v is not None for v in bits.values()),
+            "min_margin": float(min(margins)) if margins else None}
+
+
+def run_logic(netlist: Netlist, values: dict[str, int]) -> dict:
+    t0 = time.time()
+    bits = logic.evaluate_bits(netlist, values)
+    out = {b: bits[b] for b in logic.output_bits(netlist)}
+    outputs = logic.evaluate(netlist, values)
+    return {"backend": "logic", "outputs": outputs, "bits": out, "amplitudes": {}, "valid": True,
+            "min_margin": None, "periods": 0, "wall_s": time.time() - t0}
+
+
+def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], backend: str = "rk4",
+                 periods: int | None = None, steps: int | None = None, progress: bool = False,
+                 spice_options=None) -> list[dict]:
+    """Simulate one batch of input assignments from rest; one result dict per member."""
+    t0 = time.time()
+    for v in values:
+        logic.pack_inputs(netlist, v)                  # validates ports and widths up front
+    model = network.build(netlist, p)
+    stim = network.stimulus(model, netlist, p, [(0, values)])
+    budget = periods or period_budget(netlist)
+    if not model.probes:
+        amps, used = np.zeros((0, len(values))), 0
+    elif backend == "rk4":
+        amps, used = _settle_rk4(model, stim, budget, steps or rk4.DEFAULT_STEPS_PER_PERIOD, progress,
+                                 fixed=periods is not None)
+    elif backend == "ngspice":
+        amps, used = _run_ngspice(model, stim, budget, spice_options)
+    else:
+        raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
+    wall = time.time() - t0
+    names = list(model.probes)
+    results = []
+    for b in range(len(values)):
+        a = {n: float(amps[k, b]) for k, n in enumerate(names)}
+        res = {"backend": backend, **decode(netlist, a, model.meta["const_outputs"]),
+               "amplitudes": a, "periods": used, "wall_s": wall}
+        results.append(res)
+    return results
+
+
+def _settle_rk4(model, stim, budget: int, steps: int, progress: bool, fixed: bool):
+    state, done, history = None, 0, []
+    bar = rk4._progress(budget, progress)
+    while done < budget:
+        n = min(CHUNK, budget - done)
+        run = rk4.integrate(model, n, steps_per_period=steps, stimulus=stim, state=state, start_period=done)
+        state, done = (run.x, run.v), done + n
+        history.append(np.abs(run.amp[-1]) / model.meta["params"].u_r)
+        bar.update(n)
+        if not fixed and _settled(history, done):
+            break
+    bar.close()
+    return history[-1], done
+
+
+def _settled(history: list[np.ndarray], done: int) -> bool:
+    k = SETTLE_WINDOW // CHUNK
+    if len(history) <= k:
+        return False
+    now, before = history[-1], history[-1 - k]
+    inside = np.vectorize(lambda a: band_of(a) is not None)(now)
+    return bool(np.all(np.abs(now - before) < SETTLE_TOL) and np.all(inside))
+
+
+def _run_ngspice(model, stim, periods: int, options):
+    from . import ngspice
+    u_r = model.meta["params"].u_r
+    cols = []
+    for b in range(stim.batch):
+        run = ngspice.run(model, periods, stimulus=stim, options=options, batch_index=b) if options else \
+            ngspice.run(model, periods, stimulus=stim, batch_index=b)
+        cols.append(np.abs(run.amp[-1, :, 0]) / u_r)
+    return np.stack(cols, axis=1), periods

@@ -1,0 +1,18 @@
+import numpy as np
+import pytest
+
+from mech2spice import nor, params
+from mech2spice.characterise import LEVEL, PAIRS, settle
+
+
+@pytest.fixture(scope="session")
+def p():
+    return params.DEFAULT
+
+
+@pytest.fixture(scope="session")
+def gate_run(p):
+    """Single gate, the four nominal input pairs as one RK4 batch, settled from rest."""
+    levels = np.array([[LEVEL[a], LEVEL[b]] for a, b in PAIRS])
+    run, amp = settle(nor.single_gate(p), p, levels, 2000)
+    return run, amp[0]

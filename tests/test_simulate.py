@@ -1,0 +1,104 @@
+"""Verilog -> mechanical network -> RK4, decoded and compared with the logic-level oracle; the CLI contract."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mech2spice import logic, network, params, simulate, synth
+
+
+def cli(*args):
+    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *args], capture_output=True, text=True)
+    return r.returncode, r.stdout, r.stderr
+
+
+@pytest.fixture(scope="module")
+def adder():
+    return synth.synthesize("verilog/adder2.v")
+
+
+def test_adder_counts_match_paper_convention(adder, p):
+    m = network.build(adder, p)
+    n = len(adder.gates())
+    assert n <= 17
+    c = m.counts()
+    assert c["oscillators"] == 6 * n and c["nonlinear_springs"] == 5 * n
+    g = adder.graph
+    links = sum(1 for u, v in g.edges if g.nodes[u]["kind"] == "nor" and g.nodes[v]["kind"] == "nor")
+    assert c["linear_springs"] == c["dashpots"] == links
+
+
+def test_adder_all_16_sums_rk4(adder, p):
+    vals = [{"a": a, "b": b} for a in range(4) for b in range(4)]
+    res = simulate.run_physical(adder, p, vals, "rk4")
+    for v, r in zip(vals, res):
+        assert r["valid"], (v, r["amplitudes"])
+        assert r["outputs"]["s"] == v["a"] + v["b"]
+        assert r["min_margin"] > 0.05
+        want = logic.evaluate_bits(adder, v)
+        assert all(r["bits"][b] == want[b] for b in r["bits"])
+
+
+@pytest.mark.parametrize("design,vectors", [
+    ("verilog/mux4.v", [{"d": d, "sel": s} for d, s in [(0b0101, 0), (0b0101, 1), (0b1010, 3), (0b0110, 2)]]),
+    ("verilog/mult2.v", [{"a": a, "b": b} for a, b in [(3, 3), (2, 3), (1, 2), (0, 3)]]),
+])
+def test_rk4_matches_logic_on_other_designs(design, vectors, p):
+    nl = synth.synthesize(design)
+    res = simulate.run_physical(nl, p, vectors, "rk4")
+    for v, r in zip(vectors, res):
+        assert r["valid"], (design, v, r["amplitudes"])
+        assert r["outputs"] == logic.evaluate(nl, v), (design, v)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("design", ["verilog/comparator4.v", "verilog/parity8.v"])
+def test_rk4_matches_logic_large(design, p):
+    nl = synth.synthesize(design)
+    rng = np.random.default_rng(1)
+    vectors = [{port: int(rng.integers(0, 2 ** w)) for port, w in nl.inputs.items()} for _ in range(6)]
+    for v, r in zip(vectors, simulate.run_physical(nl, p, vectors, "rk4")):
+        assert r["valid"] and r["outputs"] == logic.evaluate(nl, v)
+
+
+def test_decode_reports_invalid_bits_instead_of_rounding(adder):
+    amps = {"s[0]": 0.97, "s[1]": 0.8, "s[2]": 0.5}      # s[1] sits between the bands
+    d = simulate.decode(adder, amps, {})
+    assert d["bits"]["s[1]"] is None and d["valid"] is False and d["outputs"]["s"] is None
+    assert d["min_margin"] < 0
+
+
+def test_cli_synth_json(adder):
+    rc, out, _ = cli("synth", "verilog/adder2.v", "--json")
+    assert rc == 0
+    d = json.loads(out)
+    assert d["top"] == "adder2" and d["gates"] <= 17 and d["latches"] == 0
+    assert d["oscillators"] == 6 * d["gates"] and d["nonlinear_springs"] == 5 * d["gates"]
+    assert d["inputs"] == {"a": 2, "b": 2} and d["outputs"] == {"s": 3}
+    assert d["linear_springs"] == d["dashpots"]
+
+
+def test_cli_simulate_logic_json():
+    rc, out, _ = cli("simulate", "verilog/adder2.v", "--set", "a=3", "--set", "b=2", "--backend", "logic", "--json")
+    d = json.loads(out)
+    assert rc == 0 and d["outputs"] == {"s": 5} and d["bits"] == {"s[0]": 1, "s[1]": 0, "s[2]": 1}
+    for key in ("backend", "amplitudes", "valid", "min_margin", "periods", "wall_s"):
+        assert key in d
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["synth", "verilog/bad_syntax.v"], "line 5"),
+    (["synth", "verilog/adder2.v", "--top", "nope"], "nope"),
+    (["synth", "missing.v"], "cannot read"),
+    (["synth", "verilog/loop.v"], "combinational loop"),
+    (["simulate", "verilog/adder2.v", "--set", "c=1", "--backend", "logic"], "unknown input port 'c'"),
+    (["simulate", "verilog/adder2.v", "--set", "a=4", "--backend", "logic"], "does not fit"),
+    (["simulate", "verilog/adder2.v", "--set", "a=x", "--backend", "logic"], "not an integer"),
+])
+def test_cli_errors_are_one_line(args, needle):
+    rc, out, err = cli(*args)
+    assert rc == 2
+    assert needle in err
+    assert err.count("\n") == 1 and "Traceback" not in err

@@ -178,9 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "both bands is reported invalid, never rounded; the exit code is 1 then.")
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
-    s.add_argument("--backend", default="rk4", choices=["logic", "rk4", "ngspice"])
+    s.add_argument("--backend", default="rk4", choices=["logic", "rk4", "envelope", "ngspice"])
     s.add_argument("--periods", type=int, default=None, help="simulate exactly this many drive periods")
-    s.add_argument("--steps", type=int, default=None, help="RK4 steps per drive period (default 80)")
+    s.add_argument("--steps", type=int, default=None,
+                   help="steps per drive period (rk4 default 80; envelope default: one step per 2 periods)")
     s.set_defaults(func=cmd_simulate)
     return ap
 

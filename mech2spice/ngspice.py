@@ -54,9 +54,9 @@ def read_raw(path) -> tuple[list[str], np.ndarray]:
     nvar = int(head["No. Variables"])
     at = next(k for k, line in enumerate(lines) if line.startswith("Variables:"))
     names = [lines[at + 1 + j].split()[1].lower() for j in range(nvar)]
-    values = np.frombuffer(data, dtype="<f8", offset=mark + 8)
-    rows = values.size // nvar
-    return names, values[: rows * nvar].reshape(rows, nvar)
+    rows = (len(data) - mark - 8) // (8 * nvar)          # whole rows only (a run cut short)
+    values = np.frombuffer(data, dtype="<f8", offset=mark + 8, count=rows * nvar)
+    return names, values.reshape(rows, nvar)
 
 
 def demodulate(t: np.ndarray, x: np.ndarray, omega: float, periods: int):
@@ -171,6 +171,8 @@ def run(model: MechModel, periods: int, stimulus: Stimulus | None = None,
     t0 = time.perf_counter()
     try:
         names, data, log = run_netlist(text, timeout=timeout)
+    except ToolMissingError:
+        raise
     except Mech2SpiceError as e:
         raise _fail(model, str(e), getattr(e, "names", []), getattr(e, "data", np.zeros((0, 0))), vecs) from None
     wall = time.perf_counter() - t0
@@ -189,8 +191,12 @@ def to_run(model: MechModel, periods: int, names: list[str], data: np.ndarray, v
     h = options.max_step_periods * T
     amp, mean = demodulate(t, x, model.omega, periods)
     dt = np.diff(t)
-    extra = {**extra, "points": int(t.size),
-             "uniform_fraction": float(np.mean(np.abs(dt - h) < 1e-6 * h)) if dt.size else 0.0}
+    uniform = float(np.mean(np.abs(dt - h) < 1e-6 * h)) if dt.size else 0.0
+    extra = {**extra, "points": int(t.size), "uniform_fraction": uniform}
+    if options.fixed_step and uniform < 0.9:
+        # the prewarp is exact for steps of max_step only; say so rather than return quietly wrong data
+        extra["warning"] = (f"only {uniform:.0%} of ngspice's steps were at max_step: the prewarp is "
+                            "inexact (raise trtol or lower max_step_periods)")
     xf = np.zeros((model.n, 1))
     end = np.searchsorted(t, periods * T * (1 + 1e-12))      # last sample at or before the end
     xf[dofs, 0] = x[max(end - 1, 0)]
@@ -276,12 +282,18 @@ def run_netlist_shared(text: str, vecs: list[str]) -> tuple[list[str], np.ndarra
     read from ngspice's own output (PySpice 1.5 raises bare NameError/NgSpiceCommandError)."""
     ng = _shared()
     ng.clear_output()
-    try:
+    msg = None
+    try:                       # each PySpice call clears the captured output: read it after each
         ng.load_circuit(text)
-        ng.run()
-    except Exception:          # the message is in ngspice's stderr, read below
+    except Exception:
         pass
     msg = _ngspice_message("\n".join([ng.stderr, ng.stdout]))
+    if msg is None:
+        try:
+            ng.run()
+        except Exception:
+            pass
+        msg = _ngspice_message("\n".join([ng.stderr, ng.stdout]))
     plot = ng.last_plot
     names, data = ["time", *vecs], np.zeros((0, 0))
     try:

@@ -48,6 +48,7 @@ class SpiceOptions:
     vntol: float = 1e-9               # displacements are ~1e-2, so ngspice's default 1e-6 V is too loose
     prewarp: bool = True              # trap only: exact phasor response at omega (see module doc)
     maxord: int = 2                   # gear order
+    trtol: float | None = None        # None: 1e4 when prewarped (pins the step, below), else ngspice's 7
 
     def validate(self) -> None:
         if self.method not in METHODS:
@@ -59,10 +60,22 @@ class SpiceOptions:
                 raise Mech2SpiceError(f"SpiceOptions.{name} must be positive")
         if not 1 <= self.maxord <= 6:
             raise Mech2SpiceError("maxord must be 1..6")
+        if self.trtol is not None and not self.trtol > 0:
+            raise Mech2SpiceError("SpiceOptions.trtol must be positive")
+
+    @property
+    def fixed_step(self) -> bool:
+        """Prewarped trap needs every step at max_step: the warp is exact for that h only."""
+        return self.prewarp and self.method == "trap"
+
+    def trtol_value(self) -> float:
+        # ngspice's truncation-error control shrank steps below max_step at reltol 1e-6 (all steps;
+        # 2 % phasor error on a linear chain); trtol 1e4 keeps them at max_step (error 7e-12)
+        return self.trtol if self.trtol is not None else (1e4 if self.fixed_step else 7.0)
 
     def warp(self, omega: float) -> float:
         """Capacitor scale making trapezoidal steps of max_step exact at omega (1 without prewarp)."""
-        if not self.prewarp or self.method != "trap":
+        if not self.fixed_step:
             return 1.0
         half = math.pi * self.max_step_periods      # omega * h / 2
         return half / math.tan(half)
@@ -423,7 +436,7 @@ class _Emitter:
     def analysis(self) -> list[str]:
         o = self.opt
         opts = f".options method={o.method} reltol={num(o.reltol)} abstol={num(o.abstol)} " \
-               f"chgtol={num(o.chgtol)} vntol={num(o.vntol)}"
+               f"chgtol={num(o.chgtol)} vntol={num(o.vntol)} trtol={num(o.trtol_value())}"
         if o.method == "gear":
             opts += f" maxord={o.maxord}"
         # a quarter period past the end keeps ngspice's final short steps out of the last period

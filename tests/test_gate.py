@@ -111,3 +111,20 @@ def test_steady_state_finds_every_root(p):
     for s in states:                                  # each root really balances the insulator
         r = steady._balance(env, F[:, 0], s.s)
         assert abs(r[0]) < 1e-8
+
+
+def test_envelope_model_matches_rk4_on_gate(p, gate_run):
+    from mech2spice import envelope
+    from mech2spice.characterise import _tt_stimulus
+    _, amp = gate_run
+    run = envelope.integrate(nor.single_gate(p), 2000, step_periods=1.0, stimulus=_tt_stimulus(p))
+    env_amp = np.abs(run.amp[-1, 0]) / p.u_r
+    assert np.abs(env_amp - amp).max() < 0.02
+
+
+def test_envelope_refuses_unstable_step(p):
+    from mech2spice import envelope
+    m = nor.single_gate(p)
+    limit = envelope.max_step_periods(m)
+    with pytest.raises(Mech2SpiceError, match="stability limit"):
+        envelope.integrate(m, 10, step_periods=float(np.ceil(limit + 1)))

@@ -30,9 +30,14 @@ def test_adder_counts_match_paper_convention(adder, p):
     assert c["linear_springs"] == c["dashpots"] == links
 
 
-def test_adder_all_16_sums_rk4(adder, p):
+def test_adder_all_16_sums_rk4_and_envelope(adder, p):
     vals = [{"a": a, "b": b} for a in range(4) for b in range(4)]
     res = simulate.run_physical(adder, p, vals, "rk4")
+    env = simulate.run_physical(adder, p, vals, "envelope")
+    for r, e in zip(res, env):
+        assert e["outputs"] == r["outputs"] and e["valid"]
+        for bit, a in r["amplitudes"].items():
+            assert abs(e["amplitudes"][bit] - a) < 0.02, (bit, a, e["amplitudes"][bit])
     for v, r in zip(vals, res):
         assert r["valid"], (v, r["amplitudes"])
         assert r["outputs"]["s"] == v["a"] + v["b"]

@@ -127,8 +127,12 @@ def cmd_simulate(args) -> int:
         pack_inputs(nl, values)
         res = simulate.run_logic(nl, values)
     else:
+        opts = _spice_options(args) if args.backend == "ngspice" else None
         res = simulate.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
-                                    steps=args.steps, progress=not args.json and sys.stderr.isatty())[0]
+                                    steps=args.steps, progress=not args.json and sys.stderr.isatty(),
+                                    spice_options=opts)[0]
+        if opts is not None:
+            res["ngspice_options"] = opts.__dict__
     res["inputs"] = values
     if args.json:
         _print_json(res)
@@ -139,6 +143,56 @@ def cmd_simulate(args) -> int:
             print(f"  {bit}: {a:.4f} u_R -> {'invalid' if res['bits'][bit] is None else res['bits'][bit]}")
         print(f"backend {res['backend']}, {res['periods']} periods, {res['wall_s']:.1f} s, valid: {res['valid']}")
     return 0 if res["valid"] else 1
+
+
+# --- SPICE --------------------------------------------------------------------------
+def cmd_emit(args) -> int:
+    from . import network, simulate, spice
+    from .logic import pack_inputs
+    from .params import load_params
+    p = load_params(args.params)
+    nl = _netlist(args)
+    values = _parse_sets(args.set)
+    pack_inputs(nl, values)
+    model = network.build(nl, p)
+    stim = network.stimulus(model, nl, p, [(0, [values])])
+    periods = args.periods or simulate.period_budget(nl)
+    opts = _spice_options(args)
+    text = spice.emit(model, periods, stim, options=opts,
+                      title=f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}")
+    with open(args.output, "w", encoding="ascii") as f:
+        f.write(text)
+    info = {"netlist": args.output, "periods": periods, "oscillators": model.n, "probes": list(model.probes),
+            "options": _jsonable(opts.__dict__)}
+    if args.json:
+        _print_json(info)
+    else:
+        print(f"wrote {args.output}: {model.n} oscillators, {periods} periods; run with: ngspice -b {args.output}")
+    return 0
+
+
+def _spice_options(args):
+    from dataclasses import replace
+    from .spice import SpiceOptions
+    o = SpiceOptions()
+    if getattr(args, "method", None):
+        o = replace(o, method=args.method)
+    if getattr(args, "max_step", None):
+        o = replace(o, max_step_periods=args.max_step)
+    o.validate()
+    return o
+
+
+def cmd_subckts(args) -> int:
+    from .params import load_params
+    from .spice import write_subckt_library
+    paths = write_subckt_library(args.output, load_params(args.params))
+    if args.json:
+        _print_json({"files": [str(x) for x in paths]})
+    else:
+        for x in paths:
+            print(x)
+    return 0
 
 
 # --- parser --------------------------------------------------------------------
@@ -182,7 +236,27 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--periods", type=int, default=None, help="simulate exactly this many drive periods")
     s.add_argument("--steps", type=int, default=None,
                    help="steps per drive period (rk4 default 80; envelope default: one step per 2 periods)")
+    s.add_argument("--method", choices=["trap", "gear"], help="ngspice integration method (default trap)")
+    s.add_argument("--max-step", type=float, help="ngspice max step in drive periods (default 1/40)")
     s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("emit", help="write a self-contained ngspice netlist of a design",
+                       description="Write DESIGN as a hierarchical ngspice netlist (library .subckts inlined, "
+                                   "stimulus, .tran, .options, .save of the output probes). "
+                                   "`ngspice -b OUT.cir` runs it with nothing else.")
+    design_args(s)
+    s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
+    s.add_argument("-o", "--output", required=True, help="netlist file to write")
+    s.add_argument("--periods", type=int, default=None, help="simulated drive periods (default: settle budget)")
+    s.add_argument("--method", choices=["trap", "gear"], help="integration method (default trap)")
+    s.add_argument("--max-step", type=float, help="max step in drive periods (default 1/40)")
+    s.set_defaults(func=cmd_emit)
+
+    s = sub.add_parser("subckts", help="regenerate the .subckt library (checked in under subckts/)")
+    s.add_argument("-o", "--output", default="subckts", help="directory (default subckts/)")
+    s.add_argument("--params", default="default", help="gate parameters")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_subckts)
     return ap
 
 

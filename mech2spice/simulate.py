@@ -65,17 +65,18 @@ def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], 
     model = network.build(netlist, p)
     stim = network.stimulus(model, netlist, p, [(0, values)])
     budget = periods or period_budget(netlist)
-    if not model.probes:
+    outs = [b for b in logic.output_bits(netlist) if b in model.probes]
+    if not outs:
         amps, used = np.zeros((0, len(values))), 0
     elif backend in ("rk4", "envelope"):
-        amps, used = _settle(_chunker(model, stim, backend, steps), model, budget, progress,
+        amps, used = _settle(_chunker(model, stim, backend, steps, outs), model, budget, progress,
                              fixed=periods is not None)
     elif backend == "ngspice":
-        amps, used = _run_ngspice(model, stim, budget, spice_options)
+        amps, used = _run_ngspice(model, stim, budget, spice_options, outs)
     else:
         raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
     wall = time.time() - t0
-    names = list(model.probes)
+    names = outs
     results = []
     for b in range(len(values)):
         a = {n: float(amps[k, b]) for k, n in enumerate(names)}
@@ -85,19 +86,19 @@ def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], 
     return results
 
 
-def _chunker(model, stim, backend: str, steps: int | None):
+def _chunker(model, stim, backend: str, steps: int | None, probes: list[str]):
     """A function (n periods, state, start period) -> (run, new state) for one backend."""
     if backend == "rk4":
         def chunk(n, state, start):
             run = rk4.integrate(model, n, steps_per_period=steps or rk4.DEFAULT_STEPS_PER_PERIOD,
-                                stimulus=stim, state=state, start_period=start)
+                                stimulus=stim, state=state, start_period=start, probes=probes)
             return run, (run.x, run.v)
     else:
         from . import envelope
 
         def chunk(n, state, start):
             run = envelope.integrate(model, n, step_periods=1.0 / steps if steps else ENVELOPE_STEP,
-                                     stimulus=stim, state=state, start_period=start)
+                                     stimulus=stim, state=state, start_period=start, probes=probes)
             return run, run.extra["envelope_state"]
     return chunk
 
@@ -126,12 +127,10 @@ def _settled(history: list[np.ndarray], done: int) -> bool:
     return bool(np.all(np.abs(now - before) < SETTLE_TOL) and np.all(inside))
 
 
-def _run_ngspice(model, stim, periods: int, options):
+def _run_ngspice(model, stim, periods: int, options, probes: list[str]):
+    """ngspice has no cheap restart, so it runs the whole period budget; batch members in parallel."""
     from . import ngspice
-    u_r = model.meta["params"].u_r
-    cols = []
-    for b in range(stim.batch):
-        run = ngspice.run(model, periods, stimulus=stim, options=options, batch_index=b) if options else \
-            ngspice.run(model, periods, stimulus=stim, batch_index=b)
-        cols.append(np.abs(run.amp[-1, :, 0]) / u_r)
-    return np.stack(cols, axis=1), periods
+    from .spice import SpiceOptions
+    run = ngspice.run_batch(model, periods, stimulus=stim, options=options or SpiceOptions())
+    rows = [run.probe_names.index(n) for n in probes]
+    return np.abs(run.amp[-1, rows, :]) / model.meta["params"].u_r, periods

@@ -107,3 +107,20 @@ def test_cli_errors_are_one_line(args, needle):
     assert rc == 2
     assert needle in err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+@pytest.mark.ngspice
+def test_cli_emit_runs_standalone_and_ngspice_matches_rk4(tmp_path):
+    cir = tmp_path / "add.cir"
+    rc, _, err = cli("emit", "verilog/adder2.v", "--set", "a=3", "--set", "b=2", "-o", str(cir))
+    assert rc == 0, err
+    r = subprocess.run(["ngspice", "-b", str(cir)], capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-500:]
+    common = ["simulate", "verilog/adder2.v", "--set", "a=3", "--set", "b=2", "--json", "--periods", "2900"]
+    rc1, out1, err1 = cli(*common, "--backend", "ngspice")
+    rc2, out2, _ = cli(*common, "--backend", "rk4")
+    assert rc1 == 0 and rc2 == 0, err1
+    ng, rk = json.loads(out1), json.loads(out2)
+    assert ng["outputs"]["s"] == 5 and ng["valid"] and "ngspice_options" in ng
+    for bit, a in rk["amplitudes"].items():
+        assert abs(ng["amplitudes"][bit] - a) < 0.01

@@ -10,6 +10,8 @@ import numpy as np
 
 from .errors import Mech2SpiceError
 
+MAX_FANOUT = 12       # = network.MAX_FANOUT (kept literal so --help needs no heavy imports)
+
 
 def _jsonable(o):
     if isinstance(o, dict):
@@ -215,8 +217,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("design", help="Verilog file")
         sp.add_argument("--top", help="top module (default: the only/auto-detected top)")
         sp.add_argument("--params", default="default", help="gate parameters: default, printed or a JSON file")
-        sp.add_argument("--max-fanout", type=int, default=None,
-                        help="insert NOR-pair buffers so no gate drives more loads (fan-out 3 is verified)")
+        sp.add_argument("--max-fanout", type=int, default=MAX_FANOUT,
+                        help="insert NOR-pair buffers so no gate drives more loads (default 12, the largest "
+                             "fan-out measured to work)")
         sp.add_argument("--json", action="store_true", help="machine-readable output")
 
     s = sub.add_parser("synth", help="synthesise Verilog to mechanical NOR gates and count elements",

@@ -228,6 +228,24 @@ def write_subckt_library(directory, p: GateParams = DEFAULT) -> list[Path]:
 
 
 # --- netlist emission ------------------------------------------------------------
+class _Incidence:
+    """Per-DOF lists of the elements touching it, so planning is linear in the model's size."""
+
+    def __init__(self, model: MechModel):
+        self.quads = self._index(model.n, [(f, s) for f, s, _ in model.quads])
+        self.springs = self._index(model.n, [(i, j) for i, j, _ in model.springs])
+        self.dashpots = self._index(model.n, [(i, j) for i, j, _ in model.dashpots])
+        self.drives = self._index(model.n, [(d.dof,) for d in model.drives])
+
+    @staticmethod
+    def _index(n: int, ends) -> list[list[int]]:
+        out = [[] for _ in range(n)]
+        for k, dofs in enumerate(ends):
+            for i in set(dofs):
+                out[i].append(k)
+        return out
+
+
 @dataclass
 class _Plan:
     """Which model elements the hierarchical instances already cover."""
@@ -240,41 +258,38 @@ class _Plan:
     dashpots: set[int]
 
 
-def _nor_quads(model: MechModel, g) -> dict[int, int] | None:
+def _nor_quads(model: MechModel, inc: _Incidence, g) -> dict[int, int] | None:
     """DOF -> quad index for the five quads an m2s_nor2 holds, or None if the block is not one."""
     if len(g.inputs) != 2:
         return None
     fast = [g.channel, *[d for pair in g.inputs for d in pair]]
     found = {}
-    for qi, (f, s, _) in enumerate(model.quads):
+    for qi in inc.quads[g.insulator]:
+        f, s, _ = model.quads[qi]
         if s == g.insulator and f in fast and f not in found:
             found[f] = qi
     return found if len(found) == 5 else None
 
 
-def _plan(model: MechModel) -> _Plan:
+def _gate_is_closed(model: MechModel, inc: _Incidence, g, own_quads: set[int]) -> bool:
+    """True if nothing outside the block touches its hidden nodes (insulator x/v, dashpot-gate x)."""
+    hidden_x = (g.insulator, g.inputs[0][1], g.inputs[1][1])
+    if any(set(inc.quads[i]) - own_quads or inc.springs[i] for i in hidden_x):
+        return False
+    return not (inc.dashpots[g.insulator] or inc.drives[g.insulator])
+
+
+def _plan(model: MechModel, inc: _Incidence) -> _Plan:
     plan = _Plan([], {}, set(), set(), set(), set(), set())
     for g in model.meta.get("gates", []):
-        q = _nor_quads(model, g)
-        if q is None or not _gate_is_closed(model, g, set(q.values())):
+        q = _nor_quads(model, inc, g)
+        dofs = {g.channel, g.insulator, *[d for pair in g.inputs for d in pair]}
+        if q is None or len(dofs) != 6 or dofs & plan.in_gate or not _gate_is_closed(model, inc, g, set(q.values())):
             continue                                       # emitted DOF by DOF instead
         plan.gates.append(g)
         plan.quads |= set(q.values())
-        plan.in_gate |= {g.channel, g.insulator, *[d for pair in g.inputs for d in pair]}
+        plan.in_gate |= dofs
     return plan
-
-
-def _gate_is_closed(model: MechModel, g, own_quads: set[int]) -> bool:
-    """True if nothing outside the block touches its internal nodes (insulator, dashpot-gate x)."""
-    hidden_x = {g.insulator, g.inputs[0][1], g.inputs[1][1]}
-    for qi, (f, s, _) in enumerate(model.quads):
-        if qi not in own_quads and ({f, s} & hidden_x):
-            return False
-    if any({i, j} & hidden_x for i, j, _ in model.springs):
-        return False
-    if any(g.insulator in (i, j) for i, j, _ in model.dashpots):
-        return False
-    return not any(d.dof == g.insulator for d in model.drives)
 
 
 class _Emitter:
@@ -288,7 +303,8 @@ class _Emitter:
         # one namer per prefix: stems are unique within a prefix, prefixes keep kinds apart
         self.namer = {k: Namer() for k in ("dof", "gate", "couple", "drive", "amp")}
         self.stem = [self.namer["dof"](n) for n in model.names]
-        self.plan = _plan(model)
+        self.inc = _Incidence(model)
+        self.plan = _plan(model, self.inc)
         self.lines: list[str] = []
         self.amp_nodes: dict[tuple, str] = {}
         self.amp_lines: list[str] = []
@@ -344,7 +360,7 @@ class _Emitter:
         m = self.m
         inst = f"xg_{self.namer['gate'](g.name)}"
         (s1, d1), (s2, d2) = g.inputs
-        src = [k for k, d in enumerate(m.drives) if d.dof == g.channel][:1]
+        src = self.inc.drives[g.channel][:1]
         self.plan.drives |= set(src)
         asrc = self.amp_node(src[0]) if src else "0"
         ports = [self.x(g.channel), self.v(g.channel), asrc, self.x(s1), self.v(s1), self.v(d1),
@@ -365,7 +381,7 @@ class _Emitter:
             for key, val, ref in (("m", m.mass[i], m0), ("k", m.k_local[i], k0), ("c", m.c_local[i], c0)):
                 if not math.isclose(val, ref, rel_tol=1e-13, abs_tol=0.0):
                     out.append((f"{key}{r}", num(val)))
-        gam = {f: gm for f, s, gm in m.quads if s == g.insulator}
+        gam = {m.quads[q][0]: m.quads[q][2] for q in self.inc.quads[g.insulator] if m.quads[q][1] == g.insulator}
         for key, dof, ref in (("gci", g.channel, -p.gamma_ic), ("g1s", s1, p.gamma_ig),
                               ("g1d", d1, p.gamma_ig), ("g2s", s2, p.gamma_ig), ("g2d", d2, p.gamma_ig)):
             if gam[dof] != ref:
@@ -379,10 +395,8 @@ class _Emitter:
         m = self.m
         pairs = [pair for g in self.plan.gates for pair in g.inputs]
         for s, d in pairs:
-            ks = [(n, i if j == s else j) for n, (i, j, _) in enumerate(m.springs) if s in (i, j)
-                  and n not in self.plan.springs]
-            cs = [(n, i if j == d else j) for n, (i, j, _) in enumerate(m.dashpots) if d in (i, j)
-                  and n not in self.plan.dashpots]
+            ks = [(n, sum(m.springs[n][:2]) - s) for n in self.inc.springs[s] if n not in self.plan.springs]
+            cs = [(n, sum(m.dashpots[n][:2]) - d) for n in self.inc.dashpots[d] if n not in self.plan.dashpots]
             match = [(a, b) for a in ks for b in cs if a[1] == b[1]]
             if not match:
                 continue
@@ -417,18 +431,18 @@ class _Emitter:
     def drives(self) -> None:
         """External pair drives as m2s_pairdrive, every other drive as m2s_drive."""
         m = self.m
-        free = [k for k in range(len(m.drives)) if k not in self.plan.drives]
+        used = set(self.plan.drives)
         for g in self.plan.gates:
             for s, d in g.inputs:
-                ds = [k for k in free if m.drives[k].dof == s]
-                dd = [k for k in free if m.drives[k].dof == d]
+                ds = [k for k in self.inc.drives[s] if k not in used]
+                dd = [k for k in self.inc.drives[d] if k not in used]
                 if len(ds) == 1 and len(dd) == 1:
                     a, b = ds[0], dd[0]
-                    free = [k for k in free if k not in (a, b)]
+                    used |= {a, b}
                     self.lines.append(
                         f"Xd_{self.namer['drive'](m.drives[a].name)} {self.v(s)} {self.v(d)} {self.amp_node(a)} "
                         f"{self.amp_node(b, share=a)} m2s_pairdrive ps={num(m.drives[a].phase)} pd={num(m.drives[b].phase)}")
-        for k in free:
+        for k in (k for k in range(len(m.drives)) if k not in used):
             d = m.drives[k]
             self.lines.append(f"Xd_{self.namer['drive'](d.name)} {self.v(d.dof)} {self.amp_node(k)} "
                               f"m2s_drive ph={num(d.phase)}")

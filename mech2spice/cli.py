@@ -10,7 +10,7 @@ import numpy as np
 
 from .errors import Mech2SpiceError
 
-MAX_FANOUT = 12       # = network.MAX_FANOUT (kept literal so --help needs no heavy imports)
+from .network import MAX_FANOUT
 
 
 def _jsonable(o):

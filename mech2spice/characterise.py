@@ -323,9 +323,12 @@ def requirements(out, vm, fo, ph, cas, tr, impurity) -> dict:
                           "figure": "driver amplitude changes by at most "
                                     f"{max(f['driver_swing_with_load_state'] for f in fo):.1e} u_R when its loads "
                                     "switch"},
-        "level_restoration": {"pass": last_stage > 0.2 and all(
-            r["stage_margins"][2] > r["input_margin"] for r in cas["restoration"]),
-                              "figure": f"band-edge inputs (margin 0) reach margin >= {last_stage:.2f} after 3 gates"},
+        # paper: deviations self-correct. Criterion: every band-edge input (margin 0) ends >= 0.1 band
+        # widths inside the correct band after three gates.
+        "level_restoration": {"pass": all(r["stage_margins"][2] >= r["input_margin"] + 0.1
+                                          for r in cas["restoration"]),
+                              "figure": f"band-edge inputs (margin 0) reach margin >= {last_stage:.2f} after 3 gates "
+                                        "(criterion: >= 0.10)"},
         "phase_insensitivity": {"pass": ph["max_output_change"] < 1e-3,
                                 "figure": f"output changes by {ph['max_output_change']:.1e} u_R under input "
                                           "phase shifts"},

@@ -12,7 +12,7 @@ from .errors import Mech2SpiceError
 from .synth import Netlist
 
 __all__ = ["evaluate", "evaluate_bits", "evaluate_batch", "pack_inputs",
-           "input_bits", "output_bits"]
+           "input_bits", "output_bits", "ClockedLogic"]
 
 
 def input_bits(netlist: Netlist) -> list[str]:
@@ -55,11 +55,13 @@ def _input_bit_values(netlist: Netlist, values: dict) -> dict[str, int]:
     return bits
 
 
-def evaluate_bits(netlist: Netlist, values: dict) -> dict[str, int]:
-    """0/1 for every node (inputs, consts, gates, outputs) given port ints or input bits."""
+def evaluate_bits(netlist: Netlist, values: dict, state: dict[str, int] | None = None) -> dict[str, int]:
+    """0/1 for every node (inputs, consts, latches, gates, outputs) given port ints or input bits;
+    latches hold `state` (0 where not given)."""
     g = netlist.graph
     val = _input_bit_values(netlist, values)
     val.update({n: int(n == "const1") for n in g if g.nodes[n]["kind"] == "const"})
+    val.update({q: int((state or {}).get(q, 0)) for q in netlist.latches()})
     for gate in netlist.gates():
         val[gate] = int(not any(val[src] for src in g.predecessors(gate)))
     for out in output_bits(netlist):
@@ -68,10 +70,35 @@ def evaluate_bits(netlist: Netlist, values: dict) -> dict[str, int]:
     return val
 
 
-def evaluate(netlist: Netlist, values: dict[str, int]) -> dict[str, int]:
+def evaluate(netlist: Netlist, values: dict[str, int], state: dict[str, int] | None = None) -> dict[str, int]:
     """Output port -> integer for input port integers (unset inputs are 0)."""
-    bits = evaluate_bits(netlist, values)
+    bits = evaluate_bits(netlist, values, state)
+    return _ports(netlist, bits)
+
+
+def _ports(netlist: Netlist, bits: dict[str, int]) -> dict[str, int]:
     return {p: sum(bits[f"{p}[{i}]"] << i for i in range(w)) for p, w in netlist.outputs.items()}
+
+
+class ClockedLogic:
+    """Cycle-level model of a clocked netlist: latches are registers that start at 0 and take their
+    D value at each clock edge (`tick`)."""
+
+    def __init__(self, netlist: Netlist):
+        self.netlist = netlist
+        self.state = dict.fromkeys(netlist.latches(), 0)
+
+    def evaluate_bits(self, values: dict) -> dict[str, int]:
+        return evaluate_bits(self.netlist, values, self.state)
+
+    def evaluate(self, values: dict) -> dict[str, int]:
+        return _ports(self.netlist, self.evaluate_bits(values))
+
+    def tick(self, values: dict) -> None:
+        """One rising clock edge with inputs `values`."""
+        bits = self.evaluate_bits(values)
+        g = self.netlist.graph
+        self.state = {q: bits[next(iter(g.predecessors(q)))] for q in self.state}
 
 
 def evaluate_batch(netlist: Netlist, vectors) -> np.ndarray:

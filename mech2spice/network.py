@@ -25,34 +25,70 @@ from .synth import Netlist
 MAX_FANOUT = 12
 
 
-def build(netlist: Netlist, p: GateParams) -> MechModel:
+LATCH_DELAY_PAIRS = 3      # identity pairs (x NOR 0) NOR 0 after each latch: output waits out the pulse
+
+
+def build(netlist: Netlist, p: GateParams, delay_pairs: int = LATCH_DELAY_PAIRS) -> MechModel:
     g = netlist.graph
     m = nor.new_model(p)
     blocks = {name: nor.add_nor(m, p, name) for name in netlist.gates()}
+    wiring: list[tuple[str, str, int]] = [(src, name, d["pin"]) for name in blocks
+                                          for src, _, d in g.in_edges(name, data=True)]
+    outs: dict[str, nor.GateBlock] = dict(blocks)        # node -> block whose channel is its output
+    clock_pairs = []
+    for q in netlist.latches():
+        (d_src,) = g.predecessors(q)
+        first, last, clocked = _add_latch(m, p, q, delay_pairs)
+        outs[q] = last
+        wiring.append((d_src, first.name, 0))
+        clock_pairs += clocked
     bit_drives: dict[str, list[int]] = {b: [] for b in input_bits(netlist)}
-    for name, block in blocks.items():
-        for src, _, data in g.in_edges(name, data=True):
-            pair = block.inputs[data["pin"]]
-            kind = g.nodes[src]["kind"]
-            if kind == "nor":
-                nor.connect(m, p, blocks[src].channel, pair)
-            elif kind == "input":
-                bit_drives[src] += nor.drive_pair(m, p, pair, NOMINAL0, f"in.{src}.{name}")
-            elif src == "const0":
-                nor.drive_pair(m, p, pair, NOMINAL0, f"zero.{name}")
-            else:
-                raise Mech2SpiceError(f"gate {name} is fed by {src} ({kind}); only NOR gates, inputs and "
-                                      "const0 can drive a gate")
+    every = {**blocks, **{b.name: b for b in m.meta.get("latch_blocks", [])}}
+    for src, sink, pin in wiring:
+        pair = every[sink].inputs[pin]
+        kind = g.nodes[src]["kind"]
+        if kind in ("nor", "latch"):
+            nor.connect(m, p, outs[src].channel, pair)
+        elif kind == "input":
+            bit_drives[src] += nor.drive_pair(m, p, pair, NOMINAL0, f"in.{src}.{sink}")
+        elif src == "const0":
+            nor.drive_pair(m, p, pair, NOMINAL0, f"zero.{sink}")
+        else:
+            raise Mech2SpiceError(f"gate {sink} is fed by {src} ({kind}); only gates, latches, inputs "
+                                  "and const0 can drive a gate")
+    clock_drives = [d for pair in clock_pairs for d in nor.drive_pair(m, p, pair, NOMINAL0, "clk")]
     const_out = {}
     for bit in output_bits(netlist):
         (src,) = list(g.predecessors(bit))
-        if g.nodes[src]["kind"] == "nor":
-            m.add_probe(bit, blocks[src].channel)
+        if g.nodes[src]["kind"] in ("nor", "latch"):
+            m.add_probe(bit, outs[src].channel)
         else:
             const_out[bit] = 1 if src == "const1" else 0
-    m.meta.update(gates=list(blocks.values()), blocks=blocks, bit_drives=bit_drives, const_outputs=const_out,
-                  netlist=netlist)
+    m.meta.update(gates=list(every.values()), blocks=blocks, bit_drives=bit_drives, const_outputs=const_out,
+                  netlist=netlist, clock_drives=clock_drives, latch_outputs={q: outs[q] for q in netlist.latches()})
     return m
+
+
+def _add_latch(m: MechModel, p: GateParams, q: str, delay_pairs: int):
+    """The paper's symmetric NOR latch (Fig. 5a) plus a delay line:
+        ne = NOR(EN, 0), a = NOR(D, ne) = !D.EN, b = NOR(m, EN) = !Q.!EN, m = NOR(a, b) = Q_next,
+    so the loop m -> b -> m holds the bit, and D and Q each reach m through one gate.  The output is m
+    after 2 * delay_pairs inverters, so it changes only after the enable pulse is over.  From rest
+    the loop settles with m at '0': registers power up at 0, as Yosys and the logic backend assume.
+    Returns (gate taking D on pin 0, gate whose channel is the output, the two clock pairs)."""
+    mk = {k: nor.add_nor(m, p, f"{q}.{k}") for k in ("ne", "a", "b", "m")}
+    for src, sink, pin in (("ne", "a", 1), ("m", "b", 0), ("a", "m", 0), ("b", "m", 1)):
+        nor.connect(m, p, mk[src].channel, mk[sink].inputs[pin])
+    last = mk["m"]
+    for k in range(2 * delay_pairs):
+        nxt = nor.add_nor(m, p, f"{q}.d{k}")
+        nor.connect(m, p, last.channel, nxt.inputs[0])
+        mk[f"d{k}"] = last = nxt
+    for name, block in mk.items():                 # every free pin 1 is a constant '0'
+        if name == "ne" or name.startswith("d"):
+            nor.drive_pair(m, p, block.inputs[1], NOMINAL0, f"zero.{block.name}")
+    m.meta.setdefault("latch_blocks", []).extend(mk.values())
+    return mk["a"], last, [mk["ne"].inputs[0], mk["b"].inputs[1]]
 
 
 def drive_levels(model: MechModel, netlist: Netlist, p: GateParams, values: list[dict[str, int]]) \
@@ -68,16 +104,24 @@ def drive_levels(model: MechModel, netlist: Netlist, p: GateParams, values: list
 
 
 def stimulus(model: MechModel, netlist: Netlist, p: GateParams,
-             segments: list[tuple[float, list[dict[str, int]]]]) -> Stimulus:
-    """Piecewise-constant input values: [(start period, [values per batch member])]."""
+             segments: list[tuple[float, list[dict[str, int]]]], clock: list[list[int]] | None = None) -> Stimulus:
+    """Piecewise-constant input values: [(start period, [values per batch member])]; `clock` gives the
+    clock level (0/1) per segment and member, for clocked designs."""
     batch = len(segments[0][1])
-    return Stimulus.from_levels(
-        model, [(t * p.period, drive_levels(model, netlist, p, vals)) for t, vals in segments], batch=batch)
+    levels = []
+    for k, (t, vals) in enumerate(segments):
+        lv = drive_levels(model, netlist, p, vals)
+        if model.meta.get("clock_drives"):
+            ck = np.array([p.force(NOMINAL1 if c else NOMINAL0) for c in (clock[k] if clock else [0] * batch)])
+            lv.update({d: ck for d in model.meta["clock_drives"]})
+        levels.append((t * p.period, lv))
+    return Stimulus.from_levels(model, levels, batch=batch)
 
 
 def logic_depth(netlist: Netlist) -> int:
-    """Longest chain of NOR gates from any input to any output."""
-    g = netlist.graph
+    """Longest chain of NOR gates from any input or latch to any output or latch."""
+    from .synth import combinational_view
+    g = combinational_view(netlist.graph)
     depth = {}
     for node in netlist.gates():
         depth[node] = 1 + max((depth.get(s, 0) for s in g.predecessors(node)), default=0)

@@ -1,11 +1,11 @@
 """Running emitted netlists under ngspice and reading the results back as an `rk4.Run`.
 
-Default path: a subprocess `ngspice -b -r out.raw file.cir` in a temporary directory (binary raw file,
+Default path: a subprocess `ngspice -b -n -r out.raw file.cir` in a temporary directory (binary raw file,
 streamed to disk by ngspice, read here with a header parse + np.frombuffer).  ngspice's own time
-points are used as they are: with the max step binding (it does in steady state, see
-reports/speed_accuracy.md) they form a uniform grid of T/N, and summing N samples per period against
-e^{-i omega t_j} is then an exact demodulation of the integrator's samples, as in rk4.py.  Where the
-grid is not uniform (start-up, amplitude steps) each sample is weighted by its share of the time axis.
+points are used as they are (no `linearize`, no `interp`): with the step pinned at max_step (the
+default, see spice.SpiceOptions.trtol_value) they form a uniform grid of T/N after start-up, and
+`demodulate` is then exactly the N-point DFT of the integrator's samples, as in rk4.py; around
+start-up and amplitude steps it falls back to the midpoint rule.
 
 Second path, for interactive use: PySpice's shared-library mode (`run_pyspice`).
 """
@@ -86,7 +86,7 @@ def demodulate(t: np.ndarray, x: np.ndarray, omega: float, periods: int):
 
 
 # --- errors --------------------------------------------------------------------------
-_ERR = re.compile(r"(^|\s)(error\b|timestep too small|fatal)", re.I)
+_ERR = re.compile(r"^\s*(error|fatal)\b|\berror:|timestep too small", re.I)
 _MORE = re.compile(r"trouble|aborted|interrupted|line\s*\d", re.I)
 
 
@@ -145,8 +145,10 @@ def run_netlist(text: str, workdir=None, timeout: float | None = None) -> tuple[
         cir, raw = d / "circuit.cir", d / "out.raw"
         cir.write_text(text, encoding="ascii")
         try:
-            proc = subprocess.run([exe, "-b", "-r", str(raw), str(cir)], cwd=d, capture_output=True,
-                                  text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+            # -n: no user .spiceinit (one asking for ASCII raw files, or anything else, must not change runs)
+            proc = subprocess.run([exe, "-b", "-n", "-r", str(raw), str(cir)], cwd=d, capture_output=True,
+                                  text=True, timeout=timeout, stdin=subprocess.DEVNULL,
+                                  env={**os.environ, "SPICE_ASCIIRAWFILE": "0"})
         except subprocess.TimeoutExpired:
             raise Mech2SpiceError(f"ngspice did not finish within {timeout:g} s") from None
         log = proc.stdout + "\n" + proc.stderr
@@ -217,7 +219,8 @@ def run_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
     return Run(first.probe_names, first.period, first.t_end,
                np.concatenate([r.amp for r in runs], axis=2), np.concatenate([r.mean for r in runs], axis=2),
                np.concatenate([r.x for r in runs], axis=1), np.concatenate([r.v for r in runs], axis=1),
-               first.t, extra={"wall_s": [r.extra["wall_s"] for r in runs], "backend": "ngspice"})
+               first.t, extra={"backend": "ngspice",
+                               **{k: [r.extra[k] for r in runs] for k in ("wall_s", "points", "uniform_fraction")}})
 
 
 # --- PySpice shared mode (interactive use) ------------------------------------------------

@@ -79,8 +79,11 @@ class _Rhs:
 def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT_STEPS_PER_PERIOD,
               stimulus: Stimulus | None = None, state: tuple[np.ndarray, np.ndarray] | None = None,
               start_period: int = 0, probes: list[str] | None = None, trace_every: int = 0,
-              blowup: float | None = None, progress: bool = False) -> Run:
-    """Integrate `periods` drive periods from `start_period` (state at rest unless given)."""
+              blowup: float | None = None, progress: bool = False, compiled: bool = True) -> Run:
+    """Integrate `periods` drive periods from `start_period` (state at rest unless given).
+
+    compiled=True uses the numba kernel (rk4_kernel.py) for whole periods at constant drive
+    amplitudes; the numpy path (compiled=False) is the same scheme and the fallback."""
     model.check()
     stimulus = stimulus or Stimulus.constant(model)
     B, N = stimulus.batch, int(steps_per_period)
@@ -106,41 +109,72 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     amp = np.zeros((periods, len(names), B), complex)
     mean = np.zeros((periods, len(names), B))
     traces, trace_t = [], []
-    t = start_period * T
-    amps, t_next = stimulus.at(t), stimulus.next_change(t)
-
+    kern = _kernel(model, N, h, sin_full, sin_half, demod, pidx, blowup, compiled and not trace_every)
     bar = _progress(periods, progress)
-    for k in range(periods):
-        acc = np.zeros((len(names), B), complex)
-        acc0 = np.zeros((len(names), B))
-        for s in range(N):
-            t = (start_period + k) * T + s * h
-            if t >= t_next - 1e-9 * h:
-                amps, t_next = stimulus.at(t + 1e-9 * h), stimulus.next_change(t + 1e-9 * h)
-            d0, dh, d1 = amps * sin_full[s], amps * sin_half[s], amps * sin_full[s + 1]
-            k1v = rhs(x, v, d0)
-            x2, v2 = x + 0.5 * h * v, v + 0.5 * h * k1v
-            k2v = rhs(x2, v2, dh)
-            x3, v3 = x + 0.5 * h * v2, v + 0.5 * h * k2v
-            k3v = rhs(x3, v3, dh)
-            x4, v4 = x + h * v3, v + h * k3v
-            k4v = rhs(x4, v4, d1)
-            x = x + (h / 6) * (v + 2 * v2 + 2 * v3 + v4)
-            v = v + (h / 6) * (k1v + 2 * k2v + 2 * k3v + k4v)
-            xp = x[pidx]
-            acc += xp * demod[s]
-            acc0 += xp
-            if trace_every and s % trace_every == 0:
-                traces.append(xp.copy())
-                trace_t.append(t + h)
-        amp[k] = acc * (2.0 / N)
-        mean[k] = acc0 / N
-        _check_blowup(model, x, (start_period + k + 1) * T, T, blowup)
-        bar.update(1)
+    k = 0
+    while k < periods:
+        t = (start_period + k) * T
+        amps = stimulus.at(t + 1e-9 * h)
+        whole = int(min(np.floor((stimulus.next_change(t + 1e-9 * h) - t) / T + 1e-9), periods))  # at these amps
+        if kern is not None and whole >= 1:
+            n = min(whole, periods - k, KERNEL_CHUNK)
+            x, v = np.ascontiguousarray(x), np.ascontiguousarray(v)
+            amp[k:k + n], mean[k:k + n], bad = kern.run(x, v, amps, n)
+            if bad >= 0:
+                _check_blowup(model, x, (start_period + k + bad + 1) * T, T, blowup)
+        else:
+            n = 1
+            x, v = _numpy_period(rhs, x, v, stimulus, start_period + k, N, h, T, sin_full, sin_half, demod,
+                                 pidx, amp[k], mean[k], trace_every, traces, trace_t)
+            _check_blowup(model, x, (start_period + k + 1) * T, T, blowup)
+        k += n
+        bar.update(n)
     bar.close()
     t_end = (start_period + 1 + np.arange(periods)) * T
     return Run(names, T, t_end, amp, mean, x, v, (start_period + periods) * T,
-               np.array(traces) if traces else None, np.array(trace_t) if trace_t else None)
+               np.array(traces) if traces else None, np.array(trace_t) if trace_t else None,
+               extra={"compiled": kern is not None})
+
+
+KERNEL_CHUNK = 200     # periods per compiled call: bounds the progress-bar and Ctrl-C latency
+
+
+def _kernel(model, N, h, sin_full, sin_half, demod, pidx, bound, wanted: bool):
+    from . import rk4_kernel
+    if not (wanted and rk4_kernel.AVAILABLE):
+        return None
+    return rk4_kernel.Kernel(model, N, h, sin_full, sin_half, demod, pidx, bound)
+
+
+def _numpy_period(rhs, x, v, stimulus, period_index, N, h, T, sin_full, sin_half, demod, pidx, amp_out,
+                  mean_out, trace_every, traces, trace_t):
+    """One drive period with the numpy RK4 (stimulus may change at any step)."""
+    acc = np.zeros(amp_out.shape, complex)
+    acc0 = np.zeros(mean_out.shape)
+    t_next = -np.inf
+    for s in range(N):
+        t = period_index * T + s * h
+        if t >= t_next - 1e-9 * h:
+            amps, t_next = stimulus.at(t + 1e-9 * h), stimulus.next_change(t + 1e-9 * h)
+        d0, dh, d1 = amps * sin_full[s], amps * sin_half[s], amps * sin_full[s + 1]
+        k1v = rhs(x, v, d0)
+        x2, v2 = x + 0.5 * h * v, v + 0.5 * h * k1v
+        k2v = rhs(x2, v2, dh)
+        x3, v3 = x + 0.5 * h * v2, v + 0.5 * h * k2v
+        k3v = rhs(x3, v3, dh)
+        x4, v4 = x + h * v3, v + h * k3v
+        k4v = rhs(x4, v4, d1)
+        x = x + (h / 6) * (v + 2 * v2 + 2 * v3 + v4)
+        v = v + (h / 6) * (k1v + 2 * k2v + 2 * k3v + k4v)
+        xp = x[pidx]
+        acc += xp * demod[s]
+        acc0 += xp
+        if trace_every and s % trace_every == 0:
+            traces.append(xp.copy())
+            trace_t.append(t + h)
+    amp_out[:] = acc * (2.0 / N)
+    mean_out[:] = acc0 / N
+    return x, v
 
 
 def _check_blowup(model: MechModel, x: np.ndarray, t: float, T: float, bound: float) -> None:

@@ -134,3 +134,99 @@ def _run_ngspice(model, stim, periods: int, options, probes: list[str]):
     run = ngspice.run_batch(model, periods, stimulus=stim, options=options or SpiceOptions())
     rows = [run.probe_names.index(n) for n in probes]
     return np.abs(run.amp[-1, rows, :]) / model.meta["params"].u_r, periods
+
+
+# --- clocked designs -------------------------------------------------------------------------
+# Measured on verilog/dff.v (envelope model, 1-period steps; reports/sequential.md): a 300-period
+# enable pulse does not capture a 0, 500 does; the latch output (3 delay pairs) moves ~1640 periods
+# after the pulse starts. Gate delays are at most 225 periods (reports/gate.md).
+LATCH_MIN_PULSE = 500
+LATCH_OUTPUT_DELAY = 1640
+GATE_DELAY_MAX = 225
+SETTLE_MARGIN = 600
+
+
+def clock_timing(netlist: Netlist, pulse: int | None = None, pause: int | None = None) -> dict:
+    """Pulse and pause (drive periods) from the measured latch and gate delays and the logic depth."""
+    pulse = pulse or int(1.6 * LATCH_MIN_PULSE)
+    if pulse >= LATCH_OUTPUT_DELAY:
+        raise Mech2SpiceError(f"a {pulse}-period clock pulse outlasts the latch's output delay "
+                              f"({LATCH_OUTPUT_DELAY} periods): outputs would change while it latches")
+    need = LATCH_OUTPUT_DELAY - pulse + GATE_DELAY_MAX * (network.logic_depth(netlist) + 1) + SETTLE_MARGIN
+    return {"pulse": pulse, "pause": pause or need, "derived_pause": need,
+            "logic_depth": network.logic_depth(netlist)}
+
+
+def expand_steps(steps: list[dict]) -> list[dict[str, int]]:
+    """[{"set": {...}, "cycles": N}, ...] -> the input values of every cycle (settings persist)."""
+    values, out = {}, []
+    for k, step in enumerate(steps):
+        if not isinstance(step, dict) or not isinstance(step.get("cycles", 1), int) or step.get("cycles", 1) < 0:
+            raise Mech2SpiceError(f"stimulus step {k}: expected {{\"set\": {{PORT: INT}}, \"cycles\": N}}")
+        values = {**values, **step.get("set", {})}
+        out += [dict(values)] * step.get("cycles", 1)
+    if not out:
+        raise Mech2SpiceError("the stimulus has no clock cycles")
+    return out
+
+
+def run_clocked_logic(netlist: Netlist, cycles: list[dict[str, int]]) -> dict:
+    """Trace entry k: outputs after clock edge k, read with the next cycle's inputs applied."""
+    t0 = time.time()
+    sim = logic.ClockedLogic(netlist)
+    trace = []
+    for k, v in enumerate(cycles):
+        sim.tick(v)
+        bits = sim.evaluate_bits(cycles[min(k + 1, len(cycles) - 1)])
+        out = {b: bits[b] for b in logic.output_bits(netlist)}
+        trace.append({"cycle": k, "outputs": logic._ports(netlist, bits), "bits": out, "valid": True,
+                      "min_margin": None})
+    return {"backend": "logic", **_final(trace), "trace": trace, "periods": 0, "wall_s": time.time() - t0}
+
+
+def _final(trace: list[dict]) -> dict:
+    last = trace[-1]
+    return {"outputs": last["outputs"], "bits": last["bits"], "valid": all(t["valid"] for t in trace),
+            "min_margin": min((t["min_margin"] for t in trace if t["min_margin"] is not None), default=None)}
+
+
+def clocked_schedule(cycles: list[dict[str, int]], timing: dict):
+    """Segments (start period, values, clock level) and the period at which each trace entry is read:
+    settle S_0, then per cycle k a pulse P_k and the settle S_{k+1} (with cycle k+1's inputs) after it."""
+    pulse, pause = timing["pulse"], timing["pause"]
+    segs, reads, t = [(0, cycles[0], 0)], [], pause
+    for k, v in enumerate(cycles):
+        segs.append((t, v, 1))
+        t += pulse
+        segs.append((t, cycles[min(k + 1, len(cycles) - 1)], 0))
+        t += pause
+        reads.append(t)
+    return segs, reads, t
+
+
+def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str, int]], backend: str,
+                         timing: dict, steps: int | None = None, progress: bool = False) -> dict:
+    t0 = time.time()
+    for v in cycles:
+        logic.pack_inputs(netlist, v)
+    model = network.build(netlist, p)
+    segs, reads, total = clocked_schedule(cycles, timing)
+    stim = network.stimulus(model, netlist, p, [(t, [v]) for t, v, _ in segs], clock=[[c] for *_, c in segs])
+    outs = [b for b in logic.output_bits(netlist) if b in model.probes]
+    if backend == "rk4":
+        run = rk4.integrate(model, total, steps_per_period=steps or rk4.DEFAULT_STEPS_PER_PERIOD, stimulus=stim,
+                            probes=outs, progress=progress)
+    elif backend == "envelope":
+        from . import envelope
+        run = envelope.integrate(model, total, step_periods=1.0 / steps if steps else 1.0, stimulus=stim,
+                                 probes=outs, progress=progress)
+    else:
+        raise Mech2SpiceError(f"backend '{backend}' cannot run clocked designs (use logic, rk4 or envelope)")
+    amp = np.abs(run.amp[:, :, 0]) / p.u_r
+    trace = []
+    for k, t in enumerate(reads):
+        a = {n: float(amp[t - 10:t, j].mean()) for j, n in enumerate(outs)}
+        trace.append({"cycle": k, **decode(netlist, a, model.meta["const_outputs"]), "amplitudes": a})
+    return {"backend": backend, **_final(trace), "amplitudes": trace[-1]["amplitudes"], "trace": trace,
+            "periods": total, "timing": timing, "wall_s": time.time() - t0,
+            "_amplitude_trace": amp, "_reads": reads, "_probe_names": outs}

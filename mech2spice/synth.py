@@ -6,6 +6,9 @@ Graph conventions (nodes are strings, attribute ``kind``):
 * ``const``  -- exactly ``const0`` / ``const1``, present only while something uses them.
 * ``nor``    -- a 2-input NOR gate ``g<N>``; exactly two in-edges with edge attr ``pin`` 0 and 1.
   A NOT is ``NOR(x, const0)``.  Optional attr ``net``: the Yosys net it drives (for messages).
+* ``latch``  -- a positive-edge flip-flop bit ``q<N>`` (Yosys ``$_DFF_P_``); one in-edge with pin
+  ``"D"``; clocked by the port ``Netlist.clock`` (not an edge of the graph). Mechanically it is the
+  paper's NOR latch (network.py); logically a register that starts at 0.
 * ``output`` -- one per output port bit, named ``p[i]`` (attrs ``port``, ``bit``); one in-edge.
 
 Edges run driver -> sink.  Bit ``i`` of a port is bit ``i`` of its value (LSB = 0), i.e.
@@ -40,15 +43,25 @@ class Netlist:
     graph: nx.DiGraph
     inputs: dict[str, int]    # port name -> width, in declaration order
     outputs: dict[str, int]   # port name -> width, in declaration order
+    clock: str | None = None  # the flip-flops' clock port, if any
 
     def gates(self) -> list[str]:
-        """NOR gates in topological order (level by level, by gate number within a level)."""
-        g = self.graph
+        """NOR gates in topological order (level by level, by gate number within a level); latch
+        outputs count as sources, so clocked designs order too."""
+        g = combinational_view(self.graph)
         return [n for level in nx.topological_generations(g)
                 for n in sorted(level, key=_gate_key) if g.nodes[n]["kind"] == "nor"]
 
+    def latches(self) -> list[str]:
+        return sorted((n for n in self.graph if self.graph.nodes[n]["kind"] == "latch"), key=_gate_key)
+
     def fanout(self, node) -> int:
         return self.graph.out_degree(node)
+
+
+def combinational_view(g: nx.DiGraph) -> nx.DiGraph:
+    """The graph without the edges into latches: what must be loop-free and is evaluated in order."""
+    return nx.subgraph_view(g, filter_edge=lambda u, v: g.nodes[v]["kind"] != "latch")
 
 
 def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -> Netlist:
@@ -158,7 +171,9 @@ def _pick_top(modules: dict, top: str | None, path: Path) -> tuple[str, dict]:
 _CELLS = {
     "$_NOR_": ("nor", ("A", "B"), "Y"),
     "$_NOT_": ("nor", ("A", None), "Y"),
+    "$_DFF_P_": ("latch", ("D",), "Q"),
 }
+_ASYNC = re.compile(r"^\$_(?:DFF_[NP][NP][01]|DFFE_[NP][NP][01][NP]|DFFSRE?_\w+|ALDFFE?_\w+)_$")
 _SEQUENTIAL = re.compile(r"^\$_?(?:\w*dff\w*|\w*dlatch\w*|sr|ff|mem\w*)(?:_|$)", re.I)
 _NAMED = {"$print": "$display/$write", "$check": "assert/assume/cover"}
 
@@ -169,10 +184,18 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
         return _CELLS[cell_type]
     if cell_type == "$scopeinfo":               # flatten's record of the hierarchy: no logic
         return None
+    if cell_type == "$_DFF_N_":
+        raise Mech2SpiceError(f"module {top}: negative-edge flip-flops are not supported "
+                              "(use posedge; the mechanical latch captures on the clock pulse)")
+    if _ASYNC.match(cell_type):
+        raise Mech2SpiceError(f"module {top}: asynchronous set/reset ({cell_type}) cannot be honoured by "
+                              "the mechanical latch; use a synchronous reset")
+    if "DLATCH" in cell_type.upper():
+        raise Mech2SpiceError(f"module {top}: Yosys inferred a level-sensitive latch ({cell_type}); "
+                              "assign every signal on every path of combinational always blocks")
     if _SEQUENTIAL.match(cell_type):
-        raise Mech2SpiceError(f"module {top} contains a flip-flop/latch ({cell_type}): "
-                              "clocked designs are not supported by synth yet "
-                              "(combinational logic only)")
+        raise Mech2SpiceError(f"module {top}: sequential cell {cell_type} is not supported "
+                              "(only posedge flip-flops on one clock)")
     what = _NAMED.get(cell_type, f"cell type {cell_type}")
     raise Mech2SpiceError(f"module {top}: {what} is not supported (only logic that maps "
                           "to NOR gates)")
@@ -186,15 +209,43 @@ def build_netlist(top: str, module: dict) -> Netlist:
         raise Mech2SpiceError(f"module {top} has no output ports: nothing to synthesize")
     cells = _add_cells(g, top, module, driver)
     names = _net_names(module)
+    clock = _clock_port(g, top, module, driver)
     for node, (pins, out_net) in cells.items():
         g.nodes[node]["net"] = names.get(out_net, f"${out_net}")
-        _connect_gate(g, node, [_source(g, b, driver, top) for b in pins])
+        sources = [_source(g, b, driver, top) for b in pins]
+        if g.nodes[node]["kind"] == "latch":
+            g.add_edge(sources[0], node, pin="D")
+        else:
+            _connect_gate(g, node, sources)
     for port, bits in _ports(module, "output"):
         for i, bit in enumerate(bits):
             node = f"{port}[{i}]"
             g.add_node(node, kind="output", port=port, bit=i)
             g.add_edge(_source(g, bit, driver, top), node)
-    return Netlist(top, g, inputs, outputs)
+    if clock is not None:
+        for n in [f"{clock}[0]"]:
+            if g.out_degree(n):
+                raise Mech2SpiceError(f"module {top}: the clock '{clock}' is also used as data; "
+                                      "the mechanical clock only drives latches")
+            g.remove_node(n)
+        inputs = {p: w for p, w in inputs.items() if p != clock}
+    return Netlist(top, g, inputs, outputs, clock)
+
+
+def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict) -> str | None:
+    """The single 1-bit input port clocking every flip-flop (None for combinational designs)."""
+    clocks = {c["connections"]["C"][0] for c in module["cells"].values() if c["type"] == "$_DFF_P_"}
+    if not clocks:
+        return None
+    srcs = {driver.get(c) for c in clocks}
+    if len(srcs) != 1 or None in srcs or g.nodes[next(iter(srcs))]["kind"] != "input":
+        raise Mech2SpiceError(f"module {top}: every flip-flop must be clocked directly by one input port "
+                              "(no gated or derived clocks)")
+    node = next(iter(srcs))
+    port = g.nodes[node]["port"]
+    if g.nodes[node]["bit"] != 0 or sum(1 for n in g if g.nodes[n].get("port") == port) != 1:
+        raise Mech2SpiceError(f"module {top}: the clock port '{port}' must be 1 bit wide")
+    return port
 
 
 def _ports(module: dict, direction: str):
@@ -225,7 +276,7 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict) -> dict:
         if mapped is None:
             continue
         kind, pins, out_pin = mapped
-        node = f"g{len(cells)}"
+        node = f"{'q' if kind == 'latch' else 'g'}{len(cells)}"
         out_net = cell["connections"][out_pin][0]
         if out_net in driver:
             raise Mech2SpiceError(f"module {top}: net {out_net} has more than one driver")
@@ -315,13 +366,13 @@ def remove_dead_gates(g: nx.DiGraph) -> None:
         if node not in live:
             live.add(node)
             stack.extend(g.predecessors(node))
-    g.remove_nodes_from([n for n in list(g) if _kind(g, n) in ("nor", "const") and n not in live])
+    g.remove_nodes_from([n for n in list(g) if _kind(g, n) in ("nor", "const", "latch") and n not in live])
 
 
 def check_loops(g: nx.DiGraph, top: str = "") -> None:
-    """Raise if the gates form a combinational loop, naming its gates and nets."""
+    """Raise if the gates form a combinational loop (one not broken by a latch), naming gates and nets."""
     try:
-        cycle = [u for u, _ in nx.find_cycle(g)]
+        cycle = [u for u, _ in nx.find_cycle(combinational_view(g))]
     except nx.NetworkXNoCycle:
         return
     hops = [f"{n} (net {g.nodes[n]['net']})" if not g.nodes[n].get("net", "$").startswith("$")
@@ -367,7 +418,7 @@ def limit_fanout(g: nx.DiGraph, max_fanout: int | None) -> None:
     if max_fanout < 2:
         raise Mech2SpiceError(f"max_fanout must be at least 2 (got {max_fanout}): "
                               "a buffer pair cannot widen a fan-out of 1")
-    for node in [n for n in g if _kind(g, n) in ("input", "nor")]:
+    for node in [n for n in g if _kind(g, n) in ("input", "nor", "latch")]:
         if g.out_degree(node) > max_fanout:
             sinks = list(g[node].items())
             g.remove_edges_from([(node, s) for s, _ in sinks])
@@ -388,17 +439,19 @@ def _fan_out(g: nx.DiGraph, src: str, sinks: list, k: int) -> None:
 
 
 def _gate_key(name: str) -> tuple:
-    m = re.fullmatch(r"g(\d+)", str(name))
+    m = re.fullmatch(r"[gq](\d+)", str(name))
     return (int(m.group(1)), "") if m else (-1, str(name))
 
 
 def _renumbered(g: nx.DiGraph) -> nx.DiGraph:
     """Copy with gates named g0.. in Netlist.gates() order; nodes listed inputs, consts, gates, outputs."""
     order = Netlist("", g, {}, {}).gates()
+    latches = Netlist("", g, {}, {}).latches()
     mapping = {old: f"g{i}" for i, old in enumerate(order)}
+    mapping.update({old: f"q{i}" for i, old in enumerate(latches)})
     h = nx.DiGraph()
-    for kind in ("input", "const", "nor", "output"):
-        nodes = order if kind == "nor" else [n for n in g if _kind(g, n) == kind]
+    for kind in ("input", "const", "latch", "nor", "output"):
+        nodes = order if kind == "nor" else latches if kind == "latch" else [n for n in g if _kind(g, n) == kind]
         h.add_nodes_from((mapping.get(n, n), g.nodes[n]) for n in nodes)
     h.add_edges_from((mapping.get(u, u), mapping.get(v, v), d) for u, v, d in g.edges(data=True))
     return h

@@ -142,6 +142,31 @@ def test_generic_model_uses_oscillator_subckts():
     assert "Bqf_0 v_a 0 I = 0.6*V(x_a)*V(x_s)" in body
 
 
+def test_gate_touched_inside_is_emitted_dof_by_dof():
+    """A drive on a gate's insulator (a hidden node of m2s_nor2) makes the emitter fall back to
+    m2s_osc per DOF, and the circuit still is the model."""
+    m = nor.single_gate(P)
+    g = m.meta["gates"][0]
+    m.add_drive(g.insulator, 1e-3, 0.0, "poke")
+    m.add_probe("ins", g.insulator)
+    body = emit(m, 10).split("* --- circuit")[1]
+    assert "m2s_nor2" not in body and body.count(" m2s_osc ") == 6
+    ref, got = rk4.integrate(m, 300), ngspice.run(m, 300)
+    assert np.abs(np.abs(ref.amp[-1, 0]) - np.abs(got.amp[-1, 0])).max() / U_R < AMP_TOL
+    assert np.abs(ref.mean[-1, 1] - got.mean[-1, 1]).max() < 1e-3 * np.abs(ref.mean[-1, 1]).max()
+
+
+def test_internal_probes_use_hierarchical_names():
+    m = nor.single_gate(P)
+    g = m.meta["gates"][0]
+    m.add_probe("ins", g.insulator)
+    m.add_probe("g1d", g.inputs[0][1])
+    _, vecs = emit_with_probes(m, 5)
+    assert vecs == ["v(x_g0_c)", "v(xg_g0.xi)", "v(xg_g0.x1d)"]
+    run = ngspice.run(m, 5)
+    assert run.amp.shape == (5, 3, 1) and np.all(np.abs(run.amp[-1]) > 0)
+
+
 # --- (3) agreement with RK4 ------------------------------------------------------------------------
 def test_negative_locals_give_model_totals():
     """A linear 3-DOF chain whose local k and c are negative: the circuit's steady phasors equal the

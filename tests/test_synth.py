@@ -283,15 +283,24 @@ def test_combinational_loop_names_a_net():
         synthesize(VERILOG / "loop.v")
 
 
-@pytest.mark.parametrize("body", [
-    "module c(input clk, input d, output reg q); always @(posedge clk) q <= d; endmodule",
-    "module c(input clk, input rst, input d, output reg q);\n"
-    "  always @(posedge clk or posedge rst) if (rst) q <= 0; else q <= d; endmodule",
-    "module c(input en, input d, output reg q); always @* if (en) q = d; endmodule",
+@pytest.mark.parametrize("body,needle", [
+    ("module c(input clk, input rst, input d, output reg q);\n"
+     "  always @(posedge clk or posedge rst) if (rst) q <= 0; else q <= d; endmodule", "asynchronous"),
+    ("module c(input en, input d, output reg q); always @* if (en) q = d; endmodule", "level-sensitive latch"),
+    ("module c(input clk, input d, output reg q); always @(negedge clk) q <= d; endmodule", "negative-edge"),
+    ("module c(input clk, input d, output reg q, output y); always @(posedge clk) q <= d; "
+     "assign y = clk & d; endmodule", "clock"),
 ])
-def test_clocked_designs_not_supported_yet(tmp_path, body):
-    with pytest.raises(Mech2SpiceError, match="clocked designs are not supported by synth yet"):
+def test_unsupported_clocking_is_refused(tmp_path, body, needle):
+    with pytest.raises(Mech2SpiceError, match=needle):
         synth_text(tmp_path, body)
+
+
+def test_flip_flops_become_latch_nodes(tmp_path):
+    nl = synth_text(tmp_path, "module c(input clk, input d, output reg q); always @(posedge clk) q <= d; endmodule")
+    assert nl.clock == "clk" and "clk" not in nl.inputs
+    (q,) = nl.latches()
+    assert [d["pin"] for _, _, d in nl.graph.in_edges(q, data=True)] == ["D"]
 
 
 @pytest.mark.parametrize("body, match", [

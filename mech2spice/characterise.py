@@ -333,3 +333,37 @@ def requirements(out, vm, fo, ph, cas, tr, impurity) -> dict:
                                 "figure": f"output changes by {ph['max_output_change']:.1e} u_R under input "
                                           "phase shifts"},
     }
+
+
+# --- the latch (paper Fig. 5b, 5d) -----------------------------------------------------------
+def latch_sequence(p: GateParams, backend: str = "rk4", pulse: int = 800, settle: int = 2500) -> dict:
+    """verilog/dff.v through a pulse sequence: store 1, hold while d toggles, store 0, hold while d toggles.
+
+    Returns the output amplitude per period, the decoded output at the end of each phase, and when
+    the output crossed the threshold relative to each storing pulse (it must wait out the pulse)."""
+    from pathlib import Path
+    from . import envelope, network, synth
+    nl = synth.synthesize(Path(__file__).resolve().parent.parent / "verilog" / "dff.v")
+    model = network.build(nl, p)
+    phases = [("power-up d=0", 0, 0, settle), ("store 1", 1, 1, pulse), ("settle", 1, 0, settle),
+              ("hold, d=0", 0, 0, settle), ("hold, d=1", 1, 0, settle), ("hold, d=0", 0, 0, settle),
+              ("store 0", 0, 1, pulse), ("settle", 0, 0, settle), ("hold, d=1", 1, 0, settle),
+              ("hold, d=0", 0, 0, settle)]
+    starts = np.cumsum([0] + [ph[3] for ph in phases])
+    stim = network.stimulus(model, nl, p, [(int(t), [{"d": d}]) for t, (_, d, _, _) in zip(starts, phases)],
+                            clock=[[c] for _, _, c, _ in phases])
+    probes = ["q[0]", "q0.m"]
+    integ = rk4.integrate if backend == "rk4" else envelope.integrate
+    run = integ(model, int(starts[-1]), stimulus=stim, probes=probes)
+    amp = np.abs(run.amp[:, :, 0]) / p.u_r
+    decoded = [{"phase": name, "d": d, "clock": c, "output": float(amp[int(t1) - 10:int(t1), 0].mean()),
+                "logic": band_of(float(amp[int(t1) - 10:int(t1), 0].mean()))}
+               for (name, d, c, _), t1 in zip(phases, starts[1:])]
+    delays = []
+    for k, (name, _, c, _) in enumerate(phases):
+        if c:
+            x = amp[starts[k]:, 0] - MID
+            idx = np.flatnonzero(np.sign(x[:-1]) != np.sign(x[1:]))
+            delays.append(float(idx[0] + 1) if idx.size else math.nan)
+    return {"amplitude": amp, "starts": starts.tolist(), "phases": phases, "decoded": decoded,
+            "output_delays": delays, "pulse": pulse, "backend": backend}

@@ -94,12 +94,14 @@ def cmd_synth(args) -> int:
     from .params import load_params
     nl = _netlist(args)
     model = network.build(nl, load_params(args.params))
-    out = {"top": nl.top, "gates": len(nl.gates()), "latches": 0, **model.counts(),
-           "inputs": nl.inputs, "outputs": nl.outputs, "logic_depth": network.logic_depth(nl)}
+    out = {"top": nl.top, "gates": len(model.meta["gates"]), "latches": len(nl.latches()), **model.counts(),
+           "inputs": nl.inputs, "outputs": nl.outputs, "clock": nl.clock, "logic_gates": len(nl.gates()),
+           "logic_depth": network.logic_depth(nl)}
     if args.json:
         _print_json(out)
     else:
-        print(f"{out['top']}: {out['gates']} NOR gates, logic depth {out['logic_depth']}")
+        print(f"{out['top']}: {out['gates']} NOR gates ({out['logic_gates']} logic + {out['latches']} latches), "
+              f"logic depth {out['logic_depth']}" + (f", clock '{nl.clock}'" if nl.clock else ""))
         print(f"  {out['oscillators']} oscillators, {out['linear_springs']} linear springs, "
               f"{out['nonlinear_springs']} nonlinear springs, {out['dashpots']} dashpots")
         print(f"  inputs  {out['inputs']}\n  outputs {out['outputs']}")
@@ -119,10 +121,61 @@ def _parse_sets(items: list[str]) -> dict[str, int]:
     return values
 
 
+def _clocked_steps(args, nl) -> list[dict]:
+    if args.stimulus:
+        try:
+            with open(args.stimulus) as f:
+                steps = json.load(f)
+        except OSError as e:
+            raise Mech2SpiceError(f"cannot read stimulus file {args.stimulus}: {e.strerror}") from None
+        except json.JSONDecodeError as e:
+            raise Mech2SpiceError(f"stimulus file {args.stimulus} is not valid JSON: {e.msg} (line {e.lineno})") \
+                from None
+        if not isinstance(steps, list):
+            raise Mech2SpiceError("the stimulus file must hold a list of steps")
+        base = _parse_sets(args.set)
+        return [{"set": {**base, **s.get("set", {})}, "cycles": s.get("cycles", 1)} if isinstance(s, dict) else s
+                for s in steps]
+    if not args.cycles:
+        raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N or --stimulus FILE.json")
+    return [{"set": _parse_sets(args.set), "cycles": args.cycles}]
+
+
+def cmd_simulate_clocked(args, nl) -> int:
+    from . import simulate
+    from .params import load_params
+    if args.clock and args.clock != nl.clock:
+        raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by '{nl.clock}'")
+    cycles = simulate.expand_steps(_clocked_steps(args, nl))
+    if args.backend == "logic":
+        res = simulate.run_clocked_logic(nl, cycles)
+    else:
+        timing = simulate.clock_timing(nl, args.pulse, args.pause)
+        res = simulate.run_clocked_physical(nl, load_params(args.params), cycles, args.backend, timing,
+                                            steps=args.steps, progress=not args.json and sys.stderr.isatty())
+    if args.json:
+        _print_json(res)
+    else:
+        if "timing" in res:
+            t = res["timing"]
+            print(f"clock: pulse {t['pulse']} periods, pause {t['pause']} periods "
+                  f"(derived from logic depth {t['logic_depth']}: {t['derived_pause']})")
+        for e in res["trace"]:
+            outs = ", ".join(f"{p}={'invalid' if v is None else v}" for p, v in e["outputs"].items())
+            mg = "" if e["min_margin"] is None else f"  (margin {e['min_margin']:+.3f})"
+            print(f"  cycle {e['cycle']:4d}: {outs}{mg}")
+        print(f"backend {res['backend']}, {res['periods']} periods, {res['wall_s']:.1f} s, valid: {res['valid']}")
+    return 0 if res["valid"] else 1
+
+
 def cmd_simulate(args) -> int:
     from . import simulate
     from .params import load_params
     nl = _netlist(args)
+    if nl.clock:
+        return cmd_simulate_clocked(args, nl)
+    if args.cycles or args.stimulus or args.clock:
+        raise Mech2SpiceError(f"{nl.top} has no flip-flops: --clock/--cycles/--stimulus apply to clocked designs")
     values = _parse_sets(args.set)
     if args.backend == "logic":
         from .logic import pack_inputs
@@ -230,9 +283,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_synth)
 
     s = sub.add_parser("simulate", help="simulate a design and decode its outputs",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
                        description="Apply input values (unset inputs are 0), simulate until the outputs settle "
                                    "(or --periods), and decode each output bit from its amplitude. A bit outside "
-                                   "both bands is reported invalid, never rounded; the exit code is 1 then.")
+                                   "both bands is reported invalid, never rounded; the exit code is 1 then.",
+                       epilog="""clocked designs (posedge flip-flops on one clock port):
+  --cycles N holds the --set inputs and pulses the clock N times; --stimulus FILE.json applies
+  [{"set": {"PORT": INT, ...}, "cycles": N}, ...] in order (settings persist between steps).
+  A cycle is a settle phase (clock 0, 'pause' periods) then an enable pulse ('pulse' periods);
+  trace entry k holds the outputs read after clock edge k, with the next step's inputs applied.
+  The physical run starts with every oscillator at rest. From rest a latch settles to the value at
+  its D input, not necessarily 0, so registers without a reset may start differently from the
+  logic backend (which starts them at 0): reset them synchronously in the first cycle.""")
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
     s.add_argument("--backend", default="rk4", choices=["logic", "rk4", "envelope", "ngspice"])
@@ -241,6 +303,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="steps per drive period (rk4 default 80; envelope default: one step per 2 periods)")
     s.add_argument("--method", choices=["trap", "gear"], help="ngspice integration method (default trap)")
     s.add_argument("--max-step", type=float, help="ngspice max step in drive periods (default 1/40)")
+    s.add_argument("--clock", metavar="PORT", help="the clock port (default: the one clocking the flip-flops)")
+    s.add_argument("--cycles", type=int, help="clock cycles to run with the --set inputs held")
+    s.add_argument("--stimulus", metavar="FILE.json", help="clocked stimulus: a list of {set, cycles} steps")
+    s.add_argument("--pulse", type=int, help="enable pulse length in drive periods (default 800, measured)")
+    s.add_argument("--pause", type=int, help="settle time between pulses (default: from logic depth)")
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("emit", help="write a self-contained ngspice netlist of a design",

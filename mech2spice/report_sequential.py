@@ -1,0 +1,203 @@
+"""reports/sequential.md: the mechanical latch, clocked designs, the FSM and the square root of 2809.
+
+Run: python -m mech2spice.report_sequential reports [--sqrt-rk4]
+(--sqrt-rk4 adds the oscillator-level RK4 run of the square root: ~15-30 min on 2 cores.)
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from . import characterise, network, simulate, synth  # noqa: E402
+from .params import BAND0, BAND1, DEFAULT  # noqa: E402
+from .report_gate import MACHINE  # noqa: E402
+
+PAPER_SQRT = {"gates": 501, "oscillators": 3006, "linear_springs": 685, "nonlinear_springs": 2505, "dashpots": 685}
+SQRT_STEPS = [{"set": {"rst": 1, "n": 2809}, "cycles": 1}, {"set": {"rst": 0}, "cycles": 6}]
+COUNTER_STEPS = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, "cycles": 3},
+                 {"set": {"en": 0}, "cycles": 2}, {"set": {"en": 1}, "cycles": 2}, {"set": {"rst": 1}, "cycles": 1}]
+FSM_X = [1, 1, 0, 1, 1, 0, 1, 0]
+
+
+def _bands(ax, offset=0.0):
+    ax.axhspan(offset + BAND0[0], offset + BAND0[1], color="tab:red", alpha=0.1, lw=0)
+    ax.axhspan(offset + BAND1[0], offset + BAND1[1], color="tab:blue", alpha=0.1, lw=0)
+
+
+def plot_latch(res: dict, path: Path) -> None:
+    fig, ax = plt.subplots(figsize=(11, 3.4))
+    _bands(ax)
+    t = np.arange(1, res["amplitude"].shape[0] + 1)
+    ax.plot(t, res["amplitude"][:, 0], label="latch output q")
+    ax.plot(t, res["amplitude"][:, 1], lw=0.8, alpha=0.7, label="loop node m (before the delay line)")
+    for (name, d, c, _), t0, t1 in zip(res["phases"], res["starts"][:-1], res["starts"][1:]):
+        if c:
+            ax.axvspan(t0, t1, color="k", alpha=0.15, lw=0)
+        ax.text((t0 + t1) / 2, 1.12, f"d={d}", ha="center", fontsize=8)
+    ax.set_ylim(0, 1.2)
+    ax.set_xlabel("drive periods")
+    ax.set_ylabel("amplitude / $u_R$")
+    ax.set_title(f"mechanical latch ({res['backend']}): grey = enable pulse ({res['pulse']} periods)")
+    ax.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_trace(res: dict, path: Path, title: str) -> None:
+    """Output-bit amplitudes over the whole clocked run, read points marked (paper Fig. 6b style)."""
+    amp, names = res["_amplitude_trace"], res["_probe_names"]
+    fig, ax = plt.subplots(figsize=(11, 0.55 * len(names) + 1.5))
+    t = np.arange(1, amp.shape[0] + 1)
+    for k, n in enumerate(names):
+        off = 1.3 * k
+        _bands(ax, off)
+        ax.plot(t, off + amp[:, k], lw=0.9)
+        ax.text(-0.01 * t[-1], off + 0.7, n, ha="right", fontsize=8)
+    for r in res["_reads"]:
+        ax.axvline(r, color="k", lw=0.4, ls=":")
+    ax.set_yticks([])
+    ax.set_xlabel("drive periods")
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _trace_table(runs: dict[str, dict]) -> str:
+    names = list(runs)
+    head = "| cycle | " + " | ".join(names) + " | min margin (" + ", ".join(n for n in names if n != "logic") + ") |"
+    rows = [head, "|" + "---|" * (len(names) + 2)]
+    for k in range(len(runs[names[0]]["trace"])):
+        cells = [", ".join(f"{p}={v}" for p, v in runs[n]["trace"][k]["outputs"].items()) for n in names]
+        mg = ", ".join(f"{runs[n]['trace'][k]['min_margin']:+.3f}" for n in names if n != "logic")
+        rows.append(f"| {k} | " + " | ".join(cells) + f" | {mg} |")
+    return "\n".join(rows)
+
+
+def _clocked(design: str, steps: list[dict], backends=("logic", "envelope")) -> tuple:
+    nl = synth.synthesize(design)
+    cycles = simulate.expand_steps(steps)
+    timing = simulate.clock_timing(nl)
+    runs = {}
+    for b in backends:
+        runs[b] = simulate.run_clocked_logic(nl, cycles) if b == "logic" else \
+            simulate.run_clocked_physical(nl, DEFAULT, cycles, b, timing, progress=sys.stderr.isatty())
+    return nl, runs, timing
+
+
+def write(directory: str = "reports", sqrt_rk4: bool = False) -> Path:
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    p = DEFAULT
+    latch = characterise.latch_sequence(p, "rk4")
+    latch_env = characterise.latch_sequence(p, "envelope")
+    plot_latch(latch, d / "latch.png")
+    short = characterise.latch_sequence(p, "envelope", pulse=300)
+    ctr_nl, ctr, ctr_t = _clocked("verilog/counter4.v", COUNTER_STEPS, ("logic", "rk4", "envelope"))
+    fsm_steps = [{"set": {"rst": 1}, "cycles": 1}] + [{"set": {"rst": 0, "x": x}, "cycles": 1} for x in FSM_X]
+    fsm_nl, fsm, fsm_t = _clocked("verilog/fsm.v", fsm_steps, ("logic", "rk4"))
+    plot_trace(fsm["rk4"], d / "fsm.png", "FSM (1101 detector), RK4: output amplitudes; dotted = read points")
+    sq_nl, sq, sq_t = _clocked("verilog/sqrt.v", SQRT_STEPS, ("logic", "envelope") + (("rk4",) if sqrt_rk4 else ()))
+    plot_trace(sq["envelope"], d / "sqrt.png", "sqrt(2809), envelope model: |root[i]| over time; dotted = read points")
+    counts = {"gates": len(network.build(sq_nl, p).meta["gates"]), **network.build(sq_nl, p).counts()}
+    latch_rows = "\n".join(f"| {ph['phase']} | {ph['d']} | {ph['clock']} | {ph['output']:.3f} | {ph['logic']} |"
+                           for ph in latch["decoded"])
+    text = SEQ_MD.format(
+        machine=MACHINE, latch_rows=latch_rows, delays=latch["output_delays"], env_delays=latch_env["output_delays"],
+        pulse=latch["pulse"], short_ok=[ph["logic"] for ph in short["decoded"]][6:8],
+        ctr_table=_trace_table(ctr), ctr_timing=ctr_t, ctr_wall={b: r["wall_s"] for b, r in ctr.items()},
+        ctr_periods=ctr["rk4"]["periods"], fsm_table=_trace_table(fsm), fsm_wall=fsm["rk4"]["wall_s"],
+        fsm_periods=fsm["rk4"]["periods"], sq_table=_trace_table(sq), sq_t=sq_t,
+        sq_wall={b: round(r["wall_s"], 1) for b, r in sq.items()}, sq_periods=sq["envelope"]["periods"],
+        counts="\n".join(f"| {k} | {counts[k]} | {PAPER_SQRT[k]} |" for k in PAPER_SQRT),
+        sq_latches=len(sq_nl.latches()), sq_logic=len(sq_nl.gates()),
+        sq_rk4="" if sqrt_rk4 else "The oscillator-level RK4 run of the square root is optional "
+                                   "(`--sqrt-rk4`, ~15-30 min here) and was not part of this report run.")
+    (d / "sequential.md").write_text(text)
+    return d / "sequential.md"
+
+
+SEQ_MD = """# Memory and time: the latch, clocked designs, the FSM and sqrt(2809)
+
+Generated by `python -m mech2spice.report_sequential reports`; measured on {machine}. RK4 at 80 steps
+per drive period, envelope model at 1-period steps, default gate parameters (`gate.md`).
+
+## The mechanical latch (paper Fig. 5a, 5b)
+
+Each Yosys flip-flop (`$_DFF_P_`) becomes the paper's symmetric NOR latch followed by a delay line
+(`network._add_latch`):
+
+    ne = NOR(EN, 0)   a = NOR(D, ne) = !D.EN   b = NOR(m, EN) = !m.!EN   m = NOR(a, b) = Q
+    output = m after 3 identity pairs (x NOR 0) NOR 0
+
+D and the held value Q each reach the loop node m through exactly one gate (the symmetry that avoids
+hazards); 10 NOR gates per latch. The clock is an external drive on the `ne` and `b` input pairs.
+
+![latch](latch.png)
+
+Pulse sequence (RK4; `characterise.latch_sequence`), output decoded at the end of each phase:
+
+| phase | d | enable | output (u_R) | decoded |
+|---|---|---|---|---|
+{latch_rows}
+
+Output delay, enable-pulse start to output crossing the mid threshold: {delays} periods (RK4),
+{env_delays} (envelope) - well after the {pulse}-period pulse has ended, so a register's output cannot
+race through the logic while it is still latching. The paper's latch (13 gates at ~500 periods/gate)
+took ~6500 periods; ours has 1 gate to the loop plus 6 delay gates at our measured 126-225
+periods/gate. A 300-period pulse does not store a 0 (decoded after it: {short_ok}); 500 periods does,
+so the default pulse is 800 (1.6x the shortest that works).
+
+**Power-up.** From rest a latch settles to the value at its D input, not necessarily 0 (measured: with
+d = 1 during power-up it holds 1). The logic backend starts registers at 0, so designs reset
+synchronously in their first cycle; `simulate --help` says so.
+
+## Clocked designs from Verilog
+
+A cycle is a settle phase with the clock at '0' and then an enable pulse. Pulse and pause are derived
+from the measured latch delay (1640 periods), the worst gate delay (225 periods) and the design's
+logic depth: pause = (1640 - pulse) + 225 x (depth + 1) + 600, printed by `simulate` and overridable
+(`--pulse`, `--pause`). Trace entry k is read at the end of the settle phase after clock edge k.
+
+### Counter with enable and synchronous reset (`verilog/counter4.v`)
+
+Timing: {ctr_timing}; {ctr_periods} drive periods in all. Wall time per backend (s): {ctr_wall}.
+
+{ctr_table}
+
+### Finite-state machine (paper Fig. 5c; `verilog/fsm.v`)
+
+A one-hot state register of 4 latches and a registered `found` flag detect the input sequence 1,1,0,1
+(overlapping). Input x per cycle after reset: {fsm_x}. RK4: {fsm_periods} periods, {fsm_wall:.0f} s.
+
+![fsm](fsm.png)
+
+{fsm_table}
+
+## The square root of 2809 (paper Fig. 6; `verilog/sqrt.v`, binary search, 15 lines)
+
+| | ours | paper |
+|---|---|---|
+{counts}
+
+Ours: {sq_logic} logic gates + {sq_latches} latches x 10 gates. Timing {sq_t}; {sq_periods} drive
+periods (the paper: ~2e5). Wall time per backend (s): {sq_wall}. {sq_rk4}
+
+![sqrt](sqrt.png)
+
+{sq_table}
+
+One result bit is decided per cycle, from the top: 32, 48, 48 (bit 3 rejected: 56^2 > 2809), 52,
+52 (bit 1 rejected), 53.
+""".replace("{fsm_x}", str(FSM_X))
+
+if __name__ == "__main__":
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    print(write(args[0] if args else "reports", sqrt_rk4="--sqrt-rk4" in sys.argv))

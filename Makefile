@@ -14,6 +14,7 @@ demo: setup  ## the main job end to end: gate characterisation, adder from Veril
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend logic
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend rk4
 	$(PY) -m mech2spice.report_adder reports
+	mech2spice simulate verilog/sqrt.v --stimulus verilog/sqrt_2809.json --backend envelope
 
 test: setup  ## the CI suite (long physical runs marked slow are left out)
 	$(PY) -m pytest -q -m "not slow"
@@ -24,3 +25,4 @@ test-all: setup
 reports: setup  ## regenerate every report in reports/
 	mech2spice gate --report reports
 	$(PY) -m mech2spice.report_adder reports
+	$(PY) -m mech2spice.report_sequential reports

@@ -109,13 +109,15 @@ def write(directory: str = "reports", sqrt_rk4: bool = False) -> Path:
     counts = {"gates": len(network.build(sq_nl, p).meta["gates"]), **network.build(sq_nl, p).counts()}
     latch_rows = "\n".join(f"| {ph['phase']} | {ph['d']} | {ph['clock']} | {ph['output']:.3f} | {ph['logic']} |"
                            for ph in latch["decoded"])
+    fmt_t = lambda t: f"pulse {t['pulse']}, pause {t['pause']} periods (logic depth {t['logic_depth']})"
+    fmt_w = lambda runs: ", ".join(f"{b} {r['wall_s']:.1f} s" for b, r in runs.items())
     text = SEQ_MD.format(
         machine=MACHINE, latch_rows=latch_rows, delays=latch["output_delays"], env_delays=latch_env["output_delays"],
         pulse=latch["pulse"], short_ok=[ph["logic"] for ph in short["decoded"]][6:8],
-        ctr_table=_trace_table(ctr), ctr_timing=ctr_t, ctr_wall={b: r["wall_s"] for b, r in ctr.items()},
+        ctr_table=_trace_table(ctr), ctr_timing=fmt_t(ctr_t), ctr_wall=fmt_w(ctr),
         ctr_periods=ctr["rk4"]["periods"], fsm_table=_trace_table(fsm), fsm_wall=fsm["rk4"]["wall_s"],
-        fsm_periods=fsm["rk4"]["periods"], sq_table=_trace_table(sq), sq_t=sq_t,
-        sq_wall={b: round(r["wall_s"], 1) for b, r in sq.items()}, sq_periods=sq["envelope"]["periods"],
+        fsm_periods=fsm["rk4"]["periods"], sq_table=_trace_table(sq), sq_t=fmt_t(sq_t),
+        sq_wall=fmt_w(sq), sq_periods=sq["envelope"]["periods"],
         counts="\n".join(f"| {k} | {counts[k]} | {PAPER_SQRT[k]} |" for k in PAPER_SQRT),
         sq_latches=len(sq_nl.latches()), sq_logic=len(sq_nl.gates()),
         sq_rk4="" if sqrt_rk4 else "The oscillator-level RK4 run of the square root is optional "
@@ -142,7 +144,8 @@ hazards); 10 NOR gates per latch. The clock is an external drive on the `ne` and
 
 ![latch](latch.png)
 
-Pulse sequence (RK4; `characterise.latch_sequence`), output decoded at the end of each phase:
+Pulse sequence (RK4; `characterise.latch_sequence`), output decoded at the end of each phase. At the
+end of a storing pulse the output still shows the old value - by design, it moves only afterwards:
 
 | phase | d | enable | output (u_R) | decoded |
 |---|---|---|---|---|
@@ -150,7 +153,7 @@ Pulse sequence (RK4; `characterise.latch_sequence`), output decoded at the end o
 
 Output delay, enable-pulse start to output crossing the mid threshold: {delays} periods (RK4),
 {env_delays} (envelope) - well after the {pulse}-period pulse has ended, so a register's output cannot
-race through the logic while it is still latching. The paper's latch (13 gates at ~500 periods/gate)
+race through the logic while it is still latching. The two values are storing 1 and storing 0. The paper's latch (13 gates at ~500 periods/gate)
 took ~6500 periods; ours has 1 gate to the loop plus 6 delay gates at our measured 126-225
 periods/gate. A 300-period pulse does not store a 0 (decoded after it: {short_ok}); 500 periods does,
 so the default pulse is 800 (1.6x the shortest that works).
@@ -162,13 +165,13 @@ synchronously in their first cycle; `simulate --help` says so.
 ## Clocked designs from Verilog
 
 A cycle is a settle phase with the clock at '0' and then an enable pulse. Pulse and pause are derived
-from the measured latch delay (1640 periods), the worst gate delay (225 periods) and the design's
-logic depth: pause = (1640 - pulse) + 225 x (depth + 1) + 600, printed by `simulate` and overridable
+from the measured latch delay (at most 1650 periods), the worst gate delay (225 periods) and the design's
+logic depth: pause = (1650 - pulse) + 225 x (depth + 1) + 600, printed by `simulate` and overridable
 (`--pulse`, `--pause`). Trace entry k is read at the end of the settle phase after clock edge k.
 
 ### Counter with enable and synchronous reset (`verilog/counter4.v`)
 
-Timing: {ctr_timing}; {ctr_periods} drive periods in all. Wall time per backend (s): {ctr_wall}.
+Timing: {ctr_timing}; {ctr_periods} drive periods in all. Wall time: {ctr_wall}.
 
 {ctr_table}
 
@@ -187,8 +190,8 @@ A one-hot state register of 4 latches and a registered `found` flag detect the i
 |---|---|---|
 {counts}
 
-Ours: {sq_logic} logic gates + {sq_latches} latches x 10 gates. Timing {sq_t}; {sq_periods} drive
-periods (the paper: ~2e5). Wall time per backend (s): {sq_wall}. {sq_rk4}
+Ours: {sq_logic} logic gates + {sq_latches} latches x 10 gates. Timing: {sq_t}; {sq_periods} drive
+periods (the paper: ~2e5). Wall time: {sq_wall}. {sq_rk4}
 
 ![sqrt](sqrt.png)
 

@@ -65,10 +65,12 @@ def test_sqrt_logic_reaches_53(tmp_path):
 
 def test_fsm_detects_sequence():
     nl = synth.synthesize("verilog/fsm.v")
-    xs = [1, 1, 0, 1, 1, 0, 1, 0]
+    xs = [1, 1, 0, 1, 1, 0, 1, 0, 1, 1, 0, 1]
     steps = [{"set": {"rst": 1}, "cycles": 1}] + [{"set": {"rst": 0, "x": x}, "cycles": 1} for x in xs]
-    found = [e["outputs"]["found"] for e in simulate.run_clocked_logic(nl, simulate.expand_steps(steps))["trace"]]
-    assert found == [0, 0, 0, 0, 1, 0, 0, 1, 0]
+    trace = simulate.run_clocked_logic(nl, simulate.expand_steps(steps))["trace"]
+    assert [e["outputs"]["found"] for e in trace] == [0, 0, 0, 0, 1, 0, 0, 1, 0, 0, 0, 0, 1]
+    assert trace[8]["outputs"]["state"] == 1                  # "1" then 0 returns to idle
+    assert all(bin(e["outputs"]["state"]).count("1") == 1 for e in trace)   # always one-hot
 
 
 @pytest.mark.parametrize("args,needle", [
@@ -77,6 +79,7 @@ def test_fsm_detects_sequence():
     (["simulate", "verilog/counter4.v", "--backend", "logic"], "--cycles"),
     (["simulate", "verilog/adder2.v", "--cycles", "2", "--backend", "logic"], "no flip-flops"),
     (["simulate", "verilog/counter4.v", "--cycles", "2", "--pulse", "5000"], "outlasts"),
+    (["simulate", "verilog/counter4.v", "--cycles", "2", "--pulse", "100"], "shorter"),
 ])
 def test_clocking_errors(args, needle):
     rc, _, err = cli(*args)

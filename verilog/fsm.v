@@ -7,7 +7,7 @@ module fsm(input clk, input rst, input x, output reg [3:0] state, output reg fou
       state <= 4'b0001;
       found <= 1'b0;
     end else begin
-      state[0] <= ~x & (state[0] | state[3]);
+      state[0] <= ~x & (state[0] | state[1] | state[3]);
       state[1] <= x & (state[0] | state[3]);
       state[2] <= x & (state[1] | state[2]);
       state[3] <= ~x & state[2];

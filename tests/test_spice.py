@@ -153,7 +153,8 @@ def test_gate_touched_inside_is_emitted_dof_by_dof():
     assert "m2s_nor2" not in body and body.count(" m2s_osc ") == 6
     ref, got = rk4.integrate(m, 300), ngspice.run(m, 300)
     assert np.abs(np.abs(ref.amp[-1, 0]) - np.abs(got.amp[-1, 0])).max() / U_R < AMP_TOL
-    assert np.abs(ref.mean[-1, 1] - got.mean[-1, 1]).max() < 1e-3 * np.abs(ref.mean[-1, 1]).max()
+    # the insulator's static displacement, still rising at 300 periods (hence 1 %)
+    assert np.abs(ref.mean[-1, 1] - got.mean[-1, 1]).max() < 1e-2 * np.abs(ref.mean[-1, 1]).max()
 
 
 def test_internal_probes_use_hierarchical_names():
@@ -213,9 +214,9 @@ def test_fanout2_matches_rk4():
 
 
 def test_without_prewarp_trap_is_detuned():
-    """Why prewarp is the default: plain trap at the same step misses the '1' by ~0.2 u_R, 24 deg."""
+    """Why prewarp is the default: plain trap at the same (pinned) step misses the '1' by ~0.2 u_R, 24 deg."""
     m, st, ref = design("gate")
-    got = ngspice.run(m, PERIODS, options=SpiceOptions(prewarp=False))
+    got = ngspice.run(m, PERIODS, options=SpiceOptions(prewarp=False, trtol=1e4))
     a, b = settled(ref)[0, 0], settled(got)[0, 0]
     assert abs(abs(b) - abs(a)) / U_R > 0.1
     assert abs(np.degrees(np.angle(b / a))) > 10

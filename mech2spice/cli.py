@@ -322,6 +322,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-step", type=float, help="max step in drive periods (default 1/40)")
     s.set_defaults(func=cmd_emit)
 
+    from .cpu.cli import add_parser as add_cpu_parser
+    add_cpu_parser(sub)
+
     s = sub.add_parser("subckts", help="regenerate the .subckt library (checked in under subckts/)")
     s.add_argument("-o", "--output", default="subckts", help="directory (default subckts/)")
     s.add_argument("--params", default="default", help="gate parameters")

@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from . import characterise  # noqa: E402
-from .params import BAND0, BAND1, NOMINAL0, NOMINAL1, GateParams  # noqa: E402
+from .params import BAND0, BAND1, GateParams  # noqa: E402
 
 MACHINE = f"{platform.machine()} {platform.system()}, {__import__('os').cpu_count()} cores"
 

@@ -52,7 +52,7 @@ def run_periods(x, v, nper, N, h, Kp, Ki, Kd, Cp, Ci, Cd, inv_m, qf, qs, qg, ddo
     k3 = np.empty_like(x)
     k4 = np.empty_like(x)
     xs = np.empty_like(x)
-    vs = np.empty_like(x)
+
     v2 = np.empty_like(x)
     v3 = np.empty_like(x)
     v4 = np.empty_like(x)

@@ -224,9 +224,13 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
         from . import envelope
         run = envelope.integrate(model, total, step_periods=1.0 / steps if steps else 1.0, stimulus=stim,
                                  probes=outs, progress=progress)
+    elif backend == "ngspice":
+        from . import ngspice
+        run = ngspice.run(model, total, stimulus=stim)
     else:
-        raise Mech2SpiceError(f"backend '{backend}' cannot run clocked designs (use logic, rk4 or envelope)")
-    amp = np.abs(run.amp[:, :, 0]) / p.u_r
+        raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
+    rows = [run.probe_names.index(n) for n in outs]
+    amp = np.abs(run.amp[:, rows, 0]) / p.u_r
     trace = []
     for k, t in enumerate(reads):
         a = {n: float(amp[t - 10:t, j].mean()) for j, n in enumerate(outs)}

@@ -47,13 +47,22 @@ class Netlist:
 
     def gates(self) -> list[str]:
         """NOR gates in topological order (level by level, by gate number within a level); latch
-        outputs count as sources, so clocked designs order too."""
-        g = combinational_view(self.graph)
-        return [n for level in nx.topological_generations(g)
-                for n in sorted(level, key=_gate_key) if g.nodes[n]["kind"] == "nor"]
+        outputs count as sources, so clocked designs order too.  Cached per graph object: a finished
+        netlist's graph is not edited in place (the hygiene passes build a new one)."""
+        return self._order()[0]
 
     def latches(self) -> list[str]:
-        return sorted((n for n in self.graph if self.graph.nodes[n]["kind"] == "latch"), key=_gate_key)
+        return self._order()[1]
+
+    def _order(self) -> tuple[list[str], list[str]]:
+        cache = self.__dict__.get("_order_cache")
+        if cache is None or cache[0] is not self.graph:
+            g = combinational_view(self.graph)
+            gates = [n for level in nx.topological_generations(g)
+                     for n in sorted(level, key=_gate_key) if g.nodes[n]["kind"] == "nor"]
+            latches = sorted((n for n in g if g.nodes[n]["kind"] == "latch"), key=_gate_key)
+            cache = self.__dict__["_order_cache"] = (self.graph, gates, latches)
+        return cache[1], cache[2]
 
     def fanout(self, node) -> int:
         return self.graph.out_degree(node)

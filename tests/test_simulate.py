@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from mech2spice import logic, network, params, simulate, synth
+from mech2spice import logic, network, simulate, synth
 
 
 def cli(*args):

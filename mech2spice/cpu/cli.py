@@ -1,0 +1,82 @@
+"""`mech2spice cpu ...`: assemble and run programs for the 8-bit processor.
+
+Registered by the main command line with ``add_parser(subparsers)``.  Handlers return the exit
+code and raise Mech2SpiceError for user errors (the main CLI prints those as one line, exit 2).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from ..errors import Mech2SpiceError
+from .run import BACKENDS, load_program, run_program
+
+
+def add_parser(subparsers) -> None:
+    cpu = subparsers.add_parser(
+        "cpu", help="assemble and run programs on the 8-bit mechanical processor",
+        description="The paper's 8-bit processor (verilog/cpu.v): assemble programs, run them on the "
+                    "instruction-set simulator or on the synthesized NOR netlist.")
+    sub = cpu.add_subparsers(dest="cpu_command", required=True)
+
+    a = sub.add_parser("asm", help="assemble PROG.asm into a memory image",
+                       description="Assemble PROG.asm into a binary memory image (address 0 first).")
+    a.add_argument("program", help="assembly source (.asm)")
+    a.add_argument("-o", "--output", required=True, help="binary image to write")
+    a.add_argument("--listing", action="store_true", help="print the listing (address, bytes, source)")
+    a.set_defaults(func=cmd_asm)
+
+    r = sub.add_parser("run", help="run a program until it halts (a jump to itself)",
+                       description="Run PROG (.asm, or a binary image) until it halts or --max-cycles. "
+                                   "Exit code 0 when it halted, 1 when it ran out of cycles.")
+    r.add_argument("program", help="assembly source (.asm) or binary image")
+    r.add_argument("--backend", default="iss", choices=BACKENDS,
+                   help="iss (instruction-set simulator), logic (the NOR netlist), envelope, rk4")
+    r.add_argument("--max-cycles", type=int, default=100_000, help="stop after this many cycles in total")
+    r.add_argument("--checkpoint", metavar="FILE", help="write the machine state to FILE (JSON) as it runs")
+    r.add_argument("--checkpoint-every", type=int, default=1000, metavar="N",
+                   help="cycles between checkpoints (default 1000)")
+    r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
+    r.add_argument("--json", action="store_true", help="machine-readable output")
+    r.set_defaults(func=cmd_run)
+
+
+def cmd_asm(args) -> int:
+    if Path(args.program).suffix.lower() != ".asm":
+        raise Mech2SpiceError(f"{args.program}: expected an assembly source (.asm)")
+    prog = load_program(args.program)
+    try:
+        Path(args.output).write_bytes(prog.image)
+    except OSError as err:
+        raise Mech2SpiceError(f"cannot write {args.output}: {err.strerror or err}") from None
+    if args.listing:
+        print(prog.listing)
+    print(f"wrote {args.output}: {len(prog.image)} bytes", file=sys.stderr if args.listing else sys.stdout)
+    return 0
+
+
+def cmd_run(args) -> int:
+    res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
+                      resume=args.resume, progress=not args.json and sys.stderr.isatty(),
+                      checkpoint_every=args.checkpoint_every)
+    if args.json:
+        print(json.dumps(res, indent=2))
+    else:
+        _print_run(res)
+    return 0 if res["halted"] else 1
+
+
+def _print_run(res: dict) -> None:
+    regs = res["registers"]
+    state = "halted" if res["halted"] else "did not halt"
+    print(f"{state} after {res['cycles']} cycles ({res['backend']}, {res['wall_s']:.2f} s)")
+    print("registers: " + " ".join(f"{k}={v}" for k, v in regs.items()))
+    mem = res["memory"]
+    print("memory (hex, row = 16 addresses):")
+    for row in range(16):
+        cells = " ".join(f"{v:02x}" for v in mem[16 * row:16 * row + 16])
+        print(f"  {16 * row:3d}: {cells}")
+    for addr, dev in res.get("devices", {}).items():
+        print(f"tape at {addr}: head {dev['head']}, {dev['steps']} moves, cells {dev['cells']}")

@@ -1,0 +1,409 @@
+"""Write reports/cpu.md and reports/cpu_*.png: the 8-bit processor, its programs, Turing machines.
+
+    python scripts/cpu_report.py [--out reports] [--skip-slow]
+
+Every number in the report is measured by this script on the machine running it.  --skip-slow
+leaves out the logic-level run of Minsky's machine (about 2.5 minutes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import os
+import platform
+import time
+from pathlib import Path
+
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+from matplotlib.patches import Rectangle
+
+from mech2spice import network, params
+from mech2spice.cpu import tm
+from mech2spice.cpu.asm import assemble_program
+from mech2spice.cpu.isa import CYCLES, OPCODES, SEMANTICS
+from mech2spice.cpu.iss import ISS
+from mech2spice.cpu.run import CPU_VERILOG, LogicCPU, cpu_netlist, load_program, make_memory, run_program
+from mech2spice.synth import synthesize
+
+ROOT = Path(__file__).resolve().parent.parent
+PROGRAMS = ROOT / "programs"
+PAPER = {"gates": 1959, "oscillators": 11754, "linear_springs": 2744, "nonlinear_springs": 9795,
+         "dashpots": 2744, "sieve_cycles": 719, "sieve_bytes": 48}
+
+# The same processor written behaviourally, for comparison: what Yosys/ABC alone make of it.
+BEHAVIOURAL = """
+module cpu(input clk, input rst, input [7:0] rdata, output [7:0] raddr, output [7:0] waddr,
+           output [7:0] wdata, output we);
+  reg [7:0] pc, a, b, c, d;
+  reg ov, ld, nx;
+  wire fetch = ~(ld | nx | rst);
+  wire [3:0] op = rdata[3:0];
+  wire [15:0] is = fetch ? (16'd1 << op) : 16'd0;
+  wire [8:0] sum = a + b;
+  wire skip = is[12] & (a > b) | is[13] & (a != b) | is[14] & ov;
+  assign raddr = ld ? a : pc;
+  assign waddr = b;
+  assign wdata = a;
+  assign we = is[10];
+  always @(posedge clk) begin
+    ld <= is[11];
+    nx <= is[15];
+    pc <= rst ? 8'd0 : is[9] ? c : pc + {6'd0, skip, ~(skip | ld)};
+    a <= nx ? rdata : is[2] ? b : is[0] ? c : a;
+    b <= ld ? rdata : is[2] ? a : is[3] ? d : b;
+    c <= is[7] ? ~(a | b) : is[8] ? ~c : (is[0] | is[1]) ? a : c;
+    d <= (is[4] | is[5]) ? {is[5] & d[7], d[7:1]} : is[6] ? sum[7:0] : is[3] ? b : d;
+    ov <= is[6] ? sum[8] : ov;
+  end
+endmodule
+"""
+
+# Gate nets of verilog/cpu.v by block (prefix before '[' or '.'); ABC's own inverters feed the adder.
+BLOCKS = {
+    "decoder and selects": "no f0 nf0 f nf g0 g1 ng0 ng1 H nH L nL s_ac s_c s_ab s_bd s_sh s_add s_nor "
+                           "s_not s_jmp we next_ld next_nx n_ac n_c n_ab n_bd n_sh n_add n_nor n_not n_jmp "
+                           "n_ld n_nx",
+    "adder A+B (9-NOR full adders)": "n t u x xo m v w s cy $abc",
+    "A>B and A==B": "ngt gq p np r nr eq",
+    "skip condition": "nov t_gt t_ne t_ov k1 k2 nin skip",
+    "pc + 1 + skip": "np_ pn pk ps ki nki nk",
+    "register multiplexers (A, B, C, D, pc, overflow)": "ma1 ma2 ma3 mb1 mb2 mb3 mc1 mc2 mc3 md1 md2 md3 mp "
+                                                        "next_a next_b next_c next_d p1 nc nd7 sh7 ot ou next_ov",
+    "synchronous reset of pc": "np1 next_pc",
+    "read-address multiplexer (pc / A)": "mr raddr",
+}
+
+
+def block_of(net: str) -> str:
+    top = "$abc" if net.startswith("$abc") else net.split("[")[0].split(".")[0]
+    for block, names in BLOCKS.items():
+        if top in names.split():
+            return block
+    return "other"
+
+
+# --------------------------------------------------------------------------- measurements
+
+def hardware() -> dict:
+    t0 = time.perf_counter()
+    plain = synthesize(CPU_VERILOG)
+    synth_s = time.perf_counter() - t0
+    buffered = synthesize(CPU_VERILOG, max_fanout=network.MAX_FANOUT)
+    out = {"synth_s": synth_s, "latches": len(plain.latches()), "depth": network.logic_depth(plain)}
+    for key, nl in (("plain", plain), ("buffered", buffered)):
+        model = network.build(nl, params.DEFAULT)
+        out[key] = {"logic": len(nl.gates()), "blocks": len(model.meta["gates"]), **model.counts()}
+    out["behavioural"] = behavioural_check()
+    g = plain.graph
+    out["by_block"] = collections.Counter(block_of(str(g.nodes[n].get("net", "?"))) for n in plain.gates())
+    return out
+
+
+def behavioural_check() -> dict:
+    """Synthesize BEHAVIOURAL and check it against the ISS on the sieve, cycle by cycle (ports)."""
+    import tempfile
+    from mech2spice.logic import ClockedLogic
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "cpu_behavioural.v"
+        path.write_text(BEHAVIOURAL)
+        nl = synthesize(path)
+    prog = load_program(PROGRAMS / "sieve.asm")
+    iss, mem, cl = ISS(make_memory(prog)), make_memory(prog), ClockedLogic(nl)
+    same = True
+    while not iss.halted:
+        rec = iss.step()
+        raddr = cl.evaluate({"rdata": 0})["raddr"]
+        outs = cl.evaluate({"rdata": mem.read(raddr)})
+        cl.tick({"rdata": mem.read(raddr)})
+        mem.commit(outs["waddr"], outs["wdata"], outs["we"])
+        same &= (raddr, outs["we"], outs["waddr"], outs["wdata"]) == (rec.raddr, rec.we, rec.waddr, rec.wdata)
+    return {"logic": len(nl.gates()), "latches": len(nl.latches()), "sieve_same": same and
+            mem.snapshot() == iss.mem.snapshot()}
+
+
+def sieve_runs() -> dict:
+    prog = load_program(PROGRAMS / "sieve.asm")
+    frames, moments = [], []
+    iss = ISS(make_memory(prog))
+    while not iss.halted:
+        mem_before = iss.mem.snapshot()
+        rec = iss.step()
+        frames.append((rec, mem_before, iss.mem.snapshot()))
+    runs = {b: run_program(PROGRAMS / "sieve.asm", b) for b in ("iss", "logic")}
+    writes = [k for k, (rec, _, _) in enumerate(frames) if rec.we]
+    last = {frames[k][0].wdata: k for k in writes}       # last write of each step p (the value written)
+    first5 = next(k for k in writes if frames[k][0].wdata == 5)
+    moments = [last[2], last[3], first5, len(frames) - 1]
+    return {"prog": prog, "frames": frames, "runs": runs, "moments": moments, "writes": len(writes)}
+
+
+def tm_runs(skip_slow: bool) -> dict:
+    out = {}
+    net = cpu_netlist()
+    for name, machine in (("tm_increment.asm", tm.INCREMENT), ("tm_minsky.asm", tm.MINSKY)):
+        text = (PROGRAMS / name).read_text()
+        prog = assemble_program(text)
+        t0 = time.perf_counter()
+        emu = tm.run_emulation(text, 10_000_000)
+        iss_s = time.perf_counter() - t0
+        ref = tm.compare_emulation(machine, prog.tape.cells, prog.tape.head, emu)
+        row = {"bytes": len(prog.image), "cycles": emu["cycles"], "steps": emu["tape"].steps,
+               "halted": emu["halted"], "ref_steps": len(ref.steps), "ref_halted": ref.halted,
+               "iss_s": iss_s, "emu": emu, "ref": ref, "tape_in": prog.tape.cells,
+               "tape_out": emu["tape"].digits()}
+        if name == "tm_increment.asm" or not skip_slow:
+            t0 = time.perf_counter()
+            lemu = tm.run_emulation(text, 10_000_000, lambda mem: LogicCPU(mem, net))
+            row["logic_s"] = time.perf_counter() - t0
+            tm.compare_emulation(machine, prog.tape.cells, prog.tape.head, lemu)
+            row["logic_same"] = lemu["cycles"] == emu["cycles"] and lemu["tape"].log == emu["tape"].log
+        out[name] = row
+    rules, word = [[1, 0, 0], [2], None], [0, 0, 0]
+    digits, head, _ = tm.tag_system_tape(rules, word)
+    text = tm.emulator_source(tm.MINSKY, digits, head)
+    t0 = time.perf_counter()
+    emu = tm.run_emulation(text, 10_000_000)
+    s = time.perf_counter() - t0
+    ref = tm.compare_emulation(tm.MINSKY, digits, head, emu)
+    words, _ = tm.utm_words(rules, word, 100_000)
+    out["long"] = {"rules": rules, "word": word, "cycles": emu["cycles"], "steps": emu["tape"].steps,
+                   "halted": emu["halted"], "ref_halted": ref.halted, "iss_s": s, "words": words,
+                   "tag": tm.tag_system_run(rules, word, 50)}
+    ex_words, _ = tm.utm_words(**tm.MINSKY_EXAMPLE, max_steps=100_000)
+    out["example_words"] = ex_words
+    out["example_tag"] = tm.tag_system_run(**tm.MINSKY_EXAMPLE, max_steps=50)
+    return out
+
+
+# --------------------------------------------------------------------------- figures
+
+def _grid_xy(addr: int) -> tuple[int, int]:
+    return addr % 16, addr // 16               # address 0 bottom-left, along rows, then up
+
+
+def fig_sieve(s: dict, path: Path) -> None:
+    frames, moments = s["frames"], s["moments"]
+    fig, axes = plt.subplots(1, 4, figsize=(14, 5.6))
+    norm = matplotlib.colors.PowerNorm(0.3, vmin=0, vmax=255)     # marks are small values (2..5)
+    for ax, k in zip(axes, moments):
+        rec, _, mem = frames[k]
+        img = [[mem[16 * r + c] for c in range(16)] for r in range(16)]
+        ax.imshow(img, origin="lower", cmap="viridis", norm=norm, extent=(0, 16, 0, 16))
+        # magnified primality region (addresses 128..159 = n 0..31) above the grid
+        for n in range(32):
+            x, y = (n % 16), 17.2 + 2 * (n // 16)
+            val = mem[128 + n]
+            ax.add_patch(Rectangle((x, y), 1, 2, facecolor=plt.cm.viridis(norm(val)), edgecolor="w", lw=0.5))
+            ax.text(x + 0.5, y + 1, str(n), ha="center", va="center", fontsize=5.5,
+                    color="w" if norm(val) < 0.5 else "k")
+        ax.add_patch(Rectangle((0, 8), 16, 2, fill=False, ls=":", ec="w", lw=1.2))
+        for addr, color in ((rec.raddr, "lime"), (rec.waddr if rec.we else None, "red")):
+            if addr is not None:
+                x, y = _grid_xy(addr)
+                ax.add_patch(Rectangle((x, y), 1, 1, fill=False, ec=color, lw=2))
+        ax.set_xlim(0, 16)
+        ax.set_ylim(0, 21.4)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        what = f"{rec.instr}" if rec.instr else f"{rec.phase} data"
+        ax.set_title(f"cycle {rec.cycle} ({what})\nread {rec.raddr}" + (f", write {rec.waddr}" if rec.we else ""),
+                     fontsize=9)
+    fig.suptitle("Sieve of Eratosthenes on the ISS: memory (address 0 bottom left, 16 per row); green: read, "
+                 "red: write;\ndotted: primality array 128..159, magnified above (label n, non-zero = composite)",
+                 fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.9))
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def fig_trace(s: dict, path: Path) -> None:
+    frames = s["frames"]
+    fig, ax = plt.subplots(figsize=(10, 3.4))
+    ax.plot([r.cycle for r, _, _ in frames], [r.raddr for r, _, _ in frames], ".", ms=2.5, color="tab:green",
+            label="read address")
+    w = [r for r, _, _ in frames if r.we]
+    ax.plot([r.cycle for r in w], [r.waddr for r in w], "s", ms=3.5, color="tab:red", label="write address")
+    ax.axhspan(128, 159, color="0.9", zorder=0)
+    ax.set_xlabel("clock cycle")
+    ax.set_ylabel("address")
+    ax.legend(loc="center right", fontsize=8)
+    ax.set_title("Sieve on the ISS: memory traffic per cycle (grey band: primality array)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def fig_tm(t: dict, path: Path) -> None:
+    row = t["tm_minsky.asm"]
+    log = row["emu"]["tape"].log
+    cells = dict(tm.Tape.from_digits(row["tape_in"], 0).cells)
+    lo = min(h for h, *_ in log + [(0,)]) - 1
+    hi = max(max(h for h, *_ in log), len(row["tape_in"])) + 1
+    rows = []
+    for k, (h, _, write, _) in enumerate(log):
+        cells[h] = write
+        if k % 4 == 0:
+            rows.append([cells.get(i, 0) for i in range(lo, hi + 1)])
+    fig, ax = plt.subplots(figsize=(8, 6))
+    ax.imshow(rows, aspect="auto", cmap=matplotlib.colors.ListedColormap(["white", "0.3", "tab:blue", "tab:orange"]),
+              interpolation="nearest", extent=(lo - 0.5, hi + 0.5, len(log), 0))
+    ax.set_xlabel("tape cell (symbols 0 white, 1 grey, y blue, A orange)")
+    ax.set_ylabel("Turing-machine step")
+    ax.set_title("Minsky's U(7,4) emulated on the ISS, tape after each step (every 4th shown)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- report
+
+def write_report(out: Path, skip_slow: bool) -> None:
+    t_start = time.perf_counter()
+    hw, s, t = hardware(), sieve_runs(), tm_runs(skip_slow)
+    fig_sieve(s, out / "cpu_sieve.png")
+    fig_trace(s, out / "cpu_trace.png")
+    fig_tm(t, out / "cpu_tm.png")
+    L = []
+    add = L.append
+    add("# The 8-bit mechanical processor, its programs, and Turing completeness\n")
+    add(f"Generated by `scripts/cpu_report.py` in {time.perf_counter() - t_start:.0f} s on "
+        f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; every number "
+        "below was measured by that run unless it is marked as the paper's.\n")
+    add("```sh\nmech2spice cpu asm programs/sieve.asm -o sieve.bin --listing\n"
+        "mech2spice cpu run programs/sieve.asm --backend logic          # or iss\n"
+        "mech2spice cpu run programs/tm_minsky.asm --checkpoint ck.json  # then --resume continues\n```\n")
+    add("## Instruction set\n")
+    add("One byte per instruction: the opcode is the low nibble, the high nibble is ignored (the assembler "
+        "writes 0). The opcodes are grouped by bits 3..2 so the NOR decoder can share terms. 256 bytes of "
+        "memory, 8-bit registers A, B, C, D, pc, an overflow flag.\n")
+    add("**A cycle** is one clock period = one memory read. Every instruction takes one cycle, except "
+        "LOAD_AB and LDNX_AB, which read a second byte and take two (in the second, the byte read is data, "
+        "not an opcode). A SAVE_AB write is committed at the clock edge that ends its cycle. The processor "
+        "**halts** when it executes JMP_C with C equal to its own address; that cycle is counted. The ISS "
+        "(`mech2spice/cpu/iss.py`) is cycle-exact with `verilog/cpu.v`: the tests step both and compare "
+        "every cycle's read address, data, write port and all registers.\n")
+    add("| opcode | mnemonic | operation | cycles |\n|---|---|---|---|")
+    for name, op in sorted(OPCODES.items(), key=lambda kv: kv[1]):
+        add(f"| 0x{op:X} | `{name}` | {SEMANTICS[name]} | {CYCLES[name]} |")
+    add("")
+    add("## Hardware: `verilog/cpu.v`\n")
+    add("Paper Fig. 7 architecture: registers (pc, A, B, C, D, overflow, and two phase bits saying that "
+        "this cycle's byte is LOAD_AB / LDNX_AB data), a datapath computing every candidate next value, "
+        "and per register a chain of 2:1 multiplexers (3 NOR gates per bit) selected by the decoded "
+        "opcode. The design is written at the NOR-gate level with `(* keep *)` so Yosys/ABC keep its "
+        f"structure: the same processor written behaviourally (embedded in the report script) synthesizes "
+        f"to {hw['behavioural']['logic']} logic gates and {hw['behavioural']['latches']} latches, against "
+        f"{hw['plain']['logic']} (it runs the sieve with the same port activity every cycle as the ISS: "
+        f"{hw['behavioural']['sieve_same']}). Differences from the paper's register list, to "
+        "save gates: the write port is wired straight to the registers (waddr = B, wdata = A, we decoded "
+        "from the opcode: SAVE_AB writes in its own cycle), and the read address is pc, or A in a LOAD_AB "
+        "data cycle, through one multiplexer instead of a read-address register. `rst` (synchronous) "
+        "zeroes pc and the phase bits and blocks writes; the logic backend starts with every flip-flop at 0, "
+        "the state after `rst`. No tri-states, one clock, positive-edge flip-flops only.\n")
+    p_, b_ = hw["plain"], hw["buffered"]
+    add(f"Measured with `mech2spice.synth.synthesize` (Yosys {hw['synth_s']:.1f} s) and "
+        "`network.build(netlist, params.DEFAULT).counts()`; a latch is the paper's NOR latch, 4 gates plus "
+        f"a delay line of 6, i.e. 10 gate blocks. Logic depth (longest NOR chain between latches/ports): "
+        f"{hw['depth']}.\n")
+    add("| | paper | ours, no fan-out limit | ours, fan-out <= 12 (buffered) |\n|---|---|---|---|")
+    add(f"| logic NOR gates | | {p_['logic']} | {b_['logic']} |")
+    add(f"| latches (flip-flop bits) | | {hw['latches']} | {hw['latches']} |")
+    add(f"| NOR gate blocks (logic + 10 per latch) | {PAPER['gates']} | {p_['blocks']} | {b_['blocks']} |")
+    for k in ("oscillators", "linear_springs", "nonlinear_springs", "dashpots"):
+        add(f"| {k.replace('_', ' ')} | {PAPER[k]} | {p_[k]} | {b_[k]} |")
+    add("")
+    add("Logic gates by block (no fan-out limit):\n")
+    add("| block | NOR gates |\n|---|---|")
+    for block, n in sorted(hw["by_block"].items(), key=lambda kv: -kv[1]):
+        add(f"| {block} | {n} |")
+    add("")
+    add("## The sieve of Eratosthenes (`programs/sieve.asm`)\n")
+    r_iss, r_log = s["runs"]["iss"], s["runs"]["logic"]
+    arr = r_iss["memory"][128:160]
+    add(f"{len(s['prog'].image)} bytes including constants (paper: {PAPER['sieve_bytes']}). It marks the "
+        "multiples 2p, 3p, ... of every p = 2..5 (p*p < 32) in the array at 128..159 and halts. Unlike the "
+        "paper's program it does not skip p = 4 (already marked): that costs 6 redundant marks. 0 and 1 are "
+        "left 0 (never marked). The halt trick: the constant 6 (first p not needed) is also the address of "
+        "a JMP_C; when p reaches 6 it is copied into C and the loop's jump lands there, a jump to itself.\n")
+    add("| | cycles | halted | wall time |\n|---|---|---|---|")
+    add(f"| paper's processor (paper: 50 h 22 min of simulation on a 2015 laptop) | {PAPER['sieve_cycles']} | "
+        "yes | |")
+    add(f"| ISS | {r_iss['cycles']} | {r_iss['halted']} | {r_iss['wall_s']:.3f} s |")
+    add(f"| logic level (synthesized NOR netlist) | {r_log['cycles']} | {r_log['halted']} | "
+        f"{r_log['wall_s']:.2f} s |")
+    add("")
+    add(f"Final memory identical on both: {r_iss['memory'] == r_log['memory']}; registers identical: "
+        f"{r_iss['registers'] == r_log['registers']}. Writes: {s['writes']}. Non-zero cells of the array "
+        f"(composites): {[n for n in range(32) if arr[n]]}.\n")
+    add("![sieve memory](cpu_sieve.png)\n")
+    add("![sieve trace](cpu_trace.png)\n")
+    add("## Turing completeness (Appendix B)\n")
+    add("The tape is outside the processor, behind a memory-mapped register at address 255 "
+        "(`mech2spice/cpu/tm.py`, `Tape`, mapped into the memory stand-in): reading 255 gives the symbol "
+        "under the head; writing it is a command, bits 2..0 the symbol, bit 3 the move (1 right, 0 left), "
+        "bit 7 'do nothing' (used for halting entries). The emulator is the appendix's algorithm: the state "
+        "p_i is held as a_out + i*n; it reads the symbol j, fetches the output byte at a_out + i*n + j and "
+        "writes it to the register, adds a_trans - a_out and fetches the next state at "
+        "a_trans + i*n + j. The halting state is the address of the final JMP_C, so halting costs one "
+        "compare. 28 cycles per Turing-machine step. `programs/tm_*.asm` are generated from the machine "
+        "definitions by `tm.emulator_source` (a test checks they are current).\n")
+    add("Each run below is checked step by step against a direct Python simulation (`tm.simulate`): "
+        "state, head position, symbol read, symbol written and move at every step.\n")
+    add("| program | machine | bytes | TM steps | cycles | halted (CPU / reference) | ISS time | logic-level |")
+    add("|---|---|---|---|---|---|---|---|")
+    for name, label in (("tm_increment.asm", "binary increment"), ("tm_minsky.asm", "Minsky U(7,4)")):
+        row = t[name]
+        logic = (f"identical trace, {row['logic_s']:.1f} s" if row.get("logic_same") else
+                 ("differs" if "logic_same" in row else "not run (--skip-slow)"))
+        add(f"| `{name}` | {label} | {row['bytes']} | {row['steps']} | {row['cycles']} | "
+            f"{row['halted']} / {row['ref_halted']} | {row['iss_s']:.2f} s | {logic} |")
+    lg = t["long"]
+    add(f"| (generated, not checked in) | Minsky U(7,4), tag system {lg['rules']} from {lg['word']} | | "
+        f"{lg['steps']} | {lg['cycles']} | {lg['halted']} / {lg['ref_halted']} | {lg['iss_s']:.2f} s | |")
+    add("")
+    inc = t["tm_increment.asm"]
+    add(f"Binary increment: tape {tm.INCREMENT.encode(tm.INCREMENT_EXAMPLE['tape'])} "
+        f"({tm.INCREMENT_EXAMPLE['tape']}) becomes {inc['tape_out']} "
+        f"({''.join(tm.INCREMENT.symbols[int(c)] for c in inc['tape_out'])}).\n")
+    add("**Which universal machine, and how its table was checked.** The paper uses Neary and Woods' "
+        "U(5,5); no transcription of its table that could be checked was found (the sources searched gave the paper's text without the table), so this uses Minsky's "
+        "7-state, 4-symbol machine (M. Minsky, *Computation: Finite and Infinite Machines*, 1967, "
+        "Sec. 14.8), transcribed from `pseudo_asm/minsky_utm.s` in the GitHub repository "
+        "Ngoguey42/ft_turing, whose header says it was copied from Minsky's text "
+        "(cba.mit.edu/events/03.11.ASE/docs/Minsky.pdf). The transcription is checked by what it "
+        "computes: it simulates 2-tag systems. With the tape encoding in `tm.tag_system_tape` (letter i = "
+        "N_i y's, productions to the left), the words read off the tape each time the machine finishes "
+        "appending a production are exactly the tag system's successive words:\n")
+    add(f"- worked example of the source (a1 -> a1, a2 -> a2 a3, a3 halts; from a2 a2 a2): UTM words "
+        f"{t['example_words']}, tag system {t['example_tag'][1:]}; the machine halts after "
+        f"{t['tm_minsky.asm']['steps']} steps, when the halting letter reaches the front.")
+    add(f"- {lg['rules']} from {lg['word']}: UTM words {lg['words']}, tag system {lg['tag'][1:]}.\n")
+    add("Known limit of this encoding (seen while checking it, not fixed): a tag system that stops because "
+        "its word shrinks below two letters is not detected; the machine halts only on the halting letter.\n")
+    add("![Minsky tape](cpu_tm.png)\n")
+    add("## What is missing\n")
+    add("- The `envelope` and `rk4` backends for the processor (`run_program` raises 'not available yet'); "
+        "`Memory.decode_address` is ready for them.")
+    add("- The sieve does not skip composite p (the paper's does); the paper's Neary-Woods U(5,5) is not "
+        "run (see above).")
+    add("- The logic-level run of Minsky's machine is in the slow test set "
+        "(`tests/test_cpu.py::test_minsky_utm_on_netlist`).")
+    (out / "cpu.md").write_text("\n".join(L) + "\n")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(ROOT / "reports"))
+    ap.add_argument("--skip-slow", action="store_true")
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_report(out, args.skip_slow)
+    print(f"wrote {out / 'cpu.md'}")
+
+
+if __name__ == "__main__":
+    main()

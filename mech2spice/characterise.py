@@ -352,7 +352,7 @@ def latch_sequence(p: GateParams, backend: str = "rk4", pulse: int = 800, settle
     starts = np.cumsum([0] + [ph[3] for ph in phases])
     stim = network.stimulus(model, nl, p, [(int(t), [{"d": d}]) for t, (_, d, _, _) in zip(starts, phases)],
                             clock=[[c] for _, _, c, _ in phases])
-    probes = ["q[0]", "q0.m"]
+    probes = ["q[0]", "q0.m.C"]                  # the output, and the loop node's channel
     integ = rk4.integrate if backend == "rk4" else envelope.integrate
     run = integ(model, int(starts[-1]), stimulus=stim, probes=probes)
     amp = np.abs(run.amp[:, :, 0]) / p.u_r

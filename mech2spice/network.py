@@ -58,6 +58,7 @@ def build(netlist: Netlist, p: GateParams, delay_pairs: int = LATCH_DELAY_PAIRS)
                                   "and const0 can drive a gate")
     clock_drives = [d for pair in clock_pairs for d in nor.drive_pair(m, p, pair, NOMINAL0, "clk")]
     const_out = {}
+    m.probes.clear()              # a design is observed at its outputs (internal DOFs by name if wanted)
     for bit in output_bits(netlist):
         (src,) = list(g.predecessors(bit))
         if g.nodes[src]["kind"] in ("nor", "latch"):

@@ -26,3 +26,6 @@ reports: setup  ## regenerate every report in reports/
 	mech2spice gate --report reports
 	$(PY) -m mech2spice.report_adder reports
 	$(PY) -m mech2spice.report_sequential reports
+	$(PY) -m mech2spice.report_spice reports
+	$(PY) scripts/cpu_report.py
+	$(PY) benchmarks/speed_accuracy.py

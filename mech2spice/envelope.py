@@ -49,8 +49,9 @@ class Envelope:
         self.G = sp.csr_matrix((2 * g, (qf, qs)), shape=(nf, ns))
         self.H = sp.csr_matrix((g, (qs, qf)), shape=(ns, nf))
         self.ms = a["mass"][self.slow]
-        self.Ks = K[self.slow][:, self.slow].toarray()
-        self.Cs = C[self.slow][:, self.slow].toarray()
+        # sparse: a dense slow block made every step O(n_slow^2) (reports/performance.md)
+        self.Ks = K[self.slow][:, self.slow].tocsr()
+        self.Cs = C[self.slow][:, self.slow].tocsr()
 
         dof = a["drive_dof"]
         if np.any(a["slow"][dof]):
@@ -124,7 +125,7 @@ def rate_bound(env: Envelope, s_max: float = 0.5) -> float:
     Bd = np.abs(env.Bop.diagonal())
     Zrow = np.asarray(abs(env.Z0).sum(axis=1)).ravel() + np.asarray(abs(env.G).sum(axis=1)).ravel() * s_max
     fast = float((Zrow / Bd).max()) if Bd.size else 0.0
-    slow = float(np.max(np.sqrt(np.abs(np.diag(env.Ks)) / env.ms) + np.abs(np.diag(env.Cs)) / env.ms)) \
+    slow = float(np.max(np.sqrt(np.abs(env.Ks.diagonal()) / env.ms) + np.abs(env.Cs.diagonal()) / env.ms)) \
         if env.slow.size else 0.0
     return max(fast, slow)
 

@@ -37,7 +37,7 @@ def s_reach(env: Envelope, F: np.ndarray) -> float:
     """Bound on |s|: every |A_f| is at most |F_f| / (omega c_f), its resonant value."""
     c = env.Bop.diagonal().real
     amax2 = (np.abs(F) / (env.omega * np.maximum(c, 1e-300))) ** 2
-    return float((abs(env.H) @ amax2).max() / 2 / np.abs(np.diag(env.Ks)).min()) * 1.05 + 1e-12
+    return float((abs(env.H) @ amax2).max() / 2 / np.abs(env.Ks.diagonal()).min()) * 1.05 + 1e-12
 
 
 def balance_grid(env: Envelope, F: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -45,7 +45,7 @@ def balance_grid(env: Envelope, F: np.ndarray, s: np.ndarray) -> np.ndarray:
     z = env.z0_diag[:, None] + env.G.toarray()[:, :1] * s[None, :]
     inv_abs2 = 1.0 / np.abs(z) ** 2                              # (n_fast, S)
     weights = (np.abs(F) ** 2).T * env.H.toarray()[0][None, :]   # (B, n_fast)
-    return env.Ks[0, 0] * s[None, :] + 0.5 * weights @ inv_abs2
+    return env.Ks.diagonal()[0] * s[None, :] + 0.5 * weights @ inv_abs2
 
 
 def _balance(env: Envelope, F: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -293,10 +293,9 @@ def test_checkpoint_errors(tmp_path):
         run_program(PROGRAMS / "sieve.asm", "iss", 10, checkpoint=ck, resume=True)
 
 
-@pytest.mark.parametrize("backend", ["envelope", "rk4"])
-def test_physical_backends_not_available_yet(backend):
-    with pytest.raises(Mech2SpiceError, match="not available yet"):
-        run_program(PROGRAMS / "sieve.asm", backend, 10)
+def test_unknown_backend_is_refused():
+    with pytest.raises(Mech2SpiceError, match="unknown backend 'spice'"):
+        run_program(PROGRAMS / "sieve.asm", "spice", 10)
 
 
 def cli(argv):
@@ -327,3 +326,16 @@ def test_cli_user_errors(tmp_path):
         cli(["cpu", "run", str(tmp_path / "missing.asm")])
     with pytest.raises(Mech2SpiceError, match="expected an assembly source"):
         cli(["cpu", "asm", str(tmp_path / "x.bin"), "-o", str(tmp_path / "y.bin")])
+
+
+@pytest.mark.slow
+def test_sieve_first_cycles_at_envelope_fidelity_match_iss():
+    """The processor as 6000+ oscillators (envelope model) against the behavioural memory."""
+    from mech2spice.cpu import run as R
+    from mech2spice.cpu.iss import ISS
+    from mech2spice.cpu.physical import PhysicalCPU
+    prog = R.load_program("programs/sieve.asm")
+    iss, phys = ISS(R.make_memory(prog)), PhysicalCPU(R.make_memory(prog), "envelope")
+    for _ in range(3):
+        assert phys.step() == iss.step()
+        assert phys.registers() == iss.registers()

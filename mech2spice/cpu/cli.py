@@ -33,7 +33,8 @@ def add_parser(subparsers) -> None:
                                    "Exit code 0 when it halted, 1 when it ran out of cycles.")
     r.add_argument("program", help="assembly source (.asm) or binary image")
     r.add_argument("--backend", default="iss", choices=BACKENDS,
-                   help="iss (instruction-set simulator), logic (the NOR netlist), envelope, rk4")
+                   help="iss (instruction-set simulator), logic (the NOR netlist), envelope or rk4 (the "
+                        "netlist as oscillators, ~20 s per cycle at envelope fidelity; see reports/cpu_physical.md)")
     r.add_argument("--max-cycles", type=int, default=100_000, help="stop after this many cycles in total")
     r.add_argument("--checkpoint", metavar="FILE", help="write the machine state to FILE (JSON) as it runs")
     r.add_argument("--checkpoint-every", type=int, default=1000, metavar="N",

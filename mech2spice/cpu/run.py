@@ -134,8 +134,8 @@ def make_cpu(backend: str, memory: Memory):
     if backend == "logic":
         return LogicCPU(memory)
     if backend in ("envelope", "rk4"):
-        raise Mech2SpiceError(f"the {backend} backend for the processor is not available yet "
-                              "(use --backend iss or logic)")
+        from .physical import PhysicalCPU
+        return PhysicalCPU(memory, backend)
     raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
 
 

@@ -259,7 +259,7 @@ def characterise(p: GateParams, quick: bool = False, log=lambda msg: None) -> di
     if "diverged" in tt:
         out.update(truth_table=[], diverged=tt["diverged"], switches=False)
         return out
-    run = rk4.integrate(nor.single_gate(p), 20, stimulus=_tt_stimulus(p), state=(tt["run"].x, tt["run"].v),
+    run = rk4.integrate(nor.single_gate(p), 20, stimulus=truth_table_stimulus(p), state=(tt["run"].x, tt["run"].v),
                         start_period=int(3000 * scale), trace_every=1)
     out["truth_table"] = tt["rows"]
     out["switches"] = all(r["logic"] == r["expected"] for r in tt["rows"])
@@ -301,7 +301,7 @@ def characterise(p: GateParams, quick: bool = False, log=lambda msg: None) -> di
     return out
 
 
-def _tt_stimulus(p: GateParams) -> Stimulus:
+def truth_table_stimulus(p: GateParams) -> Stimulus:
     m = nor.single_gate(p)
     levels = np.array([[LEVEL[a], LEVEL[b]] for a, b in PAIRS])
     return Stimulus.from_levels(m, [(0.0, _input_amps(m, m.meta["input_drives"], levels, p))], batch=4)

@@ -37,7 +37,7 @@ def compare(model, periods: int, stim: Stimulus) -> dict:
 def scenes() -> dict:
     p = DEFAULT
     out = {}
-    out["NOR gate, 4 input pairs"] = (nor.single_gate(p), 2500, characterise._tt_stimulus(p))
+    out["NOR gate, 4 input pairs"] = (nor.single_gate(p), 2500, characterise.truth_table_stimulus(p))
     ch = nor.chain(p, 3)
     out["3-gate chain, inputs 00"] = (ch, 1500, Stimulus.constant(ch))
     fo = nor.fanout(p, 2)

@@ -115,9 +115,9 @@ def test_steady_state_finds_every_root(p):
 
 def test_envelope_model_matches_rk4_on_gate(p, gate_run):
     from mech2spice import envelope
-    from mech2spice.characterise import _tt_stimulus
+    from mech2spice.characterise import truth_table_stimulus
     _, amp = gate_run
-    run = envelope.integrate(nor.single_gate(p), 2000, step_periods=1.0, stimulus=_tt_stimulus(p))
+    run = envelope.integrate(nor.single_gate(p), 2000, step_periods=1.0, stimulus=truth_table_stimulus(p))
     env_amp = np.abs(run.amp[-1, 0]) / p.u_r
     assert np.abs(env_amp - amp).max() < 0.02
 

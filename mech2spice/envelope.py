@@ -159,7 +159,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
         (state[0].copy(), state[1].copy(), state[2].copy())
     names = list(probes or model.probes)
     pos = {d: k for k, d in enumerate(env.fast)}
-    prow = np.array([pos[model.probes[n]] for n in names], int)
+    prow = np.array([pos[model.probes[n] if n in model.probes else model.index(n)] for n in names], int)
     amp = np.zeros((periods, len(names), B), complex)
     bar = _progress(periods, progress)
     for k in range(0, periods, per):

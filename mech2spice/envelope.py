@@ -67,6 +67,15 @@ class Envelope:
                     f"link between oscillating '{model.names[i]}' and slow '{model.names[j]}' "
                     "has no envelope form")
 
+    @classmethod
+    def of(cls, model: MechModel) -> "Envelope":
+        """The model's envelope operator, built once (it factorises a sparse matrix); the model drops it
+        when edited."""
+        env = model.__dict__.get("_envelope")
+        if env is None:
+            env = model.__dict__["_envelope"] = cls(model)
+        return env
+
     # --- pieces --------------------------------------------------------------
     def forcing(self, amps: np.ndarray) -> np.ndarray:
         """Complex forcing F^ (n_fast, B) from drive amplitudes (n_drives, B)."""
@@ -131,7 +140,7 @@ def rate_bound(env: Envelope, s_max: float = 0.5) -> float:
 
 
 def max_step_periods(model: MechModel) -> float:
-    env = Envelope(model)
+    env = Envelope.of(model)
     return RK4_STABILITY / rate_bound(env) / (2 * np.pi / env.omega)
 
 
@@ -143,7 +152,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     stability bound is refused."""
     from .rk4 import Run, _progress
     from .stimulus import Stimulus
-    env = Envelope(model)
+    env = Envelope.of(model)
     T = 2 * np.pi / env.omega
     limit = RK4_STABILITY / rate_bound(env) / T
     if step_periods > limit:

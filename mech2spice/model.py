@@ -99,7 +99,7 @@ class MechModel:
         return {n: i for i, n in enumerate(self.names)}
 
     def _invalidate(self) -> None:
-        for key in ("K", "C", "k_local", "c_local", "arrays"):
+        for key in ("K", "C", "k_local", "c_local", "arrays", "_envelope"):
             self.__dict__.pop(key, None)
 
     # --- derived arrays -----------------------------------------------------

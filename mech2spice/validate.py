@@ -1,0 +1,474 @@
+"""Where the envelope model agrees with RK4, measured scene by scene, and why it differs where it does.
+
+A *scene* is one model, one stimulus and a period count; both backends run it from rest and the
+per-period output amplitudes (u_R) are compared on:
+
+* settled amplitudes: mean of the last `AVG` periods before each window end (each input change
+  and the end of the run); criterion |envelope - RK4| <= AMP_TOL = 0.02 u_R;
+* switching times: after every input change (and from rest), the first and the last time each
+  output crosses the threshold midway between the bands (`characterise.MID`), linearly
+  interpolated between samples; criterion |t_env - t_rk4| <= TIME_TOL = 10 % of t_rk4.
+
+What the envelope equations (`envelope.py`) leave out, each made into a variant here so its share
+of the disagreement can be measured rather than argued:
+
+* `Envelope2w`: the 2-omega part of u_f^2.  Each slow DOF s is really s_bar + Re(S e^{2 i omega t})
+  with Z_s(2 omega) S = -H A^2 / 2  (Z_s(w) = K_s - w^2 M_s + i w C_s, quasi-static since 2 omega is far
+  above the insulator's resonance); the product -2 gamma u_f s then has an omega part
+  -gamma S conj(A_f).  A gate pair driven by equal forces 90 degrees apart has A_d = i A_s, so its
+  two A^2 cancel in S; a channel's A_C^2 never cancels.
+* `EnvelopeA2`: the M A'' term.  With u = Re(A e^{i omega t}) exactly,
+  M A'' + (2 i omega M + C) A' = R(A, s) = F - Z0 A - (G s) A;  envelope.py drops M A''.  The variant
+  keeps it to next order:  A' = B^{-1} (R - M d/dt[B^{-1} R]),  d/dt R = -(Z0 + G s) A' - (G s') A.
+* `Envelope2wA2`: both.
+
+Anything left after both is higher harmonics (3 omega), RK4's own error (measured by halving its
+step) and the sampling of amplitudes (RK4 demodulates over a whole period; the envelope state is a
+point value).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import characterise as ch
+from . import envelope, logic, network, nor, rk4, simulate, synth
+from .errors import Mech2SpiceError
+from .model import MechModel
+from .params import BAND0, BAND1, DEFAULT, NOMINAL0, NOMINAL1, GateParams, band_of
+from .stimulus import Stimulus
+
+AMP_TOL = 0.02          # u_R, settled amplitudes
+TIME_TOL = 0.10         # relative, threshold-crossing times
+AVG = 20                # periods averaged for a settled amplitude
+MID = ch.MID
+EDGES = (BAND0[0], BAND0[1], BAND1[0], BAND1[1])
+ROOT = Path(__file__).resolve().parent.parent
+
+
+# --- scenes ----------------------------------------------------------------------------------
+@dataclass
+class Scene:
+    name: str
+    model: MechModel
+    stimulus: Stimulus
+    periods: int
+    probes: list[str]
+    members: list[str]                 # a label per batch member
+    events: list[int]                  # periods at which inputs change (0: start from rest)
+    windows: list[int]                 # settled amplitudes are compared just before these periods
+    description: str = ""
+    meta: dict = field(default_factory=dict)
+
+
+def _levels_stimulus(model: MechModel, p: GateParams, segments: list[tuple[int, np.ndarray]],
+                     extra=None) -> Stimulus:
+    """Input-pair levels (B, 2) per segment start period -> stimulus on the model's input drives."""
+    B = segments[0][1].shape[0]
+    segs = []
+    for t, lv in segments:
+        amps = ch._input_amps(model, model.meta["input_drives"], lv, p)
+        if extra:
+            amps.update(extra)
+        segs.append((t * p.period, amps))
+    return Stimulus.from_levels(model, segs, batch=B)
+
+
+def gate_scene(p: GateParams = DEFAULT, which: str = "nominal", periods: int = 2500) -> Scene:
+    """Single gate from rest: the 4 nominal input pairs, or all 16 pairs of band-edge levels."""
+    if which == "nominal":
+        pairs = [(ch.LEVEL[a], ch.LEVEL[b]) for a, b in ch.PAIRS]
+    else:
+        pairs = [(x1, x2) for x1 in EDGES for x2 in EDGES]
+    m = nor.single_gate(p)
+    lv = np.array(pairs, float)
+    return Scene(f"gate_{which}", m, _levels_stimulus(m, p, [(0, lv)]), periods, ["g0"],
+                 [f"{a:g},{b:g}" for a, b in pairs], [0], [periods],
+                 f"single NOR gate, {'nominal' if which == 'nominal' else 'band-edge'} inputs, "
+                 f"{periods} periods from rest")
+
+
+CASCADE_EDGES = [(0.365, 0.365), (0.67, 0.365), (0.67, 0.67), (0.92, 0.365), (1.025, 0.67), (1.025, 1.025),
+                 (0.92, 0.92)]
+
+
+def chain_scene(p: GateParams = DEFAULT, hold: int = 1500, edges: bool = True) -> Scene:
+    """characterise.cascade's experiment: member 0 inputs 00 -> 10 -> 00; the others band-edge inputs."""
+    m = nor.chain(p, 3)
+    rows = [[NOMINAL0, NOMINAL0]] + ([list(e) for e in CASCADE_EDGES] if edges else [])
+    lv0 = np.array(rows)
+    lv1 = lv0.copy()
+    lv1[0] = [NOMINAL1, NOMINAL0]
+    st = _levels_stimulus(m, p, [(0, lv0), (hold, lv1), (2 * hold, lv0)])
+    return Scene("chain3", m, st, 3 * hold, ["g0", "g1", "g2"],
+                 ["00->10->00"] + [f"{a:g},{b:g}" for a, b in rows[1:]], [0, hold, 2 * hold],
+                 [hold, 2 * hold, 3 * hold],
+                 f"3-gate chain ((x1 NOR x2) NOR 0) NOR 0, hold {hold} periods per input setting")
+
+
+def fanout_scene(p: GateParams = DEFAULT, n_loads: int = 2, periods: int = 2500) -> Scene:
+    """characterise.fanout_test's experiment: driver 00 / 10, every load's second input 0 / 1."""
+    cases = [(0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1)]
+    m = nor.fanout(p, n_loads)
+    lv = np.array([[ch.LEVEL[a], ch.LEVEL[b]] for a, b, _ in cases])
+    amps = ch._input_amps(m, m.meta["input_drives"], lv, p)
+    for pair in m.meta["load_drives"]:
+        amps.update(ch._input_amps(m, [pair], np.array([[ch.LEVEL[c]] for *_, c in cases]), p))
+    st = Stimulus.from_levels(m, [(0.0, amps)], batch=len(cases))
+    return Scene(f"fanout{n_loads}", m, st, periods, list(m.probes), [f"drv {a}{b}, loads x2={c}" for a, b, c in cases],
+                 [0], [periods], f"one driver feeding {n_loads} loads, {periods} periods from rest")
+
+
+def adder_scene(p: GateParams = DEFAULT, hold: int | None = None) -> Scene:
+    """report_adder's experiment: inputs 0 for `hold` periods, then each of the 16 (a, b)."""
+    nl = synth.synthesize(ROOT / "verilog" / "adder2.v")
+    m = network.build(nl, p)
+    hold = hold or simulate.period_budget(nl)
+    vals = [{"a": a, "b": b} for a in range(4) for b in range(4)]
+    st = network.stimulus(m, nl, p, [(0, [{}] * 16), (hold, vals)])
+    probes = [b for b in logic.output_bits(nl) if b in m.probes]
+    return Scene("adder2", m, st, 2 * hold, probes, [f"a={v['a']} b={v['b']}" for v in vals], [0, hold],
+                 [hold, 2 * hold], f"2-bit adder (17 gates), inputs 0 for {hold} periods then (a, b)",
+                 {"netlist": nl, "values": vals})
+
+
+# --- running ---------------------------------------------------------------------------------
+def run(scene: Scene, backend: str, step: float | None = None, env: envelope.Envelope | None = None) -> dict:
+    """Amplitudes (P, probes, B) in u_R, the time each sample stands for (periods), and wall time.
+
+    backend 'rk4' (step = steps per period, default 80) or 'envelope' (step in periods, default
+    simulate.ENVELOPE_STEP); `env` runs a variant Envelope (this module's classes) instead."""
+    p = scene.model.meta["params"]
+    t0 = time.perf_counter()
+    if backend == "rk4":
+        steps = int(step or rk4.DEFAULT_STEPS_PER_PERIOD)
+        r = rk4.integrate(scene.model, scene.periods, steps_per_period=steps, stimulus=scene.stimulus,
+                          probes=scene.probes)
+        amp = np.abs(r.amp) / p.u_r
+        t = np.arange(scene.periods) + 0.5             # each sample demodulates one whole period
+    elif backend == "envelope":
+        step = float(step or simulate.ENVELOPE_STEP)
+        if env is None:
+            r = envelope.integrate(scene.model, scene.periods, step_periods=step, stimulus=scene.stimulus,
+                                   probes=scene.probes)
+            a = np.abs(r.amp) / p.u_r
+            per = max(1, int(round(step)))
+            amp = a[per - 1::per]                        # integrate() repeats the value over each chunk
+            t = per * (np.arange(amp.shape[0]) + 1.0)
+        else:
+            amp, t = integrate_free(env, scene, step)
+            if step < 1:                                 # keep one sample per period, like integrate()
+                k = int(round(1 / step))
+                amp, t = amp[k - 1::k], t[k - 1::k]
+        amp = np.concatenate([np.zeros((1,) + amp.shape[1:]), amp])      # every scene starts from rest
+        t = np.concatenate([[0.0], t])
+    else:
+        raise Mech2SpiceError(f"unknown backend {backend}")
+    return {"amp": amp, "t": t, "wall_s": time.perf_counter() - t0, "backend": backend, "step": step}
+
+
+def integrate_free(env: envelope.Envelope, scene: Scene, step: float, blowup: float = 50.0):
+    """envelope.integrate's scheme with any Envelope (sub)class and any step (periods, no stability
+    check); forcing is taken at each step's start.  Returns (|A| per step in u_R, step-end times in
+    periods).  Stops early (amplitudes NaN from there on) once |A| exceeds `blowup` u_R."""
+    p = scene.model.meta["params"]
+    T = 2 * np.pi / env.omega
+    h = step * T
+    nsteps = int(math.ceil(scene.periods / step - 1e-9))
+    B = scene.stimulus.batch
+    nf, ns = env.fast.size, env.slow.size
+    A, s, sd = np.zeros((nf, B), complex), np.zeros((ns, B)), np.zeros((ns, B))
+    pos = {d: k for k, d in enumerate(env.fast)}
+    prow = np.array([pos[scene.model.probes[n]] for n in scene.probes], int)
+    out = np.full((nsteps, len(prow), B), np.nan)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for j in range(nsteps):
+            F = env.forcing(scene.stimulus.at(j * h + 1e-9 * h))
+            A, s, sd = envelope._rk4_step(env, A, s, sd, F, h)
+            mag = np.abs(A)
+            out[j] = mag[prow] / p.u_r
+            if not np.all(np.isfinite(mag)) or mag.max() > blowup * p.u_r:
+                break
+    return out, step * (np.arange(nsteps) + 1.0)
+
+
+class Envelope2w(envelope.Envelope):
+    """envelope.Envelope plus the omega part of (2-omega insulator motion) x (fast DOF), see module doc."""
+
+    def __init__(self, model: MechModel):
+        super().__init__(model)
+        w = self.omega
+        dense = [m.toarray() if hasattr(m, "toarray") else np.asarray(m) for m in (self.Ks, self.Cs)]
+        Zs2 = dense[0] - 4 * w * w * np.diag(self.ms) + 2j * w * dense[1]
+        self.Zs2_inv = np.linalg.inv(Zs2) if Zs2.size else Zs2
+
+    def s2(self, A):
+        """Complex 2-omega amplitude S of each slow DOF (n_slow, B)."""
+        return -(self.Zs2_inv @ (self.H @ (A * A))) / 2
+
+    def residual_fast(self, A, s, F):
+        return super().residual_fast(A, s, F) - 0.5 * (self.G @ self.s2(A)) * np.conj(A)
+
+
+class EnvelopeA2(envelope.Envelope):
+    """envelope.Envelope keeping M A'' to next order in the slow time, see module doc."""
+
+    def __init__(self, model: MechModel):
+        super().__init__(model)
+        self.mf = model.arrays["mass"][self.fast][:, None]
+
+    def rhs(self, A, s, sd, F):
+        R = self.residual_fast(A, s, F)
+        Ad0 = self._Bsolve(R)
+        dR = -(self.Z0 @ Ad0) - (self.G @ s) * Ad0 - (self.G @ sd) * A
+        Ad = self._Bsolve(R - self.mf * self._Bsolve(dR))
+        sdd = (-(self.Ks @ s) - self.Cs @ sd + self.slow_force(A)) / self.ms[:, None]
+        return Ad, sd, sdd
+
+
+class Envelope2wA2(Envelope2w, EnvelopeA2):
+    """Both corrections (EnvelopeA2.rhs calls Envelope2w.residual_fast through the MRO)."""
+
+
+VARIANTS = {"envelope": envelope.Envelope, "+2w": Envelope2w, "+A''": EnvelopeA2, "+2w+A''": Envelope2wA2}
+
+
+# --- comparing -------------------------------------------------------------------------------
+def crossings(a: np.ndarray, t: np.ndarray, start: float, stop: float) -> list[float]:
+    """Times (periods after `start`) at which the series a(t) crosses MID within (start, stop]."""
+    keep = (t > start) & (t <= stop) & np.isfinite(a)
+    a, t = a[keep] - MID, t[keep]
+    if a.size < 2:
+        return []
+    k = np.flatnonzero(np.sign(a[:-1]) * np.sign(a[1:]) < 0)
+    return [float(t[i] + (t[i + 1] - t[i]) * a[i] / (a[i] - a[i + 1]) - start) for i in k]
+
+
+def settled(a: np.ndarray, t: np.ndarray, end: float) -> np.ndarray:
+    """Mean over the AVG periods before `end` (probes, B); the last sample at or before `end` when the
+    samples are sparser than that (envelope steps longer than AVG periods)."""
+    keep = (t > end - AVG) & (t <= end)
+    if not keep.any():
+        keep = t == t[t <= end].max()
+    return a[keep].mean(axis=0)
+
+
+def compare(scene: Scene, ref: dict, test: dict) -> dict:
+    """Settled-amplitude and switching-time agreement of `test` against `ref` (both from run())."""
+    wins = []
+    for w in scene.windows:
+        d = settled(test["amp"], test["t"], w) - settled(ref["amp"], ref["t"], w)
+        wins.append({"end": w, "max_abs_diff": float(np.nanmax(np.abs(d))) if np.all(np.isfinite(d)) else math.inf,
+                     "ref": settled(ref["amp"], ref["t"], w).tolist(),
+                     "test": settled(test["amp"], test["t"], w).tolist()})
+    amp_err = max(x["max_abs_diff"] for x in wins)
+    cross = []
+    bounds = list(scene.events) + [scene.periods]
+    for e, (t0, t1) in enumerate(zip(bounds[:-1], bounds[1:])):
+        for j, probe in enumerate(scene.probes):
+            for b, label in enumerate(scene.members):
+                cr = crossings(ref["amp"][:, j, b], ref["t"], t0, t1)
+                ct = crossings(test["amp"][:, j, b], test["t"], t0, t1)
+                if not cr and not ct:
+                    continue
+                row = {"event": t0, "probe": probe, "member": label, "n_ref": len(cr), "n_test": len(ct),
+                       "first_ref": cr[0] if cr else None, "first_test": ct[0] if ct else None,
+                       "last_ref": cr[-1] if cr else None, "last_test": ct[-1] if ct else None}
+                if cr and ct:
+                    row["first_rel"] = abs(ct[0] - cr[0]) / cr[0]
+                    row["last_rel"] = abs(ct[-1] - cr[-1]) / cr[-1]
+                else:
+                    row["first_rel"] = row["last_rel"] = math.inf
+                cross.append(row)
+    time_err = max((max(c["first_rel"], c["last_rel"]) for c in cross), default=0.0)
+    # trajectory difference on the common period grid (envelope samples interpolated)
+    traj = _trajectory_diff(ref, test)
+    return {"amp_err": amp_err, "windows": wins, "time_err": time_err, "crossings": cross,
+            "n_crossings": len(cross), "crossing_count_mismatch": sum(c["n_ref"] != c["n_test"] for c in cross),
+            "traj_err": traj, "amp_ok": amp_err <= AMP_TOL, "time_ok": time_err <= TIME_TOL}
+
+
+def _trajectory_diff(ref: dict, test: dict) -> float:
+    a, t = test["amp"], test["t"]
+    worst = 0.0
+    for j in range(a.shape[1]):
+        for b in range(a.shape[2]):
+            ok = np.isfinite(a[:, j, b])
+            if not ok.all():
+                return math.inf
+            y = np.interp(ref["t"], t, a[:, j, b])
+            worst = max(worst, float(np.abs(y - ref["amp"][:, j, b]).max()))
+    return worst
+
+
+def scene_table_row(name: str, cmp: dict) -> dict:
+    return {"scene": name, "amp_err": cmp["amp_err"], "time_err": cmp["time_err"], "traj_err": cmp["traj_err"],
+            "n_crossings": cmp["n_crossings"], "count_mismatch": cmp["crossing_count_mismatch"],
+            "pass": bool(cmp["amp_ok"] and cmp["time_ok"] and cmp["crossing_count_mismatch"] == 0)}
+
+
+def latch_scene(p: GateParams = DEFAULT, pulse: int = 800, settle: int = 2500) -> Scene:
+    """The model and stimulus of characterise.latch_sequence (verilog/dff.v), as a Scene."""
+    nl = synth.synthesize(ROOT / "verilog" / "dff.v")
+    m = network.build(nl, p)
+    phases = [("power-up d=0", 0, 0, settle), ("store 1", 1, 1, pulse), ("settle", 1, 0, settle),
+              ("hold, d=0", 0, 0, settle), ("hold, d=1", 1, 0, settle), ("hold, d=0", 0, 0, settle),
+              ("store 0", 0, 1, pulse), ("settle", 0, 0, settle), ("hold, d=1", 1, 0, settle),
+              ("hold, d=0", 0, 0, settle)]
+    starts = [int(x) for x in np.cumsum([0] + [ph[3] for ph in phases])]
+    st = network.stimulus(m, nl, p, [(t, [{"d": d}]) for t, (_, d, _, _) in zip(starts, phases)],
+                          clock=[[c] for _, _, c, _ in phases])
+    m.add_probe("q0.m.C", m.index("q0.m.C"))          # the loop node's channel (envelope.integrate reads probes only)
+    return Scene("latch", m, st, starts[-1], ["q[0]", "q0.m.C"], ["dff"], starts[:-1], starts[1:],
+                 "verilog/dff.v latch (+3 delay pairs) through characterise.latch_sequence's pulse sequence",
+                 {"phases": phases})
+
+
+def latch_decode(scene: Scene, amp: np.ndarray) -> dict:
+    """characterise.latch_sequence's decoding, from per-period amplitudes (P, probes) of a latch_scene run:
+    the output at the end of each phase (mean of its last 10 periods) and the threshold crossing after each
+    storing pulse starts."""
+    phases, starts = scene.meta["phases"], [0] + scene.windows
+    decoded = [{"phase": name, "d": d, "clock": c, "output": float(amp[t1 - 10:t1, 0].mean()),
+                "logic": band_of(float(amp[t1 - 10:t1, 0].mean()))}
+               for (name, d, c, _), t1 in zip(phases, starts[1:])]
+    delays = []
+    for k, (_, _, c, _) in enumerate(phases):
+        if c:
+            x = amp[starts[k]:, 0] - MID
+            idx = np.flatnonzero(np.sign(x[:-1]) != np.sign(x[1:]))
+            delays.append(float(idx[0] + 1) if idx.size else math.nan)
+    return {"amplitude": amp, "starts": starts, "phases": phases, "decoded": decoded, "output_delays": delays,
+            "pulse": phases[1][3]}
+
+
+# --- the latch --------------------------------------------------------------------------------
+def latch_compare(p: GateParams = DEFAULT, env_result: dict | None = None, rk4_result: dict | None = None) -> dict:
+    """characterise.latch_sequence on RK4 and on the envelope (its default step, 1/2 period)."""
+    t0 = time.perf_counter()
+    r = rk4_result or ch.latch_sequence(p, "rk4")
+    w_r = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    e = env_result or ch.latch_sequence(p, "envelope")
+    w_e = time.perf_counter() - t0
+    dec_r = [d["logic"] for d in r["decoded"]]
+    dec_e = [d["logic"] for d in e["decoded"]]
+    out_diff = max(abs(a["output"] - b["output"]) for a, b in zip(r["decoded"], e["decoded"]))
+    rel = [abs(a - b) / a for a, b in zip(r["output_delays"], e["output_delays"])]
+    return {"decoded_rk4": dec_r, "decoded_env": dec_e, "identical": dec_r == dec_e,
+            "max_output_diff": out_diff, "delays_rk4": r["output_delays"], "delays_env": e["output_delays"],
+            "delay_rel": rel, "traj_err": float(np.abs(r["amplitude"] - e["amplitude"]).max()),
+            "wall_rk4": w_r, "wall_env": w_e, "rk4": r, "env": e,
+            "amp_ok": out_diff <= AMP_TOL, "time_ok": max(rel) <= TIME_TOL}
+
+
+# --- stability of the envelope integrator ----------------------------------------------------
+def rk4_growth(z: np.ndarray) -> np.ndarray:
+    """|R(z)| of classical RK4, R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24."""
+    return np.abs(1 + z + z ** 2 / 2 + z ** 3 / 6 + z ** 4 / 24)
+
+
+def rk4_stable_step(lams: np.ndarray) -> float:
+    """Largest h with |R(h lambda)| <= 1 for every eigenvalue (those with Re > -1e-9 are skipped:
+    a neutral or growing mode of the equations is not a property of the step)."""
+    lams = np.asarray(lams)
+    lams = lams[lams.real < -1e-9]
+    if lams.size == 0:
+        return math.inf
+    # along each ray h * lambda, the first h where |R| > 1: scan on a grid, then bisect (vectorised)
+    x = np.linspace(0, 4.0, 4001)[1:]                      # |h lambda| up to 4 (RK4's region ends < 2.8)
+    bad = rk4_growth(x[None, :] * (lams / np.abs(lams))[:, None]) > 1 + 1e-12
+    has = bad.any(axis=1)
+    if not has.any():
+        return math.inf
+    lams, bad = lams[has], bad[has]
+    first = bad.argmax(axis=1)
+    hi = x[first] / np.abs(lams)
+    lo = np.where(first > 0, x[np.maximum(first - 1, 0)], 0.0) / np.abs(lams)
+    for _ in range(50):
+        mid = (lo + hi) / 2
+        ok = rk4_growth(mid * lams) <= 1 + 1e-12
+        lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+    return float(lo.min())
+
+
+def jacobian(env: envelope.Envelope, y: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Envelope.jacobian's central differences, every column in one batched rhs call."""
+    n = y.size
+    scale = np.maximum(np.abs(y), 1e-6 * max(np.abs(y).max(), 1e-12))
+    e = 1e-6 * scale
+    Y = np.concatenate([y[:, None] + np.diag(e), y[:, None] - np.diag(e)], axis=1)
+    A, s, sd = env.unpack(Y)
+    Ad, sd_, sdd = env.rhs(A, s, sd, np.asarray(F)[:, None])
+    R = np.concatenate([Ad.real, Ad.imag, sd_, sdd])
+    return (R[:, :n] - R[:, n:]) / (2 * e)
+
+
+def jacobian_eigs(env: envelope.Envelope, A: np.ndarray, s: np.ndarray, sd: np.ndarray, F: np.ndarray) -> np.ndarray:
+    return np.linalg.eigvals(jacobian(env, env.pack(A, s, sd), F))
+
+
+def stability_along(scene: Scene, at: list[int], step: float = 2.0) -> list[dict]:
+    """At each period in `at`: the largest |eigenvalue| of the linearised envelope equations and the largest
+    RK4 step (periods) that keeps every decaying mode stable, worst over the batch members."""
+    env = envelope.Envelope(scene.model)
+    T = 2 * np.pi / env.omega
+    states = trajectory_states(scene, step, at)
+    rows = []
+    for t in at:
+        A, s, sd = states[t]
+        F = env.forcing(scene.stimulus.at(t * T + 1e-9 * T))
+        rad, hstar, growth = 0.0, math.inf, -math.inf
+        for b in range(A.shape[1]):
+            ev = jacobian_eigs(env, A[:, b], s[:, b], sd[:, b], F[:, b])
+            rad = max(rad, float(np.abs(ev).max()))
+            hstar = min(hstar, rk4_stable_step(ev) / T)
+            growth = max(growth, float(ev.real.max()))
+        rows.append({"period": t, "max_abs_eig": rad, "rk4_stable_step_periods": hstar, "max_growth": growth})
+    return rows
+
+
+def trajectory_states(scene: Scene, step: float, at: list[int]):
+    """Envelope states (A, s, sd) of every batch member at the given periods (multiples of step)."""
+    env = envelope.Envelope(scene.model)
+    B = scene.stimulus.batch
+    state = (np.zeros((env.fast.size, B), complex), np.zeros((env.slow.size, B)), np.zeros((env.slow.size, B)))
+    out, done = {}, 0
+    for t in sorted(at):
+        if t > done:
+            r = envelope.integrate(scene.model, t - done, step_periods=step, stimulus=scene.stimulus,
+                                   state=state, start_period=done, probes=scene.probes)
+            state = r.extra["envelope_state"]
+            done = t
+        out[t] = tuple(x.copy() for x in state)
+    return out
+
+
+def two_omega_split(model: MechModel, A: np.ndarray) -> dict:
+    """How much 2-omega forcing each insulator gets, from its channel and from its gate pairs, for envelope
+    states A (n_fast, B): per slow DOF  sum over couplings gamma A_f^2  (the force's 2-omega phasor is
+    minus half of it).  'pair_cancellation' = |sum over gates| / sum over gates |gamma A_g^2|: 0 when every
+    pair's two gates are equal and 90 degrees apart."""
+    env = envelope.Envelope(model)
+    a = model.arrays
+    pos_f = {d: k for k, d in enumerate(env.fast)}
+    pos_s = {d: k for k, d in enumerate(env.slow)}
+    ns, B = env.slow.size, A.shape[1]
+    ch_sum = np.zeros((ns, B), complex)
+    g_sum = np.zeros((ns, B), complex)
+    g_abs = np.zeros((ns, B))
+    for f, s, g in zip(a["quad_fast"], a["quad_slow"], a["quad_gamma"]):
+        term = g * A[pos_f[f]] ** 2
+        if g < 0:                                   # channel-insulator coupling (-gamma_IC)
+            ch_sum[pos_s[s]] += term
+        else:
+            g_sum[pos_s[s]] += term
+            g_abs[pos_s[s]] += np.abs(term)
+    return {"gates_over_channel": float((np.abs(g_sum) / np.maximum(np.abs(ch_sum), 1e-300)).max()),
+            "pair_cancellation": float((np.abs(g_sum) / np.maximum(g_abs, 1e-300)).max()),
+            "channel_2w_force_max": float(np.abs(ch_sum).max() / 2),
+            "mean_force_max": float((abs(env.H) @ (np.abs(A) ** 2)).max() / 2)}

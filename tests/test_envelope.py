@@ -1,0 +1,99 @@
+"""The envelope model against RK4 (80 steps/period): settled amplitudes within 0.02 u_R, threshold-crossing
+(switching) times within 10 %, the same number of crossings, the same decoded logic.  Full numbers per
+scene: reports/envelope.md (benchmarks/envelope_validation.py)."""
+import math
+
+import numpy as np
+import pytest
+
+from mech2spice import characterise, envelope, simulate
+from mech2spice import validate as V
+from mech2spice.errors import Mech2SpiceError
+from mech2spice.params import band_of
+
+STEP = simulate.ENVELOPE_STEP          # what run_physical uses
+
+
+def both(scene, step=STEP):
+    ref = V.run(scene, "rk4")
+    env = V.run(scene, "envelope", step)
+    return ref, env, V.compare(scene, ref, env)
+
+
+def assert_agrees(c, min_crossings):
+    assert c["amp_err"] <= V.AMP_TOL, c["windows"]
+    assert c["n_crossings"] >= min_crossings
+    assert c["crossing_count_mismatch"] == 0, [x for x in c["crossings"] if x["n_ref"] != x["n_test"]]
+    bad = [x for x in c["crossings"] if max(x["first_rel"], x["last_rel"]) > V.TIME_TOL]
+    assert not bad, bad
+
+
+def test_band_edge_gate_inputs(p):
+    """All 16 pairs of band-edge input levels on one gate, from rest."""
+    sc = V.gate_scene(p, "edge")
+    ref, env, c = both(sc)
+    assert_agrees(c, min_crossings=4)
+    a_ref = V.settled(ref["amp"], ref["t"], sc.periods)[0]
+    a_env = V.settled(env["amp"], env["t"], sc.periods)[0]
+    assert [band_of(a) for a in a_env] == [band_of(a) for a in a_ref]
+    # every member is in its band except (0.67, 0.67), still creeping towards '1' at 2500 periods on both
+    assert [m for m, a in zip(sc.members, a_ref) if band_of(a) is None] == ["0.67,0.67"]
+
+
+def test_chain_switching_times(p):
+    """3-gate chain, inputs 00 -> 10 -> 00: every stage's crossing time within 10 % (both directions),
+    and the band-edge members' level restoration within 0.02 u_R."""
+    sc = V.chain_scene(p)
+    ref, env, c = both(sc)
+    assert_agrees(c, min_crossings=20)
+    switched = [x for x in c["crossings"] if x["member"] == "00->10->00" and x["event"] > 0]
+    assert len(switched) == 6                  # 3 stages x 2 input changes
+    for x in switched:
+        assert abs(x["first_test"] - x["first_ref"]) <= V.TIME_TOL * x["first_ref"], x
+    # the delays the gate report quotes: cumulative crossing times per stage, as characterise._crossings
+    for event in (1500, 3000):
+        r = [x["first_ref"] for x in switched if x["event"] == event]
+        e = [x["first_test"] for x in switched if x["event"] == event]
+        assert np.all(np.diff(r) > 0) and np.all(np.diff(e) > 0)
+        assert np.allclose(e, r, rtol=V.TIME_TOL)
+
+
+def test_fanout2(p):
+    sc = V.fanout_scene(p, 2)
+    ref, env, c = both(sc)
+    assert_agrees(c, min_crossings=4)
+    a_ref = V.settled(ref["amp"], ref["t"], sc.periods)
+    a_env = V.settled(env["amp"], env["t"], sc.periods)
+    assert [[band_of(a) for a in row] for row in a_env] == [[band_of(a) for a in row] for row in a_ref]
+
+
+def test_latch_sequence_decoded_identically(p):
+    r = characterise.latch_sequence(p, "rk4")
+    try:
+        e = characterise.latch_sequence(p, "envelope")
+    except KeyError as ex:
+        pytest.fail(f"characterise.latch_sequence(p, 'envelope') cannot read probe {ex}: envelope.integrate resolves "
+                    "probe names through model.probes only, rk4.integrate also through model.index")
+    res = V.latch_compare(p, env_result=e, rk4_result=r)
+    assert res["identical"], (res["decoded_rk4"], res["decoded_env"])
+    assert None not in res["decoded_rk4"][1:]
+    assert res["max_output_diff"] <= V.AMP_TOL
+    assert len(res["delays_rk4"]) == 2 and all(math.isfinite(d) for d in res["delays_env"])
+    assert max(res["delay_rel"]) <= V.TIME_TOL, (res["delays_rk4"], res["delays_env"])
+
+
+def test_step_beyond_bound_is_refused(p):
+    sc = V.gate_scene(p, "nominal", periods=200)
+    limit = envelope.max_step_periods(sc.model)
+    with pytest.raises(Mech2SpiceError, match="stability limit"):
+        envelope.integrate(sc.model, 200, step_periods=float(math.ceil(limit + 1)), stimulus=sc.stimulus)
+    # just inside the bound it runs and stays finite
+    r = envelope.integrate(sc.model, 200, step_periods=float(math.floor(limit)), stimulus=sc.stimulus)
+    assert np.all(np.isfinite(r.amp))
+
+
+def test_rk4_stability_region():
+    """The step rule used in reports/envelope.md: RK4's region reaches 2.785 on the real axis, 2.828 on
+    the imaginary one."""
+    assert V.rk4_stable_step(np.array([-1.0])) == pytest.approx(2.7853, abs=1e-3)
+    assert V.rk4_stable_step(np.array([-1e-6 + 1j])) == pytest.approx(2 * math.sqrt(2), abs=1e-3)

@@ -58,7 +58,6 @@ def test_rk4_matches_logic_on_other_designs(design, vectors, p):
         assert r["outputs"] == logic.evaluate(nl, v), (design, v)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("design", ["verilog/comparator4.v", "verilog/parity8.v"])
 def test_rk4_matches_logic_large(design, p):
     nl = synth.synthesize(design)

@@ -184,13 +184,17 @@ A one-hot state register of 4 latches and a registered `found` flag detect the i
 
 {fsm_table}
 
-## The square root of 2809 (paper Fig. 6; `verilog/sqrt.v`, binary search, 15 lines)
+## The square root of 2809 (paper Fig. 6; `verilog/sqrt.v`, binary search, 16 lines)
+
+The all-zero state is the start state, so `mech2spice simulate verilog/sqrt.v --set n=2809 --clock clk
+--cycles 6 --backend logic` ends with 53; the physical run below resets first (cycle 0), since from
+rest latches take their D values (see Power-up).
 
 | | ours | paper |
 |---|---|---|
 {counts}
 
-Ours: {sq_logic} logic gates + {sq_latches} latches x 10 gates. Timing: {sq_t}; {sq_periods} drive
+Ours: {sq_logic} logic gates + {sq_latches} latches x 10 gates (6 result bits and a 3-bit step counter). Timing: {sq_t}; {sq_periods} drive
 periods (the paper: ~2e5). Wall time: {sq_wall}. {sq_rk4}
 
 ![sqrt](sqrt.png)

@@ -61,6 +61,11 @@ def test_sqrt_logic_reaches_53(tmp_path):
     assert rc == 0, err
     roots = [e["outputs"]["root"] for e in json.loads(out)["trace"]]
     assert roots == [0, 32, 48, 48, 52, 52, 53]     # one result bit decided per cycle, from the top
+    # the form: inputs held, clock pulsed; the all-zero power-up state is the start state
+    rc, out, err = cli("simulate", "verilog/sqrt.v", "--set", "n=2809", "--clock", "clk", "--cycles", "8",
+                       "--backend", "logic", "--json")
+    assert rc == 0, err
+    assert [e["outputs"]["root"] for e in json.loads(out)["trace"]] == [32, 48, 48, 52, 52, 53, 53, 53]
 
 
 def test_fsm_detects_sequence():

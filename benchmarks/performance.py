@@ -146,22 +146,11 @@ def task_adder(backend: str, netlist_pickle: str) -> dict:
     values = [{"a": a, "b": b} for a in range(4) for b in range(4)]
     if backend == "rk4_numpy":
         rk4_kernel.AVAILABLE = False            # rk4.integrate then takes its numpy path
-    if backend.startswith("envelope_step4"):
-        simulate.ENVELOPE_STEP = 4.0            # what-if: the step the sweep in envelope.md shows costs no accuracy
-    if backend.endswith("_cached"):
-        from mech2spice import envelope         # what-if: build the Envelope once, not once per 100-period chunk
-        orig, memo = envelope.Envelope, {}
-
-        def once(model):
-            if id(model) not in memo:
-                memo[id(model)] = orig(model)
-            return memo[id(model)]
-        envelope.Envelope = once
     if backend in ("rk4", "rk4_numpy"):
         _warm_rk4(backend == "rk4")
     rss0 = _rss_mb()
     t0 = time.perf_counter()
-    res = simulate.run_physical(nl, p, values, "rk4" if backend.startswith("rk4") else backend.split("_")[0])
+    res = simulate.run_physical(nl, p, values, "rk4" if backend.startswith("rk4") else backend)
     wall = time.perf_counter() - t0
     correct = sum(r["valid"] and r["outputs"]["s"] == logic.evaluate(nl, v)["s"] for r, v in zip(res, values))
     return {"backend": backend, "wall_s": wall, "periods": res[0]["periods"], "correct": int(correct),
@@ -510,7 +499,7 @@ def section_adder(tmp: Path) -> dict:
     nlp = _netlist_pickle("verilog/adder2.v", tmp)
     rows = {}
     # envelope first and last: the ratio to RK4 is taken against their mean (shared machine)
-    for backend in ("envelope", "rk4", "rk4_numpy", "ngspice", "envelope", "envelope_step4", "envelope_step4_cached"):
+    for backend in ("envelope", "rk4", "rk4_numpy", "ngspice", "envelope"):
         log(f"adder, 16 inputs, run_physical on {backend}")
         r = spawn("adder", backend=backend, netlist_pickle=nlp)
         if "failed" in r:
@@ -765,7 +754,8 @@ def main() -> None:
                 res["cpu"] = section_cpu(tmp, args.quick)
             elif sec:
                 raise SystemExit(f"unknown section {sec}")
-            res.setdefault("section_wall_s", {})[sec] = time.perf_counter() - t0
+            if sec:
+                res.setdefault("section_wall_s", {})[sec] = time.perf_counter() - t0
             res["sieve"] = sieve_estimate(res)
             jf.write_text(json.dumps(res, indent=1, default=float))
     made = charts(res, out)
@@ -844,7 +834,8 @@ def _dur_ms(s: float) -> str:
 
 
 ADDER_LABEL = {"rk4": "RK4, numba kernel (80 steps/T)", "rk4_numpy": "RK4, numpy (80 steps/T)",
-               "envelope": "envelope (step 2 T)", "envelope_again": "envelope (step 2 T), run again after the others",
+               "envelope": "envelope (default step: `simulate.envelope_step`, 4 T here)",
+               "envelope_again": "envelope, run again after the others",
                "envelope_step4": "what-if: envelope with ENVELOPE_STEP = 4",
                "envelope_step4_cached": "what-if: ENVELOPE_STEP = 4 and one Envelope per run (not per chunk)",
                "ngspice": "ngspice (defaults), 16 processes, 2 at a time"}
@@ -907,6 +898,16 @@ def sqrt_md(res: dict) -> list[str]:
         r = sq["rk4"]
         L.append(f"| RK4, numba kernel, whole run | {_dur(r['wall_s'])} | {_dur_ms(r['s_per_period'])} | "
                  f"root trace {r['root_trace']}, valid {r['valid']} | measured |")
+    old = res.get("sqrt_before_2bd32d8", {})
+    if "wall_s" in old.get("rk4", {}) and "wall_s" in old.get("envelope", {}):
+        L.append(f"| *previous `sqrt.v` (before commit 2bd32d8, {old['logic']['gates']} gates, "
+                 f"{old['envelope']['periods']} periods)*: envelope step 1 T | {_dur(old['envelope']['wall_s'])} | "
+                 f"{_dur_ms(old['envelope']['s_per_period'])} | root trace {old['envelope']['root_trace']} | "
+                 "measured (envelope code as of commit c97a5be) |")
+        L.append(f"| *previous `sqrt.v`*: RK4, numba kernel, whole run | {_dur(old['rk4']['wall_s'])} | "
+                 f"{_dur_ms(old['rk4']['s_per_period'])} | root trace {old['rk4']['root_trace']}, valid "
+                 f"{old['rk4']['valid']} | measured: **{old['rk4']['wall_s'] / old['envelope']['wall_s']:.0f}x the "
+                 f"envelope**; its first-400-period estimate was {_dur(old['rk4_probe']['estimate_s'])} |")
     if "s_per_cycle" in lg:
         L.append(f"| logic (`run_clocked_logic`) | {_dur_ms(lg['wall_s'])} | {lg['s_per_cycle'] * 1e3:.2f} ms per "
                  f"cycle | root {lg['root']} | measured |")
@@ -1009,10 +1010,7 @@ def SUMMARY_HOOK(res):
         L.append(f"- **Adder, 16 inputs, `run_physical`: envelope {e:.2f} s, RK4 (numba) {ad['rk4']['wall_s']:.1f} s "
                  f"-> {ad['rk4']['wall_s'] / e:.1f}x** (issue: >= 20x). RK4 numpy {ad.get('rk4_numpy', {}).get('wall_s', float('nan')):.1f} s, "
                  f"ngspice {ad.get('ngspice', {}).get('wall_s', float('nan')):.0f} s (2 processes at a time). "
-                 + (f"With `ENVELOPE_STEP = 4` (no accuracy cost, `envelope.md` step sweep) and one `Envelope` per "
-                    f"run instead of one per 100-period chunk: {ad['envelope_step4_cached']['wall_s']:.2f} s -> "
-                    f"{ad['rk4']['wall_s'] / ad['envelope_step4_cached']['wall_s']:.0f}x."
-                    if "wall_s" in ad.get("envelope_step4_cached", {}) else ""))
+                 + _adder_history(res))
     big = {b: _row(res, b, 12000) for b in PLAN}
     if big.get("rk4"):
         parts = [f"{LABEL[b].split(' (')[0]} {_dur_ms(r['s_per_period'])}" for b, r in big.items() if r]
@@ -1039,11 +1037,17 @@ def SUMMARY_HOOK(res):
               "1020 and 3000 oscillators and is then roughly linear.")
     sq = res.get("sqrt", {})
     if "wall_s" in sq.get("envelope", {}):
-        t = f"- **sqrt(2809)**, {sq['envelope']['periods']} periods: envelope {_dur(sq['envelope']['wall_s'])} (root 53)"
+        t = (f"- **sqrt(2809)** (`verilog/sqrt.v`, {sq['logic'].get('gates', '?')} gates), {sq['envelope']['periods']} "
+             f"periods: envelope {_dur(sq['envelope']['wall_s'])} (root trace ends at {sq['envelope']['root_trace'][-1]})")
         if "wall_s" in sq.get("rk4", {}):
             t += f", RK4 {_dur(sq['rk4']['wall_s'])} measured ({sq['rk4']['wall_s'] / sq['envelope']['wall_s']:.0f}x)"
         if "estimate_s" in sq.get("rk4_probe", {}):
             t += f", RK4 estimated {_dur(sq['rk4_probe']['estimate_s'])} from its first 400 periods"
+        old = res.get("sqrt_before_2bd32d8", {})
+        if "wall_s" in old.get("rk4", {}):
+            t += (f". On the previous sqrt.v ({old['logic']['gates']} gates) both ran in full: RK4 "
+                  f"{_dur(old['rk4']['wall_s'])} vs envelope {_dur(old['envelope']['wall_s'])}, "
+                  f"{old['rk4']['wall_s'] / old['envelope']['wall_s']:.0f}x")
         L.append(t + ".")
     sv = res.get("sieve", {})
     for key, lab in (("issue_processor", "issue's 12000-oscillator processor, 700 cycles"),
@@ -1073,6 +1077,19 @@ def SUMMARY_HOOK(res):
                  "with identical results (prototype below).")
     L.append("")
     return L
+
+
+def _adder_history(res) -> str:
+    h = res.get("adder_before_5c6b8d2", {}).get("rows", {})
+    if not ("wall_s" in h.get("rk4", {}) and "wall_s" in h.get("envelope", {})):
+        return ""
+    e = (h["envelope"]["wall_s"] + h.get("envelope_again", h["envelope"])["wall_s"]) / 2
+    out = (f"Before commit 5c6b8d2 (envelope step 2 T, `Envelope` rebuilt for every 100-period chunk) the same "
+           f"measurement gave {h['rk4']['wall_s'] / e:.1f}x (RK4 {h['rk4']['wall_s']:.1f} s / envelope {e:.2f} s)")
+    if "wall_s" in h.get("envelope_step4_cached", {}):
+        out += (f"; this script's what-if runs with step 4 and one `Envelope` per run gave "
+                f"{h['rk4']['wall_s'] / h['envelope_step4_cached']['wall_s']:.0f}x, which 5c6b8d2 then adopted")
+    return out + "."
 
 
 def _old_ratio(res, old, n):

@@ -353,8 +353,10 @@ def latch_sequence(p: GateParams, backend: str = "rk4", pulse: int = 800, settle
     stim = network.stimulus(model, nl, p, [(int(t), [{"d": d}]) for t, (_, d, _, _) in zip(starts, phases)],
                             clock=[[c] for _, _, c, _ in phases])
     probes = ["q[0]", "q0.m.C"]                  # the output, and the loop node's channel
-    integ = rk4.integrate if backend == "rk4" else envelope.integrate
-    run = integ(model, int(starts[-1]), stimulus=stim, probes=probes)
+    if backend == "rk4":
+        run = rk4.integrate(model, int(starts[-1]), stimulus=stim, probes=probes)
+    else:                       # 4-period steps: same accuracy as 1/2 (reports/envelope.md), 8x faster
+        run = envelope.integrate(model, int(starts[-1]), step_periods=4.0, stimulus=stim, probes=probes)
     amp = np.abs(run.amp[:, :, 0]) / p.u_r
     decoded = [{"phase": name, "d": d, "clock": c, "output": float(amp[int(t1) - 10:int(t1), 0].mean()),
                 "logic": band_of(float(amp[int(t1) - 10:int(t1), 0].mean()))}

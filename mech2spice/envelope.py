@@ -90,7 +90,7 @@ class Envelope:
     def rhs(self, A, s, sd, F):
         """Time derivatives (A', s', s'') for states of shape (n_fast, B), (n_slow, B)."""
         Ad = self._Bsolve(self.residual_fast(A, s, F))
-        sdd = (-self.Ks @ s - self.Cs @ sd + self.slow_force(A)) / self.ms[:, None]
+        sdd = (self.slow_force(A) - self.Ks @ s - self.Cs @ sd) / self.ms[:, None]   # no negated matrix copies
         return Ad, sd, sdd
 
     def fast_response(self, s: np.ndarray, F: np.ndarray) -> np.ndarray:

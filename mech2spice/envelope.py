@@ -56,6 +56,10 @@ class Envelope:
         dof = a["drive_dof"]
         if np.any(a["slow"][dof]):
             raise Mech2SpiceError("the envelope model cannot drive a slow DOF at omega")
+        # settle detection watches the channels (the logic signals): gate oscillators ring in slow,
+        # lightly damped gate-insulator modes that change no logic level (reports/envelope.md)
+        gates = model.meta.get("gates")
+        self.watch = pos_f[[g.channel for g in gates]] if gates else np.arange(nf)
         self.Dmap = sp.csr_matrix((-1j * np.exp(1j * a["drive_phase"]),
                                    (pos_f[dof], np.arange(dof.size))), shape=(nf, dof.size))
 
@@ -75,6 +79,35 @@ class Envelope:
         if env is None:
             env = model.__dict__["_envelope"] = cls(model)
         return env
+
+    def kernel(self):
+        """The compiled loop's arrays (envelope_kernel.Kernel), built once."""
+        if getattr(self, "_kernel", None) is None:
+            from .envelope_kernel import Kernel
+            self._kernel = Kernel(self)
+        return self._kernel
+
+    def block_inverse(self, max_block: int = 64):
+        """Bop^-1 as a sparse matrix when Bop's connected blocks are small (a channel and the dashpot
+        gates it drives), else None.  Cached."""
+        if not hasattr(self, "_binv"):
+            from scipy.sparse.csgraph import connected_components
+            n, label = connected_components(abs(self.Bop), directed=False)
+            sizes = np.bincount(label, minlength=n)
+            self._binv = None
+            if sizes.size == 0 or sizes.max() <= max_block:
+                B = self.Bop.tocsr()
+                rows, cols, vals = [], [], []
+                order = np.argsort(label, kind="stable")
+                for idx in np.split(order, np.cumsum(sizes)[:-1]):
+                    inv = np.linalg.inv(B[idx][:, idx].toarray())
+                    rows.append(np.repeat(idx, idx.size))
+                    cols.append(np.tile(idx, idx.size))
+                    vals.append(inv.ravel())
+                nf = self.fast.size
+                self._binv = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                           shape=(nf, nf)) if nf else None
+        return self._binv
 
     # --- pieces --------------------------------------------------------------
     def forcing(self, amps: np.ndarray) -> np.ndarray:
@@ -144,12 +177,24 @@ def max_step_periods(model: MechModel) -> float:
     return RK4_STABILITY / rate_bound(env) / (2 * np.pi / env.omega)
 
 
+SETTLE_WINDOW = 200          # periods: more than one gate delay (173 mean, 224 max: reports/gate.md), so
+                             # a signal in flight moves some channel by a large part of a band per window
+SETTLE_MIN = 400             # periods after a stimulus change before a window counts: an input change
+                             # first moves gate oscillators and insulators, not yet channels
+CHUNK_PERIODS = 2000         # periods per compiled call: bounds the progress-bar and Ctrl-C latency
+
+
 def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stimulus=None, state=None,
-              start_period: int = 0, probes: list[str] | None = None, progress: bool = False):
+              start_period: int = 0, probes: list[str] | None = None, progress: bool = False,
+              settle: float | None = None, compiled: bool = True):
     """RK4 on the envelope equations with a step of `step_periods` drive periods (must divide 1 or be whole).
 
     Returns an rk4.Run whose per-period amplitudes are the envelope itself.  A step beyond the measured
-    stability bound is refused."""
+    stability bound is refused.  With `settle` (u_R), each stretch of constant stimulus ends once every
+    channel's amplitude stayed within a range of `settle` for two SETTLE_WINDOWs in a row: the rest of
+    the stretch is the settled state, held (idle-time skipping; the slow small ringing this ignores and
+    its error are measured in reports/cpu_physical.md).  compiled=True uses the numba loop (envelope_kernel.py) where numba exists."""
+    from . import envelope_kernel
     from .rk4 import Run, _progress
     from .stimulus import Stimulus
     env = Envelope.of(model)
@@ -170,20 +215,69 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     pos = {d: k for k, d in enumerate(env.fast)}
     prow = np.array([pos[model.probes[n] if n in model.probes else model.index(n)] for n in names], int)
     amp = np.zeros((periods, len(names), B), complex)
+    tol = settle * model.meta["params"].u_r if settle else 0.0
+    check = sub * max(1, int(round(SETTLE_WINDOW / per)))
+    kern = env.kernel() if compiled and envelope_kernel.AVAILABLE else None
+    bound = 1e3 * model.meta["params"].u_r
+    settled_periods = 0
     bar = _progress(periods, progress)
-    for k in range(0, periods, per):
+    k, seg_now, since = 0, None, 0
+    while k < periods:
         t = (start_period + k) * T
         F = env.forcing(stimulus.at(t + 1e-9 * h))
-        for _ in range(sub):
-            A, s, sd = _rk4_step(env, A, s, sd, F, h)
-        amp[k:k + per] = A[prow]                       # the envelope is the per-period phasor
-        _check(model, env, A, t + per * T, T)
-        bar.update(per)
+        if stimulus.segment(t + 1e-9 * h) != seg_now:
+            seg_now, since = stimulus.segment(t + 1e-9 * h), 0
+        settle_from = max(0, SETTLE_MIN - since) // per * sub
+        # chunks until the stimulus next changes (F is read at each chunk's start)
+        span = min(stimulus.next_change(t + 1e-9 * h) - t, periods * T)
+        to_change = min(-(-(periods - k) // per), max(1, int(np.ceil(span / (per * T) - 1e-9))))
+        nchunks = min(to_change, max(1, CHUNK_PERIODS // per))
+        if kern is not None:
+            seg, done, status = kern.run(A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from)
+        else:
+            seg, done, status = _numpy_chunks(env, A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check,
+                                              settle_from)
+        if status == envelope_kernel.DIVERGED:
+            _check(model, env, A, t + (done + 1) * h, T)
+        n = min(nchunks * per, periods - k)
+        amp[k:k + n] = seg[:n]
+        if status == envelope_kernel.SETTLED:        # hold the settled state up to the stimulus change
+            got = done // sub * per
+            n = min(to_change * per, periods - k)
+            amp[k + got:k + n] = A[prow]
+            settled_periods += n - got
+        k += n
+        since += n
+        bar.update(n)
     bar.close()
     t_end = (start_period + 1 + np.arange(periods)) * T
     run = Run(names, T, t_end, amp, np.zeros(amp.shape), None, None, (start_period + periods) * T)
     run.extra["envelope_state"] = (A, s, sd)
+    run.extra["settled_periods"] = settled_periods
     return run
+
+
+def _numpy_chunks(env, A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from):
+    """The compiled loop's contract in numpy (used without numba); updates A, s, sd in place."""
+    from . import envelope_kernel
+    amp = np.zeros((nchunks * per, prow.size, A.shape[1]), complex)
+    w, quiet = env.watch, 0
+    lo = hi = np.abs(A[w])
+    for n in range(nchunks * sub):
+        if tol and n % check == 0:
+            if n >= settle_from + check:
+                quiet = quiet + 1 if (hi - lo).max(initial=0) < tol else 0
+                if quiet >= 2:
+                    return amp, n, envelope_kernel.SETTLED
+            lo = hi = np.abs(A[w])
+        A[:], s[:], sd[:] = _rk4_step(env, A, s, sd, F, h)
+        if not np.all(np.abs(A) < bound):
+            return amp, n, envelope_kernel.DIVERGED
+        lo, hi = np.minimum(lo, np.abs(A[w])), np.maximum(hi, np.abs(A[w]))
+        if (n + 1) % sub == 0:
+            c = (n + 1) // sub - 1
+            amp[c * per:(c + 1) * per] = A[prow]
+    return amp, nchunks * sub, envelope_kernel.DONE
 
 
 def _step_layout(step_periods: float) -> tuple[int, int]:

@@ -1,66 +1,182 @@
-"""The processor at envelope fidelity against the ISS, cycle by cycle: reports/cpu_physical.md.
+"""The processor at oscillator level against the ISS, cycle by cycle: reports/cpu_physical.md.
 
 Usage: python scripts/cpu_physical.py [--cycles N] [--program programs/sieve.asm] [--backend envelope]
-Each cycle's port activity (read address, data, write port) and the registers decoded from the latch
-amplitudes are compared with the ISS; the run stops at the first disagreement or invalid bit.
+                                      [--step 4] [--settle TOL] [--checkpoint FILE [--resume]]
+--cycles 0 runs to the halt.  Each cycle's port activity (read address, data, write port) and the
+registers decoded from the latch amplitudes are compared with the ISS; the run stops at the first
+disagreement.  The run goes through `run_program` (checkpoints every 10 cycles with --checkpoint, so an
+interrupted run continues with --resume); the figures come from the physical run's own trace.
+The fidelity table comes from benchmarks/cpu_fidelity.py (reports/cpu_fidelity.json) when present.
 """
 import argparse
+import json
 import platform
 import time
 from pathlib import Path
 
-from mech2spice.cpu import run as R
-from mech2spice.cpu.iss import ISS
-from mech2spice.cpu.physical import PhysicalCPU
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from mech2spice.cpu import figures  # noqa: E402
+from mech2spice.cpu import run as R  # noqa: E402
+from mech2spice.cpu.iss import ISS  # noqa: E402
+from mech2spice.cpu.physical import ENVELOPE_STEP, SETTLE  # noqa: E402
+from mech2spice.errors import Mech2SpiceError  # noqa: E402
+
+PAPER_CYCLES, PAPER_WALL = 719, "50 h 22 min"
+
+
+class Tracker:
+    """Steps the ISS beside the physical run (trace callback) and keeps Fig. 8's frames."""
+
+    def __init__(self, prog):
+        self.iss = ISS(R.make_memory(prog))
+        self.frames, self.rows, self.agree = [], [], True
+        self.t = time.perf_counter()
+
+    def fast_forward(self, cycles: int) -> None:
+        """A resumed run: replay the ISS to the checkpoint (frames before it are ISS frames)."""
+        while self.iss.cycle < cycles:
+            before = self.iss.mem.snapshot()
+            rec = self.iss.step()
+            self.frames.append((rec, before, self.iss.mem.snapshot()))
+
+    def __call__(self, got, cpu) -> None:
+        before = self.iss.mem.snapshot()
+        want = self.iss.step()
+        same = want == got and self.iss.registers() == cpu.registers() and \
+            cpu.mem.snapshot() == self.iss.mem.snapshot()
+        self.frames.append((got, before, cpu.mem.snapshot()))
+        now = time.perf_counter()
+        self.rows.append({"cycle": got.cycle, "pc": got.pc, "instr": got.instr or got.phase, "raddr": got.raddr,
+                          "rdata": got.rdata, "we": got.we, "waddr": got.waddr, "wdata": got.wdata,
+                          "same": same, "wall_s": now - self.t})
+        self.t = now
+        if not same:
+            self.agree = False
+            raise Mech2SpiceError(f"cycle {got.cycle}: the physical run differs from the ISS "
+                                  f"({got} vs {want})")
+        if got.cycle % 25 == 0:
+            print(f"cycle {got.cycle}: pc {got.pc} {got.instr or got.phase}", flush=True)
+
+
+def fig_activity(rows, path: Path, backend: str) -> None:
+    fig, ax = plt.subplots(figsize=(10, 3.4))
+    ax.plot([r["cycle"] for r in rows], [r["raddr"] for r in rows], ".", ms=2.5, color="tab:green",
+            label="read address (decoded from amplitudes)")
+    w = [r for r in rows if r["we"]]
+    ax.plot([r["cycle"] for r in w], [r["waddr"] for r in w], "s", ms=3.5, color="tab:red", label="write address")
+    ax2 = ax.twinx()
+    ax2.plot([r["cycle"] for r in rows], [r["wall_s"] for r in rows], lw=0.6, color="0.4")
+    ax2.set_ylabel("wall time per cycle (s)", color="0.4")
+    ax.axhspan(128, 159, color="0.9", zorder=0)
+    ax.set_xlabel("clock cycle")
+    ax.set_ylabel("address")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(f"Sieve at {backend} fidelity: memory traffic per cycle (grey: primality array)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def fidelity_section(path: Path) -> str:
+    if not path.exists():
+        return ""
+    d = json.loads(path.read_text())
+    lines = [f"\n## What each speed-up costs (`python benchmarks/cpu_fidelity.py --cycles {d['cycles']}`)\n",
+             f"The first {d['cycles']} sieve cycles under each setting, side by side in one run on the "
+             f"{d['machine']}. *Amplitude difference*: the largest difference of any probed amplitude (the "
+             "output bits and all 43 latch outputs) at the end of each cycle against the reference setting; "
+             "*margin*: the smallest distance of any of them to its band edge, in band widths; "
+             "*integrated*: the drive periods actually integrated (a settled pause skips the rest).\n",
+             "| setting | cycles = ISS | max amplitude difference (u_R) | min margin | integrated / "
+             "simulated periods | s per cycle |", "|---|---|---|---|---|---|"]
+    for r in d["table"]:
+        lines.append(f"| {r['setting']} | {r['cycles'] if r['all_same_as_iss'] else 'NO'} | "
+                     f"{r['max_amp_diff']:.4f} | {r['min_margin']:+.3f} | {r['simulated']:,} / {r['periods']:,} "
+                     f"| {r['s_per_cycle']:.2f} |")
+    return "\n".join(lines) + "\n"
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cycles", type=int, default=30)
+    ap.add_argument("--cycles", type=int, default=0, help="cycles to run (0: to the halt)")
     ap.add_argument("--program", default="programs/sieve.asm")
     ap.add_argument("--backend", default="envelope", choices=["envelope", "rk4"])
-    ap.add_argument("--out", default="reports/cpu_physical.md")
+    ap.add_argument("--step", type=float, default=ENVELOPE_STEP)
+    ap.add_argument("--settle", type=float, default=SETTLE)
+    ap.add_argument("--checkpoint", default=None)
+    ap.add_argument("--resume", action="store_true")
+    ap.add_argument("--out", default="reports")
     a = ap.parse_args()
+    out = Path(a.out)
     prog = R.load_program(a.program)
-    iss = ISS(R.make_memory(prog))
-    t0 = time.time()
-    phys = PhysicalCPU(R.make_memory(prog), a.backend)
-    t_reset = time.time() - t0
-    rows, agree = [], True
-    for _ in range(a.cycles):
-        t = time.time()
-        want, got = iss.step(), phys.step()
-        same = want == got and iss.registers() == phys.registers()
-        rows.append(f"| {got.cycle} | {got.pc} | {got.instr or got.phase} | {got.raddr} | {got.rdata} | "
-                    f"{got.we} | {got.waddr} | {got.wdata} | {'yes' if same else 'NO'} | {time.time() - t:.1f} |")
-        print(rows[-1], flush=True)
-        if not same:
-            agree = False
-            break
-    wall = time.time() - t0
-    n = len(rows)
+    tracker = Tracker(prog)
+    if a.resume:
+        tracker.fast_forward(json.loads(Path(a.checkpoint).read_text())["cycle"])
+    physical = {"step": a.step, "settle": a.settle or None} if a.backend == "envelope" else {}
+    t0 = time.perf_counter()
+    try:
+        res = R.run_program(a.program, a.backend, a.cycles or 100_000, checkpoint=a.checkpoint,
+                            resume=a.resume, trace=tracker, **physical)
+    except Mech2SpiceError as err:       # keep what was measured: the rows up to the failure
+        (out / "cpu_physical_failed.md").write_text(f"# Physical run stopped\n\n{err}\n\n" + "\n".join(
+            json.dumps(r) for r in tracker.rows) + "\n")
+        raise SystemExit(f"{err} (rows in {out / 'cpu_physical_failed.md'})")
+    wall = time.perf_counter() - t0
+    golden = R.run_program(a.program, "iss")
+    final_same = res["memory"] == golden["memory"] and res["cycles"] == golden["cycles"]
+    moments = figures.sieve_moments(tracker.frames) if res["halted"] else []
+    if moments:
+        figures.fig_sieve(tracker.frames, moments, out / "cpu_sieve_physical.png",
+                          f"{a.backend} fidelity ({res.get('simulated_periods', 0):,} periods integrated)")
+    fig_activity(tracker.rows, out / "cpu_physical_trace.png", a.backend)
+    rows = tracker.rows
+    per_cycle = sum(r["wall_s"] for r in rows) / max(len(rows), 1)
+    primes = [n for n in range(2, 32) if res["memory"][128 + n] == 0]
+    cmd = (f"python scripts/cpu_physical.py --cycles {a.cycles} --backend {a.backend}"
+           + (f" --step {a.step:g} --settle {a.settle}" if a.backend == "envelope" else ""))
+    settle_txt = (f"each pause ends once every channel has stayed within {a.settle} u_R for two 200-period "
+                  "windows (`envelope.integrate(settle=...)`; pulses always run in full)" if a.settle else
+                  "fixed-length pauses")
     text = f"""# The processor at oscillator level ({a.backend})
 
-Generated by `python scripts/cpu_physical.py --cycles {a.cycles} --backend {a.backend}` on
-{platform.machine()} {platform.system()}, 2 cores (shared), program `{a.program}`.
+Generated by `{cmd}` on {platform.machine()} {platform.system()}, 2 cores (shared with other jobs),
+program `{a.program}`{' (resumed from a checkpoint: wall time is this session only)' if a.resume else ''}.
 
-`verilog/cpu.v` synthesised with the fan-out limit ({len(phys.netlist.gates())} logic gates,
-{len(phys.netlist.latches())} latches, {phys.model.n} oscillators), simulated at {a.backend} fidelity
-(step {2.0 if a.backend == 'envelope' else 1 / 80} periods). The behavioural memory decodes the read address
-from the raddr channels' amplitudes each cycle and drives rdata with the stored byte as forces (`mech2spice/cpu/physical.py`).
-Clock: pulse {phys.pulse}, pause {phys.pause} periods; one cycle is pulse + pause, plus another pause when
-the byte read changes. Power-up with rst = 1 for one clock: {t_reset:.0f} s.
+`verilog/cpu.v` synthesised with the fan-out limit: 6486 oscillators. Simulated at {a.backend} fidelity
+(step {a.step:g} periods, compiled envelope kernel, {settle_txt}). The behavioural memory decodes the read
+address from the raddr channels' amplitudes each cycle, drives rdata with the stored byte as forces and
+commits writes at the clock edge (`mech2spice/cpu/physical.py`). Every cycle is compared with the ISS
+(port activity, all registers decoded from the latch amplitudes, and memory).
 
-**{n} cycles, {'every one identical' if agree else 'STOPPED at a disagreement'} to the ISS** (port activity
-and all registers decoded from the latch amplitudes), {phys.period} drive periods, wall time {wall:.0f} s
-({(wall - t_reset) / max(n, 1):.1f} s per cycle). At that rate the full sieve (457 cycles) would take
-about {457 * (wall - t_reset) / max(n, 1) / 3600:.1f} h: this is the cost the multi-fidelity work of issue 6 must cut.
+## Result
+
+- **{'halted' if res['halted'] else 'did not halt'} after {res['cycles']} cycles** (the paper's sieve:
+  {PAPER_CYCLES} cycles); {'every cycle identical to the ISS' if tracker.agree else 'DISAGREED with the ISS'};
+  final memory {'equal to' if final_same else 'DIFFERENT from'} the golden (ISS) memory.
+- primes left unmarked in 128..159: {primes}
+- **wall time {wall:.0f} s ({wall / 60:.1f} min)**, {per_cycle:.2f} s per cycle on average (the paper's
+  run: {PAPER_WALL}); {res.get('periods', 0):,} drive periods of processor time, of which
+  {res.get('simulated_periods', 0):,} were integrated.
+
+![sieve memory, physical run](cpu_sieve_physical.png)
+
+![memory traffic, physical run](cpu_physical_trace.png)
+{fidelity_section(out / 'cpu_fidelity.json')}
+## Every cycle
+
+<details><summary>{len(rows)} cycles (click)</summary>
 
 | cycle | pc | instruction | raddr | rdata | we | waddr | wdata | = ISS | wall (s) |
 |---|---|---|---|---|---|---|---|---|---|
-""" + "\n".join(rows) + "\n"
-    Path(a.out).write_text(text)
-    print(a.out)
+""" + "\n".join(f"| {r['cycle']} | {r['pc']} | {r['instr']} | {r['raddr']} | {r['rdata']} | {r['we']} | "
+                f"{r['waddr']} | {r['wdata']} | {'yes' if r['same'] else 'NO'} | {r['wall_s']:.1f} |"
+                for r in rows) + "\n\n</details>\n"
+    (out / "cpu_physical.md").write_text(text)
+    (out / "cpu_physical.json").write_text(json.dumps({k: v for k, v in res.items()}, indent=1))
+    print(out / "cpu_physical.md", f"{wall:.0f} s")
 
 
 if __name__ == "__main__":

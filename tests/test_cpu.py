@@ -328,14 +328,31 @@ def test_cli_user_errors(tmp_path):
         cli(["cpu", "asm", str(tmp_path / "x.bin"), "-o", str(tmp_path / "y.bin")])
 
 
-@pytest.mark.slow
-def test_sieve_first_cycles_at_envelope_fidelity_match_iss():
-    """The processor as 6000+ oscillators (envelope model) against the behavioural memory."""
+def test_sieve_at_envelope_fidelity_matches_iss_and_resumes_exactly(tmp_path):
+    """The processor as 6486 oscillators (envelope model, settle detection on) against the behavioural
+    memory: the first cycles equal the ISS, and a run interrupted at a checkpoint continues from the saved
+    oscillator state to exactly the same amplitudes as an uninterrupted run."""
     from mech2spice.cpu import run as R
     from mech2spice.cpu.iss import ISS
-    from mech2spice.cpu.physical import PhysicalCPU
-    prog = R.load_program("programs/sieve.asm")
-    iss, phys = ISS(R.make_memory(prog)), PhysicalCPU(R.make_memory(prog), "envelope")
-    for _ in range(3):
-        assert phys.step() == iss.step()
-        assert phys.registers() == iss.registers()
+    prog = R.load_program(PROGRAMS / "sieve.asm")
+    iss = ISS(R.make_memory(prog))
+    seen = []
+
+    def trace(rec, cpu):
+        seen.append((rec == iss.step(), cpu.registers() == iss.registers(), dict(cpu.amps)))
+
+    whole = run_program(PROGRAMS / "sieve.asm", "envelope", 4, trace=trace)
+    assert all(a and b for a, b, _ in seen) and len(seen) == 4
+    assert whole["simulated_periods"] < whole["periods"]          # settled pauses were skipped
+    ck = tmp_path / "ck.json"
+    run_program(PROGRAMS / "sieve.asm", "envelope", 2, checkpoint=ck)
+    assert R.physical_state_path(ck).exists()
+    amps = []
+    done = run_program(PROGRAMS / "sieve.asm", "envelope", 4, checkpoint=ck, resume=True,
+                       trace=lambda rec, cpu: amps.append(dict(cpu.amps)))
+    for key in ("cycles", "memory", "registers", "periods", "simulated_periods"):
+        assert done[key] == whole[key], key
+    assert amps == [a for _, _, a in seen[2:]]                    # bit-for-bit the same trajectory
+    R.physical_state_path(ck).write_bytes(b"junk")
+    with pytest.raises(Mech2SpiceError, match="cannot read the oscillator state"):
+        run_program(PROGRAMS / "sieve.asm", "envelope", 4, checkpoint=ck, resume=True)

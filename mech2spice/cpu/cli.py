@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
+from .physical import ENVELOPE_STEP, SETTLE
 from .run import BACKENDS, load_program, run_program
 
 
@@ -34,11 +35,18 @@ def add_parser(subparsers) -> None:
     r.add_argument("program", help="assembly source (.asm) or binary image")
     r.add_argument("--backend", default="iss", choices=BACKENDS,
                    help="iss (instruction-set simulator), logic (the NOR netlist), envelope or rk4 (the "
-                        "netlist as oscillators, ~20 s per cycle at envelope fidelity; see reports/cpu_physical.md)")
+                        "netlist as 6486 oscillators; envelope ~1.5 s per cycle: reports/cpu_physical.md)")
     r.add_argument("--max-cycles", type=int, default=100_000, help="stop after this many cycles in total")
     r.add_argument("--checkpoint", metavar="FILE", help="write the machine state to FILE (JSON) as it runs")
-    r.add_argument("--checkpoint-every", type=int, default=1000, metavar="N",
-                   help="cycles between checkpoints (default 1000)")
+    r.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
+                   help="cycles between checkpoints (default 1000; 10 for envelope / rk4, whose checkpoint "
+                        "also keeps the oscillator state in FILE.state.npz)")
+    r.add_argument("--step", type=float, default=None, metavar="PERIODS",
+                   help=f"envelope step in drive periods (default {ENVELOPE_STEP:g}; refused above the "
+                        "stability bound)")
+    r.add_argument("--settle", type=float, default=None, metavar="TOL",
+                   help=f"envelope: end each pause once every channel stays within TOL u_R for two 200-period "
+                        f"windows (default {SETTLE}; 0 = full fixed-length pauses)")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
     r.add_argument("--json", action="store_true", help="machine-readable output")
     r.set_defaults(func=cmd_run)
@@ -59,9 +67,16 @@ def cmd_asm(args) -> int:
 
 
 def cmd_run(args) -> int:
+    physical = {}
+    if args.step is not None:
+        physical["step"] = args.step
+    if args.settle is not None:
+        physical["settle"] = args.settle or None
+    if physical and args.backend != "envelope":
+        raise Mech2SpiceError("--step and --settle apply to the envelope backend only")
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=not args.json and sys.stderr.isatty(),
-                      checkpoint_every=args.checkpoint_every)
+                      checkpoint_every=args.checkpoint_every, **physical)
     if args.json:
         print(json.dumps(res, indent=2))
     else:

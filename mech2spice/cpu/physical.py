@@ -10,6 +10,9 @@ The halt is the logic backend's: no register changed at the edge.
 """
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 
 from .. import network, simulate
@@ -19,11 +22,13 @@ from .iss import FETCH, LDNX, LOAD, REGISTERS, Cycle
 from .isa import mnemonic
 from .memory import Memory
 
-ENVELOPE_STEP = 2.0     # periods; pulse and pause are even, so stimulus changes fall on step boundaries
+ENVELOPE_STEP = 4.0     # periods; pulse and pause are multiples of 4, so stimulus changes fall on steps
+SETTLE = 0.1            # u_R: end a pause once the channels settle (envelope.integrate); benchmarks/cpu_fidelity.py
 
 
 class PhysicalCPU:
-    def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT):
+    def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float = ENVELOPE_STEP,
+                 settle: float | None = SETTLE, power_up: bool = True):
         from ..synth import synthesize
         from .run import CPU_VERILOG, register_map
         if backend not in ("envelope", "rk4"):
@@ -35,24 +40,29 @@ class PhysicalCPU:
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
         t = simulate.clock_timing(self.netlist)
-        self.pulse, self.pause = t["pulse"], t["pause"] + t["pause"] % 2
+        self.pulse, self.pause = t["pulse"], -(-t["pause"] // 4) * 4
         self.backend, self.p, self.mem = backend, p, memory
+        self.step_periods, self.settle = step, settle
+        self.simulated = 0          # periods actually integrated (a settled pause skips the rest)
         self.state, self.period, self.rdata = None, 0, 0
         self.cycle, self.halted = 0, False
-        self.amps = self._reset()
+        self.amps = self._reset() if power_up else None      # else: load() a checkpoint
 
     # --- integration -----------------------------------------------------------------------
     def _run(self, periods: int, values: dict, clock: int) -> dict[str, float]:
         from .. import envelope, rk4
         stim = network.stimulus(self.model, self.netlist, self.p, [(0, [values])], clock=[[clock]])
         if self.backend == "envelope":
-            run = envelope.integrate(self.model, periods, step_periods=ENVELOPE_STEP, stimulus=stim,
-                                     state=self.state, start_period=self.period, probes=self.probes)
+            run = envelope.integrate(self.model, periods, step_periods=self.step_periods, stimulus=stim,
+                                     state=self.state, start_period=self.period, probes=self.probes,
+                                     settle=self.settle if clock == 0 else None)
             self.state = run.extra["envelope_state"]
+            self.simulated += periods - run.extra["settled_periods"]
         else:
             run = rk4.integrate(self.model, periods, stimulus=stim, state=self.state, start_period=self.period,
                                 probes=self.probes)
             self.state = (run.x, run.v)
+            self.simulated += periods
         self.period += periods
         amp = np.abs(run.amp[-10:, :, 0]).mean(axis=0) / self.p.u_r
         return dict(zip(self.probes, amp))
@@ -82,8 +92,37 @@ class PhysicalCPU:
                 "phase": LOAD if ld else LDNX if nx else FETCH}
 
     def set_registers(self, regs: dict) -> None:
-        raise Mech2SpiceError("a physical run cannot resume from a checkpoint's registers; "
-                              "restart it (checkpoints of physical runs are for inspection)")
+        """Registers cannot be forced into oscillators: after load(), check that the restored state
+        decodes to the checkpoint's registers."""
+        if self.amps is None:
+            raise Mech2SpiceError("a physical run resumes from its saved oscillator state (load() it first)")
+        if self.registers() != regs:
+            raise Mech2SpiceError(f"the saved oscillator state decodes to {self.registers()}, not the "
+                                  f"checkpoint's registers {regs}")
+
+    # --- checkpoints: the whole dynamical state, so a resumed run continues exactly ----------
+    def save(self, path) -> None:
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        arrays = {f"state{k}": np.asarray(a) for k, a in enumerate(self.state)}
+        np.savez(tmp, **arrays, period=self.period, rdata=self.rdata, simulated=self.simulated,
+                 probes=np.array(self.probes), amps=np.array([self.amps[k] for k in self.probes]),
+                 backend=self.backend, step=self.step_periods)
+        os.replace(tmp, path)            # a crash mid-write leaves the previous file intact
+
+    def load(self, path) -> None:
+        try:
+            z = np.load(path)
+        except (OSError, ValueError) as err:
+            raise Mech2SpiceError(f"cannot read the oscillator state {path}: {err}") from None
+        with z:
+            if str(z["backend"]) != self.backend or list(z["probes"]) != self.probes:
+                raise Mech2SpiceError(f"{path} holds the state of a different processor model or backend")
+            n = sum(1 for k in z.files if k.startswith("state"))
+            self.state = tuple(z[f"state{k}"] for k in range(n))
+            self.period, self.rdata = int(z["period"]), int(z["rdata"])
+            self.simulated = int(z["simulated"])
+            self.amps = dict(zip(self.probes, map(float, z["amps"])))
 
     # --- one clock cycle --------------------------------------------------------------------
     def step(self) -> Cycle:

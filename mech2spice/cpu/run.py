@@ -128,14 +128,18 @@ class LogicCPU:
         return self.cycle, self.halted
 
 
-def make_cpu(backend: str, memory: Memory):
+PHYSICAL = ("envelope", "rk4")
+
+
+def make_cpu(backend: str, memory: Memory, power_up: bool = True, **physical):
+    """physical: step / settle for the oscillator-level backends (physical.PhysicalCPU)."""
     if backend == "iss":
         return ISS(memory)
     if backend == "logic":
         return LogicCPU(memory)
-    if backend in ("envelope", "rk4"):
+    if backend in PHYSICAL:
         from .physical import PhysicalCPU
-        return PhysicalCPU(memory, backend)
+        return PhysicalCPU(memory, backend, power_up=power_up, **physical)
     raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
 
 
@@ -147,6 +151,17 @@ def _state(cpu, program: Program, backend: str) -> dict:
             "program_sha256": hashlib.sha256(program.image).hexdigest(),
             "cycle": cpu.cycle, "halted": cpu.halted, "registers": cpu.registers(),
             "memory": cpu.mem.snapshot(), "devices": devices}
+
+
+def physical_state_path(checkpoint) -> Path:
+    """Where a physical run keeps its oscillator state beside the JSON checkpoint."""
+    return Path(str(checkpoint) + ".state.npz")
+
+
+def save_checkpoint(cpu, path, program: Program, backend: str) -> None:
+    if hasattr(cpu, "save"):             # the oscillator state first: the JSON names a complete pair
+        cpu.save(physical_state_path(path))
+    write_checkpoint(path, _state(cpu, program, backend))
 
 
 def write_checkpoint(path, state: dict) -> None:
@@ -173,7 +188,9 @@ def read_checkpoint(path, program: Program, backend: str) -> dict:
     return state
 
 
-def _restore(cpu, state: dict) -> None:
+def _restore(cpu, state: dict, path) -> None:
+    if hasattr(cpu, "load"):
+        cpu.load(physical_state_path(path))
     cpu.mem.cells = [int(v) for v in state["memory"]]
     for addr, dev_state in state.get("devices", {}).items():
         if int(addr) not in cpu.mem.devices:
@@ -186,17 +203,20 @@ def _restore(cpu, state: dict) -> None:
 # --------------------------------------------------------------------------- the runner
 
 def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpoint=None,
-                resume: bool = False, progress: bool = False, checkpoint_every: int = 1000,
-                trace=None) -> dict:
-    """Run until halted or ``max_cycles`` (total) and return the result dict."""
+                resume: bool = False, progress: bool = False, checkpoint_every: int | None = None,
+                trace=None, **physical) -> dict:
+    """Run until halted or ``max_cycles`` (total) and return the result dict.  Checkpoints are written
+    every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level backends)."""
+    checkpoint_every = checkpoint_every or (10 if backend in PHYSICAL else 1000)
     if max_cycles < 0 or checkpoint_every < 1:
         raise Mech2SpiceError("max_cycles must be >= 0 and checkpoint_every >= 1")
     if resume and checkpoint is None:
         raise Mech2SpiceError("resume needs a checkpoint file")
     program = load_program(source)
-    cpu = make_cpu(backend, make_memory(program))
+    state = read_checkpoint(checkpoint, program, backend) if resume else None
+    cpu = make_cpu(backend, make_memory(program), power_up=not resume, **physical)
     if resume:
-        _restore(cpu, read_checkpoint(checkpoint, program, backend))
+        _restore(cpu, state, checkpoint)
     t0 = time.perf_counter()
     last_report = t0
     while not cpu.halted and cpu.cycle < max_cycles:
@@ -204,15 +224,18 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         if trace is not None:
             trace(rec, cpu)
         if checkpoint is not None and cpu.cycle % checkpoint_every == 0:
-            write_checkpoint(checkpoint, _state(cpu, program, backend))
+            save_checkpoint(cpu, checkpoint, program, backend)
         if progress and time.perf_counter() - last_report > 1.0:
             last_report = time.perf_counter()
             print(f"[{backend}] cycle {cpu.cycle}", file=sys.stderr, flush=True)
     if checkpoint is not None:
-        write_checkpoint(checkpoint, _state(cpu, program, backend))
+        save_checkpoint(cpu, checkpoint, program, backend)
     result = {"backend": backend, "cycles": cpu.cycle, "halted": cpu.halted,
               "memory": cpu.mem.snapshot(), "registers": cpu.registers(),
               "wall_s": time.perf_counter() - t0}
+    if backend in PHYSICAL:
+        result.update(periods=cpu.period, simulated_periods=cpu.simulated, step=cpu.step_periods,
+                      settle=cpu.settle)
     for addr, dev in cpu.mem.devices.items():
         result.setdefault("devices", {})[str(addr)] = dev.state()
     return result

@@ -33,7 +33,7 @@ import networkx as nx
 from .errors import Mech2SpiceError
 from . import yosys
 
-__all__ = ["Netlist", "synthesize", "build_netlist", "clean", "propagate_constants",
+__all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
 
 
@@ -93,6 +93,22 @@ def clean(netlist: Netlist, *, max_fanout: int | None = None) -> Netlist:
     limit_fanout(g, max_fanout)
     netlist.graph = _renumbered(g)
     return netlist
+
+
+def observe(netlist: Netlist, ports: list[str]) -> Netlist:
+    """Keep only the output ports named (cone pruning): every gate and latch outside their fan-in cones
+    goes, so a scene models what it observes.  The kept gates lose the loads of pruned ones; the cost of
+    that in amplitude is measured in reports/fidelity.md."""
+    unknown = [p for p in ports if p not in netlist.outputs]
+    if unknown:
+        raise Mech2SpiceError(f"--observe {', '.join(unknown)}: {netlist.top} has no such output "
+                              f"(outputs: {', '.join(netlist.outputs)})")
+    g = netlist.graph.copy()
+    g.remove_nodes_from([n for n, d in g.nodes(data=True) if d["kind"] == "output" and d["port"] not in ports])
+    remove_dead_gates(g)
+    outputs = {p: w for p, w in netlist.outputs.items() if p in ports}
+    clock = netlist.clock if any(d["kind"] == "latch" for _, d in g.nodes(data=True)) else None
+    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock)
 
 
 # --------------------------------------------------------------------------- running Yosys

@@ -6,7 +6,7 @@ Usage: python scripts/cpu_physical.py [--cycles N] [--program programs/sieve.asm
 registers decoded from the latch amplitudes are compared with the ISS; the run stops at the first
 disagreement.  The run goes through `run_program` (checkpoints every 10 cycles with --checkpoint, so an
 interrupted run continues with --resume); the figures come from the physical run's own trace.
-The fidelity table comes from benchmarks/cpu_fidelity.py (reports/cpu_fidelity.json) when present.
+The fidelity table comes from benchmarks/fidelity.py (reports/fidelity.json) when present.
 """
 import argparse
 import json
@@ -81,10 +81,11 @@ def fig_activity(rows, path: Path, backend: str) -> None:
 
 
 def fidelity_section(path: Path) -> str:
-    if not path.exists():
+    """The processor table of benchmarks/fidelity.py (reports/fidelity.json), when it has been run."""
+    if not path.exists() or "cpu" not in json.loads(path.read_text()):
         return ""
     d = json.loads(path.read_text())
-    lines = [f"\n## What each speed-up costs (`python benchmarks/cpu_fidelity.py --cycles {d['cycles']}`)\n",
+    lines = [f"\n## What each speed-up costs (`python benchmarks/fidelity.py`, [fidelity.md](fidelity.md))\n",
              f"The first {d['cycles']} sieve cycles under each setting, side by side in one run on the "
              f"{d['machine']}. *Amplitude difference*: the largest difference of any probed amplitude (the "
              "output bits and all 43 latch outputs) at the end of each cycle against the reference setting; "
@@ -92,7 +93,7 @@ def fidelity_section(path: Path) -> str:
              "*integrated*: the drive periods actually integrated (a settled pause skips the rest).\n",
              "| setting | cycles = ISS | max amplitude difference (u_R) | min margin | integrated / "
              "simulated periods | s per cycle |", "|---|---|---|---|---|---|"]
-    for r in d["table"]:
+    for r in d["cpu"]:
         lines.append(f"| {r['setting']} | {r['cycles'] if r['all_same_as_iss'] else 'NO'} | "
                      f"{r['max_amp_diff']:.4f} | {r['min_margin']:+.3f} | {r['simulated']:,} / {r['periods']:,} "
                      f"| {r['s_per_cycle']:.2f} |")
@@ -164,7 +165,7 @@ commits writes at the clock edge (`mech2spice/cpu/physical.py`). Every cycle is 
 ![sieve memory, physical run](cpu_sieve_physical.png)
 
 ![memory traffic, physical run](cpu_physical_trace.png)
-{fidelity_section(out / 'cpu_fidelity.json')}
+{fidelity_section(out / 'fidelity.json')}
 ## Every cycle
 
 <details><summary>{len(rows)} cycles (click)</summary>
@@ -175,7 +176,10 @@ commits writes at the clock edge (`mech2spice/cpu/physical.py`). Every cycle is 
                 f"{r['waddr']} | {r['wdata']} | {'yes' if r['same'] else 'NO'} | {r['wall_s']:.1f} |"
                 for r in rows) + "\n\n</details>\n"
     (out / "cpu_physical.md").write_text(text)
-    (out / "cpu_physical.json").write_text(json.dumps({k: v for k, v in res.items()}, indent=1))
+    summary = {**res, "agree_every_cycle": tracker.agree, "final_memory_equals_iss": final_same,
+               "wall_s": wall, "s_per_cycle": per_cycle, "primes": primes, "command": cmd,
+               "resumed": a.resume, "machine": f"{platform.machine()} {platform.system()}, 2 cores (shared)"}
+    (out / "cpu_physical.json").write_text(json.dumps(summary, indent=1))
     print(out / "cpu_physical.md", f"{wall:.0f} s")
 
 

@@ -9,6 +9,7 @@ leaves out the logic-level run of Minsky's machine (about 2.5 minutes).
 from __future__ import annotations
 
 import argparse
+import json
 import collections
 import os
 import platform
@@ -302,6 +303,7 @@ def write_report(out: Path, skip_slow: bool) -> None:
         f"(composites): {[n for n in range(32) if arr[n]]}.\n")
     add("![sieve memory](cpu_sieve.png)\n")
     add("![sieve trace](cpu_trace.png)\n")
+    physical_section(add, out)
     add("## Turing completeness (Appendix B)\n")
     add("The tape is outside the processor, behind a memory-mapped register at address 255 "
         "(`mech2spice/cpu/tm.py`, `Tape`, mapped into the memory stand-in): reading 255 gives the symbol "
@@ -347,13 +349,33 @@ def write_report(out: Path, skip_slow: bool) -> None:
         "its word shrinks below two letters is not detected; the machine halts only on the halting letter.\n")
     add("![Minsky tape](cpu_tm.png)\n")
     add("## What is missing\n")
-    add("- The `envelope` and `rk4` backends for the processor (`run_program` raises 'not available yet'); "
-        "`Memory.decode_address` is ready for them.")
     add("- The sieve does not skip composite p (the paper's does); the paper's Neary-Woods U(5,5) is not "
         "run (see above).")
     add("- The logic-level run of Minsky's machine is in the slow test set "
         "(`tests/test_cpu.py::test_minsky_utm_on_netlist`).")
     (out / "cpu.md").write_text("\n".join(L) + "\n")
+
+
+def physical_section(add, out: Path) -> None:
+    """The sieve at oscillator level, from the last `scripts/cpu_physical.py` run (reports/cpu_physical.json)."""
+    path = out / "cpu_physical.json"
+    if not path.exists():
+        add("## The sieve at oscillator level\n\nNot run yet: `python scripts/cpu_physical.py`.\n")
+        return
+    r = json.loads(path.read_text())
+    add("## The sieve at oscillator level (envelope)\n")
+    add(f"Measured by `{r['command']}` on the {r['machine']} (details, every cycle and what each speed-up "
+        f"costs: [cpu_physical.md](cpu_physical.md)). The processor runs as {6486} oscillators at envelope "
+        f"fidelity against the behavioural memory, which reads the address from the channels' amplitudes "
+        f"and drives the data back as forces.\n")
+    add(f"- {'halted' if r['halted'] else 'did not halt'} after **{r['cycles']} cycles** "
+        f"(paper: {PAPER['sieve_cycles']}); every cycle identical to the ISS: {r['agree_every_cycle']}; final "
+        f"memory equal to the ISS's: {r['final_memory_equals_iss']}; primes left at zero: {r['primes']}.")
+    add(f"- wall time **{r['wall_s'] / 60:.1f} min** ({r['s_per_cycle']:.2f} s per cycle"
+        f"{', this session of a resumed run' if r.get('resumed') else ''}), against the paper's 50 h 22 min "
+        f"for its (larger) processor; {r['periods']:,} drive periods of processor time, "
+        f"{r['simulated_periods']:,} of them integrated (step {r['step']:g} periods, settle {r['settle']}).\n")
+    add("![sieve memory, physical run](cpu_sieve_physical.png)\n")
 
 
 def main() -> None:

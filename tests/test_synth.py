@@ -344,3 +344,18 @@ def test_system_yosys_is_used_only_when_asked(monkeypatch):
     assert yosys.yosys_command()[0] != "/usr/bin/yosys"
     monkeypatch.setenv("MECH2SPICE_YOSYS", "system")
     assert yosys.yosys_command() == ["/usr/bin/yosys"]
+
+
+def test_observe_prunes_to_the_cone_of_the_named_outputs():
+    """--observe: only the named ports stay, every other gate goes, and the kept logic is unchanged."""
+    from mech2spice.synth import observe
+    full = synthesize(VERILOG / "comparator4.v")
+    eq = observe(full, ["eq"])
+    assert list(eq.outputs) == ["eq"] and len(eq.gates()) < len(full.gates())
+    for a, b in itertools.product(range(16), repeat=2):
+        assert evaluate(eq, {"a": a, "b": b}) == {"eq": int(a == b)}
+    assert len(observe(full, list(full.outputs)).gates()) == len(full.gates())
+    with pytest.raises(Mech2SpiceError, match="no such output.*outputs: gt, eq, lt"):
+        observe(full, ["ne"])
+    fsm = synthesize(VERILOG / "fsm.v")
+    assert observe(fsm, ["found"]).clock == fsm.clock          # latches in the cone keep the clock

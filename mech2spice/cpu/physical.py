@@ -23,7 +23,7 @@ from .isa import mnemonic
 from .memory import Memory
 
 ENVELOPE_STEP = 4.0     # periods; pulse and pause are multiples of 4, so stimulus changes fall on steps
-SETTLE = 0.1            # u_R: end a pause once the channels settle (envelope.integrate); benchmarks/cpu_fidelity.py
+SETTLE = 0.1            # u_R: end a pause once the channels settle (envelope.integrate); benchmarks/fidelity.py
 
 
 class PhysicalCPU:

@@ -629,11 +629,22 @@ def sieve_estimate(res: dict) -> dict:
             est["envelope_dense"] = {"s_per_period": old, "how": "measured on the cpu.v model before commit c97a5be "
                                      "(dense slow block), 300 periods, step 1 T"}
         out["cpu_v"] = {**b, "oscillators": cpu["oscillators"], "estimates": _totals(est, b)}
+        phys = ROOT / "reports" / "cpu_physical.json"       # the whole run, measured (scripts/cpu_physical.py)
+        if phys.exists():
+            r = json.loads(phys.read_text())
+            if r.get("halted") and not r.get("resumed"):
+                out["cpu_v"]["estimates"]["envelope_settle"] = {
+                    "total_s": r["wall_s"], "s_per_cycle": r["s_per_cycle"],
+                    "how": f"**measured**: the whole run to the halt ({r['cycles']} cycles, `{r['command']}`, "
+                           f"reports/cpu_physical.md); {r['simulated_periods']:,} of {r['periods']:,} periods "
+                           f"integrated"}
     return out
 
 
 def _totals(est: dict, sched: dict) -> dict:
     for e in est.values():
+        if "total_s" in e:          # measured whole
+            continue
         e["total_s"] = e["s_per_period"] * sched["total_periods"] if "s_per_period" in e else \
             e["s_per_cycle"] * sched["cycles"]
     return est
@@ -933,14 +944,15 @@ def sieve_md(res: dict) -> list[str]:
               "| fidelity | cost | wall time for the sieve | how measured |", "|---|---|---|---|"]
         for b, e in sorted(blk["estimates"].items(), key=lambda kv: kv[1]["total_s"]):
             cost = _dur_ms(e["s_per_period"]) + " per period" if "s_per_period" in e else \
-                f"{e['s_per_cycle'] * 1e3:.2f} ms per cycle"
+                f"{e['s_per_cycle'] * 1e3:.0f} ms per cycle"
             L.append(f"| {SIEVE_LABEL.get(b, b)} | {cost} | **{_dur(e['total_s'])}** | {e['how']} |")
         L.append("")
     return L
 
 
 SIEVE_LABEL = {"rk4": "RK4, numba kernel (80 steps/T)", "rk4_numpy": "RK4, numpy (80 steps/T)",
-               "envelope": "envelope, step 1 T (clocked default)", "envelope_step2": "envelope, step 2 T",
+               "envelope": "envelope, step 1 T (numpy path)", "envelope_step2": "envelope, step 2 T",
+               "envelope_settle": "envelope, compiled, step 4 T, settle 0.1 (`cpu run --backend envelope`)",
                "envelope_sparse": "envelope step 1 T, sparse slow block (proposed fix, prototype)",
                "envelope_dense": "envelope step 1 T, before c97a5be (dense slow block)",
                "envelope_sparse_step2": "envelope step 2 T, sparse slow block (prototype)",

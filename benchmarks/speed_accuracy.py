@@ -1,44 +1,64 @@
 #!/usr/bin/env python3
-"""Speed vs accuracy of the RK4 and ngspice backends (measured; ~15 min on a 2-core machine).
+"""Speed vs accuracy of the RK4 and ngspice backends (measured; ~15 min on a 2-core machine for the small
+designs, plus the adder's sweep, 15 min of CPU time: ~10 min on an idle 2-core machine, 19 min under a load
+average of 3-5, and ~5 min for the analogy forms).
 
 Sections (all written to reports/speed_accuracy.json, charts reports/speed_accuracy_*.png and the
 summary reports/speed_accuracy.md):
-  accuracy   NOR gate (4 nominal input pairs) and chain(3): wall time vs error against RK4 at
-             160 steps/period, for RK4 at 10..80 steps/period and ngspice at several max steps x
-             {trap + prewarp, trap, gear} x two reltol values.  Error = max over probes (and input
-             pairs) of |amplitude error| in u_R after settling (mean of the last 20 of 1500 periods),
-             and of the phase error in degrees.
+  accuracy   NOR gate (4 nominal input pairs), chain(3) and the 2-bit adder (verilog/adder2.v, two input
+             cases): wall time vs error against RK4 at 160 steps/period, for RK4 at 10..80 steps/period
+             and ngspice at several max steps x {trap + prewarp, trap, gear} x reltol values (fewer points
+             on the adder, reltol 1e-5 only).  Error = max over probes (and cases) of |amplitude error| in
+             u_R after settling (mean of the last 20 periods), and of the phase error in degrees.
   stability  RK4 at 4..9 steps/period (where does it diverge or fall apart?).
   damping    one Q = 200 oscillator driven at resonance, then released: fitted Q of the ring-down and
              the free oscillation's frequency error (phase drift), per method and step.
   scaling    arrays of independent driven NOR gates (6 oscillators each) up to >= 2000 oscillators:
              wall time of RK4 (40 steps/period) and ngspice (defaults) for 50 periods.
+  forms      the electrical analogy itself: the package's mobility form against two alternatives emitted
+             by this script (impedance/force-voltage analogy; mobility with inductor springs), same
+             ngspice options, wall time and error against the RK4 reference.
 
-usage: python benchmarks/speed_accuracy.py [--quick] [--out reports]
+usage: python benchmarks/speed_accuracy.py [--quick] [--out reports] [--only SECTION ...] [--design NAME ...]
+       python benchmarks/speed_accuracy.py --only adder      # the adder's accuracy sweep only, merged into
+                                                            # the existing JSON (same as --only accuracy
+                                                            # --design adder2)
+       python benchmarks/speed_accuracy.py --render          # .md/.png from the JSON, nothing measured
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import os
 import platform
+import re
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from mech2spice import ngspice, nor, rk4
+from mech2spice import network, ngspice, nor, rk4, simulate, synth
 from mech2spice.errors import DivergenceError, Mech2SpiceError
 from mech2spice.model import MechModel
 from mech2spice.params import DEFAULT, NOMINAL0, NOMINAL1
-from mech2spice.spice import SpiceOptions
+from mech2spice.spice import SpiceOptions, emit_with_probes, num
 from mech2spice.stimulus import Stimulus
 
 MACHINE = "2-core Debian 12 sandbox"
 P = DEFAULT
 AVG = 20
-PERIODS = {"nor_gate": 2500, "chain3": 1500}   # the gate's '11' case still beats at 1500 periods
+ROOT = Path(__file__).resolve().parent.parent
+ADDER_V = ROOT / "verilog" / "adder2.v"
+ADDER_CASES = [(3, 2), (1, 3)]     # 3+2 = 101 and 1+3 = 100 (carry from bit 0 through bit 1): two ngspice
+                                   # processes, one per core
+# the gate's '11' case still beats at 1500 periods; the adder gets simulate.period_budget (800 + 300 per
+# level of logic depth 7): its outputs are within 1e-3 u_R of their final values by ~2150 periods (the
+# measured settle_1e-3 in the JSON / md)
+PERIODS = {"nor_gate": 2500, "chain3": 1500, "adder2": 2900}
+SMALL = ("nor_gate", "chain3")     # the designs the tolerances and stability sections use
 REF_STEPS = 160
 RK4_STEPS = [10, 20, 25, 30, 40, 80]
 RK4_UNSTABLE_SCAN = [4, 5, 6, 7, 8, 9]
@@ -54,6 +74,12 @@ SCALING_PERIODS = 50
 SCALING_RK4_STEPS = 40       # the same step as ngspice's default
 PAIRS = [(NOMINAL0, NOMINAL0), (NOMINAL1, NOMINAL0), (NOMINAL0, NOMINAL1), (NOMINAL1, NOMINAL1)]
 SKIP = 10          # trajectory error ignores the first periods (start-up from rest)
+# the adder (102 oscillators): ngspice at fine steps is slow on 2 cores, so fewer points, reltol 1e-5 only
+ADDER_SWEEP = {"rk4": [20, 25, 30, 40, 80],
+               "ngspice": {"trap+prewarp": [1 / 10, 1 / 20, 1 / 40, 1 / 80], "trap": [1 / 40, 1 / 80],
+                           "gear": [1 / 40, 1 / 80]},
+               "reltols": [1e-5]}
+ENVELOPE_BEGIN, ENVELOPE_END = "<!-- envelope-spice:begin -->", "<!-- envelope-spice:end -->"
 
 
 # --- designs -----------------------------------------------------------------------------------
@@ -66,8 +92,21 @@ def gate_design():
     return m, Stimulus.from_levels(m, [(0.0, ch)], batch=len(PAIRS))
 
 
-def designs() -> dict:
-    return {"nor_gate": gate_design(), "chain3": (nor.chain(P, 3), None)}
+def adder_design():
+    """verilog/adder2.v (17 NOR gates, 102 oscillators), ADDER_CASES as one batch from rest."""
+    nl = synth.synthesize(ADDER_V)
+    m = network.build(nl, P)
+    st = network.stimulus(m, nl, P, [(0, [{"a": a, "b": b} for a, b in ADDER_CASES])])
+    m.meta["bench"] = {"logic_depth": network.logic_depth(nl), "period_budget": simulate.period_budget(nl),
+                       "case_labels": [f"a={a}, b={b} (s={a + b:03b})" for a, b in ADDER_CASES]}
+    return m, st
+
+
+DESIGNS = {"nor_gate": gate_design, "chain3": lambda: (nor.chain(P, 3), None), "adder2": adder_design}
+
+
+def designs(names=SMALL) -> dict:
+    return {n: DESIGNS[n]() for n in names}
 
 
 def settled(amp: np.ndarray) -> np.ndarray:
@@ -89,48 +128,76 @@ def timed(fn):
     return out, time.perf_counter() - t0
 
 
+def cpu_seconds() -> float:
+    """User + system CPU time of this process and of its finished children (the ngspice processes).
+    On a shared machine this is the robust cost: wall times grow with other jobs' load, CPU time does not
+    (much)."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
 def run_rk4(model, st, steps, periods) -> dict:
+    c0 = cpu_seconds()
     try:
         run, wall = timed(lambda: rk4.integrate(model, periods, steps_per_period=steps, stimulus=st))
     except (DivergenceError, Mech2SpiceError) as e:
         return {"failed": str(e)}
-    return {"wall_s": wall, "amp": run.amp}
+    return {"wall_s": wall, "cpu_s": cpu_seconds() - c0, "amp": run.amp}
 
 
 def run_ng(model, st, opts: SpiceOptions, periods) -> dict:
     """One ngspice process per case, two at a time (2 cores); wall_s is the SUM of the processes'
-    own wall times, i.e. the one-core cost, comparable with RK4's single-process time."""
+    own wall times, i.e. the one-core cost, comparable with RK4's single-process time; cpu_s the CPU time
+    of the ngspice processes and of this process (raw-file reading) over the batch."""
+    c0 = cpu_seconds()
     try:
         run = ngspice.run_batch(model, periods, st, opts, workers=2)
     except Mech2SpiceError as e:
         return {"failed": str(e)}
-    return {"wall_s": float(np.sum(run.extra["wall_s"])), "amp": run.amp,
+    return {"wall_s": float(np.sum(run.extra["wall_s"])), "cpu_s": cpu_seconds() - c0, "amp": run.amp,
             "uniform_fraction": float(np.min(run.extra["uniform_fraction"])),
             "points_per_case": int(np.mean(run.extra["points"]))}
 
 
 # --- sections ------------------------------------------------------------------------------------
-def accuracy(quick: bool) -> dict:
+def accuracy(quick: bool, names=tuple(DESIGNS)) -> dict:
     out = {}
-    for name, (m, st) in designs().items():
+    for name, (m, st) in designs(names).items():
         periods = PERIODS[name] // (3 if quick else 1)
+        t0 = time.perf_counter()
         print(f"[accuracy] {name}: RK4 reference at {REF_STEPS} steps/period, {periods} periods", flush=True)
         ref = run_rk4(m, st, REF_STEPS, periods)
-        rows = [{"backend": "rk4", "steps_per_period": REF_STEPS, "wall_s": ref["wall_s"], "reference": True}]
-        for steps in RK4_STEPS[:3] if quick else RK4_STEPS:
+        rows = [{"backend": "rk4", "steps_per_period": REF_STEPS, "wall_s": ref["wall_s"], "cpu_s": ref["cpu_s"],
+                 "reference": True}]
+        sweep = ADDER_SWEEP if name == "adder2" else None
+        rk_steps = sweep["rk4"] if sweep else RK4_STEPS
+        for steps in rk_steps[:3] if quick else rk_steps:
             rows.append({"backend": "rk4", "steps_per_period": steps,
                          **_scored(run_rk4(m, st, steps, periods), ref["amp"])})
             print(f"  rk4 {steps:4d}/T {_fmt(rows[-1])}", flush=True)
         for label, kw in NG_METHODS.items():
-            for reltol in RELTOLS[:1] if quick else RELTOLS:
-                for ms in _ng_steps(label, reltol, quick):
+            reltols = sweep["reltols"] if sweep else RELTOLS
+            for reltol in reltols[:1] if quick else reltols:
+                steps = sweep["ngspice"][label][:2] if sweep and quick else \
+                    sweep["ngspice"][label] if sweep else _ng_steps(label, reltol, quick)
+                for ms in steps:
                     r = run_ng(m, st, SpiceOptions(max_step_periods=ms, reltol=reltol, **kw), periods)
                     rows.append({"backend": "ngspice", "method": label, "reltol": reltol,
                                  "steps_per_period": round(1 / ms), **_scored(r, ref["amp"])})
                     print(f"  ngspice {label:12s} reltol={reltol:g} T/{round(1 / ms):<4d} {_fmt(rows[-1])}", flush=True)
-        out[name] = {"probes": list(m.probes), "cases": len(PAIRS) if st is not None else 1, "periods": periods,
-                     "reference_amp_ur": (np.abs(settled(ref["amp"])) / P.u_r).round(5).tolist(), "rows": rows}
+        out[name] = {"probes": list(m.probes), "cases": st.batch if st is not None else 1, "periods": periods,
+                     "oscillators": m.n,
+                     "reference_amp_ur": (np.abs(settled(ref["amp"])) / P.u_r).round(5).tolist(),
+                     "settle_period": {str(tol): settle_period(ref["amp"], tol) for tol in (1e-2, 1e-3)},
+                     "wall_s": time.perf_counter() - t0, "rows": rows, **m.meta.get("bench", {})}
     return out
+
+
+def settle_period(amp: np.ndarray, tol: float) -> int:
+    """The last period (1-based) at which some probe's |A| is off its settled value by more than tol u_R."""
+    off = np.abs(np.abs(amp) - np.abs(settled(amp))[None]) / P.u_r > tol
+    bad = np.flatnonzero(off.reshape(off.shape[0], -1).any(axis=1))
+    return int(bad[-1] + 1) if bad.size else 0
 
 
 def _ng_steps(label: str, reltol: float, quick: bool) -> list[float]:
@@ -150,7 +217,7 @@ def _scored(r: dict, ref: np.ndarray) -> dict:
 def _fmt(row: dict) -> str:
     if "amp_err_ur" not in row:
         return f"FAILED: {row.get('failed')}"
-    return (f"{row['wall_s']:6.2f} s  amp err {row['amp_err_ur']:.4f} u_R  phase err {row['phase_err_deg']:.2f} deg"
+    return (f"{row['wall_s']:6.2f} s (cpu {row.get('cpu_s', float('nan')):6.2f} s)  amp err {row['amp_err_ur']:.4f} u_R  phase err {row['phase_err_deg']:.2f} deg"
             f"  trajectory err {row['traj_err_ur']:.4f} u_R")
 
 
@@ -295,16 +362,196 @@ def scaling(quick: bool) -> dict:
             "ngspice_options": asdict(SpiceOptions()), "rows": rows}
 
 
+# --- the analogy form: the package's against two alternatives ------------------------------------------
+# Each form is a small standalone emitter here (not in the package).  All three get the same .options and
+# .tran line (spice.SpiceOptions defaults: trap, max step T/40 pinned by trtol 1e4, reltol 1e-5, vntol
+# 1e-9) and the same prewarp: every reactive element of an oscillating DOF scaled by w (C -> wC, L -> wL),
+# which makes each one's trapezoidal admittance exact at omega.  `.options acct` is appended to every
+# netlist (the circuit-equation count comes from ngspice's own statistics).
+FORM_DESIGNS = ("nor_gate", "chain3", "adder2")
+FORM_REPEAT = 2          # the run with the least CPU time of two is kept (the machine is shared)
+
+
+def _form_analysis(model: MechModel, periods: int, o: SpiceOptions, saves: list[str]) -> list[str]:
+    """The same .options/.tran/.save lines as spice._Emitter.analysis."""
+    T = 2 * math.pi / model.omega
+    h = o.max_step_periods * T
+    opts = (f".options method={o.method} reltol={num(o.reltol)} abstol={num(o.abstol)} chgtol={num(o.chgtol)} "
+            f"vntol={num(o.vntol)} trtol={num(o.trtol_value())}") + (f" maxord={o.maxord}" if o.method == "gear" else "")
+    out = [opts, f".tran {num(h)} {num((periods + 0.25) * T)} 0 {num(h)} uic"]
+    out += [".save " + " ".join(saves[k:k + 8]) for k in range(0, len(saves), 8)]
+    return out
+
+
+def _form_amplitudes(model: MechModel, periods: int, st: Stimulus | None, b: int) -> tuple[dict, list[str]]:
+    """{drive: amplitude node} and one DC/PWL voltage source per drive (the package's schedule rules)."""
+    T = 2 * math.pi / model.omega
+    nodes, lines = {}, []
+    for d, drv in enumerate(model.drives):
+        sched, last = [], None
+        for t, a in ([(0.0, drv.amplitude)] if st is None else zip(st.times, st.amps[:, d, b])):
+            if t < periods * T and a != last:
+                sched.append((float(t), float(a)))
+                last = a
+        if len(sched) == 1:
+            src = f"DC {num(sched[0][1])}"
+        else:
+            ramp, pts = 1e-3 * T, [f"0 {num(sched[0][1])}"]
+            for (_, a0), (t1, a1) in zip(sched, sched[1:]):
+                pts += [f"{num(t1 - ramp / 2)} {num(a0)}", f"{num(t1 + ramp / 2)} {num(a1)}"]
+            src = "PWL(" + " ".join(pts) + ")"
+        nodes[d] = f"amp{d}"
+        lines.append(f"Vamp{d} amp{d} 0 {src}")
+    return nodes, lines
+
+
+def emit_mobility(model, periods, st, b, o):
+    """The package's form (mech2spice.spice): velocity node with C = m, conductance c_local and a VCCS
+    k_local V(x) to ground; displacement node x = 1 F capacitor fed by the VCCS V(v); coupling springs
+    VCCS k (V(x_i) - V(x_j)), dashpots conductances, quadratic couplings and drives B current sources."""
+    text, vecs = emit_with_probes(model, periods, st, b, o)
+    return text, vecs, [1.0] * len(vecs)
+
+
+def emit_impedance(model, periods, st, b, o):
+    """Force-voltage (impedance) analogy: force = voltage, velocity = current.  Per DOF one series loop,
+    loop current = velocity: 0 V ammeter -> force sources -> L = m -> R = c_total -> C = 1/k_total -> ground,
+    so V(C) = k_total u.  Couplings are controlled voltage sources in the loop (a coupling element shared
+    by two meshes needs the dual graph, which a general network need not have): spring +k_ij u_j a VCVS of
+    the other loop's capacitor, dashpot +c_ij v_j a CCVS of its ammeter; quadratic forces and drives B
+    voltage sources.  The probe vector V(C) is scaled by 1/k_total to give u."""
+    w = o.warp(model.omega)
+    kt, ct = np.array(model.k_total), np.array(model.c_total)
+    forces = [[] for _ in range(model.n)]
+    for i, j, k in model.springs:
+        forces[i].append(f"E {{}} {{}} c{j} 0 {num(k / kt[j])}")
+        forces[j].append(f"E {{}} {{}} c{i} 0 {num(k / kt[i])}")
+    for i, j, c in model.dashpots:
+        forces[i].append(f"H {{}} {{}} Vam{j} {num(c)}")
+        forces[j].append(f"H {{}} {{}} Vam{i} {num(c)}")
+    quad = [[] for _ in range(model.n)]
+    for f, s_, g in model.quads:
+        quad[f].append(f"{num(-2 * g / (kt[f] * kt[s_]))}*V(c{f})*V(c{s_})")
+        quad[s_].append(f"{num(-g / kt[f] ** 2)}*V(c{f})*V(c{f})")
+    amp, amp_lines = _form_amplitudes(model, periods, st, b)
+    for d, drv in enumerate(model.drives):
+        forces[drv.dof].append(f"B {{}} {{}} V = V({amp[d]})*sin({num(model.omega)}*time+{num(drv.phase)})")
+    for i in range(model.n):
+        if quad[i]:
+            forces[i].append("B {} {} V = " + " + ".join(quad[i]))
+    lines = [f"* impedance (force-voltage) analogy, {model.n} DOFs, prewarp w = {num(w)}"]
+    for i in range(model.n):
+        wi = 1.0 if model.slow[i] else w
+        lines.append(f"Vam{i} 0 a{i}_0 DC 0")          # current 0 -> a0 through it = the loop current
+        node = f"a{i}_0"
+        for k, spec in enumerate(forces[i]):
+            kind, rest = spec.split(" ", 1)
+            lines.append(f"{kind}f{i}_{k} " + rest.format(f"a{i}_{k + 1}", node))
+            node = f"a{i}_{k + 1}"
+        lines += [f"L{i} {node} q{i} {num(model.mass[i] * wi)}", f"R{i} q{i} c{i} {num(ct[i])}",
+                  f"C{i} c{i} 0 {num(wi / kt[i])}"]
+    probes = list(model.probes.values())
+    saves = [f"v(c{i})" for i in probes]
+    text = "\n".join(lines + amp_lines + _form_analysis(model, periods, o, saves) + [".end"]) + "\n"
+    return text, saves, [1 / kt[i] for i in probes]
+
+
+def emit_inductor_springs(model, periods, st, b, o):
+    """Mobility analogy with the textbook spring: velocity nodes with C = m and conductance c_local as in
+    the package, but every spring an inductor L = 1/k (local ones to ground, coupling ones between the
+    velocity nodes; negative L for negative k_local); a displacement node (1 F fed by V(v)) only for DOFs
+    in a quadratic coupling or probed."""
+    w = o.warp(model.omega)
+    need_x = {f for f, _, _ in model.quads} | {s_ for _, s_, _ in model.quads} | set(model.probes.values())
+    lines = [f"* mobility analogy, springs as inductors, {model.n} DOFs, prewarp w = {num(w)}"]
+    for i in range(model.n):
+        wi = 1.0 if model.slow[i] else w
+        lines.append(f"Cm{i} v{i} 0 {num(model.mass[i] * wi)}")
+        if model.c_local[i] != 0:
+            lines.append(f"Gc{i} v{i} 0 v{i} 0 {num(model.c_local[i])}")
+        if model.k_local[i] != 0:
+            lines.append(f"Lk{i} v{i} 0 {num(wi / model.k_local[i])}")
+        if i in need_x:
+            lines += [f"Cx{i} x{i} 0 {num(wi)}", f"Gx{i} 0 x{i} v{i} 0 1"]
+    for n, (i, j, k) in enumerate(model.springs):
+        lines.append(f"Lc{n} v{i} v{j} {num((1.0 if model.slow[i] else w) / k)}")
+    for n, (i, j, c) in enumerate(model.dashpots):
+        lines.append(f"Gd{n} v{i} v{j} v{i} v{j} {num(c)}")
+    for n, (f, s_, g) in enumerate(model.quads):
+        lines += [f"Bqf{n} v{f} 0 I = {num(2 * g)}*V(x{f})*V(x{s_})", f"Bqs{n} v{s_} 0 I = {num(g)}*V(x{f})*V(x{f})"]
+    amp, amp_lines = _form_amplitudes(model, periods, st, b)
+    for d, drv in enumerate(model.drives):
+        lines.append(f"Bd{d} 0 v{drv.dof} I = V({amp[d]})*sin({num(model.omega)}*time+{num(drv.phase)})")
+    probes = list(model.probes.values())
+    saves = [f"v(x{i})" for i in probes]
+    text = "\n".join(lines + amp_lines + _form_analysis(model, periods, o, saves) + [".end"]) + "\n"
+    return text, saves, [1.0] * len(probes)
+
+
+FORMS = {"mobility, VCCS springs (package)": emit_mobility, "impedance (force-voltage)": emit_impedance,
+         "mobility, inductor springs": emit_inductor_springs}
+
+
+def run_form(emitter, model: MechModel, st: Stimulus | None, o: SpiceOptions, periods: int) -> dict:
+    """Every case as its own `ngspice -b -r` process, two at a time; wall_s = sum of the processes' own
+    times (subprocess + raw-file read, as ngspice.run measures), as in run_ng."""
+    def one(b):
+        text, vecs, scale = emitter(model, periods, st, b, o)
+        text = text.replace("\n.end\n", "\n.options acct\n.end\n")
+        t0 = time.perf_counter()
+        names, data, log = ngspice.run_netlist(text)
+        wall = time.perf_counter() - t0
+        data = data.copy()
+        for v, k in zip(vecs, scale):
+            data[:, names.index(v)] *= k
+        eq = re.search(r"Circuit Equations\s*=\s*(\d+)", log)
+        run = ngspice.to_run(model, periods, names, data, vecs, o, {"wall_s": wall})
+        return run, wall, int(eq.group(1)) if eq else None, len(text.splitlines())
+    B = st.batch if st is not None else 1
+    c0 = cpu_seconds()
+    try:
+        with ThreadPoolExecutor(2) as pool:
+            runs = list(pool.map(one, range(B)))
+    except Mech2SpiceError as e:
+        return {"failed": str(e)}
+    return {"wall_s": float(sum(r[1] for r in runs)), "cpu_s": cpu_seconds() - c0, "amp": np.concatenate([r[0].amp for r in runs], axis=2),
+            "uniform_fraction": float(min(r[0].extra["uniform_fraction"] for r in runs)),
+            "equations": runs[0][2], "netlist_lines": runs[0][3]}
+
+
+def forms(quick: bool) -> dict:
+    out = {}
+    o = SpiceOptions()
+    for name, (m, st) in designs(FORM_DESIGNS[:2] if quick else FORM_DESIGNS).items():
+        periods = PERIODS[name] // (3 if quick else 1)
+        ref = run_rk4(m, st, REF_STEPS, periods)
+        rows = []
+        for label, emitter in FORMS.items():
+            runs = [run_form(emitter, m, st, o, periods) for _ in range(1 if quick else FORM_REPEAT)]
+            ok = [r for r in runs if "wall_s" in r]
+            best = min(ok, key=lambda r: r["cpu_s"]) if ok else runs[0]
+            rows.append({"form": label, **_scored(best, ref["amp"]), "walls": [r["wall_s"] for r in ok],
+                         "cpus": [r["cpu_s"] for r in ok]})
+            print(f"[forms] {name} {label}: {_fmt(rows[-1])}, equations {rows[-1].get('equations')}, "
+                  f"runs {[round(x, 2) for x in rows[-1].get('walls', [])]}", flush=True)
+        out[name] = {"periods": periods, "cases": st.batch if st is not None else 1, "oscillators": m.n,
+                     "options": asdict(o), "repeat": 1 if quick else FORM_REPEAT, "rows": rows}
+    return out
+
+
 # --- output ------------------------------------------------------------------------------------------------
 def charts(res: dict, out: Path) -> list[str]:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     files = []
-    fig, axes = plt.subplots(1, 2, figsize=(12, 5))
+    acc = res["accuracy"]
+    fig, axes = plt.subplots(1, len(acc), figsize=(6 * len(acc), 5), squeeze=False)
+    axes = axes[0]
     styles = {("rk4", None): "k-o", ("ngspice", "trap+prewarp"): "g-s", ("ngspice", "trap"): "b-^",
               ("ngspice", "gear"): "r-v"}
-    for ax, (name, d) in zip(axes, res["accuracy"].items()):
+    for ax, (name, d) in zip(axes, acc.items()):
+        key = "cpu_s" if all("cpu_s" in r for r in d["rows"] if "amp_err_ur" in r) else "wall_s"
         for (backend, method), style in styles.items():
             for reltol in RELTOLS:
                 rows = [r for r in d["rows"] if r["backend"] == backend and r.get("method") == method
@@ -312,13 +559,14 @@ def charts(res: dict, out: Path) -> list[str]:
                 if not rows or (backend == "rk4" and reltol != RELTOLS[0]):
                     continue
                 lab = "RK4" if backend == "rk4" else f"ngspice {method}, reltol {reltol:g}"
-                ax.loglog([r["wall_s"] for r in rows], [max(r["amp_err_ur"], 1e-6) for r in rows], style,
+                ax.loglog([r[key] for r in rows], [max(r["amp_err_ur"], 1e-6) for r in rows], style,
                           alpha=1.0 if reltol == RELTOLS[0] else 0.4, label=lab)
                 for r in rows:
-                    ax.annotate(f"{r['steps_per_period']}", (r["wall_s"], max(r["amp_err_ur"], 1e-6)),
+                    ax.annotate(f"{r['steps_per_period']}", (r[key], max(r["amp_err_ur"], 1e-6)),
                                 fontsize=6, xytext=(2, 2), textcoords="offset points")
         ax.axhline(0.01, color="grey", ls="--", lw=0.8)
-        ax.set(title=f"{name}: {d['periods']} periods (labels: steps/period)", xlabel="wall time [s]",
+        ax.set(title=f"{name}: {d['cases']} case(s), {d['periods']} periods (labels: steps/period)",
+               xlabel=("CPU" if key == "cpu_s" else "wall") + " time [s] (ngspice: sum over cases)",
                ylabel="max amplitude error [u_R] vs RK4 @160")
         ax.legend(fontsize=7)
     fig.suptitle(f"speed vs accuracy, {MACHINE}")
@@ -376,18 +624,24 @@ def _row_label(r: dict) -> str:
 def _acc_table(name: str, d: dict) -> list[str]:
     out = [f"Design **{name}** ({d['cases']} case(s), {d['periods']} periods, probes {', '.join(d['probes'])}); "
            f"reference RK4 at {REF_STEPS} steps/period; machine {MACHINE}.", "",
-           "| design | backend | step | wall [s] | amp err [u_R] | phase err [deg] | trajectory err [u_R] | steps at max |",
-           "|---|---|---|---|---|---|---|---|"]
+           "| design | backend | step | wall [s] | CPU [s] | amp err [u_R] | phase err [deg] | trajectory err [u_R] "
+           "| steps at max |", "|---|---|---|---|---|---|---|---|---|"]
     for r in d["rows"]:
+        cpu = f"{r['cpu_s']:.2f}" if "cpu_s" in r else "-"
         if r.get("reference"):
-            out.append(f"| {name} | RK4 (reference) | T/{r['steps_per_period']} | {r['wall_s']:.2f} | 0 | 0 | 0 | - |")
+            out.append(f"| {name} | RK4 (reference) | T/{r['steps_per_period']} | {r['wall_s']:.2f} | {cpu} | 0 | 0 | 0 | - |")
         elif "amp_err_ur" in r:
             uni = f"{r['uniform_fraction']:.0%}" if "uniform_fraction" in r else "-"
-            out.append(f"| {name} | {_row_label(r)} | T/{r['steps_per_period']} | {r['wall_s']:.2f} | "
+            out.append(f"| {name} | {_row_label(r)} | T/{r['steps_per_period']} | {r['wall_s']:.2f} | {cpu} | "
                        f"{r['amp_err_ur']:.4f} | {r['phase_err_deg']:.2f} | {r['traj_err_ur']:.4f} | {uni} |")
         else:
-            out.append(f"| {name} | {_row_label(r)} | T/{r['steps_per_period']} | failed: {r['failed'][:80]} | | | | |")
+            out.append(f"| {name} | {_row_label(r)} | T/{r['steps_per_period']} | failed: {r['failed'][:80]} | | | | | |")
     return out + [""]
+
+
+def _t(r: dict) -> str:
+    """A row's cost: wall time, and CPU time where measured."""
+    return f"{r['wall_s']:.2f} s" + (f" wall, {r['cpu_s']:.2f} s CPU" if "cpu_s" in r else "")
 
 
 def _first_ok(rows, backend, method=None, reltol=None, tol=0.01, phase=2.0, traj=math.inf):
@@ -430,18 +684,126 @@ def _form(res: dict) -> list[str]:
     return out + [""]
 
 
+def _adder_recheck(res: dict) -> list[str]:
+    """The recommended defaults rechecked on the adder, with its settling numbers."""
+    dd = res.get("accuracy", {}).get("adder2")
+    if not dd:
+        return []
+    d = res["default_options"]
+    rows = dd["rows"]
+    ng = _find(rows, backend="ngspice", method="trap+prewarp", reltol=d["reltol"],
+               steps_per_period=round(1 / d["max_step_periods"]))
+    rk = _find(rows, backend="rk4", steps_per_period=80)
+    okp = _first_ok(rows, "ngspice", "trap+prewarp", d["reltol"])
+    okr = _first_ok(rows, "rk4")
+    st = dd.get("settle_period", {})
+    out = ["", f"**Rechecked on the 2-bit adder** (`verilog/adder2.v`: {dd.get('oscillators', '?')} oscillators, "
+           f"logic depth {dd.get('logic_depth', '?')}; cases {'; '.join(dd.get('case_labels', [])) or dd['cases']}; "
+           f"probes {', '.join(dd['probes'])}; {dd['periods']} periods, `simulate.period_budget` "
+           f"{dd.get('period_budget', '?')}; {MACHINE}). "
+           f"In the RK4 reference every output is within 0.01 u_R of its settled value after period "
+           f"{st.get('0.01', '?')} and within 0.001 u_R after period {st.get('0.001', '?')}, so the last "
+           f"{AVG} periods are settled with a margin of {dd['periods'] - int(st.get('0.001', 0))} periods. "
+           f"Sweep: {dd.get('wall_s', 0) / 60:.1f} min of wall time, "
+           f"{sum(r.get('cpu_s', 0) for r in rows) / 60:.1f} min of CPU time (ngspice two processes at a time)."]
+    if ng:
+        good = ng["amp_err_ur"] < 0.01 and ng["phase_err_deg"] < 2
+        out.append(f"- ngspice defaults (trap+prewarp, T/{ng['steps_per_period']}, reltol {d['reltol']:g}): "
+                   f"{ng['amp_err_ur']:.4f} u_R / {ng['phase_err_deg']:.2f} deg settled, trajectory "
+                   f"{ng['traj_err_ur']:.4f} u_R, {_t(ng)} for {dd['cases']} case(s): "
+                   + ("within" if good else "NOT within") + " 0.01 u_R and 2 deg; the defaults "
+                   + ("hold" if good else "do not hold") + " on the adder.")
+    if okp:
+        out.append(f"- coarsest trap+prewarp step within the criterion on the adder: T/{okp['steps_per_period']} "
+                   f"({_t(okp)}, trajectory {okp['traj_err_ur']:.4f} u_R)"
+                   + (f"; at the default T/{ng['steps_per_period']} the trajectory error is {ng['traj_err_ur']:.4f} "
+                      "u_R" if ng else "") + ".")
+    for method in ("trap", "gear"):
+        sel = [r for r in rows if r.get("method") == method and "amp_err_ur" in r]
+        if sel and ng:
+            key = "cpu_s" if all("cpu_s" in r for r in sel + [ng]) else "wall_s"
+            fails = all(r["amp_err_ur"] >= 0.01 or r["phase_err_deg"] >= 2 for r in sel)
+            out.append(f"- ngspice {'plain trap (no prewarp)' if method == 'trap' else 'gear'} (reltol "
+                       f"{sel[0]['reltol']:g}) on the adder" + (" misses at every step measured" if fails else "")
+                       + ": " + "; ".join(
+                           f"T/{r['steps_per_period']} {r['amp_err_ur']:.3f} u_R / {r['phase_err_deg']:.1f} deg at "
+                           f"{r[key] / ng[key]:.1f}x the default's {'CPU' if key == 'cpu_s' else 'wall'} time, "
+                           f"{r.get('uniform_fraction', 0):.0%} of steps at the max step" for r in sel)
+                       + " (its truncation-error control, not the max step, sets the step).")
+    if okr:
+        out.append(f"- RK4: coarsest step within the criterion T/{okr['steps_per_period']} ({_t(okr)}, "
+                   f"{okr['amp_err_ur']:.4f} u_R)" + (f"; the default T/80 {_t(rk)}, {rk['amp_err_ur']:.5f} "
+                                                      f"u_R" if rk else "") + ".")
+    return out
+
+
+def _forms_section(res: dict) -> list[str]:
+    fm = res.get("forms")
+    if not fm:
+        return []
+    first = next(iter(fm.values()))
+    o = first["options"]
+    out = ["## Analogy form, measured", "",
+           "The package's form against two alternatives emitted by the benchmark script itself (`emit_impedance`, "
+           "`emit_inductor_springs`): the impedance (force-voltage) analogy - per DOF a series loop, 0 V "
+           "ammeter, force sources, L = m, R = c_total, C = 1/k_total, loop current = velocity, couplings as "
+           "controlled voltage sources (VCVS from the other loop's capacitor for springs, CCVS from its ammeter "
+           "for dashpots), quadratic forces and drives as B voltage sources - and the mobility analogy with "
+           "textbook springs, inductors L = 1/k (local to ground, coupling ones between velocity nodes), with a "
+           "displacement node only where a quadratic coupling or a probe reads u. Same `.options`/`.tran` for all "
+           f"three (method {o['method']}, max step T/{round(1 / o['max_step_periods'])} pinned by trtol 1e4, reltol "
+           f"{o['reltol']:g}, vntol {o['vntol']:g}), every reactive element of an oscillating DOF prewarped (C -> wC, "
+           "L -> wL), `.options acct` added to read ngspice's circuit-equation count. Each form ran "
+           f"{first['repeat']} times; the run with the least CPU time is shown (CPU time of the ngspice processes "
+           "plus raw-file reading; wall = the sum over cases of the processes' own wall times, all runs listed); "
+           f"errors against RK4 at {REF_STEPS} steps/period as in the accuracy tables; {MACHINE}.", "",
+           "| design | form | circuit equations | CPU [s] (runs) | CPU / package form | wall [s] (runs) | amp err [u_R] "
+           "| phase err [deg] | trajectory err [u_R] | steps at max |", "|---|---|---|---|---|---|---|---|---|---|"]
+    verdict = []
+    for name, dd in fm.items():
+        base = next((r for r in dd["rows"] if "package" in r["form"] and "cpu_s" in r), None)
+        for r in dd["rows"]:
+            if "amp_err_ur" not in r:
+                out.append(f"| {name} ({dd['cases']} case(s), {dd['periods']} T) | {r['form']} | | failed: "
+                           f"{r.get('failed', '')[:80]} | | | | | | |")
+                continue
+            cpus = ", ".join(f"{x:.2f}" for x in r.get("cpus", []))
+            walls = ", ".join(f"{x:.2f}" for x in r.get("walls", []))
+            rel = f"{r['cpu_s'] / base['cpu_s']:.2f}" if base else "-"
+            out.append(f"| {name} ({dd['cases']} case(s), {dd['periods']} T) | {r['form']} | {r.get('equations', '-')} | "
+                       f"{r['cpu_s']:.2f} ({cpus}) | {rel} | {r['wall_s']:.2f} ({walls}) | {r['amp_err_ur']:.4f} | "
+                       f"{r['phase_err_deg']:.2f} | {r['traj_err_ur']:.4f} | {r['uniform_fraction']:.0%} |")
+        if base:
+            others = [r for r in dd["rows"] if r is not base and "cpu_s" in r]
+            verdict.append(f"{name}: " + ", ".join(f"{r['form']} {r['cpu_s'] / base['cpu_s']:.2f}x" for r in others))
+    out += ["", "CPU time relative to the package's form - " + "; ".join(verdict) + ". The choice these numbers "
+            "support is stated in `spice.md` (\"Why this form (measured)\").", ""]
+    return out
+
+
 def render(res: dict) -> str:
     acc, dmp, sc, pin = res.get("accuracy", {}), res.get("damping", {}), res.get("scaling", {}), res.get("pinning", {})
     d = res["default_options"]
+    conv = [r["amp_err_ur"] for dd in acc.values() for r in dd["rows"]
+            if r["backend"] == "rk4" and r["steps_per_period"] == 80 and "amp_err_ur" in r]
+    sect = res.get("section_wall_s", {})
+    loads = res.get("section_load_avg", {})
+    later = [f"{k} {v / 60:.1f} min" + (f" (1-min load average {loads[k][0]:.1f} at the start, {loads[k][1]:.1f} at the "
+                                         "end: other jobs shared the 2 cores, so compare CPU times there)"
+                                         if k in loads else "") for k, v in sect.items()]
     L = [f"# Speed vs accuracy: RK4 and ngspice backends", "",
          f"All numbers measured by `benchmarks/speed_accuracy.py` on the **{MACHINE}** (Python {res['python']}, "
-         f"ngspice 39, no KLU), total script time {res.get('total_wall_s', 0) / 60:.1f} min. Amplitudes in u_R = "
-         f"{P.u_r}; errors against RK4 at {REF_STEPS} steps/period (converged: RK4 at 80 differs from it by "
-         f"< 0.0002 u_R). ngspice wall times are one-core times (sum over cases of each process's wall time).", ""]
+         f"ngspice 39, no KLU), total script time {res.get('total_wall_s', 0) / 60:.1f} min"
+         + (f"; sections run on their own since (`--only ...`): {', '.join(later)}" if later else "") + ". "
+         f"Amplitudes in u_R = {P.u_r}; errors against RK4 at {REF_STEPS} steps/period"
+         + (f" (converged: RK4 at 80 differs from it by at most {max(conv):.4f} u_R on the designs below)" if conv else "")
+         + ". ngspice wall times are one-core times (sum over cases of each process's wall time).", ""]
     if res.get("note"):
         L += [f"Provenance: {res['note']}", ""]
-    L += _form(res) + [f"RK4 runs the project's {res.get('rk4_kernel', 'numpy')} kernel; ngspice runs as a subprocess "
-          "(`ngspice -b -n -r`), time including netlist emission and raw-file reading.", ""]
+    L += _form(res) + _forms_section(res) + [
+        f"RK4 runs the project's {res.get('rk4_kernel', 'numpy')} kernel; ngspice runs as a subprocess "
+        "(`ngspice -b -n -r`), time = the subprocess plus reading its raw file (netlist emission, a few ms, "
+        "is outside it).", ""]
     L += ["## Recommended defaults", "",
           f"`SpiceOptions(method=\"{d['method']}\", max_step_periods=1/{round(1 / d['max_step_periods'])}, "
           f"reltol={d['reltol']:g}, abstol={d['abstol']:g}, chgtol={d['chgtol']:g}, vntol={d['vntol']:g}, "
@@ -452,26 +814,39 @@ def render(res: dict) -> str:
         ng = _find(rows, backend="ngspice", method="trap+prewarp", reltol=d["reltol"],
                    steps_per_period=round(1 / d["max_step_periods"]))
         if r40 and ng:
-            L.append(f"- {name}: ngspice at its defaults took {ng['wall_s'] / r40['wall_s']:.0f}x the time of RK4 at "
+            key = "cpu_s" if "cpu_s" in r40 and "cpu_s" in ng else "wall_s"
+            L.append(f"- {name}: ngspice at its defaults took {ng[key] / r40[key]:.0f}x the "
+                     f"{'CPU' if key == 'cpu_s' else 'wall'} time of RK4 at "
                      f"T/40 ({res.get('rk4_kernel', 'numpy')} kernel): ngspice is the independent check and the "
                      "exportable netlist, not the fast path.")
-            L.append(f"- {name}, {dd['periods']} periods, {MACHINE}: ngspice defaults {ng['wall_s']:.2f} s, "
+            L.append(f"- {name}, {dd['periods']} periods, {MACHINE}: ngspice defaults {_t(ng)}, "
                      f"error {ng['amp_err_ur']:.4f} u_R / {ng['phase_err_deg']:.2f} deg (trajectory "
-                     f"{ng['traj_err_ur']:.4f} u_R); RK4 at T/40 {r40['wall_s']:.2f} s, error {r40['amp_err_ur']:.4f} "
+                     f"{ng['traj_err_ur']:.4f} u_R); RK4 at T/40 {_t(r40)}, error {r40['amp_err_ur']:.4f} "
                      f"u_R / {r40['phase_err_deg']:.2f} deg (trajectory {r40['traj_err_ur']:.4f} u_R).")
-    L += ["", "## Failure points", ""]
+    L += _adder_recheck(res)
+    L += ["", "## Failure points", "",
+          "Criterion: settled amplitude within 0.01 u_R and phase within 2 deg of the reference (the issue's), "
+          "optionally also the whole trajectory within 0.01 u_R. 'Misses' lists every measured step that fails "
+          f"the settled criterion, with its error; {MACHINE}.", ""]
     for name, dd in acc.items():
         rows = dd["rows"]
         for label, backend, method in (("RK4", "rk4", None), ("ngspice trap+prewarp", "ngspice", "trap+prewarp"),
                                        ("ngspice trap (no prewarp)", "ngspice", "trap"),
                                        ("ngspice gear", "ngspice", "gear")):
-            reltol = None if backend == "rk4" else d["reltol"] if method == "trap+prewarp" else 1e-3
+            reltol = None if backend == "rk4" else d["reltol"] if method == "trap+prewarp" else \
+                (1e-3 if any(r.get("reltol") == 1e-3 for r in rows) else d["reltol"])
             cell = []
             for what, traj in (("settled", math.inf), ("settled and whole trajectory", 0.01)):
                 ok = _first_ok(rows, backend, method, reltol, traj=traj)
-                cell.append(f"{what}: " + (f"T/{ok['steps_per_period']} ({ok['wall_s']:.2f} s, {ok['amp_err_ur']:.4f} u_R, "
+                cell.append(f"{what}: " + (f"T/{ok['steps_per_period']} ({_t(ok)}, {ok['amp_err_ur']:.4f} u_R, "
                                            f"{ok['phase_err_deg']:.2f} deg, trajectory {ok['traj_err_ur']:.4f} u_R)"
                                            if ok else "none of the steps measured"))
+            miss = [r for r in rows if r["backend"] == backend and r.get("method") == method
+                    and not r.get("reference") and (reltol is None or r.get("reltol") == reltol)
+                    and ("amp_err_ur" not in r or r["amp_err_ur"] >= 0.01 or r["phase_err_deg"] >= 2.0)]
+            cell.append("misses: " + (", ".join(
+                f"T/{r['steps_per_period']} ({r['amp_err_ur']:.4f} u_R, {r['phase_err_deg']:.2f} deg)"
+                if "amp_err_ur" in r else f"T/{r['steps_per_period']} (failed)" for r in miss) or "none"))
             L.append(f"- {name}, {label}" + (f" (reltol {reltol:g})" if reltol else "")
                      + " - coarsest step within 0.01 u_R and 2 deg, " + "; ".join(cell))
     L += ["", "## Stability limits", ""]
@@ -549,42 +924,88 @@ def markdown(res: dict) -> str:
     return render(res)
 
 
+def envelope_block(text: str) -> str:
+    """The text from ENVELOPE_BEGIN to ENVELOPE_END (markers included), verbatim; '' if absent."""
+    i = text.find(ENVELOPE_BEGIN)
+    j = text.find(ENVELOPE_END, i + len(ENVELOPE_BEGIN)) if i >= 0 else -1
+    return text[i:j + len(ENVELOPE_END)] if i >= 0 and j >= 0 else ""
+
+
+def write_markdown(path: Path, res: dict) -> str:
+    """Regenerate the .md; a section another tool keeps between the envelope-spice markers in the existing
+    file is carried over verbatim, as the last thing in the file."""
+    path = Path(path)
+    block = envelope_block(path.read_text()) if path.exists() else ""
+    text = markdown(res).rstrip("\n") + "\n"
+    if block:
+        text += "\n" + block + "\n"
+    path.write_text(text)
+    return text
+
+
+SECTIONS = ("pinning", "accuracy", "tolerances", "stability", "damping", "scaling", "forms")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer points (a smoke run, ~2 min)")
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parent.parent / "reports"))
+    ap.add_argument("--out", default=str(ROOT / "reports"))
     ap.add_argument("--render", action="store_true", help="only rewrite the .md/.png from the .json")
-    ap.add_argument("--only", choices=["pinning", "accuracy", "tolerances", "stability", "damping", "scaling"],
-                    action="append")
+    ap.add_argument("--only", choices=[*SECTIONS, "adder"], action="append",
+                    help="run these sections only and merge them into the existing JSON ('adder' = the "
+                         "accuracy section for adder2 only)")
+    ap.add_argument("--design", choices=list(DESIGNS), action="append",
+                    help="with --only accuracy: these designs only (the other designs' results are kept)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    jpath, mpath = out / "speed_accuracy.json", out / "speed_accuracy.md"
+    if args.render:
+        res = json.loads(jpath.read_text())
+        res["charts"] = charts(res, out)
+        jpath.write_text(json.dumps(res, indent=1))
+        write_markdown(mpath, res)
+        return 0
+    only = list(args.only or [])
+    if args.design and not only:
+        only = ["accuracy"]                   # --design alone: those designs' accuracy rows, merged
+    acc_designs = tuple(args.design or DESIGNS)
+    if "adder" in only:
+        only = [x for x in only if x != "adder"] + ["accuracy"]
+        acc_designs = tuple(dict.fromkeys([*(args.design or []), "adder2"]))
     _warm_up()
     t0 = time.perf_counter()
     res = {"machine": MACHINE, "python": platform.python_version(), "periods": PERIODS, "avg": AVG,
            "rk4_kernel": "numba" if _numba() else "numpy",
            "reference": f"RK4 at {REF_STEPS} steps/period", "default_options": asdict(SpiceOptions())}
-    jpath = out / "speed_accuracy.json"
-    if args.render:
-        res = json.loads(jpath.read_text())
-        res["charts"] = charts(res, out)
-        (out / "speed_accuracy.md").write_text(markdown(res))
-        return 0
-    if args.only and jpath.exists():                 # refresh some sections, keep the others
-        res = {**json.loads(jpath.read_text()), **{k: v for k, v in res.items()}}
-    sections = {"pinning": pinning, "accuracy": lambda: accuracy(args.quick), "tolerances": tolerances,
-                "stability": stability,
-                "damping": lambda: damping(args.quick), "scaling": lambda: scaling(args.quick)}
+    if only and jpath.exists():                 # refresh some sections, keep the others
+        res = {**json.loads(jpath.read_text()), **res}
+    sections = {"pinning": pinning, "accuracy": lambda: accuracy(args.quick, acc_designs), "tolerances": tolerances,
+                "stability": stability, "damping": lambda: damping(args.quick), "scaling": lambda: scaling(args.quick),
+                "forms": lambda: forms(args.quick)}
     for name, fn in sections.items():
-        if not args.only or name in args.only:
-            res[name] = fn()
-    res["partial_rerun_s" if args.only else "total_wall_s"] = time.perf_counter() - t0
+        if not only or name in only:
+            t1, load0 = time.perf_counter(), os.getloadavg()[0]
+            new = fn()
+            if name == "accuracy" and only:             # merge per design, in DESIGNS order
+                merged = {**res.get("accuracy", {}), **new}
+                new = {k: merged[k] for k in sorted(merged, key=lambda k: list(DESIGNS).index(k)
+                                                    if k in DESIGNS else len(DESIGNS))}
+            res[name] = new
+            if only:
+                key = name if name != "accuracy" or set(acc_designs) == set(DESIGNS) else \
+                    f"accuracy ({', '.join(acc_designs)})"
+                res.setdefault("section_wall_s", {})[key] = time.perf_counter() - t1
+                res.setdefault("section_load_avg", {})[key] = [round(load0, 2), round(os.getloadavg()[0], 2)]
+    if not only:
+        res["total_wall_s"] = time.perf_counter() - t0
+        res.pop("section_wall_s", None)
     jpath.write_text(json.dumps(res, indent=1, default=_json))
     res = json.loads(jpath.read_text())
     res["charts"] = charts(res, out)
     jpath.write_text(json.dumps(res, indent=1))
-    (out / "speed_accuracy.md").write_text(markdown(res))
-    print(f"wrote {jpath}, {out / 'speed_accuracy.md'}, charts {res['charts']} in {res['total_wall_s']:.0f} s")
+    write_markdown(mpath, res)
+    print(f"wrote {jpath}, {mpath}, charts {res['charts']} in {time.perf_counter() - t0:.0f} s")
     return 0
 
 

@@ -38,8 +38,8 @@ from mech2spice.params import BAND0, BAND1, DEFAULT  # noqa: E402
 MACHINE = "2-core Debian 12 sandbox, shared"
 P = DEFAULT
 STEPS = sorted({0.5, 2.0, simulate.ENVELOPE_STEP})   # envelope steps per scene (periods); 2 was the default until 5c6b8d2
-SWEEP = [0.25, 0.5, 1, 2, 4, 6]                  # adder, through envelope.integrate
-REFUSE = [7, 8, 24]                              # beyond the enforced bound: must be refused (24: unstable)
+SWEEP = [0.25, 0.5, 1, 2, 4, 6, 8, 12]          # adder, through envelope.integrate
+REFUSE = [16, 20, 24]                            # beyond the enforced bound: must be refused (24: unstable)
 FREE = [6, 8, 10, 12, 16, 20, 21, 22, 23, 24, 26, 28, 32]   # adder, no bound check (validate.integrate_free)
 STAB_AT = [0, 20, 100, 300, 1000, 2900, 2920, 3000, 3200, 3500, 4000, 5800]
 
@@ -153,7 +153,8 @@ def adder_sweep(sc: V.Scene, r80: dict, r160: dict) -> dict:
     chain_stab = V.stability_along(V.chain_scene(P, edges=False), [0, 200, 1500, 1700, 3000, 3200, 4500])
     env = envelope.Envelope(sc.model)
     return {"sweep": rows, "refused": refused, "free": free, "stability": stab, "bound": envelope.max_step_periods(sc.model),
-            "gershgorin_rate": envelope.rate_bound(env), "gate_stability": gate_stab, "chain_stability": chain_stab,
+            "gershgorin_rate": envelope.gershgorin_rate(env), "spectral_rate": envelope.spectral_rate(env),
+            "rate_safety": envelope.RATE_SAFETY, "gate_stability": gate_stab, "chain_stability": chain_stab,
             "gate_bound": envelope.max_step_periods(V.gate_scene(P).model),
             "chain_bound": envelope.max_step_periods(V.chain_scene(P).model),
             "T": P.period}
@@ -458,11 +459,13 @@ cases that cross the threshold ({mism} mismatches), and the latch sequence decod
   {traj_env:.3f} u_R; keeping the M A'' term the envelope equations drop brings it to {traj_a2:.4f} u_R
   (both corrections: {traj_both:.4f}). That term is the main thing the envelope model loses; the 2-omega part of
   u^2 moves settled amplitudes by ~1e-5 to 1e-4 u_R only. Evidence below.
-- The enforced step bound (`envelope.max_step_periods`) is **safe but ~{lin / sw['bound']:.1f}x conservative**:
-  {sw['bound']:.2f} periods on the adder, where the linearised envelope equations allow RK4 steps up to
-  {lin:.1f} periods and the measured onset lies between {last_ok:g} (finite) and {first_bad:g} periods (blew up).
-  Accuracy, not stability, is what limits the step: errors are flat up to 4 periods and grow beyond (this is
-  why `simulate.ENVELOPE_STEP` went from 2 to 4 periods in commit 5c6b8d2).
+- The enforced step bound (`envelope.max_step_periods`) is {sw['bound']:.2f} periods on the adder (the
+  largest |eigenvalue| of the linear part at rest x {sw['rate_safety']}), where the linearised envelope
+  equations along the trajectory allow RK4 steps up to {lin:.1f} periods and the measured onset lies between
+  {last_ok:g} (finite) and {first_bad:g} periods (blew up): **safe, {lin / sw['bound']:.1f}x below the onset**. The
+  Gershgorin bound used before allowed {envelope.RK4_STABILITY / sw['gershgorin_rate'] / sw['T']:.2f} periods
+  ({lin * sw['gershgorin_rate'] * sw['T'] / envelope.RK4_STABILITY:.1f}x conservative). Accuracy, not stability,
+  limits the step: errors are flat up to 4 periods and grow beyond (switching times within 2 % up to 8).
 
 ## Scenes
 
@@ -594,9 +597,11 @@ Steps beyond the bound through `envelope.integrate`:
 
 {refused}
 
-**Is the bound right?** It is a Gershgorin bound on the envelope equations' linear part: rate
-{sw['gershgorin_rate']:.3f} 1/s -> {envelope.RK4_STABILITY} / rate = {sw['bound']:.2f} periods on the adder
-({sw['gate_bound']:.2f} on a lone gate, {sw['chain_bound']:.2f} on the chain). The eigenvalues of the
+**Is the bound right?** It is {sw['rate_safety']} x the largest |eigenvalue| of the envelope equations' linear
+part at rest (`envelope.spectral_rate`: ARPACK on -Bop^-1 Z0 for the amplitudes, exact roots for the insulators):
+{sw['spectral_rate']:.3f} 1/s -> {envelope.RK4_STABILITY} / ({sw['rate_safety']} x rate) = {sw['bound']:.2f} periods
+on the adder ({sw['gate_bound']:.2f} on a lone gate, {sw['chain_bound']:.2f} on the chain). Until this version it
+was a Gershgorin bound, rate {sw['gershgorin_rate']:.3f} 1/s. The eigenvalues of the
 linearised envelope equations (Jacobian at the actual states, every batch member) along the adder's trajectory:
 
 | period | max abs(eigenvalue) [1/s] | largest stable RK4 step [periods] | largest Re(eigenvalue) [1/s] |
@@ -604,18 +609,18 @@ linearised envelope equations (Jacobian at the actual states, every batch member
 {stab_rows}
 
 (Positive real parts during switching are the gates' own instability that makes them switch, not a property of
-the step.) The largest |lambda| is {rad:.3f} 1/s, a third of the Gershgorin rate, and the most restrictive state
-(period {lin_at['period']}) allows {lin:.1f} periods. Measured: finite at {last_ok:g} periods, blew up at
-{first_bad:g} (and at every longer step tried, sooner the longer the step). **The measured onset agrees with the
-linearised prediction to within a period, and the enforced bound is {lin / sw['bound']:.1f}x below it: conservative,
-never unsafe** (lone gate: bound {sw['gate_bound']:.1f} vs linearised {min(s['rk4_stable_step_periods'] for s in sw['gate_stability']):.1f};
+the step.) The largest |lambda| is {rad:.3f} 1/s, within {100 * abs(rad / sw['spectral_rate'] - 1):.0f} % of the rate at rest,
+and the most restrictive state (period {lin_at['period']}) allows {lin:.1f} periods. Measured: finite at {last_ok:g}
+periods, blew up at {first_bad:g} (and at every longer step tried, sooner the longer the step). **The measured onset
+agrees with the linearised prediction to within a period, and the enforced bound is {lin / sw['bound']:.1f}x below
+it** (lone gate: bound {sw['gate_bound']:.1f} vs linearised {min(s['rk4_stable_step_periods'] for s in sw['gate_stability']):.1f};
 chain: {sw['chain_bound']:.1f} vs {min(s['rk4_stable_step_periods'] for s in sw['chain_stability']):.1f}).
-Why so conservative: the bound's worst row is a gate oscillator's, where the coupling spring k = F_R/u_R =
-{P.k_couple:.1f} is divided by the gate's small |2 i omega m_G| = {2 * P.omega * P.m_g:.1f}, giving ~2 1/s; the
-channel on the other side of that spring has 30x the mass, so the coupled mode is slow. The fastest real mode is
-the insulator's ringing ({math.sqrt(P.k_i / P.m_i):.3f} rad/s plus damping), whose eigenvalues sit near the
-imaginary axis, where RK4's region reaches 2.83. Tightening the bound would buy little: the step is already
-accuracy-limited at ~4-6 periods (table above).
+Why the Gershgorin bound was so conservative: its worst row is a gate oscillator's, where the coupling spring
+k = F_R/u_R = {P.k_couple:.1f} is divided by the gate's small |2 i omega m_G| = {2 * P.omega * P.m_g:.1f}, giving
+~2 1/s; the channel on the other side of that spring has 30x the mass, so the coupled mode is slow. The fastest
+real mode is the insulator's ringing ({math.sqrt(P.k_i / P.m_i):.3f} rad/s plus damping), whose eigenvalues sit
+near the imaginary axis, where RK4's region reaches 2.83. The longer steps this allows matter for the processor,
+whose sieve runs at 8 periods per step (reports/fidelity.md measures what that costs).
 
 ![step sweep](envelope_step_sweep.png)
 """

@@ -37,7 +37,10 @@ SETTINGS = [("reference: step 2, full pauses", 2.0, None),
             ("step 4, full pauses", 4.0, None),
             ("step 4, settle 0.05", 4.0, 0.05),
             ("step 4, settle 0.1", 4.0, 0.1),
-            ("step 4, settle 0.2", 4.0, 0.2)]
+            ("step 4, settle 0.2", 4.0, 0.2),
+            ("step 8, full pauses", 8.0, None),
+            ("step 8, settle 0.1", 8.0, 0.1),
+            ("step 12, settle 0.1", 12.0, 0.1)]
 
 
 def run_setting(prog, cycles: int, step: float, settle) -> dict:

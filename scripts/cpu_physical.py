@@ -131,7 +131,7 @@ def main() -> None:
     moments = figures.sieve_moments(tracker.frames) if res["halted"] else []
     if moments:
         figures.fig_sieve(tracker.frames, moments, out / "cpu_sieve_physical.png",
-                          f"{a.backend} fidelity ({res.get('simulated_periods', 0):,} periods integrated)")
+                          f"the processor's oscillators at {a.backend} fidelity ({res.get('simulated_periods', 0):,} periods integrated)")
     fig_activity(tracker.rows, out / "cpu_physical_trace.png", a.backend)
     rows = tracker.rows
     per_cycle = sum(r["wall_s"] for r in rows) / max(len(rows), 1)

@@ -141,3 +141,19 @@ def test_settle_skips_idle_time_within_tolerance(p):
     # each stretch switched the chain (the output changed band), so the skip did not swallow the change
     out = np.abs(runs[0].amp[:, -1, :]) / p.u_r
     assert [band_of(x) for x in out[1990]] == [band_of(x) for x in out[-1]][::-1]
+
+
+def test_step_bound_is_the_spectral_rate_with_margin(p):
+    """max_step_periods comes from the largest |eigenvalue| of the linear part at rest (ARPACK, checked
+    here against a dense eigensolve) times RATE_SAFETY, below the RK4 onset the report measures."""
+    from mech2spice import nor
+    m = nor.single_gate(p)
+    env = envelope.Envelope.of(m)
+    nf = env.fast.size
+    dense = -np.column_stack([env._Bsolve(env.Z0 @ e) for e in np.eye(nf, dtype=complex)])
+    k, c, ms = env.Ks.diagonal(), env.Cs.diagonal(), env.ms
+    slow = np.abs(np.roots([ms[0], c[0], k[0]])).max()
+    want = max(np.abs(np.linalg.eigvals(dense)).max(), slow)
+    assert envelope.spectral_rate(env) == pytest.approx(want, rel=1e-6)
+    assert envelope.rate_bound(env) == pytest.approx(envelope.RATE_SAFETY * want)
+    assert envelope.rate_bound(env) < envelope.gershgorin_rate(env)

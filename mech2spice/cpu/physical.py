@@ -40,7 +40,8 @@ class PhysicalCPU:
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
         t = simulate.clock_timing(self.netlist)
-        self.pulse, self.pause = t["pulse"], -(-t["pause"] // 4) * 4
+        whole = max(1, int(round(step)))            # stimulus changes fall on step boundaries
+        self.pulse, self.pause = -(-t["pulse"] // whole) * whole, -(-t["pause"] // whole) * whole
         self.backend, self.p, self.mem = backend, p, memory
         self.step_periods, self.settle = step, settle
         self.simulated = 0          # periods actually integrated (a settled pause skips the rest)

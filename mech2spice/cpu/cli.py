@@ -35,7 +35,7 @@ def add_parser(subparsers) -> None:
     r.add_argument("program", help="assembly source (.asm) or binary image")
     r.add_argument("--backend", default="iss", choices=BACKENDS,
                    help="iss (instruction-set simulator), logic (the NOR netlist), envelope or rk4 (the "
-                        "netlist as 6486 oscillators; envelope ~1.5 s per cycle: reports/cpu_physical.md)")
+                        "netlist as 6486 oscillators; envelope ~0.5 s per cycle, the sieve in ~4 min: reports/cpu_physical.md)")
     r.add_argument("--max-cycles", type=int, default=100_000, help="stop after this many cycles in total")
     r.add_argument("--checkpoint", metavar="FILE", help="write the machine state to FILE (JSON) as it runs")
     r.add_argument("--checkpoint-every", type=int, default=None, metavar="N",

@@ -579,7 +579,7 @@ two extra sparse solves per right-hand side (x{a2_lo:.1f}-{a2_hi:.1f} wall time 
 
 ## The envelope step on the adder, and the enforced bound
 
-The adder scene (16 inputs, 5800 periods) at every step. Steps up to 6 go through `envelope.integrate` (the
+The adder scene (16 inputs, 5800 periods) at every step. Steps up to 12 go through `envelope.integrate` (the
 enforced bound applies); 'validate.integrate_free' is the same RK4-on-envelope scheme without the check, to find
 where it really fails. A step that does not divide the 2900-period input change applies it up to one step late
 (6: 4 periods late), which is part of the error at 6 and 12.

@@ -8,13 +8,14 @@ setup:  ## install ngspice (Debian) and the package with its Python dependencies
 	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq ngspice libngspice0)
 	$(PY) -m pip install -q --root-user-action=ignore -e '.[test]'
 
-demo: setup  ## the main job end to end: gate characterisation, adder from Verilog on RK4, reports
+demo: setup  ## the main job end to end: gate, adder from Verilog on RK4, sqrt(2809), the sieve on 6486 oscillators
 	mech2spice gate --report reports
 	mech2spice synth verilog/adder2.v
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend logic
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend rk4
 	$(PY) -m mech2spice.report_adder reports
 	mech2spice simulate verilog/sqrt.v --stimulus verilog/sqrt_2809.json --backend envelope
+	mech2spice cpu run programs/sieve.asm --backend envelope
 
 test: setup  ## the CI suite (long physical runs marked slow are left out)
 	$(PY) -m pytest -q -m "not slow"
@@ -27,5 +28,10 @@ reports: setup  ## regenerate every report in reports/
 	$(PY) -m mech2spice.report_adder reports
 	$(PY) -m mech2spice.report_sequential reports
 	$(PY) -m mech2spice.report_spice reports
+	$(PY) benchmarks/fidelity.py
+	$(PY) scripts/cpu_physical.py
 	$(PY) scripts/cpu_report.py
+	$(PY) benchmarks/envelope_validation.py
+	$(PY) benchmarks/performance.py
 	$(PY) benchmarks/speed_accuracy.py
+	$(PY) benchmarks/envelope_spice.py

@@ -85,8 +85,9 @@ def _print_gate(out: dict) -> None:
 
 # --- synth / simulate ------------------------------------------------------------
 def _netlist(args):
-    from .synth import synthesize
-    return synthesize(args.design, top=args.top, max_fanout=getattr(args, "max_fanout", None))
+    from .synth import observe, synthesize
+    nl = synthesize(args.design, top=args.top, max_fanout=getattr(args, "max_fanout", None))
+    return observe(nl, args.observe) if getattr(args, "observe", None) else nl
 
 
 def cmd_synth(args) -> int:
@@ -182,7 +183,8 @@ def cmd_simulate(args) -> int:
         pack_inputs(nl, values)
         res = simulate.run_logic(nl, values)
     else:
-        opts = _spice_options(args) if args.backend == "ngspice" else None
+        opts = _spice_options(args) if args.backend == "ngspice" else \
+            _envelope_spice_options(args) if args.backend == "ngspice-envelope" else None
         res = simulate.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
                                     steps=args.steps, progress=not args.json and sys.stderr.isatty(),
                                     spice_options=opts)[0]
@@ -238,6 +240,18 @@ def _spice_options(args):
     return o
 
 
+def _envelope_spice_options(args):
+    from dataclasses import replace
+    from .spice_envelope import EnvelopeSpiceOptions
+    o = EnvelopeSpiceOptions()
+    if getattr(args, "method", None):
+        o = replace(o, method=args.method)
+    if getattr(args, "max_step", None):
+        o = replace(o, max_step_periods=args.max_step)
+    o.validate()
+    return o
+
+
 def cmd_subckts(args) -> int:
     from .params import load_params
     from .spice import write_subckt_library
@@ -273,6 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--max-fanout", type=int, default=MAX_FANOUT,
                         help="insert NOR-pair buffers so no gate drives more loads (default 12, the largest "
                              "fan-out measured to work)")
+        sp.add_argument("--observe", action="append", metavar="PORT",
+                        help="model only these output ports and their fan-in cones (repeatable; cone "
+                             "pruning, its amplitude cost: reports/fidelity.md)")
         sp.add_argument("--json", action="store_true", help="machine-readable output")
 
     s = sub.add_parser("synth", help="synthesise Verilog to mechanical NOR gates and count elements",
@@ -297,12 +314,12 @@ def build_parser() -> argparse.ArgumentParser:
   logic backend (which starts them at 0): reset them synchronously in the first cycle.""")
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
-    s.add_argument("--backend", default="rk4", choices=["logic", "rk4", "envelope", "ngspice"])
+    s.add_argument("--backend", default="rk4", choices=["logic", "rk4", "envelope", "ngspice", "ngspice-envelope"])
     s.add_argument("--periods", type=int, default=None, help="simulate exactly this many drive periods")
     s.add_argument("--steps", type=int, default=None,
                    help="steps per drive period (rk4 default 80; envelope default: one step per 2 periods)")
     s.add_argument("--method", choices=["trap", "gear"], help="ngspice integration method (default trap)")
-    s.add_argument("--max-step", type=float, help="ngspice max step in drive periods (default 1/40)")
+    s.add_argument("--max-step", type=float, help="ngspice max step in drive periods (default 1/40; ngspice-envelope: 2)")
     s.add_argument("--clock", metavar="PORT", help="the clock port (default: the one clocking the flip-flops)")
     s.add_argument("--cycles", type=int, help="clock cycles to run with the --set inputs held")
     s.add_argument("--stimulus", metavar="FILE.json", help="clocked stimulus: a list of {set, cycles} steps")

@@ -16,8 +16,8 @@ from .errors import Mech2SpiceError
 from .params import GateParams, band_of, margin
 from .synth import Netlist
 
-BACKENDS = ("logic", "rk4", "envelope", "ngspice")
-ENVELOPE_STEP = 4.0      # periods, at most; reports/envelope.md: no accuracy cost on the adder (bound 6.7)
+BACKENDS = ("logic", "rk4", "envelope", "ngspice", "ngspice-envelope")
+ENVELOPE_STEP = 4.0      # periods, at most; reports/envelope.md: no accuracy cost on the adder (bound 15.1)
 SETTLE_TOL = 2e-3        # u_R change over SETTLE_WINDOW periods that counts as settled
 SETTLE_WINDOW = 100
 CHUNK = 100
@@ -73,6 +73,8 @@ def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], 
                              fixed=periods is not None)
     elif backend == "ngspice":
         amps, used = _run_ngspice(model, stim, budget, spice_options, outs)
+    elif backend == "ngspice-envelope":
+        amps, used = _run_ngspice_envelope(model, stim, budget, spice_options, outs)
     else:
         raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
     wall = time.time() - t0
@@ -149,6 +151,15 @@ def _run_ngspice(model, stim, periods: int, options, probes: list[str]):
     return np.abs(run.amp[-1, rows, :]) / model.meta["params"].u_r, periods
 
 
+def _run_ngspice_envelope(model, stim, periods: int, options, probes: list[str]):
+    """The envelope equations as an ngspice netlist (spice_envelope.py): the whole budget in one run per
+    batch member, steps of whole drive periods."""
+    from .spice_envelope import EnvelopeSpiceOptions, run_envelope_spice
+    run = run_envelope_spice(model, periods, stimulus=stim, opts=options or EnvelopeSpiceOptions())
+    rows = [run.probe_names.index(n) for n in probes]
+    return np.abs(run.amp[-1, rows, :]) / model.meta["params"].u_r, periods
+
+
 # --- clocked designs -------------------------------------------------------------------------
 # Measured on verilog/dff.v (reports/sequential.md, RK4 and envelope agree within 4 periods): a 300-period
 # enable pulse does not capture a 0, 500 does; the latch output (3 delay pairs) moves 1282 (storing 1)
@@ -221,12 +232,24 @@ def clocked_schedule(cycles: list[dict[str, int]], timing: dict):
     return segs, reads, t
 
 
+CLOCKED_SETTLE = 0.1     # u_R; envelope pauses end once the channels settle: within 0.012 u_R (reports/fidelity.md)
+
+
 def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str, int]], backend: str,
-                         timing: dict, steps: int | None = None, progress: bool = False) -> dict:
+                         timing: dict, steps: int | None = None, progress: bool = False,
+                         settle: float | None = CLOCKED_SETTLE) -> dict:
+    """Trace entry k: outputs after clock edge k.  Envelope: step envelope_step(model) unless `steps`
+    per period are given, the pause rounded up to whole steps; `settle` ends a stretch of constant
+    inputs once every channel is steady (envelope.integrate)."""
     t0 = time.time()
     for v in cycles:
         logic.pack_inputs(netlist, v)
     model = network.build(netlist, p)
+    if backend == "envelope":
+        step = 1.0 / steps if steps else envelope_step(model)
+        whole = max(1, int(round(step)))
+        timing = {**timing, "pause": -(-timing["pause"] // whole) * whole,
+                  "pulse": -(-timing["pulse"] // whole) * whole}
     segs, reads, total = clocked_schedule(cycles, timing)
     stim = network.stimulus(model, netlist, p, [(t, [v]) for t, v, _ in segs], clock=[[c] for *_, c in segs])
     outs = [b for b in logic.output_bits(netlist) if b in model.probes]
@@ -235,11 +258,14 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
                             probes=outs, progress=progress)
     elif backend == "envelope":
         from . import envelope
-        run = envelope.integrate(model, total, step_periods=1.0 / steps if steps else 1.0, stimulus=stim,
-                                 probes=outs, progress=progress)
+        run = envelope.integrate(model, total, step_periods=step, stimulus=stim, probes=outs,
+                                 progress=progress, settle=settle)
     elif backend == "ngspice":
         from . import ngspice
         run = ngspice.run(model, total, stimulus=stim)
+    elif backend == "ngspice-envelope":
+        from .spice_envelope import run_envelope_spice
+        run = run_envelope_spice(model, total, stimulus=stim)
     else:
         raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
     rows = [run.probe_names.index(n) for n in outs]
@@ -248,6 +274,8 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
     for k, t in enumerate(reads):
         a = {n: float(amp[t - 10:t, j].mean()) for j, n in enumerate(outs)}
         trace.append({"cycle": k, **decode(netlist, a, model.meta["const_outputs"]), "amplitudes": a})
+    extra = {"envelope_step": step, "settle": settle,
+             "simulated_periods": total - run.extra["settled_periods"]} if backend == "envelope" else {}
     return {"backend": backend, **_final(trace), "amplitudes": trace[-1]["amplitudes"], "trace": trace,
-            "periods": total, "timing": timing, "wall_s": time.time() - t0,
+            "periods": total, "timing": timing, "wall_s": time.time() - t0, **extra,
             "_amplitude_trace": amp, "_reads": reads, "_probe_names": outs}

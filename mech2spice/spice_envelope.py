@@ -1,0 +1,403 @@
+"""The envelope equations (mech2spice.envelope) as an ngspice netlist, and a runner for it.
+
+The carrier-level netlist (spice.py) must resolve every drive period (max step T/40); the envelope
+netlist carries only the slowly varying complex amplitudes, so ngspice can take steps of whole drive
+periods and run scenes far too long or too large for the carrier-level form.
+
+Equations (envelope.py), for the complex amplitudes A of the fast DOFs and the slow DOFs s:
+
+    B A' = F^ - Z0 A - (G s) * A,       B = 2 i omega M + C       (fast block)
+    M_s s'' = -K_s s - C_s s' - H |A|^2 / 2
+
+Circuit form (time is real time; every number below is computed from the one `Envelope` operator):
+
+* Each fast DOF j has two nodes, ar_<dof> = Re A_j / u_R and ai_<dof> = Im A_j / u_R (voltages in units
+  of u_R = params.u_r, so ngspice's vntol reads directly as an amplitude tolerance).
+* Row j of the fast equations is divided by b_j = B_jj (complex, never 0: 2 omega m_j > 0), so that
+
+      A_j' + sum_{k != j} beta_jk A_k' = sum_k zeta_jk A_k + F_j / b_j - (G s)_j A_j / b_j,
+      beta_jk = B_jk / b_j,  zeta_jk = -Z0_jk / b_j.
+
+  The left side's diagonal is then real: a 1 F capacitor from each of ar_j, ai_j to ground, whose current
+  is Re / Im A_j'.  (Without the division 2 i omega m_j would couple Re and Im through the *derivatives*,
+  an antisymmetric "capacitive gyrator" that no capacitor can be.)
+* The remaining derivative couplings beta_jk are only those of dashpots between fast DOFs (B's
+  off-diagonal is the damping matrix C).  For such a DOF k the capacitors are returned to ground through
+  0 V sources Vdr_k / Vdi_k, whose currents are Re / Im A_k' exactly; linear CCCS (F sources) inject
+  -Re(beta_jk A_k') and -Im(beta_jk A_k') into node j.  DOFs without dashpots to other fast DOFs get a
+  plain capacitor.  (B sources with ddt() would do the same but are nonlinear and slower.)
+* zeta (detuning, damping, coupling springs and dashpots) are linear VCCS (G sources): a complex
+  coefficient zeta couples Re and Im as [[zr, -zi], [zi, zr]].
+* Drives: F^_j = -i a e^{i phase} (envelope.Dmap); each drive amplitude a(t) is a voltage on node
+  a_<drive> (one per distinct schedule, as in spice.py), fed into ar_j / ai_j by two VCCS with gains Re, Im
+  of Dmap_jd / (b_j u_R).  A constant amplitude is a DC source; a schedule is a B voltage source of smooth
+  tanh steps centred on each change (time constant T/4), not PWL: PWL corners are ngspice breakpoints,
+  after which ngspice stalled at its minimum step in some runs (reports/speed_accuracy.md).
+* Only the quadratic couplings are B sources: per fast DOF, Re and Im of -(G s)_j A_j / b_j (a product
+  of V(sx) and a linear form in V(ar), V(ai)); per slow DOF the force -H |A|^2 / 2.
+* Slow DOFs keep the carrier-level mobility form: velocity node sv_<dof> with C = m, displacement node
+  sx_<dof> (1 F fed by a VCCS V(sv)); K_s and C_s are VCCS stamped from their sparse matrices.
+
+Amplitudes per drive period are the node voltages linearly interpolated at the end of each period
+(envelope.integrate records the amplitude at the end of each period too).
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from .envelope import Envelope
+from .errors import DivergenceError, Mech2SpiceError, ToolMissingError
+from .model import MechModel
+from .spice import Namer, comment_text, num
+from .stimulus import Stimulus
+
+METHODS = ("trap", "gear")
+DRIVE_RAMP_PERIODS = 0.25       # tanh time constant of a drive-amplitude change (see _EnvEmitter._source)
+
+
+@dataclass(frozen=True)
+class EnvelopeSpiceOptions:
+    """ngspice settings for the envelope netlist (defaults measured by benchmarks/envelope_spice.py,
+    reports/speed_accuracy.md, section 'SPICE on the envelope equations')."""
+    method: str = "trap"
+    max_step_periods: float = 2.0     # ngspice's max step, in drive periods (its LTE control may go lower)
+    reltol: float = 1e-4
+    abstol: float = 1e-12             # currents = amplitude rates in u_R/s
+    vntol: float = 1e-7               # voltages = amplitudes in u_R
+    chgtol: float = 1e-14
+    trtol: float = 7.0                # ngspice's default truncation-error factor
+    maxord: int = 2                   # gear order
+
+    def validate(self) -> None:
+        if self.method not in METHODS:
+            raise Mech2SpiceError(f"ngspice method '{self.method}' unknown (use {' or '.join(METHODS)})")
+        if not 0 < self.max_step_periods <= 1000:
+            raise Mech2SpiceError("max_step_periods must be in (0, 1000] drive periods")
+        for name in ("reltol", "abstol", "vntol", "chgtol", "trtol"):
+            if not getattr(self, name) > 0:
+                raise Mech2SpiceError(f"EnvelopeSpiceOptions.{name} must be positive")
+        if not 1 <= self.maxord <= 6:
+            raise Mech2SpiceError("maxord must be 1..6")
+
+
+def _amp_scale(model: MechModel) -> float:
+    p = model.meta.get("params")
+    return float(p.u_r) if p is not None else 1.0
+
+
+class _EnvEmitter:
+    def __init__(self, model: MechModel, stimulus: Stimulus | None, periods: int, opts: EnvelopeSpiceOptions,
+                 batch_index: int):
+        model.check()
+        opts.validate()
+        if periods < 1:
+            raise Mech2SpiceError("periods must be at least 1")
+        self.m, self.opt, self.periods, self.b = model, opts, int(periods), batch_index
+        self.env = Envelope.of(model)
+        self.T = 2 * math.pi / model.omega
+        self.u = _amp_scale(model)
+        self.stimulus = stimulus
+        namer = Namer()
+        self.stem = [namer(n) for n in model.names]
+        self.amp_namer = Namer()
+        self.amp_nodes: dict[tuple, str] = {}
+        self.amp_lines: list[str] = []
+        self.lines: list[str] = []
+        self.n_elem = {"C": 0, "G": 0, "F": 0, "B": 0, "V": 0}
+
+    # node names
+    def ar(self, j: int) -> str:
+        return f"ar_{self.stem[self.env.fast[j]]}"
+
+    def ai(self, j: int) -> str:
+        return f"ai_{self.stem[self.env.fast[j]]}"
+
+    def sx(self, j: int) -> str:
+        return f"sx_{self.stem[self.env.slow[j]]}"
+
+    def sv(self, j: int) -> str:
+        return f"sv_{self.stem[self.env.slow[j]]}"
+
+    def add(self, kind: str, text: str) -> None:
+        self.n_elem[kind] += 1
+        self.lines.append(f"{kind}{self.n_elem[kind]} {text}")
+
+    # drive amplitudes: one voltage source per distinct schedule
+    def schedule(self, d: int) -> tuple[tuple[float, float], ...]:
+        s = self.stimulus
+        if s is None:
+            return ((0.0, float(self.m.drives[d].amplitude)),)
+        if not 0 <= self.b < s.batch:
+            raise Mech2SpiceError(f"batch index {self.b} out of range (stimulus has {s.batch})")
+        if s.amps.shape[1] != len(self.m.drives):
+            raise Mech2SpiceError(f"stimulus has {s.amps.shape[1]} drives, model {len(self.m.drives)}")
+        pts, last = [], None
+        for t, a in zip(s.times, s.amps[:, d, self.b]):
+            if t < self.periods * self.T and a != last:
+                pts.append((float(t), float(a)))
+                last = a
+        return tuple(pts)
+
+    def amp_node(self, d: int) -> str:
+        sched = self.schedule(d)
+        if sched not in self.amp_nodes:
+            node = f"a_{self.amp_namer(self.m.drives[d].name or 'drive')}"
+            self.amp_nodes[sched] = node
+            src = self._source(sched)
+            self.amp_lines.append(f"{'B' if src.startswith('V =') else 'V'}{node} {node} 0 {src}")
+        return self.amp_nodes[sched]
+
+    def _source(self, sched) -> str:
+        """DC, or a B voltage source: each change a -> a' at t1 a smooth step (a'-a)/2 (1 + tanh((t-t1)/tau)),
+        tau = DRIVE_RAMP_PERIODS T, centred on t1 like the envelope integrator's step change.  Not PWL: its
+        corners are ngspice breakpoints, and right after one (adder, reltol 1e-5) the step fell by 4x per
+        point to delmin = 1e-11 tmax and stayed there (a stall, no error)."""
+        if len(sched) == 1:
+            return f"DC {num(sched[0][1])}"
+        tau = DRIVE_RAMP_PERIODS * self.T
+        terms = [num(sched[0][1])]
+        for (_, a0), (t1, a1) in zip(sched, sched[1:]):
+            terms.append(f"{num((a1 - a0) / 2)}*(1 + tanh((time - {num(t1)})/{num(tau)}))")
+        return "V = " + " + ".join(terms)
+
+    # complex coupling k -> j as VCCS: inject Re/Im(z * A_k) into ar_j / ai_j
+    def vccs(self, j: int, k: int, z: complex) -> None:
+        zr, zi = float(z.real), float(z.imag)
+        for out, coefs in ((self.ar(j), ((self.ar(k), zr), (self.ai(k), -zi))),
+                           (self.ai(j), ((self.ar(k), zi), (self.ai(k), zr)))):
+            for node, g in coefs:
+                if g != 0.0:
+                    self.add("G", f"0 {out} {node} 0 {num(g)}")
+
+    def fast(self) -> None:
+        env = self.env
+        nf = env.fast.size
+        bdiag = env.Bop.diagonal()
+        if np.any(bdiag == 0):
+            raise Mech2SpiceError("the envelope operator has a zero diagonal (a massless oscillating DOF)")
+        Boff = sp.coo_matrix(env.Bop - sp.diags(bdiag))
+        Boff.eliminate_zeros()
+        sensed = set(int(k) for k in Boff.col)
+        for j in range(nf):
+            for node, kind in ((self.ar(j), "r"), (self.ai(j), "i")):
+                if j in sensed:
+                    mid = f"d{kind}_{self.stem[env.fast[j]]}"
+                    self.lines.append(f"Cd{kind}_{self.stem[env.fast[j]]} {node} {mid} 1")
+                    self.lines.append(f"Vd{kind}_{self.stem[env.fast[j]]} {mid} 0 0")
+                else:
+                    self.add("C", f"{node} 0 1")
+        # derivative couplings (fast-fast dashpots): inject -beta A_k' through CCCS
+        for j, k, v in zip(Boff.row, Boff.col, Boff.data):
+            beta = complex(v) / bdiag[j]
+            br, bi = beta.real, beta.imag
+            sk = self.stem[env.fast[k]]
+            for out, coefs in ((self.ar(j), ((f"Vdr_{sk}", -br), (f"Vdi_{sk}", bi))),
+                               (self.ai(j), ((f"Vdr_{sk}", -bi), (f"Vdi_{sk}", -br)))):
+                for src, g in coefs:
+                    if g != 0.0:
+                        self.add("F", f"0 {out} {src} {num(g)}")
+        # linear terms
+        Z = sp.coo_matrix(env.Z0)
+        for j, k, z in zip(Z.row, Z.col, Z.data):
+            if z != 0:
+                self.vccs(int(j), int(k), -complex(z) / bdiag[j])
+        # drives
+        D = sp.coo_matrix(env.Dmap)
+        for j, d, v in zip(D.row, D.col, D.data):
+            kappa = complex(v) / (bdiag[j] * self.u)
+            node = self.amp_node(int(d))
+            for out, g in ((self.ar(j), kappa.real), (self.ai(j), kappa.imag)):
+                if g != 0.0:
+                    self.add("G", f"0 {out} {node} 0 {num(g)}")
+        # quadratic couplings: -(G s)_j A_j / b_j
+        G = env.G.tocsr()
+        for j in range(nf):
+            lo, hi = G.indptr[j], G.indptr[j + 1]
+            if lo == hi:
+                continue
+            gs = " + ".join(f"{num(g)}*V({self.sx(int(s))})" for s, g in zip(G.indices[lo:hi], G.data[lo:hi]))
+            c = 1 / bdiag[j]
+            cr, ci = float(c.real), float(c.imag)
+            # Re(-gs c A) = gs (-cr ar + ci ai);  Im(-gs c A) = gs (-ci ar - cr ai)
+            self.add("B", f"0 {self.ar(j)} I = ({gs})*({num(-cr)}*V({self.ar(j)}) + {num(ci)}*V({self.ai(j)}))")
+            self.add("B", f"0 {self.ai(j)} I = ({gs})*({num(-ci)}*V({self.ar(j)}) + {num(-cr)}*V({self.ai(j)}))")
+
+    def slow(self) -> None:
+        env = self.env
+        for j in range(env.slow.size):
+            self.add("C", f"{self.sv(j)} 0 {num(env.ms[j])}")
+            self.add("C", f"{self.sx(j)} 0 1")
+            self.add("G", f"0 {self.sx(j)} {self.sv(j)} 0 1")
+        for M, nodes in ((env.Ks, self.sx), (env.Cs, self.sv)):
+            M = sp.coo_matrix(M)
+            for j, k, v in zip(M.row, M.col, M.data):
+                if v != 0:
+                    self.add("G", f"{self.sv(int(j))} 0 {nodes(int(k))} 0 {num(v)}")
+        # force -H |A|^2 / 2 (amplitudes in u_R: |A|^2 = u^2 (ar^2 + ai^2))
+        H = env.H.tocsr()
+        for j in range(env.slow.size):
+            lo, hi = H.indptr[j], H.indptr[j + 1]
+            if lo == hi:
+                continue
+            terms = [f"{num(h * self.u ** 2 / 2)}*(V({self.ar(int(f))})*V({self.ar(int(f))}) + "
+                     f"V({self.ai(int(f))})*V({self.ai(int(f))}))" for f, h in zip(H.indices[lo:hi], H.data[lo:hi])]
+            self.add("B", f"{self.sv(j)} 0 I = " + " + ".join(terms))
+
+    def probe_rows(self) -> list[int]:
+        pos = {int(d): k for k, d in enumerate(self.env.fast)}
+        rows = []
+        for name, dof in self.m.probes.items():
+            if dof not in pos:
+                raise Mech2SpiceError(f"probe '{name}' is on a slow DOF; the envelope netlist probes oscillating DOFs")
+            rows.append(pos[dof])
+        return rows
+
+    def analysis(self, rows: list[int]) -> list[str]:
+        o = self.opt
+        h = o.max_step_periods * self.T
+        opts = (f".options method={o.method} reltol={num(o.reltol)} abstol={num(o.abstol)} "
+                f"vntol={num(o.vntol)} chgtol={num(o.chgtol)} trtol={num(o.trtol)}")
+        if o.method == "gear":
+            opts += f" maxord={o.maxord}"
+        out = [opts, f".tran {num(h)} {num(self.periods * self.T)} 0 {num(h)} uic"]
+        nodes = [f"v({n(j)})" for j in rows for n in (self.ar, self.ai)]
+        for k in range(0, len(nodes), 8):
+            out.append(".save " + " ".join(nodes[k:k + 8]))
+        # a standalone `ngspice -b` run prints each probe's final amplitude (u_R); with -r ngspice skips
+        # .meas (it says so) and writes the raw file instead
+        tstop = num(self.periods * self.T)
+        for j in dict.fromkeys(rows):
+            for n, part in ((self.ar, "re"), (self.ai, "im")):
+                out.append(f".meas tran {part}_{n(j)[3:]} FIND v({n(j)}) AT={tstop}")
+        return out
+
+    def netlist(self, title: str) -> tuple[str, list[str]]:
+        self.fast()
+        self.slow()
+        rows = self.probe_rows()
+        m, o = self.m, self.opt
+        head = [f"* {comment_text(title or 'mech2spice envelope netlist')}",
+                f"* mech2spice envelope form: {self.env.fast.size} oscillating DOFs (2 amplitude nodes each), "
+                f"{self.env.slow.size} slow DOFs; {self.periods} periods of T = {num(self.T)} s (real time);",
+                f"* amplitudes V(ar_*) + i V(ai_*) in u_R = {num(self.u)}; method={o.method}, max step "
+                f"{num(o.max_step_periods)} T.  See mech2spice/spice_envelope.py for the circuit form.",
+                "* probe -> amplitude nodes:"]
+        head += [f"*   {comment_text(n)} -> {self.ar(j)} {self.ai(j)}" for n, j in zip(m.probes, rows)]
+        body = ["* --- circuit", *self.lines, "* --- drive amplitudes", *self.amp_lines,
+                *self.analysis(rows), ".end"]
+        vecs = [f"v({n(j)})".lower() for j in rows for n in (self.ar, self.ai)]
+        return "\n".join(head + body) + "\n", vecs
+
+
+def emit_envelope_with_probes(model: MechModel, stimulus: Stimulus | None = None, periods: int = 1000,
+                              opts: EnvelopeSpiceOptions = EnvelopeSpiceOptions(), batch_index: int = 0,
+                              title: str = "") -> tuple[str, list[str]]:
+    """The netlist and the raw-file vectors (Re, Im per probe, model.probes order)."""
+    return _EnvEmitter(model, stimulus, periods, opts, batch_index).netlist(title)
+
+
+def emit_envelope(model: MechModel, stimulus: Stimulus | None = None, periods: int = 1000,
+                  opts: EnvelopeSpiceOptions = EnvelopeSpiceOptions(), batch_index: int = 0, title: str = "") -> str:
+    """A self-contained netlist of the envelope equations: `ngspice -b -r out.raw file.cir` runs it."""
+    return emit_envelope_with_probes(model, stimulus, periods, opts, batch_index, title)[0]
+
+
+# --- running ---------------------------------------------------------------------------------------
+_NODE = re.compile(r'trouble with node\s+"?([\w.]+)', re.I)
+_TOO_SMALL = re.compile(r"timestep too small;\s*time\s*=\s*([0-9.eE+-]+)", re.I)
+
+
+def _dof_of_node(model: MechModel, node: str) -> str | None:
+    namer = Namer()
+    stems = {namer(n): n for n in model.names}
+    kind, _, stem = node.lower().partition("_")
+    return stems.get(stem) if kind in ("ar", "ai", "sx", "sv", "dr", "di") else None
+
+
+def _check(model: MechModel, t: np.ndarray, amp: np.ndarray, T: float) -> None:
+    """DivergenceError at the first sample where a probe amplitude is non-finite or beyond 1e3 u_R."""
+    mag = np.abs(amp)
+    bad = ~np.isfinite(mag) | (mag > 1e3 * _amp_scale(model))
+    if bad.any():
+        row = int(np.flatnonzero(bad.any(axis=1))[0])
+        col = int(np.flatnonzero(bad[row])[0])
+        raise DivergenceError(list(model.probes)[col], float(t[row]), T, float(mag[row, col]))
+
+
+def _failure(model: MechModel, err: Mech2SpiceError, vecs: list[str]) -> Mech2SpiceError:
+    T = 2 * math.pi / model.omega
+    names, data = getattr(err, "names", []), getattr(err, "data", np.zeros((0, 0)))
+    if data.ndim == 2 and data.shape[0] and all(v in names for v in vecs):
+        _check(model, data[:, 0], _complex(names, data, vecs, 1.0), T)
+    m = _TOO_SMALL.search(str(err))
+    if m:
+        node = _NODE.search(str(err))
+        dof = (_dof_of_node(model, node.group(1)) if node else None) or next(iter(model.probes), model.names[0])
+        last = float(np.abs(data[-1, 1:]).max()) if data.ndim == 2 and data.size else math.nan
+        return DivergenceError(dof, float(m.group(1)), T, last)
+    return err
+
+
+def _complex(names, data, vecs, u: float) -> np.ndarray:
+    cols = [names.index(v) for v in vecs]
+    x = data[:, cols]
+    return u * (x[:, 0::2] + 1j * x[:, 1::2])
+
+
+def run_one(model: MechModel, periods: int, stimulus: Stimulus | None = None,
+            opts: EnvelopeSpiceOptions = EnvelopeSpiceOptions(), batch_index: int = 0,
+            timeout: float | None = None, keep_netlist: str | Path | None = None):
+    """One batch member under ngspice: (t_end (P,), amp (P, n_probes) complex, extra dict)."""
+    from .ngspice import run_netlist
+    t0 = time.perf_counter()
+    text, vecs = emit_envelope_with_probes(model, stimulus, periods, opts, batch_index)
+    t_emit = time.perf_counter() - t0
+    if keep_netlist:
+        Path(keep_netlist).write_text(text, encoding="ascii")
+    try:
+        names, data, _ = run_netlist(text, timeout=timeout)
+    except ToolMissingError:
+        raise
+    except Mech2SpiceError as e:
+        raise _failure(model, e, vecs) from None
+    missing = [v for v in vecs if v not in names]
+    if missing or names[:1] != ["time"]:
+        raise Mech2SpiceError(f"ngspice raw file lacks {missing or ['time']}")
+    T = 2 * math.pi / model.omega
+    t = data[:, 0]
+    z = _complex(names, data, vecs, _amp_scale(model))
+    _check(model, t, z, T)
+    t_end = (1 + np.arange(periods)) * T
+    amp = np.stack([np.interp(t_end, t, z[:, j].real) + 1j * np.interp(t_end, t, z[:, j].imag)
+                    for j in range(z.shape[1])], axis=1) if z.shape[1] else np.zeros((periods, 0), complex)
+    dt = np.diff(t) / T
+    extra = {"wall_s": time.perf_counter() - t0, "emit_s": t_emit, "points": int(t.size),
+             "max_step_used_periods": float(dt.max()) if dt.size else 0.0,
+             "median_step_periods": float(np.median(dt)) if dt.size else 0.0}
+    return t_end, amp, extra
+
+
+def run_envelope_spice(model: MechModel, periods: int, stimulus: Stimulus | None = None,
+                       opts: EnvelopeSpiceOptions = EnvelopeSpiceOptions(), workers: int | None = None,
+                       timeout: float | None = None):
+    """The envelope netlist of every batch member of `stimulus` under ngspice (one process each, up to
+    `workers` at a time); an rk4.Run whose per-period amplitudes are the envelope at each period's end."""
+    from .rk4 import Run
+    B = stimulus.batch if stimulus is not None else 1
+    workers = max(1, min(B, workers or os.cpu_count() or 1))
+    with ThreadPoolExecutor(workers) as pool:
+        parts = list(pool.map(lambda b: run_one(model, periods, stimulus, opts, b, timeout), range(B)))
+    T = 2 * math.pi / model.omega
+    amp = np.stack([p[1] for p in parts], axis=2)
+    extra = {"backend": "ngspice-envelope", "options": asdict(opts),
+             **{k: [p[2][k] for p in parts] for k in parts[0][2]}}
+    return Run(list(model.probes), T, parts[0][0], amp, np.zeros(amp.shape), None, None, periods * T, extra=extra)

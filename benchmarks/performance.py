@@ -951,8 +951,8 @@ def sieve_md(res: dict) -> list[str]:
 
 
 SIEVE_LABEL = {"rk4": "RK4, numba kernel (80 steps/T)", "rk4_numpy": "RK4, numpy (80 steps/T)",
-               "envelope": "envelope, step 1 T (numpy path)", "envelope_step2": "envelope, step 2 T",
-               "envelope_settle": "envelope, compiled, step 4 T, settle 0.1 (`cpu run --backend envelope`)",
+               "envelope": "envelope, step 1 T, fixed pauses", "envelope_step2": "envelope, step 2 T",
+               "envelope_settle": "envelope, compiled, with settle detection (`cpu run --backend envelope`, measured)",
                "envelope_sparse": "envelope step 1 T, sparse slow block (proposed fix, prototype)",
                "envelope_dense": "envelope step 1 T, before c97a5be (dense slow block)",
                "envelope_sparse_step2": "envelope step 2 T, sparse slow block (prototype)",

@@ -46,7 +46,8 @@ class Tracker:
         before = self.iss.mem.snapshot()
         want = self.iss.step()
         same = want == got and self.iss.registers() == cpu.registers() and \
-            cpu.mem.snapshot() == self.iss.mem.snapshot()
+            cpu.mem.snapshot() == self.iss.mem.snapshot() and \
+            {a: d.state() for a, d in cpu.mem.devices.items()} == {a: d.state() for a, d in self.iss.mem.devices.items()}
         self.frames.append((got, before, cpu.mem.snapshot()))
         now = time.perf_counter()
         self.rows.append({"cycle": got.cycle, "pc": got.pc, "instr": got.instr or got.phase, "raddr": got.raddr,
@@ -74,10 +75,20 @@ def fig_activity(rows, path: Path, backend: str) -> None:
     ax.set_xlabel("clock cycle")
     ax.set_ylabel("address")
     ax.legend(loc="upper left", fontsize=8)
-    ax.set_title(f"Sieve at {backend} fidelity: memory traffic per cycle (grey: primality array)", fontsize=10)
+    ax.set_title(f"{backend} fidelity: memory traffic per cycle (grey: the sieve's primality array)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
+
+
+def devices_md(res: dict) -> str:
+    """The memory-mapped tape of a Turing-machine program, as the physical run left it."""
+    lines = []
+    for addr, d in res.get("devices", {}).items():
+        cells = "".join(str(d["cells"][k]) for k in sorted(d["cells"], key=int))
+        lines.append(f"- tape at address {addr} after the run: cells {cells} (from the leftmost written), head "
+                     f"{d['head']}, {d['steps']} head moves, identical to the ISS's tape after every cycle.")
+    return "\n".join(lines) + ("\n" if lines else "")
 
 
 def fidelity_section(path: Path) -> str:
@@ -110,8 +121,10 @@ def main() -> None:
     ap.add_argument("--checkpoint", default=None)
     ap.add_argument("--resume", action="store_true")
     ap.add_argument("--out", default="reports")
+    ap.add_argument("--name", default="cpu_physical", help="report file stem (default cpu_physical)")
     a = ap.parse_args()
     out = Path(a.out)
+    sieve = Path(a.program).name == "sieve.asm"
     prog = R.load_program(a.program)
     tracker = Tracker(prog)
     if a.resume:
@@ -122,21 +135,22 @@ def main() -> None:
         res = R.run_program(a.program, a.backend, a.cycles or 100_000, checkpoint=a.checkpoint,
                             resume=a.resume, trace=tracker, **physical)
     except Mech2SpiceError as err:       # keep what was measured: the rows up to the failure
-        (out / "cpu_physical_failed.md").write_text(f"# Physical run stopped\n\n{err}\n\n" + "\n".join(
+        (out / f"{a.name}_failed.md").write_text(f"# Physical run stopped\n\n{err}\n\n" + "\n".join(
             json.dumps(r) for r in tracker.rows) + "\n")
-        raise SystemExit(f"{err} (rows in {out / 'cpu_physical_failed.md'})")
+        raise SystemExit(f"{err} (rows in {out / (a.name + '_failed.md')})")
     wall = time.perf_counter() - t0
     golden = R.run_program(a.program, "iss")
     final_same = res["memory"] == golden["memory"] and res["cycles"] == golden["cycles"]
-    moments = figures.sieve_moments(tracker.frames) if res["halted"] else []
+    moments = figures.sieve_moments(tracker.frames) if res["halted"] and sieve else []
     if moments:
         figures.fig_sieve(tracker.frames, moments, out / "cpu_sieve_physical.png",
                           f"the processor's oscillators at {a.backend} fidelity ({res.get('simulated_periods', 0):,} periods integrated)")
-    fig_activity(tracker.rows, out / "cpu_physical_trace.png", a.backend)
+    fig_activity(tracker.rows, out / f"{a.name}_trace.png", a.backend)
     rows = tracker.rows
     per_cycle = sum(r["wall_s"] for r in rows) / max(len(rows), 1)
-    primes = [n for n in range(2, 32) if res["memory"][128 + n] == 0]
+    primes = [n for n in range(2, 32) if res["memory"][128 + n] == 0] if sieve else None
     cmd = (f"python scripts/cpu_physical.py --cycles {a.cycles} --backend {a.backend}"
+           + ("" if sieve else f" --program {a.program} --name {a.name}")
            + (f" --step {a.step:g} --settle {a.settle}" if a.backend == "envelope" else ""))
     settle_txt = (f"each pause ends once every channel has stayed within {a.settle} u_R for two 200-period "
                   "windows (`envelope.integrate(settle=...)`; pulses always run in full)" if a.settle else
@@ -154,17 +168,16 @@ commits writes at the clock edge (`mech2spice/cpu/physical.py`). Every cycle is 
 
 ## Result
 
-- **{'halted' if res['halted'] else 'did not halt'} after {res['cycles']} cycles** (the paper's sieve:
-  {PAPER_CYCLES} cycles); {'every cycle identical to the ISS' if tracker.agree else 'DISAGREED with the ISS'};
+- **{'halted' if res['halted'] else 'did not halt'} after {res['cycles']} cycles**{f" (the paper's sieve: {PAPER_CYCLES} cycles)" if sieve else ""}; {'every cycle identical to the ISS' if tracker.agree else 'DISAGREED with the ISS'};
   final memory {'equal to' if final_same else 'DIFFERENT from'} the golden (ISS) memory.
-- primes left unmarked in 128..159: {primes}
+{f"- primes left unmarked in 128..159: {primes}" if sieve else ""}
 - **wall time {wall:.0f} s ({wall / 60:.1f} min)**, {per_cycle:.2f} s per cycle on average (the paper's
   run: {PAPER_WALL}); {res.get('periods', 0):,} drive periods of processor time, of which
   {res.get('simulated_periods', 0):,} were integrated.
 
-![sieve memory, physical run](cpu_sieve_physical.png)
-
-![memory traffic, physical run](cpu_physical_trace.png)
+{'![sieve memory, physical run](cpu_sieve_physical.png)' if moments else ''}
+{devices_md(res)}
+![memory traffic, physical run]({a.name}_trace.png)
 {fidelity_section(out / 'fidelity.json')}
 ## Every cycle
 
@@ -175,12 +188,12 @@ commits writes at the clock edge (`mech2spice/cpu/physical.py`). Every cycle is 
 """ + "\n".join(f"| {r['cycle']} | {r['pc']} | {r['instr']} | {r['raddr']} | {r['rdata']} | {r['we']} | "
                 f"{r['waddr']} | {r['wdata']} | {'yes' if r['same'] else 'NO'} | {r['wall_s']:.1f} |"
                 for r in rows) + "\n\n</details>\n"
-    (out / "cpu_physical.md").write_text(text)
+    (out / f"{a.name}.md").write_text(text)
     summary = {**res, "agree_every_cycle": tracker.agree, "final_memory_equals_iss": final_same,
                "wall_s": wall, "s_per_cycle": per_cycle, "primes": primes, "command": cmd,
                "resumed": a.resume, "machine": f"{platform.machine()} {platform.system()}, 2 cores (shared)"}
-    (out / "cpu_physical.json").write_text(json.dumps(summary, indent=1))
-    print(out / "cpu_physical.md", f"{wall:.0f} s")
+    (out / f"{a.name}.json").write_text(json.dumps(summary, indent=1))
+    print(out / f"{a.name}.md", f"{wall:.0f} s")
 
 
 if __name__ == "__main__":

@@ -376,6 +376,16 @@ def physical_section(add, out: Path) -> None:
         f"for its (larger) processor; {r['periods']:,} drive periods of processor time, "
         f"{r['simulated_periods']:,} of them integrated (step {r['step']:g} periods, settle {r['settle']}).\n")
     add("![sieve memory, physical run](cpu_sieve_physical.png)\n")
+    tm_path = out / "cpu_physical_tm_increment.json"
+    if tm_path.exists():
+        r = json.loads(tm_path.read_text())
+        tape = next(iter(r.get("devices", {}).values()), None)
+        add(f"**Binary increment on the oscillators** (`{r['command']}`, "
+            f"[cpu_physical_tm_increment.md](cpu_physical_tm_increment.md)): "
+            f"{'halted' if r['halted'] else 'did not halt'} after {r['cycles']} cycles"
+            + (f", {tape['steps']} Turing-machine steps on the memory-mapped tape" if tape else "")
+            + f"; every cycle (ports, registers, memory, tape) identical to the ISS: {r['agree_every_cycle']}; "
+              f"wall time {r['wall_s']:.0f} s.\n")
 
 
 def main() -> None:

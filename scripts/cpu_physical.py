@@ -152,6 +152,7 @@ def main() -> None:
     cmd = (f"python scripts/cpu_physical.py --cycles {a.cycles} --backend {a.backend}"
            + ("" if sieve else f" --program {a.program} --name {a.name}")
            + (f" --step {a.step:g} --settle {a.settle}" if a.backend == "envelope" else ""))
+    paper_wall = f" (the paper's sieve run: {PAPER_WALL})" if sieve else ""
     settle_txt = (f"each pause ends once every channel has stayed within {a.settle} u_R for two 200-period "
                   "windows (`envelope.integrate(settle=...)`; pulses always run in full)" if a.settle else
                   "fixed-length pauses")
@@ -171,8 +172,8 @@ commits writes at the clock edge (`mech2spice/cpu/physical.py`). Every cycle is 
 - **{'halted' if res['halted'] else 'did not halt'} after {res['cycles']} cycles**{f" (the paper's sieve: {PAPER_CYCLES} cycles)" if sieve else ""}; {'every cycle identical to the ISS' if tracker.agree else 'DISAGREED with the ISS'};
   final memory {'equal to' if final_same else 'DIFFERENT from'} the golden (ISS) memory.
 {f"- primes left unmarked in 128..159: {primes}" if sieve else ""}
-- **wall time {wall:.0f} s ({wall / 60:.1f} min)**, {per_cycle:.2f} s per cycle on average (the paper's
-  run: {PAPER_WALL}); {res.get('periods', 0):,} drive periods of processor time, of which
+- **wall time {wall:.0f} s ({wall / 60:.1f} min)**, {per_cycle:.2f} s per cycle on average{paper_wall};
+  {res.get('periods', 0):,} drive periods of processor time, of which
   {res.get('simulated_periods', 0):,} were integrated.
 
 {'![sieve memory, physical run](cpu_sieve_physical.png)' if moments else ''}

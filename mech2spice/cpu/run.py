@@ -214,10 +214,10 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         raise Mech2SpiceError("resume needs a checkpoint file")
     program = load_program(source)
     state = read_checkpoint(checkpoint, program, backend) if resume else None
+    t0 = time.perf_counter()                       # wall_s includes building the model and power-up
     cpu = make_cpu(backend, make_memory(program), power_up=not resume, **physical)
     if resume:
         _restore(cpu, state, checkpoint)
-    t0 = time.perf_counter()
     last_report = t0
     while not cpu.halted and cpu.cycle < max_cycles:
         rec = cpu.step()

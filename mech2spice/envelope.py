@@ -236,17 +236,14 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     stability bound is refused.  With `settle` (u_R), each stretch of constant stimulus ends once every
     channel's amplitude stayed within a range of `settle` for two SETTLE_WINDOWs in a row: the rest of
     the stretch is the settled state, held (idle-time skipping; the slow small ringing this ignores and
-    its error are measured in reports/cpu_physical.md).  compiled=True uses the numba loop (envelope_kernel.py) where numba exists."""
+    its error are measured in reports/fidelity.md).  compiled=True uses the numba loop
+    (envelope_kernel.py) where numba exists."""
     from . import envelope_kernel
     from .rk4 import Run, _progress
     from .stimulus import Stimulus
     env = Envelope.of(model)
     T = 2 * np.pi / env.omega
-    limit = RK4_STABILITY / rate_bound(env) / T
-    if step_periods > limit:
-        raise Mech2SpiceError(f"envelope step {step_periods:g} periods exceeds the stability limit "
-                              f"{limit:.3g} periods for this network (fastest envelope rate "
-                              f"{rate_bound(env):.3g} 1/s)")
+    _check_step(env, step_periods, T)
     sub, per = _step_layout(step_periods)
     h = T * per / sub
     stimulus = stimulus or Stimulus.constant(model)
@@ -255,8 +252,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     A, s, sd = (np.zeros((nf, B), complex), np.zeros((ns, B)), np.zeros((ns, B))) if state is None else \
         (state[0].copy(), state[1].copy(), state[2].copy())
     names = list(probes or model.probes)
-    pos = {d: k for k, d in enumerate(env.fast)}
-    prow = np.array([pos[model.probes[n] if n in model.probes else model.index(n)] for n in names], int)
+    prow = _probe_rows(model, env, names)
     amp = np.zeros((periods, len(names), B), complex)
     tol = settle * model.meta["params"].u_r if settle else 0.0
     check = sub * max(1, int(round(SETTLE_WINDOW / per)))
@@ -298,6 +294,20 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     run.extra["envelope_state"] = (A, s, sd)
     run.extra["settled_periods"] = settled_periods
     return run
+
+
+def _check_step(env: Envelope, step_periods: float, T: float) -> None:
+    limit = RK4_STABILITY / rate_bound(env) / T
+    if step_periods > limit:
+        raise Mech2SpiceError(f"envelope step {step_periods:g} periods exceeds the stability limit "
+                              f"{limit:.3g} periods for this network (fastest envelope rate "
+                              f"{rate_bound(env):.3g} 1/s)")
+
+
+def _probe_rows(model: MechModel, env: Envelope, names: list[str]) -> np.ndarray:
+    """Rows of the fast block for probe names or DOF names."""
+    pos = {d: k for k, d in enumerate(env.fast)}
+    return np.array([pos[model.probes[n] if n in model.probes else model.index(n)] for n in names], int)
 
 
 def _numpy_chunks(env, A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from):

@@ -229,21 +229,18 @@ def cmd_emit(args) -> int:
 
 
 def _spice_options(args):
-    from dataclasses import replace
     from .spice import SpiceOptions
-    o = SpiceOptions()
-    if getattr(args, "method", None):
-        o = replace(o, method=args.method)
-    if getattr(args, "max_step", None):
-        o = replace(o, max_step_periods=args.max_step)
-    o.validate()
-    return o
+    return _options(args, SpiceOptions())
 
 
 def _envelope_spice_options(args):
-    from dataclasses import replace
     from .spice_envelope import EnvelopeSpiceOptions
-    o = EnvelopeSpiceOptions()
+    return _options(args, EnvelopeSpiceOptions())
+
+
+def _options(args, o):
+    """ngspice options (either netlist form) with --method / --max-step applied."""
+    from dataclasses import replace
     if getattr(args, "method", None):
         o = replace(o, method=args.method)
     if getattr(args, "max_step", None):

@@ -38,6 +38,22 @@ from .stimulus import Stimulus
 METHODS = ("trap", "gear")
 
 
+def drive_schedule(model: MechModel, stimulus, b: int, d: int, t_end: float) -> tuple[tuple[float, float], ...]:
+    """(time, amplitude) points where drive d of batch member b changes before t_end."""
+    if stimulus is None:
+        return ((0.0, float(model.drives[d].amplitude)),)
+    if not 0 <= b < stimulus.batch:
+        raise Mech2SpiceError(f"batch index {b} out of range (stimulus has {stimulus.batch})")
+    if stimulus.amps.shape[1] != len(model.drives):
+        raise Mech2SpiceError(f"stimulus has {stimulus.amps.shape[1]} drives, model {len(model.drives)}")
+    pts, last = [], None
+    for t, a in zip(stimulus.times, stimulus.amps[:, d, b]):
+        if t < t_end and a != last:
+            pts.append((float(t), float(a)))
+            last = a
+    return tuple(pts)
+
+
 @dataclass(frozen=True)
 class SpiceOptions:
     method: str = "trap"             # trap | gear (gear = BDF, numerically damped; see the report)
@@ -324,19 +340,7 @@ class _Emitter:
 
     # -- drive amplitudes: one voltage source per distinct schedule
     def schedule(self, d: int) -> tuple[tuple[float, float], ...]:
-        if self.stimulus is None:
-            return ((0.0, self.m.drives[d].amplitude),)
-        s = self.stimulus
-        if not 0 <= self.b < s.batch:
-            raise Mech2SpiceError(f"batch index {self.b} out of range (stimulus has {s.batch})")
-        if s.amps.shape[1] != len(self.m.drives):
-            raise Mech2SpiceError(f"stimulus has {s.amps.shape[1]} drives, model {len(self.m.drives)}")
-        pts, last = [], None
-        for t, a in zip(s.times, s.amps[:, d, self.b]):
-            if t < self.periods * self.T and a != last:
-                pts.append((float(t), float(a)))
-                last = a
-        return tuple(pts)
+        return drive_schedule(self.m, self.stimulus, self.b, d, self.periods * self.T)
 
     def amp_node(self, d: int, share: int | None = None) -> str:
         """The amplitude node of drive d (an editable source per drive; a pair's twin drive `share`

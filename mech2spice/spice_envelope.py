@@ -57,7 +57,7 @@ import scipy.sparse as sp
 from .envelope import Envelope
 from .errors import DivergenceError, Mech2SpiceError, ToolMissingError
 from .model import MechModel
-from .spice import Namer, comment_text, num
+from .spice import Namer, comment_text, drive_schedule, num
 from .stimulus import Stimulus
 
 METHODS = ("trap", "gear")
@@ -133,19 +133,7 @@ class _EnvEmitter:
 
     # drive amplitudes: one voltage source per distinct schedule
     def schedule(self, d: int) -> tuple[tuple[float, float], ...]:
-        s = self.stimulus
-        if s is None:
-            return ((0.0, float(self.m.drives[d].amplitude)),)
-        if not 0 <= self.b < s.batch:
-            raise Mech2SpiceError(f"batch index {self.b} out of range (stimulus has {s.batch})")
-        if s.amps.shape[1] != len(self.m.drives):
-            raise Mech2SpiceError(f"stimulus has {s.amps.shape[1]} drives, model {len(self.m.drives)}")
-        pts, last = [], None
-        for t, a in zip(s.times, s.amps[:, d, self.b]):
-            if t < self.periods * self.T and a != last:
-                pts.append((float(t), float(a)))
-                last = a
-        return tuple(pts)
+        return drive_schedule(self.m, self.stimulus, self.b, d, self.periods * self.T)
 
     def amp_node(self, d: int) -> str:
         sched = self.schedule(d)

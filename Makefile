@@ -13,7 +13,7 @@ demo: setup  ## the main job end to end: gate, adder from Verilog on RK4, sqrt(2
 	mech2spice synth verilog/adder2.v
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend logic
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend rk4
-	$(PY) -m mech2spice.report_adder reports
+	$(PY) -m mech2spice.reports.adder reports
 	mech2spice simulate verilog/sqrt.v --stimulus verilog/sqrt_2809.json --backend envelope
 	mech2spice cpu run programs/sieve.asm --backend envelope
 
@@ -25,9 +25,9 @@ test-all: setup
 
 reports: setup  ## regenerate every report in reports/
 	mech2spice gate --report reports
-	$(PY) -m mech2spice.report_adder reports
-	$(PY) -m mech2spice.report_sequential reports
-	$(PY) -m mech2spice.report_spice reports
+	$(PY) -m mech2spice.reports.adder reports
+	$(PY) -m mech2spice.reports.sequential reports
+	$(PY) -m mech2spice.reports.spice reports
 	$(PY) benchmarks/fidelity.py
 	$(PY) scripts/cpu_physical.py
 	$(PY) scripts/cpu_report.py

@@ -35,12 +35,13 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from mech2spice import envelope, nor, simulate  # noqa: E402
-from mech2spice import spice_envelope as se  # noqa: E402
-from mech2spice import validate as V  # noqa: E402
+from mech2spice import simulate
+from mech2spice.physics import envelope, nor  # noqa: E402
+from mech2spice.spice import envelope as se  # noqa: E402
+from mech2spice.experiments import validate as V  # noqa: E402
 from mech2spice.errors import Mech2SpiceError  # noqa: E402
-from mech2spice.params import DEFAULT, NOMINAL0  # noqa: E402
-from mech2spice.stimulus import Stimulus  # noqa: E402
+from mech2spice.physics.params import DEFAULT, NOMINAL0  # noqa: E402
+from mech2spice.physics.stimulus import Stimulus  # noqa: E402
 
 MACHINE = "2-core Debian 12 sandbox, shared"
 P = DEFAULT
@@ -181,7 +182,7 @@ def run_text(text: str, timeout: float) -> dict:
             p = subprocess.run(["ngspice", "-b", "-n", "-r", str(raw), str(cir)], capture_output=True, text=True,
                                timeout=timeout, stdin=subprocess.DEVNULL)
         except subprocess.TimeoutExpired:
-            from mech2spice.ngspice import read_raw
+            from mech2spice.spice.runner import read_raw
             out = {"stalled": True, "wall_s": time.perf_counter() - t0}
             if raw.exists() and raw.stat().st_size:
                 _, data = read_raw(raw)
@@ -236,7 +237,7 @@ def gate_array(n: int):
 def acct(model, periods: int, opts, drop_b: bool = False) -> dict:
     """ngspice's own accounting (.options acct) of one run: where its time goes.  drop_b: the same netlist
     without its B sources (a linear circuit, physically meaningless: a cost probe only)."""
-    from mech2spice.ngspice import run_netlist
+    from mech2spice.spice.runner import run_netlist
     text = se.emit_envelope(model, None, periods, opts).replace(".options ", ".options acct ", 1)
     if drop_b:
         text = "\n".join(ln for ln in text.splitlines() if not ln.startswith("B")) + "\n"

@@ -29,11 +29,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from mech2spice import characterise as ch  # noqa: E402
-from mech2spice import envelope, simulate  # noqa: E402
-from mech2spice import validate as V  # noqa: E402
+from mech2spice.experiments import characterise as ch  # noqa: E402
+from mech2spice import simulate
+from mech2spice.physics import envelope  # noqa: E402
+from mech2spice.experiments import validate as V  # noqa: E402
 from mech2spice.errors import Mech2SpiceError  # noqa: E402
-from mech2spice.params import BAND0, BAND1, DEFAULT  # noqa: E402
+from mech2spice.physics.params import BAND0, BAND1, DEFAULT  # noqa: E402
 
 MACHINE = "2-core Debian 12 sandbox, shared"
 P = DEFAULT

@@ -28,9 +28,9 @@ from mech2spice import simulate
 from mech2spice.cpu import run as R
 from mech2spice.cpu.iss import ISS
 from mech2spice.cpu.physical import PhysicalCPU
-from mech2spice.params import DEFAULT, margin
-from mech2spice.report_sequential import COUNTER_STEPS, FSM_X
-from mech2spice.synth import synthesize
+from mech2spice.physics.params import DEFAULT, margin
+from mech2spice.reports.sequential import COUNTER_STEPS, FSM_X
+from mech2spice.synthesis.synth import synthesize
 
 # (label, envelope step in periods, settle tolerance in u_R or None)
 SETTINGS = [("reference: step 2, full pauses", 2.0, None),
@@ -125,7 +125,7 @@ def clocked() -> list[dict]:
 def cone() -> list[dict]:
     """comparator4 on all 256 input pairs (envelope, one batch): the full netlist against the netlist
     pruned to the cone of one output port."""
-    from mech2spice.synth import observe
+    from mech2spice.synthesis.synth import observe
     full_nl = synthesize("verilog/comparator4.v")
     values = [{"a": a, "b": b} for a in range(16) for b in range(16)]
     t = time.perf_counter()

@@ -68,15 +68,16 @@ def _rss_mb(who=resource.RUSAGE_SELF) -> float:
 
 def _warm_rk4(compiled: bool = True) -> None:
     """Load (or compile) the numba kernel outside the timed region."""
-    from mech2spice import nor, rk4
-    from mech2spice.params import DEFAULT
+    from mech2spice.physics import nor
+    from mech2spice.backends import rk4
+    from mech2spice.physics.params import DEFAULT
     rk4.integrate(nor.single_gate(DEFAULT), 1, compiled=compiled)
 
 
 def _ngspice_with_peak_memory(tmp: Path) -> Path:
     """Make ngspice.run start ngspice under GNU time, which writes ngspice's own peak RSS (KiB) to a file.
     (RUSAGE_CHILDREN would report the forking Python's RSS: the child's high-water mark survives exec.)"""
-    from mech2spice import ngspice
+    from mech2spice.spice import runner as ngspice
     exe = ngspice.find_ngspice()
     out = tmp / "ngspice_maxrss_kb"
     wrapper = tmp / "ngspice_timed.sh"
@@ -90,8 +91,9 @@ def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, netlis
     """One backend on nor.chain(p, gates), or on a synthesized design (netlist_pickle) with its drives at
     their model amplitudes (inputs '0', clock low): the cost per period does not depend on the values."""
     import numpy as np
-    from mech2spice import envelope, network, nor, rk4
-    from mech2spice.params import DEFAULT as p
+    from mech2spice.physics import envelope, network, nor
+    from mech2spice.backends import rk4
+    from mech2spice.physics.params import DEFAULT as p
     if backend.startswith("rk4"):
         _warm_rk4(backend == "rk4")
     t0 = time.perf_counter()
@@ -122,7 +124,7 @@ def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, netlis
         wall = time.perf_counter() - t0 + setup                     # s_per_period subtracts setup again
         out.update(step_periods=step, final_amp_ur=float(np.abs(A).max() / p.u_r))
     elif backend == "ngspice":
-        from mech2spice import ngspice
+        from mech2spice.spice import runner as ngspice
         with tempfile.TemporaryDirectory() as td:
             peak_file = _ngspice_with_peak_memory(Path(td)) if os.path.exists("/usr/bin/time") else None
             t0 = time.perf_counter()
@@ -140,8 +142,9 @@ def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, netlis
 
 
 def task_adder(backend: str, netlist_pickle: str) -> dict:
-    from mech2spice import logic, rk4_kernel, simulate
-    from mech2spice.params import DEFAULT as p
+    from mech2spice import simulate
+    from mech2spice.backends import logic, _rk4_kernel as rk4_kernel
+    from mech2spice.physics.params import DEFAULT as p
     nl = pickle.loads(Path(netlist_pickle).read_bytes())
     values = [{"a": a, "b": b} for a in range(4) for b in range(4)]
     if backend == "rk4_numpy":
@@ -161,8 +164,10 @@ def task_adder(backend: str, netlist_pickle: str) -> dict:
 
 def task_sqrt(backend: str, netlist_pickle: str, probe_periods: int = 0) -> dict:
     """backend 'envelope': the whole run; 'rk4_probe': RK4 over the first `probe_periods` of the same schedule."""
-    from mech2spice import network, rk4, simulate
-    from mech2spice.params import DEFAULT as p
+    from mech2spice import simulate
+    from mech2spice.physics import network
+    from mech2spice.backends import rk4
+    from mech2spice.physics.params import DEFAULT as p
     nl = pickle.loads(Path(netlist_pickle).read_bytes())
     cycles = simulate.expand_steps(SQRT_STEPS)
     timing = simulate.clock_timing(nl)
@@ -194,8 +199,9 @@ def task_sqrt(backend: str, netlist_pickle: str, probe_periods: int = 0) -> dict
 
 def task_profile(gates_list: list[int]) -> dict:
     import numpy as np
-    from mech2spice import envelope, nor, rk4, rk4_kernel
-    from mech2spice.params import DEFAULT as p
+    from mech2spice.physics import envelope, nor
+    from mech2spice.backends import rk4, _rk4_kernel as rk4_kernel
+    from mech2spice.physics.params import DEFAULT as p
     out = {"envelope": [], "rk4": []}
     for gates in gates_list:
         model = nor.chain(p, gates)
@@ -488,7 +494,7 @@ def fits(rows: list[dict]) -> dict:
 
 
 def _netlist_pickle(path: str, tmp: Path) -> str:
-    from mech2spice import synth
+    from mech2spice.synthesis import synth
     nl = synth.synthesize(ROOT / path)
     f = tmp / (Path(path).stem + ".pkl")
     f.write_bytes(pickle.dumps(nl))
@@ -531,8 +537,9 @@ def section_sqrt(tmp: Path, full_rk4: bool) -> dict:
 
 def section_cpu(tmp: Path, quick: bool) -> dict:
     """Per-period cost of every backend on the real processor model (verilog/cpu.v), for the sieve estimate."""
-    from mech2spice import network, synth
-    from mech2spice.params import DEFAULT as p
+    from mech2spice.physics import network
+    from mech2spice.synthesis import synth
+    from mech2spice.physics.params import DEFAULT as p
     nlp = _netlist_pickle("verilog/cpu.v", tmp)
     nl = pickle.loads(Path(nlp).read_bytes())
     model = network.build(nl, p)

@@ -40,12 +40,16 @@ from pathlib import Path
 
 import numpy as np
 
-from mech2spice import network, ngspice, nor, rk4, simulate, synth
+from mech2spice import simulate
+from mech2spice.physics import network, nor
+from mech2spice.spice import runner as ngspice
+from mech2spice.backends import rk4
+from mech2spice.synthesis import synth
 from mech2spice.errors import DivergenceError, Mech2SpiceError
-from mech2spice.model import MechModel
-from mech2spice.params import DEFAULT, NOMINAL0, NOMINAL1
-from mech2spice.spice import SpiceOptions, emit_with_probes, num
-from mech2spice.stimulus import Stimulus
+from mech2spice.physics.model import MechModel
+from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
+from mech2spice.spice.carrier import SpiceOptions, emit_with_probes, num
+from mech2spice.physics.stimulus import Stimulus
 
 MACHINE = "2-core Debian 12 sandbox"
 P = DEFAULT
@@ -406,7 +410,7 @@ def _form_amplitudes(model: MechModel, periods: int, st: Stimulus | None, b: int
 
 
 def emit_mobility(model, periods, st, b, o):
-    """The package's form (mech2spice.spice): velocity node with C = m, conductance c_local and a VCCS
+    """The package's form (mech2spice.spice.carrier): velocity node with C = m, conductance c_local and a VCCS
     k_local V(x) to ground; displacement node x = 1 F capacitor fed by the VCCS V(v); coupling springs
     VCCS k (V(x_i) - V(x_j)), dashpots conductances, quadratic couplings and drives B current sources."""
     text, vecs = emit_with_probes(model, periods, st, b, o)
@@ -1011,7 +1015,7 @@ def main(argv=None) -> int:
 
 def _numba() -> bool:
     try:
-        from mech2spice import rk4_kernel
+        from mech2spice.backends import _rk4_kernel as rk4_kernel
         return bool(rk4_kernel.AVAILABLE)
     except ImportError:
         return False

@@ -10,7 +10,7 @@ import numpy as np
 
 from .errors import Mech2SpiceError
 
-from .network import MAX_FANOUT
+from .physics.network import MAX_FANOUT
 
 
 def _jsonable(o):
@@ -42,12 +42,12 @@ def _log(args):
 
 # --- gate ----------------------------------------------------------------------
 def cmd_gate(args) -> int:
-    from . import characterise
-    from .params import load_params
+    from .experiments import characterise
+    from .physics.params import load_params
     p = load_params(args.params)
     out = characterise.characterise(p, quick=args.quick, log=_log(args))
     if args.report:
-        from .report_gate import write_gate_report
+        from .reports.gate import write_gate_report
         write_gate_report(out, args.report, log=_log(args))
     out["pass"] = bool(out.get("switches")) and out.get("min_margin", -1) > 0 and all(
         r["pass"] for r in out.get("requirements", {}).values())
@@ -85,14 +85,14 @@ def _print_gate(out: dict) -> None:
 
 # --- synth / simulate ------------------------------------------------------------
 def _netlist(args):
-    from .synth import observe, synthesize
+    from .synthesis.synth import observe, synthesize
     nl = synthesize(args.design, top=args.top, max_fanout=getattr(args, "max_fanout", None))
     return observe(nl, args.observe) if getattr(args, "observe", None) else nl
 
 
 def cmd_synth(args) -> int:
-    from . import network
-    from .params import load_params
+    from .physics import network
+    from .physics.params import load_params
     nl = _netlist(args)
     model = network.build(nl, load_params(args.params))
     out = {"top": nl.top, "gates": len(model.meta["gates"]), "latches": len(nl.latches()), **model.counts(),
@@ -144,7 +144,7 @@ def _clocked_steps(args, nl) -> list[dict]:
 
 def cmd_simulate_clocked(args, nl) -> int:
     from . import simulate
-    from .params import load_params
+    from .physics.params import load_params
     if args.clock and args.clock != nl.clock:
         raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by '{nl.clock}'")
     cycles = simulate.expand_steps(_clocked_steps(args, nl))
@@ -171,7 +171,7 @@ def cmd_simulate_clocked(args, nl) -> int:
 
 def cmd_simulate(args) -> int:
     from . import simulate
-    from .params import load_params
+    from .physics.params import load_params
     nl = _netlist(args)
     if nl.clock:
         return cmd_simulate_clocked(args, nl)
@@ -179,7 +179,7 @@ def cmd_simulate(args) -> int:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --clock/--cycles/--stimulus apply to clocked designs")
     values = _parse_sets(args.set)
     if args.backend == "logic":
-        from .logic import pack_inputs
+        from .backends.logic import pack_inputs
         pack_inputs(nl, values)
         res = simulate.run_logic(nl, values)
     else:
@@ -204,9 +204,11 @@ def cmd_simulate(args) -> int:
 
 # --- SPICE --------------------------------------------------------------------------
 def cmd_emit(args) -> int:
-    from . import network, simulate, spice
-    from .logic import pack_inputs
-    from .params import load_params
+    from . import simulate
+    from .physics import network
+    from .spice import carrier as spice
+    from .backends.logic import pack_inputs
+    from .physics.params import load_params
     p = load_params(args.params)
     nl = _netlist(args)
     values = _parse_sets(args.set)
@@ -229,12 +231,12 @@ def cmd_emit(args) -> int:
 
 
 def _spice_options(args):
-    from .spice import SpiceOptions
+    from .spice.carrier import SpiceOptions
     return _options(args, SpiceOptions())
 
 
 def _envelope_spice_options(args):
-    from .spice_envelope import EnvelopeSpiceOptions
+    from .spice.envelope import EnvelopeSpiceOptions
     return _options(args, EnvelopeSpiceOptions())
 
 
@@ -250,8 +252,8 @@ def _options(args, o):
 
 
 def cmd_subckts(args) -> int:
-    from .params import load_params
-    from .spice import write_subckt_library
+    from .physics.params import load_params
+    from .spice.carrier import write_subckt_library
     paths = write_subckt_library(args.output, load_params(args.params))
     if args.json:
         _print_json({"files": [str(x) for x in paths]})

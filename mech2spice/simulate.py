@@ -11,10 +11,11 @@ import time
 
 import numpy as np
 
-from . import logic, network, rk4
+from .backends import logic, rk4
+from .physics import network
 from .errors import Mech2SpiceError
-from .params import GateParams, band_of, margin
-from .synth import Netlist
+from .physics.params import GateParams, band_of, margin
+from .synthesis.synth import Netlist
 
 BACKENDS = ("logic", "rk4", "envelope", "ngspice", "ngspice-envelope")
 ENVELOPE_STEP = 4.0      # periods, at most; reports/envelope.md: no accuracy cost on the adder (bound 15.1)
@@ -96,7 +97,7 @@ def _chunker(model, stim, backend: str, steps: int | None, probes: list[str]):
                                 stimulus=stim, state=state, start_period=start, probes=probes)
             return run, (run.x, run.v)
     else:
-        from . import envelope
+        from .physics import envelope
 
         step = 1.0 / steps if steps else envelope_step(model)
 
@@ -110,7 +111,7 @@ def _chunker(model, stim, backend: str, steps: int | None, probes: list[str]):
 def envelope_step(model) -> float:
     """The default envelope step: ENVELOPE_STEP whole periods, less where the model's stability bound
     is lower (and a divisor of CHUNK, so chunks end on step boundaries)."""
-    from . import envelope
+    from .physics import envelope
     bound = envelope.max_step_periods(model)
     for step in (4, 2, 1):
         if step <= min(ENVELOPE_STEP, bound):
@@ -144,8 +145,8 @@ def _settled(history: list[np.ndarray], done: int) -> bool:
 
 def _run_ngspice(model, stim, periods: int, options, probes: list[str]):
     """ngspice has no cheap restart, so it runs the whole period budget; batch members in parallel."""
-    from . import ngspice
-    from .spice import SpiceOptions
+    from .spice import runner as ngspice
+    from .spice.carrier import SpiceOptions
     run = ngspice.run_batch(model, periods, stimulus=stim, options=options or SpiceOptions())
     rows = [run.probe_names.index(n) for n in probes]
     return np.abs(run.amp[-1, rows, :]) / model.meta["params"].u_r, periods
@@ -154,7 +155,7 @@ def _run_ngspice(model, stim, periods: int, options, probes: list[str]):
 def _run_ngspice_envelope(model, stim, periods: int, options, probes: list[str]):
     """The envelope equations as an ngspice netlist (spice_envelope.py): the whole budget in one run per
     batch member, steps of whole drive periods."""
-    from .spice_envelope import EnvelopeSpiceOptions, run_envelope_spice
+    from .spice.envelope import EnvelopeSpiceOptions, run_envelope_spice
     run = run_envelope_spice(model, periods, stimulus=stim, opts=options or EnvelopeSpiceOptions())
     rows = [run.probe_names.index(n) for n in probes]
     return np.abs(run.amp[-1, rows, :]) / model.meta["params"].u_r, periods
@@ -257,14 +258,14 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
         run = rk4.integrate(model, total, steps_per_period=steps or rk4.DEFAULT_STEPS_PER_PERIOD, stimulus=stim,
                             probes=outs, progress=progress)
     elif backend == "envelope":
-        from . import envelope
+        from .physics import envelope
         run = envelope.integrate(model, total, step_periods=step, stimulus=stim, probes=outs,
                                  progress=progress, settle=settle)
     elif backend == "ngspice":
-        from . import ngspice
+        from .spice import runner as ngspice
         run = ngspice.run(model, total, stimulus=stim)
     elif backend == "ngspice-envelope":
-        from .spice_envelope import run_envelope_spice
+        from .spice.envelope import run_envelope_spice
         run = run_envelope_spice(model, total, stimulus=stim)
     else:
         raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")

@@ -20,13 +20,13 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from mech2spice import network, params
+from mech2spice.physics import network, params
 from mech2spice.cpu import figures, tm
 from mech2spice.cpu.asm import assemble_program
 from mech2spice.cpu.isa import CYCLES, OPCODES, SEMANTICS
 from mech2spice.cpu.iss import ISS
 from mech2spice.cpu.run import CPU_VERILOG, LogicCPU, cpu_netlist, load_program, make_memory, run_program
-from mech2spice.synth import synthesize
+from mech2spice.synthesis.synth import synthesize
 
 ROOT = Path(__file__).resolve().parent.parent
 PROGRAMS = ROOT / "programs"
@@ -105,7 +105,7 @@ def hardware() -> dict:
 def behavioural_check() -> dict:
     """Synthesize BEHAVIOURAL and check it against the ISS on the sieve, cycle by cycle (ports)."""
     import tempfile
-    from mech2spice.logic import ClockedLogic
+    from mech2spice.backends.logic import ClockedLogic
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "cpu_behavioural.v"
         path.write_text(BEHAVIOURAL)
@@ -267,7 +267,7 @@ def write_report(out: Path, skip_slow: bool) -> None:
         "zeroes pc and the phase bits and blocks writes; the logic backend starts with every flip-flop at 0, "
         "the state after `rst`. No tri-states, one clock, positive-edge flip-flops only.\n")
     p_, b_ = hw["plain"], hw["buffered"]
-    add(f"Measured with `mech2spice.synth.synthesize` (Yosys {hw['synth_s']:.1f} s) and "
+    add(f"Measured with `mech2spice.synthesis.synth.synthesize` (Yosys {hw['synth_s']:.1f} s) and "
         "`network.build(netlist, params.DEFAULT).counts()`; a latch is the paper's NOR latch, 4 gates plus "
         f"a delay line of 6, i.e. 10 gate blocks. Logic depth (longest NOR chain between latches/ports): "
         f"{hw['depth']}.\n")

@@ -8,8 +8,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from mech2spice.params import load_params
-from mech2spice.spice import write_subckt_library
+from mech2spice.physics.params import load_params
+from mech2spice.spice.carrier import write_subckt_library
 
 ROOT = Path(__file__).resolve().parent.parent
 

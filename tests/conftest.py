@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from mech2spice import nor, params
-from mech2spice.characterise import LEVEL, PAIRS, settle
+from mech2spice.physics import nor, params
+from mech2spice.experiments.characterise import LEVEL, PAIRS, settle
 
 
 @pytest.fixture(scope="session")

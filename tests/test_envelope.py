@@ -6,10 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from mech2spice import characterise, envelope, simulate
-from mech2spice import validate as V
+from mech2spice import simulate
+from mech2spice.experiments import characterise
+from mech2spice.physics import envelope
+from mech2spice.experiments import validate as V
 from mech2spice.errors import Mech2SpiceError
-from mech2spice.params import band_of
+from mech2spice.physics.params import band_of
 
 STEP = simulate.ENVELOPE_STEP          # what run_physical uses
 
@@ -101,9 +103,9 @@ def test_rk4_stability_region():
 
 def _chain_scene(p):
     """chain(3), input 1 at four levels (a batch), reversed at 2000 periods."""
-    from mech2spice import nor
-    from mech2spice.params import NOMINAL0, NOMINAL1
-    from mech2spice.stimulus import Stimulus
+    from mech2spice.physics import nor
+    from mech2spice.physics.params import NOMINAL0, NOMINAL1
+    from mech2spice.physics.stimulus import Stimulus
     m = nor.chain(p, 3)
     T = 2 * np.pi / p.omega
     d1 = m.meta["input_drives"][0]
@@ -116,7 +118,7 @@ def _chain_scene(p):
 def test_compiled_kernel_equals_numpy_path(p, step):
     """envelope_kernel.py computes the numpy path's equations (block-inverse solve vs SuperLU) to rounding,
     across a stimulus change, with sub-period and multi-period steps."""
-    from mech2spice import envelope_kernel
+    from mech2spice.backends import _envelope_kernel as envelope_kernel
     if not envelope_kernel.AVAILABLE:
         pytest.skip("numba missing")
     m, stim = _chain_scene(p)
@@ -146,7 +148,7 @@ def test_settle_skips_idle_time_within_tolerance(p):
 def test_step_bound_is_the_spectral_rate_with_margin(p):
     """max_step_periods comes from the largest |eigenvalue| of the linear part at rest (ARPACK, checked
     here against a dense eigensolve) times RATE_SAFETY, below the RK4 onset the report measures."""
-    from mech2spice import nor
+    from mech2spice.physics import nor
     m = nor.single_gate(p)
     env = envelope.Envelope.of(m)
     nf = env.fast.size

@@ -5,9 +5,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mech2spice import characterise, nor, params, rk4, steady
-from mech2spice.characterise import LEVEL, PAIRS, settle
-from mech2spice.envelope import Envelope
+from mech2spice.experiments import characterise
+from mech2spice.physics import nor, params, steady
+from mech2spice.backends import rk4
+from mech2spice.experiments.characterise import LEVEL, PAIRS, settle
+from mech2spice.physics.envelope import Envelope
 from mech2spice.errors import DivergenceError, Mech2SpiceError
 
 
@@ -69,7 +71,7 @@ def test_fanout(p, n_loads):
 
 def test_envelope_decay_matches_rk4_ringdown(p):
     """A lone Q=200 oscillator: envelope eigenvalue == RK4 ring-down rate (checks the averaging)."""
-    from mech2spice.model import MechModel
+    from mech2spice.physics.model import MechModel
     m = MechModel(omega=p.omega, meta={"params": p})
     k = p.m_g * p.omega ** 2
     c = p.damping(p.m_g, k, p.q_g)
@@ -98,7 +100,7 @@ def test_divergence_names_dof_and_time(p):
 def test_negative_stiffness_is_refused(p):
     with pytest.raises(Mech2SpiceError, match="k_g"):
         nor.single_gate(replace(p, k_g=-1.0))
-    from mech2spice.model import MechModel
+    from mech2spice.physics.model import MechModel
     with pytest.raises(Mech2SpiceError, match="total stiffness"):
         MechModel(omega=1.0).add_dof("x", 1.0, -2.0, 0.1)
 
@@ -114,8 +116,8 @@ def test_steady_state_finds_every_root(p):
 
 
 def test_envelope_model_matches_rk4_on_gate(p, gate_run):
-    from mech2spice import envelope
-    from mech2spice.characterise import truth_table_stimulus
+    from mech2spice.physics import envelope
+    from mech2spice.experiments.characterise import truth_table_stimulus
     _, amp = gate_run
     run = envelope.integrate(nor.single_gate(p), 2000, step_periods=1.0, stimulus=truth_table_stimulus(p))
     env_amp = np.abs(run.amp[-1, 0]) / p.u_r
@@ -123,7 +125,7 @@ def test_envelope_model_matches_rk4_on_gate(p, gate_run):
 
 
 def test_envelope_refuses_unstable_step(p):
-    from mech2spice import envelope
+    from mech2spice.physics import envelope
     m = nor.single_gate(p)
     limit = envelope.max_step_periods(m)
     with pytest.raises(Mech2SpiceError, match="stability limit"):

@@ -6,7 +6,9 @@ import sys
 
 import pytest
 
-from mech2spice import characterise, simulate, synth
+from mech2spice import simulate
+from mech2spice.experiments import characterise
+from mech2spice.synthesis import synth
 
 COUNTER_STEPS = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, "cycles": 2},
                  {"set": {"en": 0}, "cycles": 1}, {"set": {"en": 1}, "cycles": 1}]

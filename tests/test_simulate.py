@@ -6,7 +6,10 @@ import sys
 import numpy as np
 import pytest
 
-from mech2spice import logic, network, simulate, synth
+from mech2spice import simulate
+from mech2spice.backends import logic
+from mech2spice.physics import network
+from mech2spice.synthesis import synth
 
 
 def cli(*args):

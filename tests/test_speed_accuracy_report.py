@@ -46,7 +46,7 @@ def test_no_markers_no_block(bench, tmp_path, monkeypatch):
 def test_spice_md_states_the_form_choice_from_the_measurement(tmp_path):
     import json
 
-    from mech2spice.report_spice import UNMEASURED_WHY, why_this_form
+    from mech2spice.reports.spice import UNMEASURED_WHY, why_this_form
     assert why_this_form(tmp_path / "missing.json") == UNMEASURED_WHY
     row = {"amp_err_ur": 1e-4, "phase_err_deg": 0.05, "traj_err_ur": 0.006, "uniform_fraction": 1.0}
     forms = {"nor_gate": {"periods": 2500, "cases": 4, "options": {"method": "trap", "max_step_periods": 0.025,

@@ -15,12 +15,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mech2spice import ngspice, nor, rk4
+from mech2spice.spice import runner as ngspice
+from mech2spice.physics import nor
+from mech2spice.backends import rk4
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
-from mech2spice.model import MechModel
-from mech2spice.params import DEFAULT, NOMINAL0, NOMINAL1
-from mech2spice.spice import Namer, SpiceOptions, emit, emit_with_probes, subckt_library, write_subckt_library
-from mech2spice.stimulus import Stimulus
+from mech2spice.physics.model import MechModel
+from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
+from mech2spice.spice.carrier import Namer, SpiceOptions, emit, emit_with_probes, subckt_library, write_subckt_library
+from mech2spice.physics.stimulus import Stimulus
 
 ROOT = Path(__file__).resolve().parent.parent
 P = DEFAULT

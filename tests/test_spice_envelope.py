@@ -12,13 +12,15 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from mech2spice import envelope, nor, simulate, synth
-from mech2spice import spice_envelope as se
-from mech2spice import validate as V
+from mech2spice import simulate
+from mech2spice.physics import envelope, nor
+from mech2spice.synthesis import synth
+from mech2spice.spice import envelope as se
+from mech2spice.experiments import validate as V
 from mech2spice.errors import DivergenceError, Mech2SpiceError
-from mech2spice.model import MechModel
-from mech2spice.params import DEFAULT as P
-from mech2spice.stimulus import Stimulus
+from mech2spice.physics.model import MechModel
+from mech2spice.physics.params import DEFAULT as P
+from mech2spice.physics.stimulus import Stimulus
 
 needs_ngspice = pytest.mark.skipif(shutil.which("ngspice") is None, reason="ngspice not installed")
 pytestmark = [pytest.mark.ngspice, needs_ngspice]

@@ -9,11 +9,10 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from mech2spice import yosys
+from mech2spice.synthesis import yosys
 from mech2spice.errors import Mech2SpiceError, ToolMissingError
-from mech2spice.logic import evaluate, evaluate_batch, input_bits
-from mech2spice.synth import (Netlist, check_loops, clean, limit_fanout, propagate_constants,
-                              remove_dead_gates, synthesize)
+from mech2spice.backends.logic import evaluate, evaluate_batch, input_bits
+from mech2spice.synthesis.synth import Netlist, check_loops, clean, limit_fanout, propagate_constants, remove_dead_gates, synthesize
 
 VERILOG = Path(__file__).resolve().parent.parent / "verilog"
 
@@ -348,7 +347,7 @@ def test_system_yosys_is_used_only_when_asked(monkeypatch):
 
 def test_observe_prunes_to_the_cone_of_the_named_outputs():
     """--observe: only the named ports stay, every other gate goes, and the kept logic is unchanged."""
-    from mech2spice.synth import observe
+    from mech2spice.synthesis.synth import observe
     full = synthesize(VERILOG / "comparator4.v")
     eq = observe(full, ["eq"])
     assert list(eq.outputs) == ["eq"] and len(eq.gates()) < len(full.gates())

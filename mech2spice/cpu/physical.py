@@ -15,9 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import network, simulate
+from .. import simulate
+from ..physics import network
 from ..errors import Mech2SpiceError
-from ..params import DEFAULT, band_of
+from ..physics.params import DEFAULT, band_of
 from .iss import FETCH, LDNX, LOAD, REGISTERS, Cycle
 from .isa import mnemonic
 from .memory import Memory
@@ -29,7 +30,7 @@ SETTLE = 0.1            # u_R: end a pause once the channels settle (envelope.in
 class PhysicalCPU:
     def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float = ENVELOPE_STEP,
                  settle: float | None = SETTLE, power_up: bool = True):
-        from ..synth import synthesize
+        from ..synthesis.synth import synthesize
         from .run import CPU_VERILOG, register_map
         if backend not in ("envelope", "rk4"):
             raise Mech2SpiceError(f"no physical processor backend '{backend}'")
@@ -51,7 +52,8 @@ class PhysicalCPU:
 
     # --- integration -----------------------------------------------------------------------
     def _run(self, periods: int, values: dict, clock: int) -> dict[str, float]:
-        from .. import envelope, rk4
+        from ..physics import envelope
+        from ..backends import rk4
         stim = network.stimulus(self.model, self.netlist, self.p, [(0, [values])], clock=[[clock]])
         if self.backend == "envelope":
             run = envelope.integrate(self.model, periods, step_periods=self.step_periods, stimulus=stim,

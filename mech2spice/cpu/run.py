@@ -16,13 +16,14 @@ import time
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
+from .. import data
 from .asm import Program, assemble_program
 from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS, Cycle
 from .isa import mnemonic
 from .memory import Memory
 from .tm import Tape
 
-CPU_VERILOG = Path(__file__).resolve().parents[2] / "verilog" / "cpu.v"
+CPU_VERILOG = data.verilog("cpu.v")
 BACKENDS = ("iss", "logic", "envelope", "rk4")
 CHECKPOINT_FORMAT = "mech2spice-cpu-checkpoint"
 
@@ -61,7 +62,7 @@ def make_memory(program: Program) -> Memory:
 @functools.lru_cache(maxsize=2)
 def cpu_netlist(path: str = str(CPU_VERILOG)):
     """The synthesized processor (cached: Yosys takes a few seconds)."""
-    from ..synth import synthesize
+    from ..synthesis.synth import synthesize
     return synthesize(path)
 
 
@@ -84,7 +85,7 @@ class LogicCPU:
     """The synthesized NOR netlist of verilog/cpu.v clocked cycle by cycle against a Memory."""
 
     def __init__(self, memory: Memory, netlist=None):
-        from ..logic import ClockedLogic
+        from ..backends.logic import ClockedLogic
         self.netlist = netlist if netlist is not None else cpu_netlist()
         self.logic = ClockedLogic(self.netlist)
         self.regmap = register_map(self.netlist)

@@ -16,7 +16,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import Mech2SpiceError, ToolMissingError
+from ..errors import Mech2SpiceError, ToolMissingError
 
 #: Generous: the first yowasp call compiles the WebAssembly module (~30 s on 2 cores).
 TIMEOUT_S = 900

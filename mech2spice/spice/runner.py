@@ -23,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DivergenceError, Mech2SpiceError, ToolMissingError
-from .model import MechModel
-from .rk4 import Run, default_blowup
-from .spice import Namer, SpiceOptions, emit_with_probes
-from .stimulus import Stimulus
+from ..errors import DivergenceError, Mech2SpiceError, ToolMissingError
+from ..physics.model import MechModel
+from ..backends.rk4 import Run, default_blowup
+from .carrier import Namer, SpiceOptions, emit_with_probes
+from ..physics.stimulus import Stimulus
 
 MISSING = "ngspice not found: apt-get install -y ngspice libngspice0"
 

@@ -10,8 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from . import characterise  # noqa: E402
-from .params import BAND0, BAND1, GateParams  # noqa: E402
+from ..experiments import characterise  # noqa: E402
+from ..physics.params import BAND0, BAND1, GateParams  # noqa: E402
 
 MACHINE = f"{platform.machine()} {platform.system()}, {__import__('os').cpu_count()} cores"
 
@@ -114,7 +114,7 @@ def _tt_table(out: dict) -> str:
 
 def write_gate_report(out: dict, directory, log=lambda m: None) -> Path:
     """Write gate.md + figures for the default set `out`, re-running the printed set for comparison."""
-    from .params import PRINTED
+    from ..physics.params import PRINTED
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     p = GateParams(**out["params"])

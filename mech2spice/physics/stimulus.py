@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import Mech2SpiceError
+from ..errors import Mech2SpiceError
 from .model import MechModel
 
 

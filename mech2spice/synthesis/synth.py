@@ -30,7 +30,7 @@ from pathlib import Path
 
 import networkx as nx
 
-from .errors import Mech2SpiceError
+from ..errors import Mech2SpiceError
 from . import yosys
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants",

@@ -1,4 +1,4 @@
-"""The envelope equations (mech2spice.envelope) as an ngspice netlist, and a runner for it.
+"""The envelope equations (mech2spice.physics.envelope) as an ngspice netlist, and a runner for it.
 
 The carrier-level netlist (spice.py) must resolve every drive period (max step T/40); the envelope
 netlist carries only the slowly varying complex amplitudes, so ngspice can take steps of whole drive
@@ -54,11 +54,11 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from .envelope import Envelope
-from .errors import DivergenceError, Mech2SpiceError, ToolMissingError
-from .model import MechModel
-from .spice import Namer, comment_text, drive_schedule, num
-from .stimulus import Stimulus
+from ..physics.envelope import Envelope
+from ..errors import DivergenceError, Mech2SpiceError, ToolMissingError
+from ..physics.model import MechModel
+from .carrier import Namer, comment_text, drive_schedule, num
+from ..physics.stimulus import Stimulus
 
 METHODS = ("trap", "gear")
 DRIVE_RAMP_PERIODS = 0.25       # tanh time constant of a drive-amplitude change (see _EnvEmitter._source)
@@ -345,7 +345,7 @@ def run_one(model: MechModel, periods: int, stimulus: Stimulus | None = None,
             opts: EnvelopeSpiceOptions = EnvelopeSpiceOptions(), batch_index: int = 0,
             timeout: float | None = None, keep_netlist: str | Path | None = None):
     """One batch member under ngspice: (t_end (P,), amp (P, n_probes) complex, extra dict)."""
-    from .ngspice import run_netlist
+    from .runner import run_netlist
     t0 = time.perf_counter()
     text, vecs = emit_envelope_with_probes(model, stimulus, periods, opts, batch_index)
     t_emit = time.perf_counter() - t0
@@ -379,7 +379,7 @@ def run_envelope_spice(model: MechModel, periods: int, stimulus: Stimulus | None
                        timeout: float | None = None):
     """The envelope netlist of every batch member of `stimulus` under ngspice (one process each, up to
     `workers` at a time); an rk4.Run whose per-period amplitudes are the envelope at each period's end."""
-    from .rk4 import Run
+    from ..backends.rk4 import Run
     B = stimulus.batch if stimulus is not None else 1
     workers = max(1, min(B, workers or os.cpu_count() or 1))
     with ThreadPoolExecutor(workers) as pool:

@@ -13,7 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .rk4_kernel import AVAILABLE, njit
+from ._rk4_kernel import AVAILABLE, njit
 
 DONE, SETTLED, DIVERGED = 0, 1, 2
 FAST = {"contract", "reassoc", "nsz", "arcp"}     # not nnan/ninf: the divergence check must see NaN

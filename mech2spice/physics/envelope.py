@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .errors import Mech2SpiceError
+from ..errors import Mech2SpiceError
 from .model import MechModel
 
 
@@ -83,7 +83,7 @@ class Envelope:
     def kernel(self):
         """The compiled loop's arrays (envelope_kernel.Kernel), built once."""
         if getattr(self, "_kernel", None) is None:
-            from .envelope_kernel import Kernel
+            from ..backends._envelope_kernel import Kernel
             self._kernel = Kernel(self)
         return self._kernel
 
@@ -238,8 +238,8 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     the stretch is the settled state, held (idle-time skipping; the slow small ringing this ignores and
     its error are measured in reports/fidelity.md).  compiled=True uses the numba loop
     (envelope_kernel.py) where numba exists."""
-    from . import envelope_kernel
-    from .rk4 import Run, _progress
+    from ..backends import _envelope_kernel as envelope_kernel
+    from ..backends.rk4 import Run, _progress
     from .stimulus import Stimulus
     env = Envelope.of(model)
     T = 2 * np.pi / env.omega
@@ -312,7 +312,7 @@ def _probe_rows(model: MechModel, env: Envelope, names: list[str]) -> np.ndarray
 
 def _numpy_chunks(env, A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from):
     """The compiled loop's contract in numpy (used without numba); updates A, s, sd in place."""
-    from . import envelope_kernel
+    from ..backends import _envelope_kernel as envelope_kernel
     amp = np.zeros((nchunks * per, prow.size, A.shape[1]), complex)
     w, quiet = env.watch, 0
     lo = hi = np.abs(A[w])
@@ -347,7 +347,7 @@ def _step_layout(step_periods: float) -> tuple[int, int]:
 
 
 def _check(model: MechModel, env: Envelope, A: np.ndarray, t: float, T: float) -> None:
-    from .errors import DivergenceError
+    from ..errors import DivergenceError
     mag = np.abs(A).max(axis=1)
     bad = ~np.isfinite(mag) | (mag > 1e3 * model.meta["params"].u_r)
     if bad.any():

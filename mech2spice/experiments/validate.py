@@ -36,18 +36,21 @@ from pathlib import Path
 import numpy as np
 
 from . import characterise as ch
-from . import envelope, logic, network, nor, rk4, simulate, synth
-from .errors import Mech2SpiceError
-from .model import MechModel
-from .params import BAND0, BAND1, DEFAULT, NOMINAL0, NOMINAL1, GateParams, band_of
-from .stimulus import Stimulus
+from .. import simulate
+from ..physics import envelope, network, nor
+from ..backends import logic, rk4
+from ..synthesis import synth
+from ..errors import Mech2SpiceError
+from ..physics.model import MechModel
+from ..physics.params import BAND0, BAND1, DEFAULT, NOMINAL0, NOMINAL1, GateParams, band_of
+from ..physics.stimulus import Stimulus
+from .. import data
 
 AMP_TOL = 0.02          # u_R, settled amplitudes
 TIME_TOL = 0.10         # relative, threshold-crossing times
 AVG = 20                # periods averaged for a settled amplitude
 MID = ch.MID
 EDGES = (BAND0[0], BAND0[1], BAND1[0], BAND1[1])
-ROOT = Path(__file__).resolve().parent.parent
 
 
 # --- scenes ----------------------------------------------------------------------------------
@@ -125,7 +128,7 @@ def fanout_scene(p: GateParams = DEFAULT, n_loads: int = 2, periods: int = 2500)
 
 def adder_scene(p: GateParams = DEFAULT, hold: int | None = None) -> Scene:
     """report_adder's experiment: inputs 0 for `hold` periods, then each of the 16 (a, b)."""
-    nl = synth.synthesize(ROOT / "verilog" / "adder2.v")
+    nl = synth.synthesize(data.verilog("adder2.v"))
     m = network.build(nl, p)
     hold = hold or simulate.period_budget(nl)
     vals = [{"a": a, "b": b} for a in range(4) for b in range(4)]
@@ -313,7 +316,7 @@ def scene_table_row(name: str, cmp: dict) -> dict:
 
 def latch_scene(p: GateParams = DEFAULT, pulse: int = 800, settle: int = 2500) -> Scene:
     """The model and stimulus of characterise.latch_sequence (verilog/dff.v), as a Scene."""
-    nl = synth.synthesize(ROOT / "verilog" / "dff.v")
+    nl = synth.synthesize(data.verilog("dff.v"))
     m = network.build(nl, p)
     phases = [("power-up d=0", 0, 0, settle), ("store 1", 1, 1, pulse), ("settle", 1, 0, settle),
               ("hold, d=0", 0, 0, settle), ("hold, d=1", 1, 0, settle), ("hold, d=0", 0, 0, settle),

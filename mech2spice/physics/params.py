@@ -18,7 +18,7 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
-from .errors import Mech2SpiceError
+from ..errors import Mech2SpiceError
 
 # Logic bands, as fractions of F_R (inputs) or u_R (outputs).
 BAND0 = (0.365, 0.67)

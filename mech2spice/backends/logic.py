@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import Mech2SpiceError
-from .synth import Netlist
+from ..errors import Mech2SpiceError
+from ..synthesis.synth import Netlist
 
 __all__ = ["evaluate", "evaluate_bits", "evaluate_batch", "pack_inputs",
            "input_bits", "output_bits", "ClockedLogic"]

@@ -30,10 +30,10 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import Mech2SpiceError
-from .model import MechModel
-from .params import DEFAULT, GateParams
-from .stimulus import Stimulus
+from ..errors import Mech2SpiceError
+from ..physics.model import MechModel
+from ..physics.params import DEFAULT, GateParams
+from ..physics.stimulus import Stimulus
 
 METHODS = ("trap", "gear")
 
@@ -140,7 +140,7 @@ OSC = """\
 * m2s_osc: one mechanical oscillator, mobility analogy.
 *   V(v) = velocity, V(x) = displacement; forces are currents injected into v.
 *   m u'' = -k u - c u' + forces;  k, c are LOCAL values (may be negative).
-*   w scales both capacitors (trapezoidal prewarp, see mech2spice.spice); w = 1 for slow DOFs.
+*   w scales both capacitors (trapezoidal prewarp, see mech2spice.spice.carrier); w = 1 for slow DOFs.
 .subckt m2s_osc x v params: m=1 k=1 c=0 w={warp}
 Cm v 0 {m*w}
 Gc v 0 v 0 {c}

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import brentq, fsolve
 
 from .envelope import Envelope
-from .errors import Mech2SpiceError
+from ..errors import Mech2SpiceError
 
 STABLE_TOL = 1e-9     # growth rates (1/time) below this count as stable
 

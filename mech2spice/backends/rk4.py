@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import DivergenceError, Mech2SpiceError
-from .model import MechModel
-from .stimulus import Stimulus
+from ..errors import DivergenceError, Mech2SpiceError
+from ..physics.model import MechModel
+from ..physics.stimulus import Stimulus
 
 DEFAULT_STEPS_PER_PERIOD = 80   # 40 (the paper's 0.025 periods) leaves a 1e-3 u_R error; see reports/gate.md
 
@@ -143,7 +143,7 @@ KERNEL_MAX_SIZE = 3000
 
 
 def _kernel(model, N, h, sin_full, sin_half, demod, pidx, bound, wanted: bool, batch: int = 1):
-    from . import rk4_kernel
+    from . import _rk4_kernel as rk4_kernel
     if not (wanted and rk4_kernel.AVAILABLE) or model.n * batch > KERNEL_MAX_SIZE:
         return None
     return rk4_kernel.Kernel(model, N, h, sin_full, sin_half, demod, pidx, bound)

@@ -11,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 
 from . import nor
-from .errors import Mech2SpiceError
-from .logic import input_bits, output_bits, pack_inputs
+from ..errors import Mech2SpiceError
+from ..backends.logic import input_bits, output_bits, pack_inputs
 from .model import MechModel
 from .params import NOMINAL0, NOMINAL1, GateParams
 from .stimulus import Stimulus
-from .synth import Netlist
+from ..synthesis.synth import Netlist
 
 
 # Largest fan-out measured to work (characterise.fanout_test, RK4 80 steps/period, 2000 periods): 12 loads all
@@ -121,7 +121,7 @@ def stimulus(model: MechModel, netlist: Netlist, p: GateParams,
 
 def logic_depth(netlist: Netlist) -> int:
     """Longest chain of NOR gates from any input or latch to any output or latch."""
-    from .synth import combinational_view
+    from ..synthesis.synth import combinational_view
     g = combinational_view(netlist.graph)
     depth = {}
     for node in netlist.gates():

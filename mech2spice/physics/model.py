@@ -24,7 +24,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import Mech2SpiceError
+from ..errors import Mech2SpiceError
 
 
 @dataclass

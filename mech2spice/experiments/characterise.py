@@ -12,11 +12,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import nor, rk4, steady
-from .envelope import Envelope
-from .errors import DivergenceError
-from .params import BAND0, BAND1, NOMINAL0, NOMINAL1, GateParams, band_of, margin
-from .stimulus import Stimulus
+from ..physics import nor, steady
+from ..backends import rk4
+from ..physics.envelope import Envelope
+from ..errors import DivergenceError
+from ..physics.params import BAND0, BAND1, NOMINAL0, NOMINAL1, GateParams, band_of, margin
+from ..physics.stimulus import Stimulus
+from .. import data
 
 PAIRS = [(0, 0), (1, 0), (0, 1), (1, 1)]
 LEVEL = {0: NOMINAL0, 1: NOMINAL1}
@@ -342,8 +344,9 @@ def latch_sequence(p: GateParams, backend: str = "rk4", pulse: int = 800, settle
     Returns the output amplitude per period, the decoded output at the end of each phase, and when
     the output crossed the threshold relative to each storing pulse (it must wait out the pulse)."""
     from pathlib import Path
-    from . import envelope, network, synth
-    nl = synth.synthesize(Path(__file__).resolve().parent.parent / "verilog" / "dff.v")
+    from ..physics import envelope, network
+    from ..synthesis import synth
+    nl = synth.synthesize(data.verilog("dff.v"))
     model = network.build(nl, p)
     phases = [("power-up d=0", 0, 0, settle), ("store 1", 1, 1, pulse), ("settle", 1, 0, settle),
               ("hold, d=0", 0, 0, settle), ("hold, d=1", 1, 0, settle), ("hold, d=0", 0, 0, settle),

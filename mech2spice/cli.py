@@ -95,7 +95,7 @@ def cmd_synth(args) -> int:
     from .physics.params import load_params
     nl = _netlist(args)
     model = network.build(nl, load_params(args.params))
-    out = {"top": nl.top, "gates": len(model.meta["gates"]), "latches": len(nl.latches()), **model.counts(),
+    out = {"top": nl.top, "gates": len(model.design.gates), "latches": len(nl.latches()), **model.counts(),
            "inputs": nl.inputs, "outputs": nl.outputs, "clock": nl.clock, "logic_gates": len(nl.gates()),
            "logic_depth": network.logic_depth(nl)}
     if args.json:

@@ -83,7 +83,7 @@ def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], 
     results = []
     for b in range(len(values)):
         a = {n: float(amps[k, b]) for k, n in enumerate(names)}
-        res = {"backend": backend, **decode(netlist, a, model.meta["const_outputs"]),
+        res = {"backend": backend, **decode(netlist, a, model.design.const_outputs),
                "amplitudes": a, "periods": used, "wall_s": wall}
         results.append(res)
     return results
@@ -126,7 +126,7 @@ def _settle(chunk, model, budget: int, progress: bool, fixed: bool):
         n = min(CHUNK, budget - done)
         run, state = chunk(n, state, done)
         done += n
-        history.append(np.abs(run.amp[-1]) / model.meta["params"].u_r)
+        history.append(np.abs(run.amp[-1]) / model.params.u_r)
         bar.update(n)
         if not fixed and _settled(history, done):
             break
@@ -149,7 +149,7 @@ def _run_ngspice(model, stim, periods: int, options, probes: list[str]):
     from .spice.carrier import SpiceOptions
     run = ngspice.run_batch(model, periods, stimulus=stim, options=options or SpiceOptions())
     rows = [run.probe_names.index(n) for n in probes]
-    return np.abs(run.amp[-1, rows, :]) / model.meta["params"].u_r, periods
+    return np.abs(run.amp[-1, rows, :]) / model.params.u_r, periods
 
 
 def _run_ngspice_envelope(model, stim, periods: int, options, probes: list[str]):
@@ -158,7 +158,7 @@ def _run_ngspice_envelope(model, stim, periods: int, options, probes: list[str])
     from .spice.envelope import EnvelopeSpiceOptions, run_envelope_spice
     run = run_envelope_spice(model, periods, stimulus=stim, opts=options or EnvelopeSpiceOptions())
     rows = [run.probe_names.index(n) for n in probes]
-    return np.abs(run.amp[-1, rows, :]) / model.meta["params"].u_r, periods
+    return np.abs(run.amp[-1, rows, :]) / model.params.u_r, periods
 
 
 # --- clocked designs -------------------------------------------------------------------------
@@ -274,7 +274,7 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
     trace = []
     for k, t in enumerate(reads):
         a = {n: float(amp[t - 10:t, j].mean()) for j, n in enumerate(outs)}
-        trace.append({"cycle": k, **decode(netlist, a, model.meta["const_outputs"]), "amplitudes": a})
+        trace.append({"cycle": k, **decode(netlist, a, model.design.const_outputs), "amplitudes": a})
     extra = {"envelope_step": step, "settle": settle,
              "simulated_periods": total - run.extra["settled_periods"]} if backend == "envelope" else {}
     return {"backend": backend, **_final(trace), "amplitudes": trace[-1]["amplitudes"], "trace": trace,

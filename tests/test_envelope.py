@@ -108,7 +108,7 @@ def _chain_scene(p):
     from mech2spice.physics.stimulus import Stimulus
     m = nor.chain(p, 3)
     T = 2 * np.pi / p.omega
-    d1 = m.meta["input_drives"][0]
+    d1 = m.design.input_drives[0]
     lv = np.array([NOMINAL0, NOMINAL1, 0.45, 0.95]) * p.f_r
     stim = Stimulus.from_levels(m, [(0.0, {d: lv for d in d1}), (2000 * T, {d: lv[::-1] for d in d1})], batch=4)
     return m, stim

@@ -72,7 +72,7 @@ def test_fanout(p, n_loads):
 def test_envelope_decay_matches_rk4_ringdown(p):
     """A lone Q=200 oscillator: envelope eigenvalue == RK4 ring-down rate (checks the averaging)."""
     from mech2spice.physics.model import MechModel
-    m = MechModel(omega=p.omega, meta={"params": p})
+    m = MechModel(omega=p.omega, params=p)
     k = p.m_g * p.omega ** 2
     c = p.damping(p.m_g, k, p.q_g)
     m.add_dof("x", p.m_g, k, c)

@@ -42,7 +42,7 @@ def levels_stimulus(model: MechModel, pairs) -> Stimulus:
     """Constant input levels (fractions of F_R) on the model's two external inputs, one batch member each."""
     lv = np.array(pairs, float) * P.f_r
     changes = {}
-    for k, (ds, dd) in enumerate(model.meta["input_drives"]):
+    for k, (ds, dd) in enumerate(model.design.input_drives):
         changes[ds] = changes[dd] = lv[:, k]
     return Stimulus.from_levels(model, [(0.0, changes)], batch=len(pairs))
 
@@ -148,7 +148,7 @@ def test_gate_touched_inside_is_emitted_dof_by_dof():
     """A drive on a gate's insulator (a hidden node of m2s_nor2) makes the emitter fall back to
     m2s_osc per DOF, and the circuit still is the model."""
     m = nor.single_gate(P)
-    g = m.meta["gates"][0]
+    g = m.design.gates[0]
     m.add_drive(g.insulator, 1e-3, 0.0, "poke")
     m.add_probe("ins", g.insulator)
     body = emit(m, 10).split("* --- circuit")[1]
@@ -161,7 +161,7 @@ def test_gate_touched_inside_is_emitted_dof_by_dof():
 
 def test_internal_probes_use_hierarchical_names():
     m = nor.single_gate(P)
-    g = m.meta["gates"][0]
+    g = m.design.gates[0]
     m.add_probe("ins", g.insulator)
     m.add_probe("g1d", g.inputs[0][1])
     _, vecs = emit_with_probes(m, 5)
@@ -227,7 +227,7 @@ def test_without_prewarp_trap_is_detuned():
 def test_switching_stimulus_matches_rk4():
     """Piecewise-constant inputs (PWL amplitude sources): 00 -> 10 -> 11 -> 00 on one gate."""
     m = nor.single_gate(P)
-    (s1, d1), (s2, d2) = m.meta["input_drives"]
+    (s1, d1), (s2, d2) = m.design.input_drives
     T, lv = P.period, lambda x: x * P.f_r
     st = Stimulus.from_levels(m, [(0.0, {}), (300 * T, {s1: lv(NOMINAL1), d1: lv(NOMINAL1)}),
                                   (600 * T, {s2: lv(NOMINAL1), d2: lv(NOMINAL1)}),
@@ -335,7 +335,7 @@ def test_malformed_netlist_reports_ngspice_message():
 def test_divergence_names_the_dof():
     m = nor.single_gate(P)
     m.drives[0].amplitude = 1e6                          # the source drive, on the channel
-    m._invalidate()
+    m.invalidate()
     with pytest.raises(DivergenceError) as exc:
         ngspice.run(m, 20)
     assert exc.value.dof == "g0.C" and 0 < exc.value.t < 20 * P.period
@@ -343,7 +343,7 @@ def test_divergence_names_the_dof():
 
 def test_divergence_from_data_bound():
     """A linear oscillator driven far beyond the bound (1e3 u_R) is caught from the saved samples."""
-    m = MechModel(omega=1.0, meta={"params": P})
+    m = MechModel(omega=1.0, params=P)
     i = m.add_dof("big", 1.0, 1.0, 0.01)
     m.add_drive(i, 10.0)
     m.add_probe("big", i)

@@ -70,7 +70,7 @@ def test_dashpot_coupled_dofs_match_closed_form():
 def test_netlist_names_sanitised_and_ngspice_exits_0(tmp_path):
     """Odd DOF and drive names, a slow DOF with a quadratic coupling and a scheduled drive: every node
     is [a-z0-9_], and ngspice runs the netlist standalone (exit 0, no error line)."""
-    m = MechModel(omega=P.omega, meta={"params": P})
+    m = MechModel(omega=P.omega, params=P)
     f = m.add_dof("Gate 1.C/out", P.m_c, P.k_c, P.c_c)
     g = m.add_dof("2nd gate (in)", P.m_g, P.k_g, P.c_g)
     s = m.add_dof("Ins-ulator#1", P.m_i, P.k_i, P.c_i, slow=True)

@@ -56,7 +56,7 @@ def force_matrix(model: MechModel) -> sp.csr_matrix:
 
 
 def default_blowup(model: MechModel) -> float:
-    p = model.meta.get("params")
+    p = model.params
     return 1e3 * (p.u_r if p is not None else 1.0)
 
 

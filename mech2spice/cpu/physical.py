@@ -37,7 +37,7 @@ class PhysicalCPU:
         self.netlist = synthesize(CPU_VERILOG, max_fanout=network.MAX_FANOUT)
         self.model = network.build(self.netlist, p)
         self.regmap = register_map(self.netlist)
-        for q, block in self.model.meta["latch_outputs"].items():
+        for q, block in self.model.design.latch_outputs.items():
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
         t = simulate.clock_timing(self.netlist)

@@ -40,7 +40,7 @@ def _input_amps(model, drives_of_inputs, levels: np.ndarray, p: GateParams) -> d
 def settle(model, p: GateParams, levels: np.ndarray, periods: int, steps: int = rk4.DEFAULT_STEPS_PER_PERIOD,
            avg: int = 20, **kw):
     """RK4 from rest with constant input levels (B, 2); returns (run, amplitude per probe (n_probes, B) in u_R)."""
-    st = Stimulus.from_levels(model, [(0.0, _input_amps(model, model.meta["input_drives"], levels, p))],
+    st = Stimulus.from_levels(model, [(0.0, _input_amps(model, model.design.input_drives, levels, p))],
                               batch=levels.shape[0])
     run = rk4.integrate(model, periods, steps_per_period=steps, stimulus=st, **kw)
     return run, np.abs(run.amp[-avg:]).mean(axis=0) / p.u_r
@@ -53,7 +53,7 @@ def gate_forcing(p: GateParams, x1: np.ndarray, x2: np.ndarray) -> tuple[Envelop
     env = Envelope(m)
     levels = np.stack([np.atleast_1d(x1), np.atleast_1d(x2)], axis=1)
     amps = np.repeat(m.arrays["drive_amp"][:, None], levels.shape[0], axis=1)
-    for d, a in _input_amps(m, m.meta["input_drives"], levels, p).items():
+    for d, a in _input_amps(m, m.design.input_drives, levels, p).items():
         amps[d] = a
     return env, env.forcing(amps), int(np.flatnonzero(env.fast == m.probes["g0"])[0])
 
@@ -141,7 +141,7 @@ def transient(p: GateParams, sequence=((0, 0), (1, 0), (0, 0), (0, 1), (1, 1), (
               hold: int = 1200) -> dict:
     """Single gate under changing inputs; also tests history independence (revisits give the same output)."""
     model = nor.single_gate(p)
-    segs = [(k * hold * p.period, _input_amps(model, model.meta["input_drives"],
+    segs = [(k * hold * p.period, _input_amps(model, model.design.input_drives,
                                                np.array([[LEVEL[a], LEVEL[b]]]), p))
             for k, (a, b) in enumerate(sequence)]
     run = rk4.integrate(model, hold * len(sequence), stimulus=Stimulus.from_levels(model, segs))
@@ -165,7 +165,7 @@ def cascade(p: GateParams, hold: int = 1500) -> dict:
     lv0 = np.array([[NOMINAL0, NOMINAL0]] + [list(e) for e in edges])
     lv1 = lv0.copy()
     lv1[0] = [NOMINAL1, NOMINAL0]
-    drives = model.meta["input_drives"]
+    drives = model.design.input_drives
     segs = [(0.0, _input_amps(model, drives, lv0, p)), (hold * p.period, _input_amps(model, drives, lv1, p)),
             (2 * hold * p.period, _input_amps(model, drives, lv0, p))]
     run = rk4.integrate(model, 3 * hold, stimulus=Stimulus.from_levels(model, segs, batch=B))
@@ -200,8 +200,8 @@ def fanout_test(p: GateParams, n_loads: int, periods: int = 2500) -> dict:
     cases = [(0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1)]      # (drv x1, drv x2, load x2)
     model = nor.fanout(p, n_loads)
     lv = np.array([[LEVEL[a], LEVEL[b]] for a, b, _ in cases])
-    amps = _input_amps(model, model.meta["input_drives"], lv, p)
-    for pair in model.meta["load_drives"]:
+    amps = _input_amps(model, model.design.input_drives, lv, p)
+    for pair in model.design.load_drives:
         amps.update(_input_amps(model, [pair], np.array([[LEVEL[c]] for *_, c in cases]), p))
     run = rk4.integrate(model, periods, stimulus=Stimulus.from_levels(model, [(0.0, amps)], batch=len(cases)))
     amp = np.abs(run.amp[-20:]).mean(axis=0) / p.u_r        # (1 + n_loads, B)
@@ -235,10 +235,10 @@ def phase_insensitivity(p: GateParams, periods: int = 2500) -> dict:
     worst = 0.0
     for th1, th2 in [(2.1, 0.7), (4.0, 5.5)]:
         m = nor.single_gate(p)
-        for (ds, dd), th in zip(m.meta["input_drives"], (th1, th2)):
+        for (ds, dd), th in zip(m.design.input_drives, (th1, th2)):
             m.drives[ds].phase += th
             m.drives[dd].phase += th
-        m._invalidate()
+        m.invalidate()
         worst = max(worst, float(np.abs(settle(m, p, levels, periods)[1][0] - base).max()))
     return {"max_output_change": worst, "phases_tested": [[2.1, 0.7], [4.0, 5.5]]}
 
@@ -306,7 +306,7 @@ def characterise(p: GateParams, quick: bool = False, log=lambda msg: None) -> di
 def truth_table_stimulus(p: GateParams) -> Stimulus:
     m = nor.single_gate(p)
     levels = np.array([[LEVEL[a], LEVEL[b]] for a, b in PAIRS])
-    return Stimulus.from_levels(m, [(0.0, _input_amps(m, m.meta["input_drives"], levels, p))], batch=4)
+    return Stimulus.from_levels(m, [(0.0, _input_amps(m, m.design.input_drives, levels, p))], batch=4)
 
 
 def requirements(out, vm, fo, ph, cas, tr, impurity) -> dict:

@@ -74,7 +74,7 @@ def _levels_stimulus(model: MechModel, p: GateParams, segments: list[tuple[int, 
     B = segments[0][1].shape[0]
     segs = []
     for t, lv in segments:
-        amps = ch._input_amps(model, model.meta["input_drives"], lv, p)
+        amps = ch._input_amps(model, model.design.input_drives, lv, p)
         if extra:
             amps.update(extra)
         segs.append((t * p.period, amps))
@@ -118,8 +118,8 @@ def fanout_scene(p: GateParams = DEFAULT, n_loads: int = 2, periods: int = 2500)
     cases = [(0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1)]
     m = nor.fanout(p, n_loads)
     lv = np.array([[ch.LEVEL[a], ch.LEVEL[b]] for a, b, _ in cases])
-    amps = ch._input_amps(m, m.meta["input_drives"], lv, p)
-    for pair in m.meta["load_drives"]:
+    amps = ch._input_amps(m, m.design.input_drives, lv, p)
+    for pair in m.design.load_drives:
         amps.update(ch._input_amps(m, [pair], np.array([[ch.LEVEL[c]] for *_, c in cases]), p))
     st = Stimulus.from_levels(m, [(0.0, amps)], batch=len(cases))
     return Scene(f"fanout{n_loads}", m, st, periods, list(m.probes), [f"drv {a}{b}, loads x2={c}" for a, b, c in cases],
@@ -145,7 +145,7 @@ def run(scene: Scene, backend: str, step: float | None = None, env: envelope.Env
 
     backend 'rk4' (step = steps per period, default 80) or 'envelope' (step in periods, default
     simulate.ENVELOPE_STEP); `env` runs a variant Envelope (this module's classes) instead."""
-    p = scene.model.meta["params"]
+    p = scene.model.params
     t0 = time.perf_counter()
     if backend == "rk4":
         steps = int(step or rk4.DEFAULT_STEPS_PER_PERIOD)
@@ -178,7 +178,7 @@ def integrate_free(env: envelope.Envelope, scene: Scene, step: float, blowup: fl
     """envelope.integrate's scheme with any Envelope (sub)class and any step (periods, no stability
     check); forcing is taken at each step's start.  Returns (|A| per step in u_R, step-end times in
     periods).  Stops early (amplitudes NaN from there on) once |A| exceeds `blowup` u_R."""
-    p = scene.model.meta["params"]
+    p = scene.model.params
     T = 2 * np.pi / env.omega
     h = step * T
     nsteps = int(math.ceil(scene.periods / step - 1e-9))

@@ -58,7 +58,7 @@ class Envelope:
             raise Mech2SpiceError("the envelope model cannot drive a slow DOF at omega")
         # settle detection watches the channels (the logic signals): gate oscillators ring in slow,
         # lightly damped gate-insulator modes that change no logic level (reports/envelope.md)
-        gates = model.meta.get("gates")
+        gates = model.design.gates
         self.watch = pos_f[[g.channel for g in gates]] if gates else np.arange(nf)
         self.Dmap = sp.csr_matrix((-1j * np.exp(1j * a["drive_phase"]),
                                    (pos_f[dof], np.arange(dof.size))), shape=(nf, dof.size))
@@ -75,9 +75,9 @@ class Envelope:
     def of(cls, model: MechModel) -> "Envelope":
         """The model's envelope operator, built once (it factorises a sparse matrix); the model drops it
         when edited."""
-        env = model.__dict__.get("_envelope")
+        env = model.derived.get("envelope")
         if env is None:
-            env = model.__dict__["_envelope"] = cls(model)
+            env = model.derived["envelope"] = cls(model)
         return env
 
     def kernel(self):
@@ -254,10 +254,10 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     names = list(probes or model.probes)
     prow = _probe_rows(model, env, names)
     amp = np.zeros((periods, len(names), B), complex)
-    tol = settle * model.meta["params"].u_r if settle else 0.0
+    tol = settle * model.params.u_r if settle else 0.0
     check = sub * max(1, int(round(SETTLE_WINDOW / per)))
     kern = env.kernel() if compiled and envelope_kernel.AVAILABLE else None
-    bound = 1e3 * model.meta["params"].u_r
+    bound = 1e3 * model.params.u_r
     settled_periods = 0
     bar = _progress(periods, progress)
     k, seg_now, since = 0, None, 0
@@ -349,7 +349,7 @@ def _step_layout(step_periods: float) -> tuple[int, int]:
 def _check(model: MechModel, env: Envelope, A: np.ndarray, t: float, T: float) -> None:
     from ..errors import DivergenceError
     mag = np.abs(A).max(axis=1)
-    bad = ~np.isfinite(mag) | (mag > 1e3 * model.meta["params"].u_r)
+    bad = ~np.isfinite(mag) | (mag > 1e3 * model.params.u_r)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise DivergenceError(model.names[env.fast[i]], t, T, float(mag[i]))

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import Mech2SpiceError
+from .params import GateParams
 
 
 @dataclass
@@ -33,6 +34,21 @@ class Drive:
     amplitude: float
     phase: float = 0.0
     name: str = ""
+
+
+@dataclass
+class Design:
+    """What a builder knows beyond the equations: which DOFs form which gate, which drives carry which input."""
+    gates: list = field(default_factory=list)              # every GateBlock (physics.nor), in build order
+    blocks: dict = field(default_factory=dict)             # netlist gate name -> GateBlock
+    input_drives: list = field(default_factory=list)       # small circuits: (spring, dashpot) drives per input
+    load_drives: list = field(default_factory=list)        # fan-out circuits: the loads' second-input drives
+    bit_drives: dict = field(default_factory=dict)         # input-port bit -> its drive indices
+    clock_drives: list = field(default_factory=list)       # drive indices of every latch's clock pairs
+    const_outputs: dict = field(default_factory=dict)      # output bit -> 0/1 when a constant drives it
+    latch_blocks: list = field(default_factory=list)       # the GateBlocks that make up latches
+    latch_outputs: dict = field(default_factory=dict)      # latch name -> GateBlock whose channel is Q
+    netlist: object = None                                 # synthesis.Netlist the model was built from
 
 
 @dataclass
@@ -48,7 +64,18 @@ class MechModel:
     quads: list[tuple[int, int, float]] = field(default_factory=list)   # (fast, slow, signed gamma)
     drives: list[Drive] = field(default_factory=list)
     probes: dict[str, int] = field(default_factory=dict)
-    meta: dict = field(default_factory=dict)              # builder's bookkeeping (gates, ports, ...)
+    params: GateParams | None = None                      # the nominal gate parameters the builder used
+    design: Design = field(default_factory=Design)
+
+    @property
+    def period(self) -> float:
+        """The drive period 2 pi / omega."""
+        return 2 * np.pi / self.omega
+
+    @property
+    def amplitude_unit(self) -> float:
+        """u_R, the unit output amplitudes are decoded in (1 for a model built without gate parameters)."""
+        return self.params.u_r if self.params is not None else 1.0
 
     # --- building -----------------------------------------------------------
     def add_dof(self, name: str, m: float, k: float, c: float, slow: bool = False) -> int:
@@ -64,16 +91,16 @@ class MechModel:
         self.c_total.append(c)
         self.slow.append(slow)
         self._index[name] = len(self.names) - 1
-        self._invalidate()
+        self.invalidate()
         return len(self.names) - 1
 
     def add_spring(self, i: int, j: int, k: float) -> None:
         self.springs.append((i, j, k))
-        self._invalidate()
+        self.invalidate()
 
     def add_dashpot(self, i: int, j: int, c: float) -> None:
         self.dashpots.append((i, j, c))
-        self._invalidate()
+        self.invalidate()
 
     def add_quad(self, fast: int, slow: int, gamma: float) -> None:
         if self.slow[fast] or not self.slow[slow]:
@@ -81,11 +108,11 @@ class MechModel:
                 f"quadratic coupling must join an oscillating DOF to a slow one, got "
                 f"'{self.names[fast]}' -> '{self.names[slow]}'")
         self.quads.append((fast, slow, gamma))
-        self._invalidate()
+        self.invalidate()
 
     def add_drive(self, dof: int, amplitude: float, phase: float = 0.0, name: str = "") -> int:
         self.drives.append(Drive(dof, amplitude, phase, name or self.names[dof]))
-        self._invalidate()
+        self.invalidate()
         return len(self.drives) - 1
 
     def add_probe(self, name: str, dof: int) -> None:
@@ -98,9 +125,15 @@ class MechModel:
     def _index(self) -> dict[str, int]:
         return {n: i for i, n in enumerate(self.names)}
 
-    def _invalidate(self) -> None:
-        for key in ("K", "C", "k_local", "c_local", "arrays", "_envelope"):
+    def invalidate(self) -> None:
+        """Forget everything derived from the elements: call after editing them in place."""
+        for key in ("K", "C", "k_local", "c_local", "arrays", "derived"):
             self.__dict__.pop(key, None)
+
+    @cached_property
+    def derived(self) -> dict:
+        """A cache for what other modules derive from the model (an engine's operator, say); emptied on edit."""
+        return {}
 
     # --- derived arrays -----------------------------------------------------
     @property

@@ -43,7 +43,7 @@ def build(netlist: Netlist, p: GateParams, delay_pairs: int = LATCH_DELAY_PAIRS)
         wiring.append((d_src, first.name, 0))
         clock_pairs += clocked
     bit_drives: dict[str, list[int]] = {b: [] for b in input_bits(netlist)}
-    every = {**blocks, **{b.name: b for b in m.meta.get("latch_blocks", [])}}
+    every = {**blocks, **{b.name: b for b in m.design.latch_blocks}}
     for src, sink, pin in wiring:
         pair = every[sink].inputs[pin]
         kind = g.nodes[src]["kind"]
@@ -65,8 +65,10 @@ def build(netlist: Netlist, p: GateParams, delay_pairs: int = LATCH_DELAY_PAIRS)
             m.add_probe(bit, outs[src].channel)
         else:
             const_out[bit] = 1 if src == "const1" else 0
-    m.meta.update(gates=list(every.values()), blocks=blocks, bit_drives=bit_drives, const_outputs=const_out,
-                  netlist=netlist, clock_drives=clock_drives, latch_outputs={q: outs[q] for q in netlist.latches()})
+    m.design.gates = list(every.values())
+    m.design.blocks, m.design.bit_drives, m.design.const_outputs = blocks, bit_drives, const_out
+    m.design.netlist, m.design.clock_drives = netlist, clock_drives
+    m.design.latch_outputs = {q: outs[q] for q in netlist.latches()}
     return m
 
 
@@ -88,7 +90,7 @@ def _add_latch(m: MechModel, p: GateParams, q: str, delay_pairs: int):
     for name, block in mk.items():                 # every free pin 1 is a constant '0'
         if name == "ne" or name.startswith("d"):
             nor.drive_pair(m, p, block.inputs[1], NOMINAL0, f"zero.{block.name}")
-    m.meta.setdefault("latch_blocks", []).extend(mk.values())
+    m.design.latch_blocks.extend(mk.values())
     return mk["a"], last, [mk["ne"].inputs[0], mk["b"].inputs[1]]
 
 
@@ -97,7 +99,7 @@ def drive_levels(model: MechModel, netlist: Netlist, p: GateParams, values: list
     """{drive index: (B,) amplitude} for input-port values, one dict per batch member."""
     out: dict[int, np.ndarray] = {}
     bits = [pack_inputs(netlist, v) for v in values]
-    for bit, drives in model.meta["bit_drives"].items():
+    for bit, drives in model.design.bit_drives.items():
         amp = np.array([p.force(NOMINAL1 if b.get(bit, 0) else NOMINAL0) for b in bits])
         for d in drives:
             out[d] = amp
@@ -112,9 +114,9 @@ def stimulus(model: MechModel, netlist: Netlist, p: GateParams,
     levels = []
     for k, (t, vals) in enumerate(segments):
         lv = drive_levels(model, netlist, p, vals)
-        if model.meta.get("clock_drives"):
+        if model.design.clock_drives:
             ck = np.array([p.force(NOMINAL1 if c else NOMINAL0) for c in (clock[k] if clock else [0] * batch)])
-            lv.update({d: ck for d in model.meta["clock_drives"]})
+            lv.update({d: ck for d in model.design.clock_drives})
         levels.append((t * p.period, lv))
     return Stimulus.from_levels(model, levels, batch=batch)
 

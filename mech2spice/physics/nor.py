@@ -30,7 +30,7 @@ class GateBlock:
 
 def new_model(p: GateParams) -> MechModel:
     p.validate()
-    return MechModel(omega=p.omega, meta={"params": p})
+    return MechModel(omega=p.omega, params=p)
 
 
 def add_nor(model: MechModel, p: GateParams, name: str) -> GateBlock:
@@ -69,9 +69,9 @@ def drive_pair(model: MechModel, p: GateParams, pair: tuple[int, int], level: fl
 def single_gate(p: GateParams, x1: float = NOMINAL0, x2: float = NOMINAL0) -> MechModel:
     m = new_model(p)
     g = add_nor(m, p, "g0")
-    m.meta["input_drives"] = [drive_pair(m, p, g.inputs[0], x1, "x1"),
+    m.design.input_drives = [drive_pair(m, p, g.inputs[0], x1, "x1"),
                               drive_pair(m, p, g.inputs[1], x2, "x2")]
-    m.meta["gates"] = [g]
+    m.design.gates = [g]
     return m
 
 
@@ -79,12 +79,12 @@ def chain(p: GateParams, n: int = 3, x1: float = NOMINAL0, x2: float = NOMINAL0)
     """((x1 NOR x2) NOR 0) NOR 0 ...: n gates, each later gate's second input a constant '0'."""
     m = new_model(p)
     gates = [add_nor(m, p, f"g{k}") for k in range(n)]
-    m.meta["input_drives"] = [drive_pair(m, p, gates[0].inputs[0], x1, "x1"),
+    m.design.input_drives = [drive_pair(m, p, gates[0].inputs[0], x1, "x1"),
                               drive_pair(m, p, gates[0].inputs[1], x2, "x2")]
     for k in range(1, n):
         connect(m, p, gates[k - 1].channel, gates[k].inputs[0])
         drive_pair(m, p, gates[k].inputs[1], NOMINAL0, f"zero{k}")
-    m.meta["gates"] = gates
+    m.design.gates = gates
     return m
 
 
@@ -93,14 +93,14 @@ def fanout(p: GateParams, n_loads: int, x1: float = NOMINAL0, x2: float = NOMINA
     """One driver gate whose channel feeds input 1 of n_loads gates (their input 2 at load_x2)."""
     m = new_model(p)
     drv = add_nor(m, p, "drv")
-    m.meta["input_drives"] = [drive_pair(m, p, drv.inputs[0], x1, "x1"),
+    m.design.input_drives = [drive_pair(m, p, drv.inputs[0], x1, "x1"),
                               drive_pair(m, p, drv.inputs[1], x2, "x2")]
     loads = []
-    m.meta["load_drives"] = []
+    m.design.load_drives = []
     for k in range(n_loads):
         g = add_nor(m, p, f"load{k}")
         connect(m, p, drv.channel, g.inputs[0])
-        m.meta["load_drives"].append(drive_pair(m, p, g.inputs[1], load_x2, f"lx{k}"))
+        m.design.load_drives.append(drive_pair(m, p, g.inputs[1], load_x2, f"lx{k}"))
         loads.append(g)
-    m.meta["gates"] = [drv, *loads]
+    m.design.gates = [drv, *loads]
     return m

@@ -20,7 +20,7 @@ delays) run slower by omega h / sin(omega h), +0.4 % at T/40.  Slow DOFs (insula
 See reports/speed_accuracy.md for the measurements behind the defaults.
 
 Emission is hierarchical: the library (``subckt_library``) defines m2s_osc, m2s_nor2, m2s_couple,
-m2s_drive and m2s_pairdrive; gate blocks of ``model.meta["gates"]`` become m2s_nor2 instances, every
+m2s_drive and m2s_pairdrive; gate blocks of ``model.design.gates`` become m2s_nor2 instances, every
 other DOF an m2s_osc instance, so any MechModel can be emitted.
 """
 from __future__ import annotations
@@ -300,7 +300,7 @@ def _gate_is_closed(model: MechModel, inc: _Incidence, g, own_quads: set[int]) -
 
 def _plan(model: MechModel, inc: _Incidence) -> _Plan:
     plan = _Plan([], {}, set(), set(), set(), set(), set())
-    for g in model.meta.get("gates", []):
+    for g in model.design.gates:
         q = _nor_quads(model, inc, g)
         dofs = {g.channel, g.insulator, *[d for pair in g.inputs for d in pair]}
         if q is None or len(dofs) != 6 or dofs & plan.in_gate or not _gate_is_closed(model, inc, g, set(q.values())):
@@ -315,7 +315,7 @@ class _Emitter:
     def __init__(self, model: MechModel, periods: int, stimulus: Stimulus | None, batch_index: int,
                  options: SpiceOptions):
         self.m, self.periods, self.opt = model, int(periods), options
-        self.p: GateParams = model.meta.get("params", DEFAULT)
+        self.p: GateParams = model.params or DEFAULT
         self.T = 2 * math.pi / model.omega
         self.h = options.max_step_periods * self.T
         self.warp = options.warp(model.omega)

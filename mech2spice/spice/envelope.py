@@ -90,7 +90,7 @@ class EnvelopeSpiceOptions:
 
 
 def _amp_scale(model: MechModel) -> float:
-    p = model.meta.get("params")
+    p = model.params
     return float(p.u_r) if p is not None else 1.0
 
 

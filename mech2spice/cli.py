@@ -2,20 +2,25 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
+import signal
 import sys
 import time
 
 import numpy as np
 
+from . import inputs
 from .errors import Mech2SpiceError
 
 from .physics.network import MAX_FANOUT
 
 
 def _jsonable(o):
+    """numpy values and tuples as JSON; every key is kept (user port names may be anything)."""
     if isinstance(o, dict):
-        return {str(k): _jsonable(v) for k, v in o.items() if not str(k).startswith("_") and k != "run"}
+        return {str(k): _jsonable(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):
         return [_jsonable(v) for v in o]
     if isinstance(o, np.ndarray):
@@ -46,9 +51,12 @@ def cmd_gate(args) -> int:
     from .physics.params import load_params
     p = load_params(args.params)
     out = characterise.characterise(p, quick=args.quick, log=_log(args))
+    if out.get("diverged"):
+        raise Mech2SpiceError(f"parameters '{p.name}': the RK4 truth-table run failed: {out['diverged']}")
     if args.report:
         from .reports.gate import write_gate_report
         write_gate_report(out, args.report, log=_log(args))
+    out.pop("_figures", None)             # the report's plot data, not part of the result
     out["pass"] = bool(out.get("switches")) and out.get("min_margin", -1) > 0 and all(
         r["pass"] for r in out.get("requirements", {}).values())
     if args.json:
@@ -60,9 +68,6 @@ def cmd_gate(args) -> int:
 
 def _print_gate(out: dict) -> None:
     print(f"parameters: {out['params']['name']}   omega = {out['params']['omega']:.6g} rad/s")
-    if out.get("diverged"):
-        print(f"RK4 diverged: {out['diverged']}")
-        return
     print("truth table (RK4, amplitudes in u_R):")
     for r in out["truth_table"]:
         logic = "invalid" if r["logic"] is None else r["logic"]
@@ -110,35 +115,18 @@ def cmd_synth(args) -> int:
 
 
 def _parse_sets(items: list[str]) -> dict[str, int]:
-    values = {}
-    for item in items or []:
-        port, sep, val = item.partition("=")
-        if not sep or not port:
-            raise Mech2SpiceError(f"--set expects PORT=INT, got '{item}'")
-        try:
-            values[port.strip()] = int(val, 0)
-        except ValueError:
-            raise Mech2SpiceError(f"--set {port}: '{val}' is not an integer") from None
-    return values
+    return inputs.parse_sets(items)
 
 
 def _clocked_steps(args, nl) -> list[dict]:
+    """The clocked stimulus from --stimulus or --cycles, checked (shape, types, the cycle cap)."""
+    if args.stimulus and args.cycles:
+        raise Mech2SpiceError("give --cycles or --stimulus, not both")
     if args.stimulus:
-        try:
-            with open(args.stimulus) as f:
-                steps = json.load(f)
-        except OSError as e:
-            raise Mech2SpiceError(f"cannot read stimulus file {args.stimulus}: {e.strerror}") from None
-        except json.JSONDecodeError as e:
-            raise Mech2SpiceError(f"stimulus file {args.stimulus} is not valid JSON: {e.msg} (line {e.lineno})") \
-                from None
-        if not isinstance(steps, list):
-            raise Mech2SpiceError("the stimulus file must hold a list of steps")
-        base = _parse_sets(args.set)
-        return [{"set": {**base, **s.get("set", {})}, "cycles": s.get("cycles", 1)} if isinstance(s, dict) else s
-                for s in steps]
+        return inputs.stimulus_steps(args.stimulus, _parse_sets(args.set), args.backend)
     if not args.cycles:
         raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N or --stimulus FILE.json")
+    inputs.check_cycles(args.cycles, args.backend)
     return [{"set": _parse_sets(args.set), "cycles": args.cycles}]
 
 
@@ -219,8 +207,7 @@ def cmd_emit(args) -> int:
     opts = _spice_options(args)
     text = spice.emit(model, periods, stim, options=opts,
                       title=f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}")
-    with open(args.output, "w", encoding="ascii") as f:
-        f.write(text)
+    inputs.write_text(args.output, text, encoding="ascii")    # the path was checked before the work
     info = {"netlist": args.output, "periods": periods, "oscillators": model.n, "probes": list(model.probes),
             "options": _jsonable(opts.__dict__)}
     if args.json:
@@ -264,8 +251,19 @@ def cmd_subckts(args) -> int:
 
 
 # --- parser --------------------------------------------------------------------
+class _Parser(argparse.ArgumentParser):
+    """argparse with usage errors as one line (exit 2), like every other error."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+def _ngspice_timeout() -> float:
+    return inputs.NGSPICE_TIMEOUT_S
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = _Parser(
         prog="mech2spice",
         description="Verilog -> networks of nonlinear mechanical NOR gates -> RK4 / envelope / ngspice.")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -283,7 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("design", help="Verilog file")
         sp.add_argument("--top", help="top module (default: the only/auto-detected top)")
         sp.add_argument("--params", default="default", help="gate parameters: default, printed or a JSON file")
-        sp.add_argument("--max-fanout", type=int, default=MAX_FANOUT,
+        sp.add_argument("--max-fanout", type=inputs.integer(2, 10 ** 6), default=MAX_FANOUT,
                         help="insert NOR-pair buffers so no gate drives more loads (default 12, the largest "
                              "fan-out measured to work)")
         sp.add_argument("--observe", action="append", metavar="PORT",
@@ -314,16 +312,24 @@ def build_parser() -> argparse.ArgumentParser:
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
     s.add_argument("--backend", default="rk4", choices=["logic", "rk4", "envelope", "ngspice", "ngspice-envelope"])
-    s.add_argument("--periods", type=int, default=None, help="simulate exactly this many drive periods")
-    s.add_argument("--steps", type=int, default=None,
+    s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
+                   help="simulate exactly this many drive periods (default: until the outputs settle)")
+    s.add_argument("--steps", type=inputs.integer(1, inputs.MAX_STEPS), default=None,
                    help="steps per drive period (rk4 default 80; envelope default: one step per 2 periods)")
     s.add_argument("--method", choices=["trap", "gear"], help="ngspice integration method (default trap)")
-    s.add_argument("--max-step", type=float, help="ngspice max step in drive periods (default 1/40; ngspice-envelope: 2)")
+    s.add_argument("--max-step", type=inputs.number(0), help="ngspice max step in drive periods (default 1/40; "
+                                                            "ngspice-envelope: 2)")
+    s.add_argument("--ngspice-timeout", type=inputs.number(0), default=None, metavar="SECONDS",
+                   help=f"stop an ngspice run after this long (default {_ngspice_timeout():g} s)")
     s.add_argument("--clock", metavar="PORT", help="the clock port (default: the one clocking the flip-flops)")
-    s.add_argument("--cycles", type=int, help="clock cycles to run with the --set inputs held")
+    s.add_argument("--cycles", type=inputs.integer(1, inputs.MAX_CYCLES),
+                   help=f"clock cycles to run with the --set inputs held (at most {inputs.MAX_CYCLES:,} on the "
+                        f"logic backend, {inputs.MAX_PHYSICAL_CYCLES:,} on the others)")
     s.add_argument("--stimulus", metavar="FILE.json", help="clocked stimulus: a list of {set, cycles} steps")
-    s.add_argument("--pulse", type=int, help="enable pulse length in drive periods (default 800, measured)")
-    s.add_argument("--pause", type=int, help="settle time between pulses (default: from logic depth)")
+    s.add_argument("--pulse", type=inputs.integer(1, inputs.MAX_PERIODS),
+                   help="enable pulse length in drive periods (default 800, measured)")
+    s.add_argument("--pause", type=inputs.integer(1, inputs.MAX_PERIODS),
+                   help="settle time between pulses in drive periods (default: from logic depth)")
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("emit", help="write a self-contained ngspice netlist of a design",
@@ -333,9 +339,10 @@ def build_parser() -> argparse.ArgumentParser:
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
     s.add_argument("-o", "--output", required=True, help="netlist file to write")
-    s.add_argument("--periods", type=int, default=None, help="simulated drive periods (default: settle budget)")
+    s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
+                   help="simulated drive periods (default: settle budget)")
     s.add_argument("--method", choices=["trap", "gear"], help="integration method (default trap)")
-    s.add_argument("--max-step", type=float, help="max step in drive periods (default 1/40)")
+    s.add_argument("--max-step", type=inputs.number(0), help="max step in drive periods (default 1/40)")
     s.set_defaults(func=cmd_emit)
 
     from .cpu.cli import add_parser as add_cpu_parser
@@ -349,16 +356,107 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread so that `finally` blocks and context managers clean up."""
+
+
+BUG_EXIT = 3
+BUG_LINE = ("mech2spice: this is a bug, not a problem with your input: please report it with the command line "
+            "and the traceback above")
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run one command; the exit code is 0, 1 (a valid run with an invalid result), 2 (bad input or an
+    expected failure, one line on stderr), 130 (interrupted) or 3 (a bug, with a traceback)."""
     try:
-        return args.func(args)
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:            # --help (0) or a usage error, already printed as one line (2)
+        return e.code if isinstance(e.code, int) else 2
+    with _signals():
+        return _run(args)
+
+
+def _run(args) -> int:
+    """The one handler: every expected failure becomes one line on stderr and exit 2."""
+    try:
+        _precheck(args)
+        code = args.func(args)
+        sys.stdout.flush()             # a closed pipe shows here, not at interpreter exit
+        return code
     except Mech2SpiceError as e:
-        print(f"mech2spice: error: {e}", file=sys.stderr)
-        return 2
+        return _fail(str(e))
     except KeyboardInterrupt:
         print("mech2spice: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        _drop_stdout()
+        return _fail("the output pipe was closed before everything was written")
+    except OSError as e:
+        return _fail(f"{e.strerror or e}" + (f": {e.filename}" if e.filename else ""))
+    except MemoryError:
+        return _fail("out of memory: try a smaller design, fewer cycles or --observe")
+    except Exception:
+        import traceback
+        traceback.print_exc()
+        print(BUG_LINE, file=sys.stderr)
+        return BUG_EXIT
+
+
+def _fail(msg: str) -> int:
+    print("mech2spice: error: " + " ".join(msg.split()), file=sys.stderr)
+    return 2
+
+
+def _drop_stdout() -> None:
+    """Point stdout at /dev/null so Python's final flush does not fail again on the closed pipe."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):     # stdout is not a real file (e.g. under pytest)
+        pass
+
+
+@contextlib.contextmanager
+def _signals():
+    """SIGTERM and SIGINT stop ngspice children and raise in the main thread (so temp dirs go)."""
+    def stop(signum, frame):
+        runner = sys.modules.get("mech2spice.spice.runner")
+        if runner is not None:
+            runner.stop_all()
+        raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+    old = {}
+    try:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            old[sig] = signal.signal(sig, stop)
+    except ValueError:                 # not the main thread: leave signals to the caller
+        pass
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        runner = sys.modules.get("mech2spice.spice.runner")
+        if runner is not None:
+            runner.allow_runs()
+
+
+def _precheck(args) -> None:
+    """Check every user-supplied file before any work: parameters, stimulus, outputs (never an input)."""
+    from .physics.params import load_params
+    if getattr(args, "params", None) is not None:
+        load_params(args.params)
+    design, command = getattr(args, "design", None), args.command
+    if command == "emit":
+        inputs.check_output_file(args.output, [design, args.params], "netlist file")
+    elif command == "subckts":
+        inputs.check_output_dir(args.output, "subckt directory")
+    elif command == "gate" and args.report:
+        inputs.check_output_dir(args.report, "report directory")
+    if getattr(args, "stimulus", None):
+        inputs.stimulus_steps(args.stimulus, {}, args.backend)
+    if getattr(args, "ngspice_timeout", None):
+        from .spice import runner
+        runner.set_timeout(args.ngspice_timeout)
 
 
 if __name__ == "__main__":

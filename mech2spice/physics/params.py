@@ -13,7 +13,6 @@ Two sets ship with the package:
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -105,20 +104,24 @@ PRESETS = {"default": DEFAULT, "printed": PRINTED}
 
 def load_params(spec: str | None) -> GateParams:
     """'default', 'printed', or a JSON file with any subset of the fields (rest from default)."""
+    from ..inputs import is_number, read_json, type_name
     if spec is None or spec in PRESETS:
         return PRESETS[spec or "default"]
-    path = Path(spec)
-    try:
-        data = json.loads(path.read_text())
-    except OSError as e:
-        raise Mech2SpiceError(f"cannot read parameter file {spec}: {e.strerror}") from None
-    except json.JSONDecodeError as e:
-        raise Mech2SpiceError(f"parameter file {spec} is not valid JSON: {e.msg} (line {e.lineno})") from None
+    data = read_json(spec, "parameter file")
+    if not isinstance(data, dict):
+        raise Mech2SpiceError(f"parameter file {spec} must hold a JSON object of fields "
+                              f"(e.g. {{\"q_c\": 150}}), not {type_name(data)}")
     known = {f.name for f in fields(GateParams)}
     unknown = set(data) - known
     if unknown:
-        raise Mech2SpiceError(f"parameter file {spec}: unknown field(s) {', '.join(sorted(unknown))}")
-    p = replace(DEFAULT, **{"name": path.stem, **data})
+        raise Mech2SpiceError(f"parameter file {spec}: unknown field(s) {', '.join(sorted(unknown))} "
+                              f"(known: {', '.join(sorted(known))})")
+    for name, value in data.items():
+        ok = isinstance(value, str) if name == "name" else is_number(value)
+        if not ok:
+            raise Mech2SpiceError(f"parameter file {spec}: {name} must be "
+                                  f"{'a string' if name == 'name' else 'a finite number'}, not {type_name(value)}")
+    p = replace(DEFAULT, **{"name": Path(spec).stem, **data})
     p.validate()
     return p
 

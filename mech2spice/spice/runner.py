@@ -17,6 +17,7 @@ import re
 import shutil
 import subprocess
 import tempfile
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -136,21 +137,74 @@ def _fail(model: MechModel, msg: str, names: list[str], data: np.ndarray, vecs: 
 
 
 # --- running ---------------------------------------------------------------------------
+_TIMEOUT_S: float | None = None          # set_timeout(); None: inputs.NGSPICE_TIMEOUT_S
+_LIVE: set[subprocess.Popen] = set()     # running ngspice processes (runs may be in worker threads)
+_LOCK = threading.Lock()
+_STOPPED = threading.Event()
+
+
+def set_timeout(seconds: float) -> None:
+    """The time limit of every later ngspice run that does not give its own."""
+    global _TIMEOUT_S
+    _TIMEOUT_S = float(seconds)
+
+
+def default_timeout() -> float:
+    from ..inputs import NGSPICE_TIMEOUT_S
+    return _TIMEOUT_S or NGSPICE_TIMEOUT_S
+
+
+def stop_all() -> None:
+    """Kill every running ngspice and refuse new ones (called from a signal handler; allow_runs undoes)."""
+    _STOPPED.set()
+    with _LOCK:
+        for proc in _LIVE:
+            proc.kill()
+
+
+def allow_runs() -> None:
+    _STOPPED.clear()
+
+
+def _ngspice(argv: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProcess:
+    """Run ngspice; on a timeout or any exception (an interrupt included) the process is killed first."""
+    if _STOPPED.is_set():
+        raise Mech2SpiceError("ngspice run cancelled: interrupted")
+    # -n: no user .spiceinit (one asking for ASCII raw files, or anything else, must not change runs)
+    proc = subprocess.Popen(argv, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL, env={**os.environ, "SPICE_ASCIIRAWFILE": "0"})
+    with _LOCK:
+        _LIVE.add(proc)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        raise Mech2SpiceError(f"ngspice did not finish within {timeout:g} s (simulate --ngspice-timeout "
+                              "sets the limit)") from None
+    except BaseException:
+        proc.kill()
+        proc.wait()
+        raise
+    finally:
+        with _LOCK:
+            _LIVE.discard(proc)
+    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
 def run_netlist(text: str, workdir=None, timeout: float | None = None) -> tuple[list[str], np.ndarray, str]:
-    """Run a netlist under `ngspice -b -r`; returns (vector names, data, log).  Raises
-    Mech2SpiceError with ngspice's message on an error (the data of a run cut short is in .data)."""
+    """Run a netlist under `ngspice -b -r` (timeout default: default_timeout()); returns (vector names,
+    data, log).  Raises Mech2SpiceError with ngspice's message on an error (the data of a run cut short is
+    in .data).  The temporary directory goes on any exit, an interrupt included."""
     exe = find_ngspice()
+    timeout = timeout or default_timeout()
     with tempfile.TemporaryDirectory(prefix="m2s_ng_") as tmp:
         d = Path(workdir or tmp)
         cir, raw = d / "circuit.cir", d / "out.raw"
         cir.write_text(text, encoding="ascii")
-        try:
-            # -n: no user .spiceinit (one asking for ASCII raw files, or anything else, must not change runs)
-            proc = subprocess.run([exe, "-b", "-n", "-r", str(raw), str(cir)], cwd=d, capture_output=True,
-                                  text=True, timeout=timeout, stdin=subprocess.DEVNULL,
-                                  env={**os.environ, "SPICE_ASCIIRAWFILE": "0"})
-        except subprocess.TimeoutExpired:
-            raise Mech2SpiceError(f"ngspice did not finish within {timeout:g} s") from None
+        proc = _ngspice([exe, "-b", "-n", "-r", str(raw), str(cir)], d, timeout)
+        if _STOPPED.is_set():
+            raise Mech2SpiceError("ngspice run cancelled: interrupted")
         log = proc.stdout + "\n" + proc.stderr
         msg = _ngspice_message(proc.stderr) or _ngspice_message(proc.stdout)
         names, data = read_raw(raw) if raw.exists() and raw.stat().st_size else ([], np.zeros((0, 0)))

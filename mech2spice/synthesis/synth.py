@@ -14,9 +14,10 @@ Graph conventions (nodes are strings, attribute ``kind``):
 Edges run driver -> sink.  Bit ``i`` of a port is bit ``i`` of its value (LSB = 0), i.e.
 Yosys's bit order; for an ascending range such as ``[0:3]`` that is HDL index ``3 - i``.
 
-Documented choices: Yosys's ``x`` constants and undriven nets become 0 (any value is a valid
-refinement of "don't care"); constant nodes are not subject to the fan-out limit (they are
-the mechanical ground/bias, not a driven signal).
+Documented choices: Yosys's ``x`` constants become 0 (any value is a valid refinement of "don't
+care"), but a net that nothing drives and a declaration initialiser (``reg q = 1``, like
+``initial``) are refused; constant nodes are not
+subject to the fan-out limit (they are the mechanical ground/bias, not a driven signal).
 """
 
 from __future__ import annotations
@@ -139,7 +140,10 @@ def _flow(source: str, top: str | None) -> str:
     return "\n".join([
         f'{read} "{source}"',
         f"hierarchy -check -top {top}" if top else "hierarchy -check -auto-top",
-        "proc", "flatten",
+        "proc",
+        "tee -q -o init.txt select -list a:init",   # declaration initialisers (`reg q = 1`)
+        "tee -q -o check.txt check",                # undriven nets, before synth folds them to constants
+        "flatten",
         "tribuf",                                   # z-drivers -> $tribuf cells we can spot
         "tee -q -o tristate.txt select -list t:$tribuf",
         "synth -flatten" + (f" -top {top}" if top else ""),
@@ -159,6 +163,7 @@ def _run_yosys(path: Path, top: str | None) -> tuple[str, dict]:
             msg = yosys.error_line(result).replace(rel, str(path))
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
                                   else f"yosys error: {path}: {msg}")
+        _check_init_and_drivers(Path(tmp), path)
         tristate = (Path(tmp) / "tristate.txt").read_text().split()
         if tristate:
             raise Mech2SpiceError(f"{path}: tri-state ('z') drivers are not supported "
@@ -168,6 +173,41 @@ def _run_yosys(path: Path, top: str | None) -> tuple[str, dict]:
             raise Mech2SpiceError(f"yosys wrote no netlist for {path} (its run stopped early)")
         modules = json.loads(out.read_text())["modules"]
     return _pick_top(modules, top, path)
+
+
+_UNDRIVEN = re.compile(r"Wire (?P<mod>[^.\s]+)\.\\?(?P<net>.+?) is used but has no driver")
+_TYPES = re.compile(r"\b(?:reg|integer|logic|bit|byte|shortint|int|longint|time|real|realtime)\b")
+_NOT_A_DECLARATION = re.compile(r"\b(?:assign|always\w*|begin|for)\b")
+
+
+def _check_init_and_drivers(tmp: Path, path: Path) -> None:
+    """Refuse declaration initialisers (like `initial`) and nets nothing drives (Yosys reads them as x,
+    and synthesis would silently fold x into a constant)."""
+    inits = [(mod, name.lstrip("\\")) for mod, _, name in
+             (w.rpartition("/") for w in (tmp / "init.txt").read_text().split())]
+    if inits:
+        text = _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), _read_source(path))
+        line, mod, name = min((_declaration_line(text, name) or 1 << 30, mod, name) for mod, name in inits)
+        where = f"{path}, line {line}" if line < 1 << 30 else f"{path}, module {mod}"
+        raise Mech2SpiceError(f"{where}: '{name}' has an initial value in its declaration, which is not "
+                              "supported (a NOR-gate network powers up by its dynamics, not to a chosen value): "
+                              "reset it synchronously instead")
+    for line in (tmp / "check.txt").read_text().splitlines():
+        m = _UNDRIVEN.search(line)
+        if m:
+            net = m["net"].replace(" ", "")
+            raise Mech2SpiceError(f"{path}: in module {m['mod']}, '{net}' is used but nothing drives it "
+                                  "(it would silently read as 0): assign it a value")
+
+
+def _declaration_line(text: str, name: str) -> int | None:
+    """The line of `TYPE ... name [..] = value` (a declaration with an initialiser), if one is found."""
+    pattern = re.compile(rf"(?<![\w$]){re.escape(name)}\s*(?:\[[^\]]*\]\s*)*=(?!=)")
+    for m in pattern.finditer(text):
+        before = text[text.rfind(";", 0, m.start()) + 1:m.start()]
+        if _TYPES.search(before) and not _NOT_A_DECLARATION.search(before):
+            return text.count("\n", 0, m.start()) + 1
+    return None
 
 
 def _src_of(cell: str, rel: str, path: Path) -> str:
@@ -244,6 +284,8 @@ def build_netlist(top: str, module: dict) -> Netlist:
             _connect_gate(g, node, sources)
     for port, bits in _ports(module, "output"):
         for i, bit in enumerate(bits):
+            if not isinstance(bit, str) and bit not in driver:      # 'x' is a chosen don't-care: 0
+                raise Mech2SpiceError(f"module {top}: output {port}[{i}] is not driven by anything: assign it")
             node = f"{port}[{i}]"
             g.add_node(node, kind="output", port=port, bit=i)
             g.add_edge(_source(g, bit, driver, top), node)

@@ -65,8 +65,15 @@ def run_script(script: str, workdir: Path | str) -> YosysResult:
 _LINE_ERROR = re.compile(r"^(?P<file>\S+?):(?P<line>\d+)(?:\.\d+(?:-\d+\.\d+)?)?: ERROR: (?P<msg>.*)$")
 
 
+_STACK = re.compile(r"call stack exhausted|stack overflow", re.I)
+SIGSEGV = -11
+
+
 def error_line(result: YosysResult) -> str:
     """The first ``ERROR:`` line of a failed run, rewritten as 'FILE, line N: message'."""
+    if _STACK.search(result.stderr) or result.returncode == SIGSEGV:
+        return ("Yosys ran out of stack reading the design: an expression is nested too deeply (a few hundred "
+                "levels is Yosys's limit); split it into intermediate wires")
     lines = (result.stderr + "\n" + result.stdout).splitlines()
     for line in lines:
         m = _LINE_ERROR.match(line.strip())

@@ -1,0 +1,221 @@
+"""Every user-supplied value is checked here before work starts: numbers, JSON files read, paths written.
+
+Each check raises Mech2SpiceError with one line naming the option or file and what was expected
+(the command line prints it and exits 2).  The argparse ``type=`` factories raise
+``argparse.ArgumentTypeError`` instead, which the parser turns into the same one line.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from pathlib import Path
+
+from .errors import Mech2SpiceError
+
+# Resource guards.  The logic backend keeps a trace entry per cycle (~4 KB with its JSON: 1e6 cycles is
+# ~4 GB); a physical cycle is a few thousand drive periods, kept as amplitudes per observed bit.
+MAX_CYCLES = 1_000_000
+MAX_PHYSICAL_CYCLES = 10_000
+MAX_PERIODS = 10_000_000          # drive periods of one run (memory grows ~16 B per period and probe)
+MAX_STEPS = 100_000               # steps per drive period
+MAX_CPU_CYCLES = 1_000_000_000    # `cpu run --max-cycles`: no per-cycle memory, only time
+NGSPICE_TIMEOUT_S = 3600.0        # one ngspice run: the adder takes seconds; `simulate --ngspice-timeout`
+
+
+# --------------------------------------------------------------------------- numbers (argparse types)
+
+def integer(lo: int, hi: int):
+    """An argparse type: a whole decimal number in [lo, hi]."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number from {lo} to {hi:,}, got {text!r}") \
+                from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be from {lo} to {hi:,}, got {value}")
+        return value
+    parse.__name__ = "integer"
+    return parse
+
+
+def number(lo: float, hi: float = math.inf, *, lo_open: bool = True):
+    """An argparse type: a finite float in (lo, hi] ([lo, hi] with lo_open=False); NaN and inf refused."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        low_ok = value > lo if lo_open else value >= lo
+        if not (math.isfinite(value) and low_ok and value <= hi):
+            span = f"{'above' if lo_open else 'at least'} {lo:g}" + ("" if hi == math.inf else f" and at most {hi:g}")
+            raise argparse.ArgumentTypeError(f"must be a finite number {span}, got {text!r}")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
+def parse_sets(items: list[str] | None) -> dict[str, int]:
+    """--set PORT=INT ... -> {port: value}; ranges are checked against the design (logic.pack_inputs)."""
+    values = {}
+    for item in items or []:
+        port, sep, val = item.partition("=")
+        if not sep or not port.strip():
+            raise Mech2SpiceError(f"--set expects PORT=INT, got {item!r}")
+        try:
+            values[port.strip()] = int(val.strip(), 0)
+        except ValueError:
+            raise Mech2SpiceError(f"--set {port.strip()}: {val!r} is not an integer") from None
+    return values
+
+
+# --------------------------------------------------------------------------- JSON files
+
+def read_json(path, what: str):
+    """The parsed content of a user's JSON file; one clear error if unreadable, not UTF-8 or not JSON."""
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as err:
+        raise Mech2SpiceError(f"cannot read {what} {path}: {err.strerror or err}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise Mech2SpiceError(f"{what} {path} is not UTF-8 text (bad byte at offset {err.start})") from None
+    try:
+        return json.loads(text, parse_constant=_no_constant)
+    except json.JSONDecodeError as err:
+        raise Mech2SpiceError(f"{what} {path} is not valid JSON: {err.msg} (line {err.lineno})") from None
+    except (ValueError, RecursionError) as err:     # NaN/Infinity, >4300-digit integers, deep nesting
+        raise Mech2SpiceError(f"{what} {path} is not usable JSON: {str(err) or type(err).__name__}") from None
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def type_name(value) -> str:
+    """How JSON would call a Python value's type (for messages); a number that is not usable as itself."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and not is_number(value):
+        return f"{value:.3g}" if isinstance(value, float) else "an integer beyond the float range"
+    return {dict: "an object", list: "a list", str: "a string", bool: "true/false", int: "an integer",
+            float: "a number", type(None): "null"}.get(type(value), type(value).__name__)
+
+
+def is_int(value) -> bool:
+    """A JSON integer (true/false are not numbers here)."""
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def is_number(value) -> bool:
+    """A finite JSON number (integer or float, not true/false) that fits a float."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:                       # an integer beyond the float range
+        return False
+
+
+def stimulus_steps(path, base: dict[str, int], backend: str) -> list[dict]:
+    """A --stimulus file checked: [{"set": {PORT: INT}, "cycles": N}, ...], the --set values under each step's."""
+    data = read_json(path, "stimulus file")
+    where = f"stimulus file {path}"
+    if not isinstance(data, list):
+        raise Mech2SpiceError(f"{where} must hold a list of steps "
+                              f"([{{\"set\": {{\"PORT\": INT}}, \"cycles\": N}}, ...]), not {type_name(data)}")
+    steps = []
+    for k, step in enumerate(data):
+        if not isinstance(step, dict):
+            raise Mech2SpiceError(f"{where}, step {k}: expected an object {{\"set\": ..., \"cycles\": N}}, "
+                                  f"not {type_name(step)}")
+        extra = sorted(set(step) - {"set", "cycles"})
+        if extra:
+            raise Mech2SpiceError(f"{where}, step {k}: unknown field(s) {', '.join(map(repr, extra))} "
+                                  "(a step has 'set' and 'cycles')")
+        sets, cycles = step.get("set", {}), step.get("cycles", 1)
+        if not isinstance(sets, dict) or not all(is_int(v) for v in sets.values()):
+            raise Mech2SpiceError(f"{where}, step {k}: 'set' must map port names to integers")
+        if not is_int(cycles) or cycles < 0:
+            raise Mech2SpiceError(f"{where}, step {k}: 'cycles' must be a whole number >= 0, got {cycles!r}")
+        steps.append({"set": {**base, **sets}, "cycles": cycles})
+    check_cycles(sum(s["cycles"] for s in steps), backend, f"{where} asks for")
+    return steps
+
+
+def check_cycles(total: int, backend: str, what: str = "--cycles asks for") -> None:
+    """Refuse runs longer than the stated cap (memory and time grow with every cycle)."""
+    cap = MAX_CYCLES if backend == "logic" else MAX_PHYSICAL_CYCLES
+    if total > cap:
+        raise Mech2SpiceError(f"{what} {total:,} clock cycles; the {backend} backend is limited to {cap:,} "
+                              "per run (memory grows with every cycle): split the stimulus into shorter runs")
+    if total < 1:
+        raise Mech2SpiceError(f"{what} no clock cycles")
+
+
+# --------------------------------------------------------------------------- files written
+
+def check_output_file(path, inputs=(), what: str = "output file") -> Path:
+    """A file we may write: its folder exists, it is not a folder, and it is none of the inputs."""
+    p = Path(path)
+    if not str(path):
+        raise Mech2SpiceError(f"the {what} name is empty")
+    if p.is_dir():
+        raise Mech2SpiceError(f"{what} {path} is a directory")
+    _check_folder(p.parent, path, what)
+    if p.exists() and not os.access(p, os.W_OK):
+        raise Mech2SpiceError(f"{what} {path} is not writable")
+    for src in inputs:
+        if src is not None and _same_file(p, Path(src)):
+            raise Mech2SpiceError(f"{what} {path} is the input {src}: refusing to overwrite it")
+    return p
+
+
+def check_output_dir(path, what: str = "output directory") -> Path:
+    """A folder we may write into (created if missing, but only its last component)."""
+    p = Path(path)
+    if not str(path):
+        raise Mech2SpiceError(f"the {what} name is empty")
+    if p.exists():
+        if not p.is_dir():
+            raise Mech2SpiceError(f"{what} {path} exists and is not a directory")
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise Mech2SpiceError(f"{what} {path} is not writable")
+        return p
+    _check_folder(p.parent, path, what)
+    return p
+
+
+def write_text(path, text: str, encoding: str = "utf-8") -> None:
+    """Write an output file whole or not at all (a temporary file renamed over it; devices and pipes
+    are written directly); an OS failure such as a full disk becomes one clear error."""
+    p = Path(path)
+    direct = p.exists() and not p.is_file()
+    tmp = p if direct else p.with_name(f".{p.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "w", encoding=encoding, newline="\n") as f:
+            f.write(text)
+        if not direct:
+            os.replace(tmp, p)
+    except OSError as err:
+        if not direct:
+            tmp.unlink(missing_ok=True)
+        raise Mech2SpiceError(f"cannot write {path}: {err.strerror or err}") from None
+
+
+def _check_folder(folder: Path, path, what: str) -> None:
+    folder = folder if str(folder) else Path(".")
+    if not folder.exists():
+        raise Mech2SpiceError(f"cannot write {what} {path}: directory {folder} does not exist")
+    if not folder.is_dir():
+        raise Mech2SpiceError(f"cannot write {what} {path}: {folder} is not a directory")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise Mech2SpiceError(f"cannot write {what} {path}: directory {folder} is not writable")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:                              # one of them does not exist (yet)
+        return a.resolve() == b.resolve()

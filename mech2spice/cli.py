@@ -14,6 +14,7 @@ import numpy as np
 from . import inputs
 from .errors import Mech2SpiceError
 
+from .backends import BACKENDS
 from .physics.network import MAX_FANOUT
 
 
@@ -141,7 +142,8 @@ def cmd_simulate_clocked(args, nl) -> int:
     else:
         timing = simulate.clock_timing(nl, args.pulse, args.pause)
         res = simulate.run_clocked_physical(nl, load_params(args.params), cycles, args.backend, timing,
-                                            steps=args.steps, progress=not args.json and sys.stderr.isatty())
+                                            progress=not args.json and sys.stderr.isatty(),
+                                            options=_engine_options(args), log=_log(args))
     if args.json:
         _print_json(res)
     else:
@@ -166,18 +168,9 @@ def cmd_simulate(args) -> int:
     if args.cycles or args.stimulus or args.clock:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --clock/--cycles/--stimulus apply to clocked designs")
     values = _parse_sets(args.set)
-    if args.backend == "logic":
-        from .backends.logic import pack_inputs
-        pack_inputs(nl, values)
-        res = simulate.run_logic(nl, values)
-    else:
-        opts = _spice_options(args) if args.backend == "ngspice" else \
-            _envelope_spice_options(args) if args.backend == "ngspice-envelope" else None
-        res = simulate.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
-                                    steps=args.steps, progress=not args.json and sys.stderr.isatty(),
-                                    spice_options=opts)[0]
-        if opts is not None:
-            res["ngspice_options"] = opts.__dict__
+    res = simulate.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
+                                progress=not args.json and sys.stderr.isatty(), options=_engine_options(args),
+                                log=_log(args))[0]
     res["inputs"] = values
     if args.json:
         _print_json(res)
@@ -195,7 +188,7 @@ def cmd_emit(args) -> int:
     from . import simulate
     from .physics import network
     from .spice import carrier as spice
-    from .backends.logic import pack_inputs
+    from .synthesis.ports import pack_inputs
     from .physics.params import load_params
     p = load_params(args.params)
     nl = _netlist(args)
@@ -204,7 +197,7 @@ def cmd_emit(args) -> int:
     model = network.build(nl, p)
     stim = network.stimulus(model, nl, p, [(0, [values])])
     periods = args.periods or simulate.period_budget(nl)
-    opts = _spice_options(args)
+    opts = _engine_options(args, "ngspice")
     text = spice.emit(model, periods, stim, options=opts,
                       title=f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}")
     inputs.write_text(args.output, text, encoding="ascii")    # the path was checked before the work
@@ -217,25 +210,26 @@ def cmd_emit(args) -> int:
     return 0
 
 
-def _spice_options(args):
-    from .spice.carrier import SpiceOptions
-    return _options(args, SpiceOptions())
-
-
-def _envelope_spice_options(args):
-    from .spice.envelope import EnvelopeSpiceOptions
-    return _options(args, EnvelopeSpiceOptions())
-
-
-def _options(args, o):
-    """ngspice options (either netlist form) with --method / --max-step applied."""
+def _engine_options(args, backend: str | None = None):
+    """The engine's options from the flags: --steps (steps per drive period), --method / --max-step (ngspice)."""
     from dataclasses import replace
-    if getattr(args, "method", None):
-        o = replace(o, method=args.method)
-    if getattr(args, "max_step", None):
-        o = replace(o, max_step_periods=args.max_step)
-    o.validate()
-    return o
+    from .backends import engine_class
+    name = backend or args.backend
+    steps, method, max_step = (getattr(args, k, None) for k in ("steps", "method", "max_step"))
+    changes = {}
+    if name.startswith("ngspice"):
+        changes.update({k: v for k, v in (("method", method), ("max_step_periods", max_step)) if v is not None})
+        if steps:
+            raise Mech2SpiceError("--steps applies to rk4 and envelope; ngspice's step is --max-step")
+    elif method or max_step:
+        raise Mech2SpiceError(f"--method and --max-step apply to the ngspice backends, not {name}")
+    elif steps and name == "rk4":
+        changes["steps_per_period"] = steps
+    elif steps and name == "envelope":
+        changes["step_periods"] = 1.0 / steps
+    options = replace(engine_class(name).Options(), **changes)
+    options.validate()
+    return options
 
 
 def cmd_subckts(args) -> int:
@@ -311,11 +305,12 @@ def build_parser() -> argparse.ArgumentParser:
   logic backend (which starts them at 0): reset them synchronously in the first cycle.""")
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
-    s.add_argument("--backend", default="rk4", choices=["logic", "rk4", "envelope", "ngspice", "ngspice-envelope"])
+    s.add_argument("--backend", default="rk4", choices=list(BACKENDS))
     s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
                    help="simulate exactly this many drive periods (default: until the outputs settle)")
     s.add_argument("--steps", type=inputs.integer(1, inputs.MAX_STEPS), default=None,
-                   help="steps per drive period (rk4 default 80; envelope default: one step per 2 periods)")
+                   help="steps per drive period (rk4 default 80; envelope default: one step per 4 periods, "
+                        "fewer where the stability bound is lower)")
     s.add_argument("--method", choices=["trap", "gear"], help="ngspice integration method (default trap)")
     s.add_argument("--max-step", type=inputs.number(0), help="ngspice max step in drive periods (default 1/40; "
                                                             "ngspice-envelope: 2)")
@@ -347,6 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .cpu.cli import add_parser as add_cpu_parser
     add_cpu_parser(sub)
+    from .reports.cli import add_parser as add_report_parser; add_report_parser(sub)  # noqa: E702
 
     s = sub.add_parser("subckts", help="regenerate the .subckt library (checked in under subckts/)")
     s.add_argument("-o", "--output", default="subckts", help="directory (default subckts/)")

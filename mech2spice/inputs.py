@@ -188,14 +188,19 @@ def check_output_dir(path, what: str = "output directory") -> Path:
 
 
 def write_text(path, text: str, encoding: str = "utf-8") -> None:
+    """write_bytes of the encoded text."""
+    write_bytes(path, text.encode(encoding))
+
+
+def write_bytes(path, data: bytes) -> None:
     """Write an output file whole or not at all (a temporary file renamed over it; devices and pipes
     are written directly); an OS failure such as a full disk becomes one clear error."""
     p = Path(path)
     direct = p.exists() and not p.is_file()
     tmp = p if direct else p.with_name(f".{p.name}.{os.getpid()}.tmp")
     try:
-        with open(tmp, "w", encoding=encoding, newline="\n") as f:
-            f.write(text)
+        with open(tmp, "wb") as f:
+            f.write(data)
         if not direct:
             os.replace(tmp, p)
     except OSError as err:

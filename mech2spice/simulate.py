@@ -1,27 +1,30 @@
-"""Run a synthesised design on a backend and decode its outputs from amplitudes.
+"""Run a synthesised design on an engine and decode its outputs from amplitudes.
 
-Physical backends run in chunks until every output has settled (amplitude
-change over the last window below a tolerance and inside a band) or the
-period budget is spent.  A bit outside both bands is reported as invalid,
-never rounded.
+Engines that continue from a state run in chunks until every output has settled (amplitude change
+over the last window below a tolerance and inside a band) or the period budget is spent; the others
+run the whole budget.  A bit outside both bands is reported as invalid, never rounded.
 """
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .backends import logic, rk4
-from .physics import network
+from .backends import logic, make_engine
+from .backends._base import progress_bar
 from .errors import Mech2SpiceError
+from .physics import network
+from .physics.model import MechModel
 from .physics.params import GateParams, band_of, margin
+from .synthesis.ports import output_bits, pack_inputs, port_values
 from .synthesis.synth import Netlist
 
-BACKENDS = ("logic", "rk4", "envelope", "ngspice", "ngspice-envelope")
-ENVELOPE_STEP = 4.0      # periods, at most; reports/envelope.md: no accuracy cost on the adder (bound 15.1)
-SETTLE_TOL = 2e-3        # u_R change over SETTLE_WINDOW periods that counts as settled
-SETTLE_WINDOW = 100
-CHUNK = 100
+SETTLED_CHANGE = 2e-3    # u_R: an output that moved less than this over SETTLE_WINDOW periods has settled
+SETTLE_WINDOW = 100      # periods
+CHUNK = 100              # periods per engine call in the settle loop
+MAX_TRACE_BYTES = 2e9    # amplitudes a clocked run keeps in memory (one complex per period, probe, batch member)
+ESTIMATE_LOG_S = 10.0    # runs estimated to take longer than this say so before they start
 
 
 def period_budget(netlist: Netlist) -> int:
@@ -32,133 +35,102 @@ def period_budget(netlist: Netlist) -> int:
 def decode(netlist: Netlist, amplitudes: dict[str, float], const: dict[str, int]) -> dict:
     """bits / outputs / valid / min_margin from output amplitudes (u_R)."""
     bits, margins = {}, []
-    for bit in logic.output_bits(netlist):
+    for bit in output_bits(netlist):
         if bit in const:
             bits[bit] = const[bit]
             continue
         b = band_of(amplitudes[bit])
         bits[bit] = b
         margins.append(margin(amplitudes[bit], b))
-    outputs = {}
-    for port, width in netlist.outputs.items():
-        vals = [bits[f"{port}[{i}]"] for i in range(width)]
-        outputs[port] = None if None in vals else sum(v << i for i, v in enumerate(vals))
-    return {"outputs": outputs, "bits": bits, "valid": all(v is not None for v in bits.values()),
+    return {"outputs": port_values(netlist, bits), "bits": bits, "valid": all(v is not None for v in bits.values()),
             "min_margin": float(min(margins)) if margins else None}
 
 
 def run_logic(netlist: Netlist, values: dict[str, int]) -> dict:
+    """The logic backend's result for one input assignment (the oracle)."""
     t0 = time.time()
     bits = logic.evaluate_bits(netlist, values)
-    out = {b: bits[b] for b in logic.output_bits(netlist)}
-    outputs = logic.evaluate(netlist, values)
-    return {"backend": "logic", "outputs": outputs, "bits": out, "amplitudes": {}, "valid": True,
-            "min_margin": None, "periods": 0, "wall_s": time.time() - t0}
+    out = {b: bits[b] for b in output_bits(netlist)}
+    return {"backend": "logic", "outputs": port_values(netlist, bits), "bits": out, "amplitudes": {},
+            "valid": True, "min_margin": None, "periods": 0, "wall_s": time.time() - t0}
+
+
+def _engine_fields(engine) -> dict:
+    """Result fields naming an engine's settings (the ngspice engines' options, as before)."""
+    return {"ngspice_options": engine.describe()} if engine.name.startswith("ngspice") else {}
+
+
+def _observed(netlist: Netlist, model: MechModel) -> list[str]:
+    return [b for b in output_bits(netlist) if b in model.probes]
+
+
+def estimate_seconds(engine, model: MechModel, periods: int, batch: int = 1) -> float | None:
+    """The engine's own estimate of a run's wall time (None where it has none)."""
+    est = getattr(engine, "estimate_seconds", None)
+    return est(model, periods, batch) if est else None
+
+
+def _announce(engine, model, periods: int, batch: int, log) -> None:
+    """Say how long a long run will take before it starts (the resource guard's time half)."""
+    secs = estimate_seconds(engine, model, periods, batch)
+    if log is not None and secs is not None and secs > ESTIMATE_LOG_S:
+        log(f"{engine.name}: {model.n} oscillators x {batch} x {periods} periods, estimated {secs / 60:.1f} min")
 
 
 def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], backend: str = "rk4",
-                 periods: int | None = None, steps: int | None = None, progress: bool = False,
-                 spice_options=None) -> list[dict]:
+                 periods: int | None = None, progress: bool = False, options=None, log=None) -> list[dict]:
     """Simulate one batch of input assignments from rest; one result dict per member."""
     t0 = time.time()
     for v in values:
-        logic.pack_inputs(netlist, v)                  # validates ports and widths up front
+        pack_inputs(netlist, v)                  # validates ports and widths up front
+    engine = make_engine(backend, options)
+    if not engine.capabilities.physical:
+        return [run_logic(netlist, v) for v in values]
     model = network.build(netlist, p)
     stim = network.stimulus(model, netlist, p, [(0, values)])
     budget = periods or period_budget(netlist)
-    outs = [b for b in logic.output_bits(netlist) if b in model.probes]
+    outs = _observed(netlist, model)
+    _announce(engine, model, budget, len(values), log)
     if not outs:
         amps, used = np.zeros((0, len(values))), 0
-    elif backend in ("rk4", "envelope"):
-        amps, used = _settle(_chunker(model, stim, backend, steps, outs), model, budget, progress,
-                             fixed=periods is not None)
-    elif backend == "ngspice":
-        amps, used = _run_ngspice(model, stim, budget, spice_options, outs)
-    elif backend == "ngspice-envelope":
-        amps, used = _run_ngspice_envelope(model, stim, budget, spice_options, outs)
+    elif engine.capabilities.state:
+        amps, used = _run_until_settled(engine, model, stim, outs, budget, progress, fixed=periods is not None)
     else:
-        raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
+        run = engine.run(model, budget, stim, probes=outs, progress=progress)
+        amps, used = run.final_amplitudes(outs, model.amplitude_unit), budget
     wall = time.time() - t0
-    names = outs
     results = []
     for b in range(len(values)):
-        a = {n: float(amps[k, b]) for k, n in enumerate(names)}
-        res = {"backend": backend, **decode(netlist, a, model.design.const_outputs),
-               "amplitudes": a, "periods": used, "wall_s": wall}
-        results.append(res)
+        a = {n: float(amps[k, b]) for k, n in enumerate(outs)}
+        results.append({"backend": backend, **decode(netlist, a, model.design.const_outputs),
+                        "amplitudes": a, "periods": used, "wall_s": wall, **_engine_fields(engine)})
     return results
 
 
-def _chunker(model, stim, backend: str, steps: int | None, probes: list[str]):
-    """A function (n periods, state, start period) -> (run, new state) for one backend."""
-    if backend == "rk4":
-        def chunk(n, state, start):
-            run = rk4.integrate(model, n, steps_per_period=steps or rk4.DEFAULT_STEPS_PER_PERIOD,
-                                stimulus=stim, state=state, start_period=start, probes=probes)
-            return run, (run.x, run.v)
-    else:
-        from .physics import envelope
-
-        step = 1.0 / steps if steps else envelope_step(model)
-
-        def chunk(n, state, start):
-            run = envelope.integrate(model, n, step_periods=step,
-                                     stimulus=stim, state=state, start_period=start, probes=probes)
-            return run, run.extra["envelope_state"]
-    return chunk
-
-
-def envelope_step(model) -> float:
-    """The default envelope step: ENVELOPE_STEP whole periods, less where the model's stability bound
-    is lower (and a divisor of CHUNK, so chunks end on step boundaries)."""
-    from .physics import envelope
-    bound = envelope.max_step_periods(model)
-    for step in (4, 2, 1):
-        if step <= min(ENVELOPE_STEP, bound):
-            return float(step)
-    return 0.5
-
-
-def _settle(chunk, model, budget: int, progress: bool, fixed: bool):
+def _run_until_settled(engine, model, stim, probes: list[str], budget: int, progress: bool, fixed: bool):
+    """CHUNK periods at a time, each continuing from the last state, until the outputs settle."""
     state, done, history = None, 0, []
-    bar = rk4._progress(budget, progress)
+    bar = progress_bar(budget, progress)
     while done < budget:
         n = min(CHUNK, budget - done)
-        run, state = chunk(n, state, done)
+        run = engine.run(model, n, stim, state=state, start_period=done, probes=probes)
+        state = run.state
         done += n
-        history.append(np.abs(run.amp[-1]) / model.params.u_r)
+        history.append(run.final_amplitudes(probes, model.amplitude_unit))
         bar.update(n)
-        if not fixed and _settled(history, done):
+        if not fixed and _settled(history):
             break
     bar.close()
     return history[-1], done
 
 
-def _settled(history: list[np.ndarray], done: int) -> bool:
+def _settled(history: list[np.ndarray]) -> bool:
     k = SETTLE_WINDOW // CHUNK
     if len(history) <= k:
         return False
     now, before = history[-1], history[-1 - k]
     inside = np.vectorize(lambda a: band_of(a) is not None)(now)
-    return bool(np.all(np.abs(now - before) < SETTLE_TOL) and np.all(inside))
-
-
-def _run_ngspice(model, stim, periods: int, options, probes: list[str]):
-    """ngspice has no cheap restart, so it runs the whole period budget; batch members in parallel."""
-    from .spice import runner as ngspice
-    from .spice.carrier import SpiceOptions
-    run = ngspice.run_batch(model, periods, stimulus=stim, options=options or SpiceOptions())
-    rows = [run.probe_names.index(n) for n in probes]
-    return np.abs(run.amp[-1, rows, :]) / model.params.u_r, periods
-
-
-def _run_ngspice_envelope(model, stim, periods: int, options, probes: list[str]):
-    """The envelope equations as an ngspice netlist (spice_envelope.py): the whole budget in one run per
-    batch member, steps of whole drive periods."""
-    from .spice.envelope import EnvelopeSpiceOptions, run_envelope_spice
-    run = run_envelope_spice(model, periods, stimulus=stim, opts=options or EnvelopeSpiceOptions())
-    rows = [run.probe_names.index(n) for n in probes]
-    return np.abs(run.amp[-1, rows, :]) / model.params.u_r, periods
+    return bool(np.all(np.abs(now - before) < SETTLED_CHANGE) and np.all(inside))
 
 
 # --- clocked designs -------------------------------------------------------------------------
@@ -207,8 +179,8 @@ def run_clocked_logic(netlist: Netlist, cycles: list[dict[str, int]]) -> dict:
     for k, v in enumerate(cycles):
         sim.tick(v)
         bits = sim.evaluate_bits(cycles[min(k + 1, len(cycles) - 1)])
-        out = {b: bits[b] for b in logic.output_bits(netlist)}
-        trace.append({"cycle": k, "outputs": logic._ports(netlist, bits), "bits": out, "valid": True,
+        out = {b: bits[b] for b in output_bits(netlist)}
+        trace.append({"cycle": k, "outputs": port_values(netlist, bits), "bits": out, "valid": True,
                       "min_margin": None})
     return {"backend": "logic", **_final(trace), "trace": trace, "periods": 0, "wall_s": time.time() - t0}
 
@@ -233,50 +205,63 @@ def clocked_schedule(cycles: list[dict[str, int]], timing: dict):
     return segs, reads, t
 
 
-CLOCKED_SETTLE = 0.1     # u_R; envelope pauses end once the channels settle: within 0.012 u_R (reports/fidelity.md)
+CLOCKED_SETTLE_TOL = 0.1   # u_R; envelope pauses end once the channels settle: within 0.012 u_R (reports/fidelity.md)
+
+
+@dataclass
+class Waveform:
+    """A clocked run's output amplitudes per period (u_R) and the periods at which each cycle was read."""
+    amplitude: np.ndarray      # (periods, probes)
+    reads: list[int]
+    probes: list[str]
+
+
+def _whole_steps(timing: dict, step: float) -> dict:
+    """Pause and pulse rounded up to whole engine steps, so every stimulus change falls on a step boundary."""
+    whole = max(1, int(round(step)))
+    return {**timing, "pause": -(-timing["pause"] // whole) * whole, "pulse": -(-timing["pulse"] // whole) * whole}
+
+
+def _check_trace_memory(total: int, probes: int, batch: int = 1) -> None:
+    need = 16.0 * total * max(probes, 1) * batch
+    if need > MAX_TRACE_BYTES:
+        raise Mech2SpiceError(f"this clocked run would keep {need / 1e9:.1f} GB of amplitudes ({total:,} periods "
+                              f"x {probes} outputs): run fewer cycles (limit {MAX_TRACE_BYTES / 1e9:g} GB)")
 
 
 def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str, int]], backend: str,
-                         timing: dict, steps: int | None = None, progress: bool = False,
-                         settle: float | None = CLOCKED_SETTLE) -> dict:
-    """Trace entry k: outputs after clock edge k.  Envelope: step envelope_step(model) unless `steps`
-    per period are given, the pause rounded up to whole steps; `settle` ends a stretch of constant
-    inputs once every channel is steady (envelope.integrate)."""
+                         timing: dict, progress: bool = False, options=None,
+                         settle_tol: float | None = CLOCKED_SETTLE_TOL, waveform: bool = False, log=None) -> dict:
+    """Trace entry k: outputs after clock edge k.  On engines that skip idle time, `settle_tol` (u_R) ends
+    a stretch of constant inputs once every channel is steady (unless the options set their own);
+    `waveform=True` adds the per-period amplitudes (a Waveform) under "waveform"."""
     t0 = time.time()
     for v in cycles:
-        logic.pack_inputs(netlist, v)
+        pack_inputs(netlist, v)
+    engine = make_engine(backend, options)
+    if not engine.capabilities.physical:
+        return run_clocked_logic(netlist, cycles)
+    if engine.capabilities.settle and engine.options.settle_tol is None and settle_tol:
+        engine = make_engine(backend, replace(engine.options, settle_tol=settle_tol))
     model = network.build(netlist, p)
-    if backend == "envelope":
-        step = 1.0 / steps if steps else envelope_step(model)
-        whole = max(1, int(round(step)))
-        timing = {**timing, "pause": -(-timing["pause"] // whole) * whole,
-                  "pulse": -(-timing["pulse"] // whole) * whole}
+    step = engine.step(model) if hasattr(engine, "step") else None
+    if step is not None:
+        timing = _whole_steps(timing, step)
     segs, reads, total = clocked_schedule(cycles, timing)
+    outs = _observed(netlist, model)
+    _check_trace_memory(total, len(outs))
+    _announce(engine, model, total, 1, log)
     stim = network.stimulus(model, netlist, p, [(t, [v]) for t, v, _ in segs], clock=[[c] for *_, c in segs])
-    outs = [b for b in logic.output_bits(netlist) if b in model.probes]
-    if backend == "rk4":
-        run = rk4.integrate(model, total, steps_per_period=steps or rk4.DEFAULT_STEPS_PER_PERIOD, stimulus=stim,
-                            probes=outs, progress=progress)
-    elif backend == "envelope":
-        from .physics import envelope
-        run = envelope.integrate(model, total, step_periods=step, stimulus=stim, probes=outs,
-                                 progress=progress, settle=settle)
-    elif backend == "ngspice":
-        from .spice import runner as ngspice
-        run = ngspice.run(model, total, stimulus=stim)
-    elif backend == "ngspice-envelope":
-        from .spice.envelope import run_envelope_spice
-        run = run_envelope_spice(model, total, stimulus=stim)
-    else:
-        raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
-    rows = [run.probe_names.index(n) for n in outs]
-    amp = np.abs(run.amp[:, rows, 0]) / p.u_r
+    run = engine.run(model, total, stim, probes=outs, progress=progress)
+    amp = np.abs(run.amp[:, [run.probe(n) for n in outs], 0]) / p.u_r
     trace = []
     for k, t in enumerate(reads):
         a = {n: float(amp[t - 10:t, j].mean()) for j, n in enumerate(outs)}
         trace.append({"cycle": k, **decode(netlist, a, model.design.const_outputs), "amplitudes": a})
-    extra = {"envelope_step": step, "settle": settle,
-             "simulated_periods": total - run.extra["settled_periods"]} if backend == "envelope" else {}
-    return {"backend": backend, **_final(trace), "amplitudes": trace[-1]["amplitudes"], "trace": trace,
-            "periods": total, "timing": timing, "wall_s": time.time() - t0, **extra,
-            "_amplitude_trace": amp, "_reads": reads, "_probe_names": outs}
+    extra = {"envelope_step": step, "settle": engine.options.settle_tol,
+             "simulated_periods": total - run.settled_periods} if engine.capabilities.settle else {}
+    res = {"backend": backend, **_final(trace), "amplitudes": trace[-1]["amplitudes"], "trace": trace,
+           "periods": total, "timing": timing, "wall_s": time.time() - t0, **extra, **_engine_fields(engine)}
+    if waveform:
+        res["waveform"] = Waveform(amp, reads, outs)
+    return res

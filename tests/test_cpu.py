@@ -15,7 +15,9 @@ from mech2spice.cpu.cli import add_parser
 from mech2spice.cpu.isa import CYCLES, OPCODES
 from mech2spice.cpu.iss import FETCH, ISS
 from mech2spice.cpu.memory import Memory
-from mech2spice.cpu.run import LogicCPU, cpu_netlist, load_program, make_memory, register_map, run_program
+from mech2spice.cpu.machines import LogicCPU
+from mech2spice.cpu.netlist import cpu_netlist, register_map
+from mech2spice.cpu.run import load_program, make_memory, run_program
 from mech2spice.errors import Mech2SpiceError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -346,13 +348,14 @@ def test_sieve_at_envelope_fidelity_matches_iss_and_resumes_exactly(tmp_path):
     assert whole["simulated_periods"] < whole["periods"]          # settled pauses were skipped
     ck = tmp_path / "ck.json"
     run_program(PROGRAMS / "sieve.asm", "envelope", 2, checkpoint=ck)
-    assert R.physical_state_path(ck).exists()
+    state_file = R.checkpoint_state_file(ck)
+    assert state_file.exists() and len(list(tmp_path.glob("ck.json.state-*.npz"))) == 1   # old ones removed
     amps = []
     done = run_program(PROGRAMS / "sieve.asm", "envelope", 4, checkpoint=ck, resume=True,
                        trace=lambda rec, cpu: amps.append(dict(cpu.amps)))
     for key in ("cycles", "memory", "registers", "periods", "simulated_periods"):
         assert done[key] == whole[key], key
     assert amps == [a for _, _, a in seen[2:]]                    # bit-for-bit the same trajectory
-    R.physical_state_path(ck).write_bytes(b"junk")
-    with pytest.raises(Mech2SpiceError, match="cannot read the oscillator state"):
+    R.checkpoint_state_file(ck).write_bytes(b"junk")
+    with pytest.raises(Mech2SpiceError, match="does not match its checkpoint"):
         run_program(PROGRAMS / "sieve.asm", "envelope", 4, checkpoint=ck, resume=True)

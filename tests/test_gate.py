@@ -116,7 +116,7 @@ def test_steady_state_finds_every_root(p):
 
 
 def test_envelope_model_matches_rk4_on_gate(p, gate_run):
-    from mech2spice.physics import envelope
+    from mech2spice.backends import envelope
     from mech2spice.experiments.characterise import truth_table_stimulus
     _, amp = gate_run
     run = envelope.integrate(nor.single_gate(p), 2000, step_periods=1.0, stimulus=truth_table_stimulus(p))
@@ -125,7 +125,7 @@ def test_envelope_model_matches_rk4_on_gate(p, gate_run):
 
 
 def test_envelope_refuses_unstable_step(p):
-    from mech2spice.physics import envelope
+    from mech2spice.backends import envelope
     m = nor.single_gate(p)
     limit = envelope.max_step_periods(m)
     with pytest.raises(Mech2SpiceError, match="stability limit"):

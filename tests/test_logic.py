@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from mech2spice.errors import Mech2SpiceError
-from mech2spice.backends.logic import evaluate, evaluate_batch, evaluate_bits, input_bits, output_bits, pack_inputs
+from mech2spice.backends.logic import evaluate, evaluate_batch, evaluate_bits
+from mech2spice.synthesis.ports import input_bits, output_bits, pack_inputs
 from mech2spice.synthesis.synth import Netlist, synthesize
 
 VERILOG = Path(__file__).resolve().parent.parent / "verilog"

@@ -18,6 +18,7 @@ import pytest
 from mech2spice.spice import runner as ngspice
 from mech2spice.physics import nor
 from mech2spice.backends import rk4
+from mech2spice.backends import Run
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
@@ -47,12 +48,12 @@ def levels_stimulus(model: MechModel, pairs) -> Stimulus:
     return Stimulus.from_levels(model, [(0.0, changes)], batch=len(pairs))
 
 
-def settled(run: rk4.Run) -> np.ndarray:
+def settled(run: Run) -> np.ndarray:
     """Complex amplitude per probe and batch member, averaged over the last AVG periods."""
     return run.amp[-AVG:].mean(axis=0)
 
 
-def assert_agree(ref: rk4.Run, got: rk4.Run, label: str) -> None:
+def assert_agree(ref: Run, got: Run, label: str) -> None:
     a, b = settled(ref), settled(got)
     d_amp = np.abs(np.abs(b) - np.abs(a)) / U_R
     d_ph = np.abs(np.degrees(np.angle(b / a)))

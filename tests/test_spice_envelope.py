@@ -13,7 +13,8 @@ import pytest
 import scipy.linalg as sl
 
 from mech2spice import simulate
-from mech2spice.physics import envelope, nor
+from mech2spice.physics import nor
+from mech2spice.backends import envelope
 from mech2spice.synthesis import synth
 from mech2spice.spice import envelope as se
 from mech2spice.experiments import validate as V

@@ -11,7 +11,8 @@ import pytest
 
 from mech2spice.synthesis import yosys
 from mech2spice.errors import Mech2SpiceError, ToolMissingError
-from mech2spice.backends.logic import evaluate, evaluate_batch, input_bits
+from mech2spice.backends.logic import evaluate, evaluate_batch
+from mech2spice.synthesis.ports import input_bits
 from mech2spice.synthesis.synth import Netlist, check_loops, clean, limit_fanout, propagate_constants, remove_dead_gates, synthesize
 
 VERILOG = Path(__file__).resolve().parent.parent / "verilog"

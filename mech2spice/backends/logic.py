@@ -9,38 +9,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import Mech2SpiceError
+from ..synthesis.ports import input_bits, output_bits, pack_inputs, port_values
 from ..synthesis.synth import Netlist
+from ._base import Capabilities, NoOptions
 
-__all__ = ["evaluate", "evaluate_bits", "evaluate_batch", "pack_inputs",
-           "input_bits", "output_bits", "ClockedLogic"]
-
-
-def input_bits(netlist: Netlist) -> list[str]:
-    """Input node names in batch-column order."""
-    return [f"{p}[{i}]" for p, w in netlist.inputs.items() for i in range(w)]
-
-
-def output_bits(netlist: Netlist) -> list[str]:
-    """Output node names in batch-column order."""
-    return [f"{p}[{i}]" for p, w in netlist.outputs.items() for i in range(w)]
-
-
-def pack_inputs(netlist: Netlist, values: dict[str, int]) -> dict[str, int]:
-    """Port integers -> {"a[0]": bit, ...} for every input bit (unset ports are 0)."""
-    bits = dict.fromkeys(input_bits(netlist), 0)
-    for port, value in values.items():
-        if port not in netlist.inputs:
-            known = ", ".join(netlist.inputs) or "none"
-            raise Mech2SpiceError(f"unknown input port '{port}' (inputs: {known})")
-        width = netlist.inputs[port]
-        if not isinstance(value, (int, np.integer)):
-            raise Mech2SpiceError(f"input '{port}' needs an integer, got {value!r}")
-        if value < 0 or value >> width:
-            raise Mech2SpiceError(f"value {value} does not fit input '{port}' "
-                                  f"({width} bit{'s' * (width != 1)}, 0..{2 ** width - 1})")
-        for i in range(width):
-            bits[f"{port}[{i}]"] = (int(value) >> i) & 1
-    return bits
+__all__ = ["evaluate", "evaluate_bits", "evaluate_batch", "ClockedLogic", "LogicEngine"]
 
 
 def _input_bit_values(netlist: Netlist, values: dict) -> dict[str, int]:
@@ -73,11 +46,7 @@ def evaluate_bits(netlist: Netlist, values: dict, state: dict[str, int] | None =
 def evaluate(netlist: Netlist, values: dict[str, int], state: dict[str, int] | None = None) -> dict[str, int]:
     """Output port -> integer for input port integers (unset inputs are 0)."""
     bits = evaluate_bits(netlist, values, state)
-    return _ports(netlist, bits)
-
-
-def _ports(netlist: Netlist, bits: dict[str, int]) -> dict[str, int]:
-    return {p: sum(bits[f"{p}[{i}]"] << i for i in range(w)) for p, w in netlist.outputs.items()}
+    return port_values(netlist, bits)
 
 
 class ClockedLogic:
@@ -89,10 +58,12 @@ class ClockedLogic:
         self.state = dict.fromkeys(netlist.latches(), 0)
 
     def evaluate_bits(self, values: dict) -> dict[str, int]:
+        """Every node's value for these inputs and the current register state."""
         return evaluate_bits(self.netlist, values, self.state)
 
     def evaluate(self, values: dict) -> dict[str, int]:
-        return _ports(self.netlist, self.evaluate_bits(values))
+        """Output ports for these inputs and the current register state."""
+        return port_values(self.netlist, self.evaluate_bits(values))
 
     def tick(self, values: dict) -> None:
         """One rising clock edge with inputs `values`."""
@@ -120,3 +91,18 @@ def evaluate_batch(netlist: Netlist, vectors) -> np.ndarray:
         (src,) = g.predecessors(out)
         result[:, j] = val[src]
     return result
+
+
+class LogicEngine:
+    """The NOR graph evaluated as Boolean logic: the oracle the physical engines must match."""
+
+    name = "logic"
+    capabilities = Capabilities(physical=False, batch=True)
+    Options = NoOptions
+
+    def __init__(self, options=None):
+        self.options = options if options is not None else NoOptions()
+
+    def describe(self) -> dict:
+        """No settings."""
+        return {}

@@ -9,39 +9,17 @@ mean) over every whole period.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import DivergenceError, Mech2SpiceError
+from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
+from ._base import Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar
 
 DEFAULT_STEPS_PER_PERIOD = 80   # 40 (the paper's 0.025 periods) leaves a 1e-3 u_R error; see reports/gate.md
-
-
-@dataclass
-class Run:
-    """Result of an integration; amplitudes are complex phasors A with u = Re(A e^{i omega t})."""
-    probe_names: list[str]
-    period: float
-    t_end: np.ndarray                 # (P,) time at the end of each recorded period
-    amp: np.ndarray                   # (P, n_probes, B) complex
-    mean: np.ndarray                  # (P, n_probes, B)
-    x: np.ndarray                     # final displacements (n, B)
-    v: np.ndarray                     # final velocities (n, B)
-    t: float                          # final time
-    traces: np.ndarray | None = None  # (S, n_probes, B) raw samples if asked for
-    trace_t: np.ndarray | None = None
-    extra: dict = field(default_factory=dict)
-
-    def probe(self, name: str) -> int:
-        return self.probe_names.index(name)
-
-    def amplitude(self, name: str) -> np.ndarray:
-        """|A| per period, (P, B)."""
-        return np.abs(self.amp[:, self.probe(name), :])
 
 
 def force_matrix(model: MechModel) -> sp.csr_matrix:
@@ -53,11 +31,6 @@ def force_matrix(model: MechModel) -> sp.csr_matrix:
     Qs = sp.csr_matrix((-a["quad_gamma"], (a["quad_slow"], qi)), shape=(n, nq))
     D = sp.csr_matrix((np.ones(nd), (a["drive_dof"], np.arange(nd))), shape=(n, nd))
     return sp.hstack([-model.K, -model.C, Qf, Qs, D]).tocsr()
-
-
-def default_blowup(model: MechModel) -> float:
-    p = model.params
-    return 1e3 * (p.u_r if p is not None else 1.0)
 
 
 class _Rhs:
@@ -93,8 +66,8 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     h = T / N
     rhs = _Rhs(model)
     names = list(probes or model.probes)
-    pidx = np.array([model.probes[p] if p in model.probes else model.index(p) for p in names], int)
-    blowup = blowup or default_blowup(model)
+    pidx = probe_dofs(model, names)
+    blowup = blowup or blowup_bound(model)
 
     # Drive phase tables for the three distinct stage times of step j (periodic in N).
     a = model.arrays
@@ -110,7 +83,7 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     mean = np.zeros((periods, len(names), B))
     traces, trace_t = [], []
     kern = _kernel(model, N, h, sin_full, sin_half, demod, pidx, blowup, compiled and not trace_every, B)
-    bar = _progress(periods, progress)
+    bar = progress_bar(periods, progress)
     k = 0
     while k < periods:
         t = (start_period + k) * T
@@ -121,19 +94,19 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
             x, v = np.ascontiguousarray(x), np.ascontiguousarray(v)
             amp[k:k + n], mean[k:k + n], bad = kern.run(x, v, amps, n)
             if bad >= 0:
-                _check_blowup(model, x, (start_period + k + bad + 1) * T, T, blowup)
+                check_divergence(model, x, (start_period + k + bad + 1) * T, bound=blowup)
         else:
             n = 1
             x, v = _numpy_period(rhs, x, v, stimulus, start_period + k, N, h, T, sin_full, sin_half, demod,
                                  pidx, amp[k], mean[k], trace_every, traces, trace_t)
-            _check_blowup(model, x, (start_period + k + 1) * T, T, blowup)
+            check_divergence(model, x, (start_period + k + 1) * T, bound=blowup)
         k += n
         bar.update(n)
     bar.close()
     t_end = (start_period + 1 + np.arange(periods)) * T
     return Run(names, T, t_end, amp, mean, x, v, (start_period + periods) * T,
                np.array(traces) if traces else None, np.array(trace_t) if trace_t else None,
-               extra={"compiled": kern is not None})
+               extra={"compiled": kern is not None}, state=(x, v))
 
 
 KERNEL_CHUNK = 200     # periods per compiled call: bounds the progress-bar and Ctrl-C latency
@@ -180,24 +153,34 @@ def _numpy_period(rhs, x, v, stimulus, period_index, N, h, T, sin_full, sin_half
     return x, v
 
 
-def _check_blowup(model: MechModel, x: np.ndarray, t: float, T: float, bound: float) -> None:
-    mag = np.abs(x).max(axis=1)
-    bad = ~np.isfinite(mag) | (mag > bound)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise DivergenceError(model.names[i], t, T, float(mag[i]))
+@dataclass(frozen=True)
+class RK4Options:
+    """Settings of the carrier-level RK4 engine."""
+    steps_per_period: int = DEFAULT_STEPS_PER_PERIOD
+    compiled: bool = True
+
+    def validate(self) -> None:
+        """Refuse steps the scheme cannot take."""
+        if int(self.steps_per_period) != self.steps_per_period or self.steps_per_period < 4:
+            raise Mech2SpiceError("RK4 needs a whole number of at least 4 steps per drive period")
 
 
-class _NoBar:
-    def update(self, n):
-        pass
-
-    def close(self):
-        pass
+OSCILLATOR_STEPS_PER_S = 1.5e7   # compiled loop on this 2-core machine (reports/performance.md: 1.4-2e7)
 
 
-def _progress(total: int, enabled: bool):
-    if not enabled:
-        return _NoBar()
-    from tqdm import tqdm
-    return tqdm(total=total, unit="period", leave=False)
+class RK4Engine(Engine):
+    """Fixed-step classical RK4 on the carrier: the textbook reference every reduced model is checked against."""
+
+    name = "rk4"
+    capabilities = Capabilities(batch=True, state=True, checkpoint=True)
+    Options = RK4Options
+
+    def estimate_seconds(self, model, periods, batch=1):
+        """Wall time from the measured oscillator-step rate."""
+        return model.n * batch * periods * self.options.steps_per_period / OSCILLATOR_STEPS_PER_S
+
+    def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
+        """RK4 over `periods` drive periods (see `integrate`)."""
+        return integrate(model, periods, steps_per_period=self.options.steps_per_period, stimulus=stimulus,
+                         state=state, start_period=start_period, probes=probes, progress=progress,
+                         compiled=self.options.compiled)

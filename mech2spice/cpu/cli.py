@@ -11,8 +11,10 @@ import sys
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from .physical import ENVELOPE_STEP, SETTLE
-from .run import BACKENDS, load_program, run_program
+from ..inputs import MAX_CPU_CYCLES, check_output_file, integer, number, write_bytes
+from .physical import PROCESSOR_STEP, SETTLE_TOL
+from .machines import BACKENDS
+from .run import load_program, run_program
 
 
 def add_parser(subparsers) -> None:
@@ -36,17 +38,18 @@ def add_parser(subparsers) -> None:
     r.add_argument("--backend", default="iss", choices=BACKENDS,
                    help="iss (instruction-set simulator), logic (the NOR netlist), envelope or rk4 (the "
                         "netlist as 6486 oscillators; envelope ~0.5 s per cycle, the sieve in ~4 min: reports/cpu_physical.md)")
-    r.add_argument("--max-cycles", type=int, default=100_000, help="stop after this many cycles in total")
+    r.add_argument("--max-cycles", type=integer(0, MAX_CPU_CYCLES), default=100_000,
+                   help="stop after this many cycles in total (default 100000)")
     r.add_argument("--checkpoint", metavar="FILE", help="write the machine state to FILE (JSON) as it runs")
-    r.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
+    r.add_argument("--checkpoint-every", type=integer(1, MAX_CPU_CYCLES), default=None, metavar="N",
                    help="cycles between checkpoints (default 1000; 10 for envelope / rk4, whose checkpoint "
-                        "also keeps the oscillator state in FILE.state.npz)")
-    r.add_argument("--step", type=float, default=None, metavar="PERIODS",
-                   help=f"envelope step in drive periods (default {ENVELOPE_STEP:g}; refused above the "
+                        "also keeps the oscillator state in a file FILE.state-*.npz that FILE names)")
+    r.add_argument("--step", type=number(0), default=None, metavar="PERIODS",
+                   help=f"envelope step in drive periods (default {PROCESSOR_STEP:g}; refused above the "
                         "stability bound)")
-    r.add_argument("--settle", type=float, default=None, metavar="TOL",
+    r.add_argument("--settle", type=number(0, lo_open=False), default=None, metavar="TOL",
                    help=f"envelope: end each pause once every channel stays within TOL u_R for two 200-period "
-                        f"windows (default {SETTLE}; 0 = full fixed-length pauses)")
+                        f"windows (default {SETTLE_TOL}; 0 = full fixed-length pauses)")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
     r.add_argument("--json", action="store_true", help="machine-readable output")
     r.set_defaults(func=cmd_run)
@@ -55,11 +58,9 @@ def add_parser(subparsers) -> None:
 def cmd_asm(args) -> int:
     if Path(args.program).suffix.lower() != ".asm":
         raise Mech2SpiceError(f"{args.program}: expected an assembly source (.asm)")
+    check_output_file(args.output, [args.program], "memory image")
     prog = load_program(args.program)
-    try:
-        Path(args.output).write_bytes(prog.image)
-    except OSError as err:
-        raise Mech2SpiceError(f"cannot write {args.output}: {err.strerror or err}") from None
+    write_bytes(args.output, prog.image)
     if args.listing:
         print(prog.listing)
     print(f"wrote {args.output}: {len(prog.image)} bytes", file=sys.stderr if args.listing else sys.stdout)
@@ -74,6 +75,8 @@ def cmd_run(args) -> int:
         physical["settle"] = args.settle or None
     if physical and args.backend != "envelope":
         raise Mech2SpiceError("--step and --settle apply to the envelope backend only")
+    if args.checkpoint_every and not args.checkpoint:
+        raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=not args.json and sys.stderr.isatty(),
                       checkpoint_every=args.checkpoint_every, **physical)

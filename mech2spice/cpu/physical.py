@@ -10,38 +10,47 @@ The halt is the logic backend's: no register changed at the edge.
 """
 from __future__ import annotations
 
+import hashlib
+import io
 import os
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from .. import simulate
-from ..physics import network
-from ..errors import Mech2SpiceError
-from ..physics.params import DEFAULT, band_of
-from .iss import FETCH, LDNX, LOAD, REGISTERS, Cycle
-from .isa import mnemonic
-from .memory import Memory
+from dataclasses import replace
 
-ENVELOPE_STEP = 8.0     # periods: within tolerance with SETTLE (reports/fidelity.md), 1.9x below the bound
-SETTLE = 0.1            # u_R: end a pause once the channels settle (envelope.integrate); benchmarks/fidelity.py
+from .. import simulate
+from ..backends import make_engine
+from ..errors import Mech2SpiceError
+from ..physics import network
+from ..physics.params import DEFAULT, band_of
+from .isa import mnemonic
+from .iss import FETCH, Cycle
+from .memory import Memory
+from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
+
+PHYSICAL = ("envelope", "rk4")   # engines that continue from a state, so a cycle can follow the last
+PROCESSOR_STEP = 8.0    # envelope periods: within tolerance with SETTLE_TOL (reports/fidelity.md), 1.9x below the bound
+SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fidelity.md)
 
 
 class PhysicalCPU:
-    def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float = ENVELOPE_STEP,
-                 settle: float | None = SETTLE, power_up: bool = True):
-        from ..synthesis.synth import synthesize
-        from .run import CPU_VERILOG, register_map
-        if backend not in ("envelope", "rk4"):
-            raise Mech2SpiceError(f"no physical processor backend '{backend}'")
-        self.netlist = synthesize(CPU_VERILOG, max_fanout=network.MAX_FANOUT)
+    """The processor as oscillators (an engine that continues from a state) against the behavioural memory."""
+
+    def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float = PROCESSOR_STEP,
+                 settle: float | None = SETTLE_TOL, power_up: bool = True):
+        if backend not in PHYSICAL:
+            raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
+        self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
         self.model = network.build(self.netlist, p)
         self.regmap = register_map(self.netlist)
         for q, block in self.model.design.latch_outputs.items():
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
+        self.pulse_engine, self.pause_engine = self._engines(backend, step, settle)
         t = simulate.clock_timing(self.netlist)
-        whole = max(1, int(round(step)))            # stimulus changes fall on step boundaries
+        whole = max(1, int(round(step))) if backend == "envelope" else 1   # changes fall on step boundaries
         self.pulse, self.pause = -(-t["pulse"] // whole) * whole, -(-t["pause"] // whole) * whole
         self.backend, self.p, self.mem = backend, p, memory
         self.step_periods, self.settle = step, settle
@@ -51,21 +60,21 @@ class PhysicalCPU:
         self.amps = self._reset() if power_up else None      # else: load() a checkpoint
 
     # --- integration -----------------------------------------------------------------------
+    @staticmethod
+    def _engines(backend: str, step: float, settle: float | None):
+        """(pulse engine, pause engine): only pauses may end early once settled; pulses always run in full."""
+        if backend != "envelope":
+            engine = make_engine(backend)
+            return engine, engine
+        pulse = make_engine(backend, make_engine(backend).Options(step_periods=step))
+        return pulse, make_engine(backend, replace(pulse.options, settle_tol=settle or None))
+
     def _run(self, periods: int, values: dict, clock: int) -> dict[str, float]:
-        from ..physics import envelope
-        from ..backends import rk4
         stim = network.stimulus(self.model, self.netlist, self.p, [(0, [values])], clock=[[clock]])
-        if self.backend == "envelope":
-            run = envelope.integrate(self.model, periods, step_periods=self.step_periods, stimulus=stim,
-                                     state=self.state, start_period=self.period, probes=self.probes,
-                                     settle=self.settle if clock == 0 else None)
-            self.state = run.extra["envelope_state"]
-            self.simulated += periods - run.extra["settled_periods"]
-        else:
-            run = rk4.integrate(self.model, periods, stimulus=stim, state=self.state, start_period=self.period,
-                                probes=self.probes)
-            self.state = (run.x, run.v)
-            self.simulated += periods
+        engine = self.pulse_engine if clock else self.pause_engine
+        run = engine.run(self.model, periods, stim, state=self.state, start_period=self.period, probes=self.probes)
+        self.state = run.state
+        self.simulated += periods - run.settled_periods
         self.period += periods
         amp = np.abs(run.amp[-10:, :, 0]).mean(axis=0) / self.p.u_r
         return dict(zip(self.probes, amp))
@@ -82,17 +91,17 @@ class PhysicalCPU:
         return Memory.decode_address(bits, self.cycle, what)
 
     def registers(self, amps=None) -> dict:
+        """The architectural registers decoded from the latch outputs' amplitudes (an invalid bit stops the run)."""
         amps = amps or self.amps
-        vals = dict.fromkeys(("pc", "a", "b", "c", "d", "ov", "ld", "nx"), 0)
-        for q, (reg, bit) in self.regmap.items():
+
+        def bit(q: str) -> int:
             b = band_of(amps[f"latch.{q}"])
             if b is None:
-                raise Mech2SpiceError(f"cycle {self.cycle}: register {reg} bit {bit} (latch {q}) is invalid "
+                reg, k = self.regmap[q]
+                raise Mech2SpiceError(f"cycle {self.cycle}: register {reg} bit {k} (latch {q}) is invalid "
                                       f"(amplitude {amps[f'latch.{q}']:.3f} u_R)")
-            vals[reg] |= b << bit
-        ld, nx = vals.pop("ld"), vals.pop("nx")
-        return {**{r: vals[r] for r in REGISTERS if r != "phase"},
-                "phase": LOAD if ld else LDNX if nx else FETCH}
+            return b
+        return registers_from_latches(self.regmap, bit)
 
     def set_registers(self, regs: dict) -> None:
         """Registers cannot be forced into oscillators: after load(), check that the restored state
@@ -104,31 +113,48 @@ class PhysicalCPU:
                                   f"checkpoint's registers {regs}")
 
     # --- checkpoints: the whole dynamical state, so a resumed run continues exactly ----------
-    def save(self, path) -> None:
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp.npz")
+    def save(self, path) -> str:
+        """Write the dynamical state to `path` (durably: the checkpoint names it next); returns its sha256."""
+        buf = io.BytesIO()
         arrays = {f"state{k}": np.asarray(a) for k, a in enumerate(self.state)}
-        np.savez(tmp, **arrays, period=self.period, rdata=self.rdata, simulated=self.simulated,
+        np.savez(buf, **arrays, period=self.period, rdata=self.rdata, simulated=self.simulated,
                  probes=np.array(self.probes), amps=np.array([self.amps[k] for k in self.probes]),
                  backend=self.backend, step=self.step_periods)
-        os.replace(tmp, path)            # a crash mid-write leaves the previous file intact
+        data = buf.getvalue()
+        with open(path, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        return hashlib.sha256(data).hexdigest()
 
-    def load(self, path) -> None:
+    def load(self, path, sha256: str | None = None) -> None:
+        """Restore the state save() wrote; with `sha256`, the file must be exactly the one saved."""
         try:
-            z = np.load(path)
-        except (OSError, ValueError) as err:
+            data = Path(path).read_bytes()
+        except OSError as err:
+            raise Mech2SpiceError(f"cannot read the oscillator state {path}: {err.strerror or err}") from None
+        if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
+            raise Mech2SpiceError(f"the oscillator state {path} does not match its checkpoint (changed or "
+                                  "damaged since it was written)")
+        try:
+            z = np.load(io.BytesIO(data))
+            with z:
+                self._load_arrays(z, path)
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
             raise Mech2SpiceError(f"cannot read the oscillator state {path}: {err}") from None
-        with z:
-            if str(z["backend"]) != self.backend or list(z["probes"]) != self.probes:
-                raise Mech2SpiceError(f"{path} holds the state of a different processor model or backend")
-            n = sum(1 for k in z.files if k.startswith("state"))
-            self.state = tuple(z[f"state{k}"] for k in range(n))
-            self.period, self.rdata = int(z["period"]), int(z["rdata"])
-            self.simulated = int(z["simulated"])
-            self.amps = dict(zip(self.probes, map(float, z["amps"])))
+
+    def _load_arrays(self, z, path) -> None:
+        if str(z["backend"]) != self.backend or list(z["probes"]) != self.probes:
+            raise Mech2SpiceError(f"{path} holds the state of a different processor model or backend")
+        n = sum(1 for k in z.files if k.startswith("state"))
+        self.state = tuple(z[f"state{k}"] for k in range(n))
+        self.period, self.rdata = int(z["period"]), int(z["rdata"])
+        self.simulated = int(z["simulated"])
+        self.amps = dict(zip(self.probes, map(float, z["amps"])))
 
     # --- one clock cycle --------------------------------------------------------------------
     def step(self) -> Cycle:
+        """One clock cycle: read, settle the datapath, pulse the clock, commit the write, settle again."""
         regs = self.registers()
         raddr = self._port(self.amps, "raddr", "read address")
         rdata = self.mem.read(raddr)

@@ -1,4 +1,4 @@
-"""Run a program on the processor: the ISS, or the synthesized NOR netlist at logic level.
+"""Run a program on any of the processor's machines (cpu/machines.py), with checkpoints.
 
 ``run_program`` returns ``{"cycles", "halted", "memory", "registers", "wall_s", "backend"}`` and,
 when a checkpoint file is given, writes the whole machine state there every ``checkpoint_every``
@@ -7,24 +7,25 @@ cycles and at the end; ``resume=True`` continues from that file (cycle counts ar
 
 from __future__ import annotations
 
-import functools
+import glob
 import hashlib
 import json
 import os
+import re
+import secrets
 import sys
 import time
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from .. import data
+from ..inputs import check_output_file, is_int, read_json
+from .isa import MEM_SIZE
+from .iss import FETCH, LDNX, LOAD, REGISTERS
 from .asm import Program, assemble_program
-from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS, Cycle
-from .isa import mnemonic
+from .machines import BACKENDS, PHYSICAL, make_cpu
 from .memory import Memory
 from .tm import Tape
 
-CPU_VERILOG = data.verilog("cpu.v")
-BACKENDS = ("iss", "logic", "envelope", "rk4")
 CHECKPOINT_FORMAT = "mech2spice-cpu-checkpoint"
 
 
@@ -57,151 +58,177 @@ def make_memory(program: Program) -> Memory:
     return Memory(program.image, devices)
 
 
-# --------------------------------------------------------------------------- logic backend
-
-@functools.lru_cache(maxsize=2)
-def cpu_netlist(path: str = str(CPU_VERILOG)):
-    """The synthesized processor (cached: Yosys takes a few seconds)."""
-    from ..synthesis.synth import synthesize
-    return synthesize(path)
-
-
-def register_map(netlist) -> dict[str, tuple[str, int]]:
-    """latch -> (register, bit), read from the net each latch's D input carries (next_<reg>[i])."""
-    g = netlist.graph
-    out = {}
-    for q in netlist.latches():
-        (src,) = g.predecessors(q)
-        net = str(g.nodes[src].get("net", ""))
-        name, _, idx = net.partition("[")
-        if not name.startswith("next_"):
-            raise Mech2SpiceError(f"latch {q} is fed by net '{net}', not a next_<register> net; "
-                                  "cannot read the processor state")
-        out[q] = (name[5:], int(idx.rstrip("]") or 0))
-    return out
-
-
-class LogicCPU:
-    """The synthesized NOR netlist of verilog/cpu.v clocked cycle by cycle against a Memory."""
-
-    def __init__(self, memory: Memory, netlist=None):
-        from ..backends.logic import ClockedLogic
-        self.netlist = netlist if netlist is not None else cpu_netlist()
-        self.logic = ClockedLogic(self.netlist)
-        self.regmap = register_map(self.netlist)
-        self.mem = memory
-        self.cycle = 0
-        self.halted = False
-
-    def registers(self) -> dict:
-        vals = dict.fromkeys(("pc", "a", "b", "c", "d", "ov", "ld", "nx"), 0)
-        for q, (reg, bit) in self.regmap.items():
-            vals[reg] |= self.logic.state[q] << bit
-        ld, nx = vals.pop("ld"), vals.pop("nx")
-        phase = LOAD if ld else LDNX if nx else FETCH
-        return {**{r: vals[r] for r in REGISTERS if r != "phase"}, "phase": phase}
-
-    def set_registers(self, regs: dict) -> None:
-        vals = {r: regs[r] for r in REGISTERS if r != "phase"}
-        vals.update(ld=int(regs["phase"] == LOAD), nx=int(regs["phase"] == LDNX))
-        self.logic.state = {q: (vals[reg] >> bit) & 1 for q, (reg, bit) in self.regmap.items()}
-
-    def step(self) -> Cycle:
-        """One clock cycle: read at raddr, present rdata, commit the write, clock the latches."""
-        regs = self.registers()
-        raddr = self.logic.evaluate({"rdata": 0})["raddr"]   # raddr depends on the state only
-        rdata = self.mem.read(raddr)
-        outs = self.logic.evaluate({"rdata": rdata})
-        before = self.logic.state
-        self.logic.tick({"rdata": rdata})
-        self.mem.commit(outs["waddr"], outs["wdata"], outs["we"])
-        # Only JMP_C to itself leaves every latch unchanged: that is the halt.
-        self.halted = self.logic.state == before
-        rec = Cycle(self.cycle, regs["pc"], regs["phase"],
-                    mnemonic(rdata) if regs["phase"] == FETCH else None,
-                    raddr, rdata, outs["we"], outs["waddr"], outs["wdata"])
-        self.cycle += 1
-        return rec
-
-    def run(self, max_cycles: int) -> tuple[int, bool]:
-        while not self.halted and self.cycle < max_cycles:
-            self.step()
-        return self.cycle, self.halted
-
-
-PHYSICAL = ("envelope", "rk4")
-
-
-def make_cpu(backend: str, memory: Memory, power_up: bool = True, **physical):
-    """physical: step / settle for the oscillator-level backends (physical.PhysicalCPU)."""
-    if backend == "iss":
-        return ISS(memory)
-    if backend == "logic":
-        return LogicCPU(memory)
-    if backend in PHYSICAL:
-        from .physical import PhysicalCPU
-        return PhysicalCPU(memory, backend, power_up=power_up, **physical)
-    raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")
-
-
 # --------------------------------------------------------------------------- checkpoints
+# A checkpoint is one JSON file; a physical run's also names its oscillator-state file and that file's
+# sha256.  Each save writes the state under a new unique name, then atomically replaces the JSON, then
+# deletes the old state file: a kill at any instant leaves the old pair or the new one, both usable.
+
+CHECKPOINT_VERSION = 2
+_REG_MAX = {"pc": 255, "a": 255, "b": 255, "c": 255, "d": 255, "ov": 1}
+
 
 def _state(cpu, program: Program, backend: str) -> dict:
     devices = {str(a): d.state() for a, d in cpu.mem.devices.items()}
-    return {"format": CHECKPOINT_FORMAT, "version": 1, "backend": backend,
+    return {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "backend": backend,
             "program_sha256": hashlib.sha256(program.image).hexdigest(),
             "cycle": cpu.cycle, "halted": cpu.halted, "registers": cpu.registers(),
             "memory": cpu.mem.snapshot(), "devices": devices}
 
 
 def physical_state_path(checkpoint) -> Path:
-    """Where a physical run keeps its oscillator state beside the JSON checkpoint."""
+    """Where a version-1 checkpoint kept its oscillator state (read on resume only)."""
     return Path(str(checkpoint) + ".state.npz")
 
 
+def _state_file_pattern(path: Path) -> re.Pattern:
+    return re.compile(re.escape(path.name) + r"\.state-[0-9a-f]{16}\.npz")
+
+
+def checkpoint_state_file(checkpoint) -> Path | None:
+    """The oscillator-state file the checkpoint at `checkpoint` names (None: none, or unreadable)."""
+    try:
+        name = json.loads(Path(checkpoint).read_bytes()).get("state_file")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return Path(checkpoint).with_name(name) if isinstance(name, str) else None
+
+
 def save_checkpoint(cpu, path, program: Program, backend: str) -> None:
-    if hasattr(cpu, "save"):             # the oscillator state first: the JSON names a complete pair
-        cpu.save(physical_state_path(path))
-    write_checkpoint(path, _state(cpu, program, backend))
+    """Write the whole machine state (with a physical run's oscillator state) so that a kill at any
+    instant leaves a checkpoint that resumes: the old one or the new one."""
+    path = Path(path)
+    state = _state(cpu, program, backend)
+    try:
+        if hasattr(cpu, "save"):
+            name = f"{path.name}.state-{secrets.token_hex(8)}.npz"
+            state["state_file"], state["state_sha256"] = name, cpu.save(path.with_name(name))
+        write_checkpoint(path, state)
+    except OSError as err:
+        raise Mech2SpiceError(f"cannot write checkpoint {path} at cycle {cpu.cycle}: {err.strerror or err} "
+                              "(the previous checkpoint, if any, is intact)") from None
+    if "state_file" in state:            # the old state file, and any a killed run left behind
+        keep, pattern = state["state_file"], _state_file_pattern(path)
+        for old in path.parent.glob(f"{glob.escape(path.name)}.state-*.npz"):
+            if old.name != keep and pattern.fullmatch(old.name):
+                old.unlink(missing_ok=True)
 
 
 def write_checkpoint(path, state: dict) -> None:
+    """Replace the JSON checkpoint atomically (a crash mid-write leaves the previous one intact)."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(state))
-    os.replace(tmp, path)            # a crash mid-write leaves the previous checkpoint intact
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(json.dumps(state))
+        f.flush()
+        os.fsync(f.fileno())             # the data is on disk before the rename makes it the checkpoint
+    os.replace(tmp, path)
+
+
+def is_checkpoint(path) -> bool:
+    """Whether `path` holds a processor checkpoint (so a new run may replace it)."""
+    try:
+        state = json.loads(Path(path).read_bytes())
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(state, dict) and state.get("format") == CHECKPOINT_FORMAT
 
 
 def read_checkpoint(path, program: Program, backend: str) -> dict:
-    try:
-        state = json.loads(Path(path).read_text())
-    except OSError as err:
-        raise Mech2SpiceError(f"cannot read checkpoint {path}: {err.strerror or err}") from None
-    except json.JSONDecodeError as err:
-        raise Mech2SpiceError(f"checkpoint {path} is not valid JSON ({err.msg})") from None
+    """The checkpoint at `path`, checked field by field against the program and backend."""
+    if not Path(path).exists():
+        raise Mech2SpiceError(f"no checkpoint at {path}: the run stopped before writing one (or the path is "
+                              "wrong); start it again without --resume")
+    state = read_json(path, "checkpoint")
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise Mech2SpiceError(f"{path} is not a processor checkpoint")
+    _check_fields(state, path)
     if state["program_sha256"] != hashlib.sha256(program.image).hexdigest():
         raise Mech2SpiceError(f"checkpoint {path} belongs to a different program")
     if state["backend"] != backend:
         raise Mech2SpiceError(f"checkpoint {path} was written by the {state['backend']} backend, "
                               f"not {backend}")
+    if backend in PHYSICAL and state["version"] >= 2 and not (
+            isinstance(state.get("state_file"), str) and _state_file_pattern(Path(path)).fullmatch(state["state_file"])
+            and isinstance(state.get("state_sha256"), str)):
+        raise Mech2SpiceError(f"checkpoint {path} does not name a valid oscillator-state file")
     return state
+
+
+def _check_fields(state: dict, path) -> None:
+    """Types and ranges of every field a resume uses (a hand-edited file must not run on wrong state)."""
+    def bad(what: str):
+        raise Mech2SpiceError(f"checkpoint {path}: {what}")
+    if state.get("version") not in (1, CHECKPOINT_VERSION):
+        bad(f"unknown version {state.get('version')!r} (this mech2spice reads 1 and {CHECKPOINT_VERSION})")
+    for key, ok in (("backend", isinstance(state.get("backend"), str)),
+                    ("program_sha256", isinstance(state.get("program_sha256"), str)),
+                    ("cycle", is_int(state.get("cycle")) and state["cycle"] >= 0),
+                    ("halted", isinstance(state.get("halted"), bool))):
+        if not ok:
+            bad(f"field '{key}' is missing or has the wrong type")
+    regs = state.get("registers")
+    if not isinstance(regs, dict) or set(regs) != set(REGISTERS):
+        bad(f"'registers' must hold exactly {', '.join(REGISTERS)}")
+    if regs["phase"] not in (FETCH, LOAD, LDNX) or not all(
+            is_int(regs[r]) and 0 <= regs[r] <= hi for r, hi in _REG_MAX.items()):
+        bad(f"register values out of range: {regs}")
+    mem = state.get("memory")
+    if not isinstance(mem, list) or len(mem) != MEM_SIZE or not all(is_int(v) and 0 <= v <= 255 for v in mem):
+        bad(f"'memory' must be a list of {MEM_SIZE} bytes")
+    devices = state.get("devices", {})
+    if not isinstance(devices, dict) or not all(_valid_device(d) for d in devices.values()):
+        bad("'devices' must map addresses to tape states")
+
+
+def _valid_device(dev) -> bool:
+    return (isinstance(dev, dict) and isinstance(dev.get("cells"), dict)
+            and all(k.lstrip("-").isdigit() and is_int(v) for k, v in dev["cells"].items())
+            and all(is_int(dev.get(k)) for k in ("head", "steps", "idle")))
 
 
 def _restore(cpu, state: dict, path) -> None:
     if hasattr(cpu, "load"):
-        cpu.load(physical_state_path(path))
+        if "state_file" in state:
+            cpu.load(Path(path).with_name(state["state_file"]), sha256=state["state_sha256"])
+        else:
+            cpu.load(physical_state_path(path))
     cpu.mem.cells = [int(v) for v in state["memory"]]
     for addr, dev_state in state.get("devices", {}).items():
-        if int(addr) not in cpu.mem.devices:
+        if not addr.isdigit() or int(addr) not in cpu.mem.devices:
             raise Mech2SpiceError(f"checkpoint has a device at {addr} that the program does not map")
         cpu.mem.devices[int(addr)].restore(dev_state)
     cpu.set_registers(state["registers"])
     cpu.cycle, cpu.halted = int(state["cycle"]), bool(state["halted"])
 
 
+def check_checkpoint_path(checkpoint, program_source, resume: bool) -> None:
+    """The checkpoint may be written there: a writable place that is not the program and, unless
+    resuming, not some other file of the user's (an existing checkpoint is replaced)."""
+    inputs = [program_source] if isinstance(program_source, (str, os.PathLike)) else []
+    check_output_file(checkpoint, inputs, "checkpoint")
+    if not resume and Path(checkpoint).exists() and not is_checkpoint(checkpoint):
+        raise Mech2SpiceError(f"{checkpoint} exists and is not a processor checkpoint: refusing to overwrite it")
+
+
 # --------------------------------------------------------------------------- the runner
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _cycle_bar(enabled: bool, done: int, total: int, backend: str):
+    """A progress bar over cycles with rate and ETA (to --max-cycles: a halt comes sooner)."""
+    if not enabled:
+        return _NoBar()
+    from tqdm import tqdm
+    return tqdm(total=total, initial=done, unit="cycle", desc=f"{backend} (to --max-cycles)", leave=False,
+                file=sys.stderr, dynamic_ncols=True)
+
+
 
 def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpoint=None,
                 resume: bool = False, progress: bool = False, checkpoint_every: int | None = None,
@@ -213,22 +240,25 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         raise Mech2SpiceError("max_cycles must be >= 0 and checkpoint_every >= 1")
     if resume and checkpoint is None:
         raise Mech2SpiceError("resume needs a checkpoint file")
+    if checkpoint is not None:
+        check_checkpoint_path(checkpoint, source, resume)
     program = load_program(source)
     state = read_checkpoint(checkpoint, program, backend) if resume else None
     t0 = time.perf_counter()                       # wall_s includes building the model and power-up
+    if progress and backend in PHYSICAL:
+        print(f"[{backend}] building the processor's oscillator model ...", file=sys.stderr, flush=True)
     cpu = make_cpu(backend, make_memory(program), power_up=not resume, **physical)
     if resume:
         _restore(cpu, state, checkpoint)
-    last_report = t0
+    bar = _cycle_bar(progress and backend != "iss", cpu.cycle, max_cycles, backend)
     while not cpu.halted and cpu.cycle < max_cycles:
         rec = cpu.step()
+        bar.update(1)
         if trace is not None:
             trace(rec, cpu)
         if checkpoint is not None and cpu.cycle % checkpoint_every == 0:
             save_checkpoint(cpu, checkpoint, program, backend)
-        if progress and time.perf_counter() - last_report > 1.0:
-            last_report = time.perf_counter()
-            print(f"[{backend}] cycle {cpu.cycle}", file=sys.stderr, flush=True)
+    bar.close()
     if checkpoint is not None:
         save_checkpoint(cpu, checkpoint, program, backend)
     result = {"backend": backend, "cycles": cpu.cycle, "halted": cpu.halted,

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..physics import nor, steady
 from ..backends import rk4
+from ..backends._base import Run
 from ..physics.envelope import Envelope
 from ..errors import DivergenceError
 from ..physics.params import BAND0, BAND1, NOMINAL0, NOMINAL1, GateParams, band_of, margin
@@ -218,7 +219,7 @@ def fanout_test(p: GateParams, n_loads: int, periods: int = 2500) -> dict:
             "min_margin": float(worst), "driver_swing_with_load_state": load_swing, "branch_spread": branch_spread}
 
 
-def spectrum_purity(run: rk4.Run, p: GateParams, periods: int = 20) -> float:
+def spectrum_purity(run: Run, p: GateParams, periods: int = 20) -> float:
     """Largest fraction of a probe's RMS displacement that is not at omega, over the last `periods`."""
     x = run.traces                                          # (S, n_probes, B), one sample per step
     n = x.shape[0] // periods * periods
@@ -344,7 +345,8 @@ def latch_sequence(p: GateParams, backend: str = "rk4", pulse: int = 800, settle
     Returns the output amplitude per period, the decoded output at the end of each phase, and when
     the output crossed the threshold relative to each storing pulse (it must wait out the pulse)."""
     from pathlib import Path
-    from ..physics import envelope, network
+    from ..physics import network
+    from ..backends import envelope
     from ..synthesis import synth
     nl = synth.synthesize(data.verilog("dff.v"))
     model = network.build(nl, p)

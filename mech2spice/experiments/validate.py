@@ -37,8 +37,10 @@ import numpy as np
 
 from . import characterise as ch
 from .. import simulate
-from ..physics import envelope, network, nor
+from ..physics import network, nor
+from ..backends import envelope
 from ..backends import logic, rk4
+from ..synthesis import ports
 from ..synthesis import synth
 from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
@@ -133,7 +135,7 @@ def adder_scene(p: GateParams = DEFAULT, hold: int | None = None) -> Scene:
     hold = hold or simulate.period_budget(nl)
     vals = [{"a": a, "b": b} for a in range(4) for b in range(4)]
     st = network.stimulus(m, nl, p, [(0, [{}] * 16), (hold, vals)])
-    probes = [b for b in logic.output_bits(nl) if b in m.probes]
+    probes = [b for b in ports.output_bits(nl) if b in m.probes]
     return Scene("adder2", m, st, 2 * hold, probes, [f"a={v['a']} b={v['b']}" for v in vals], [0, hold],
                  [hold, 2 * hold], f"2-bit adder (17 gates), inputs 0 for {hold} periods then (a, b)",
                  {"netlist": nl, "values": vals})
@@ -144,7 +146,7 @@ def run(scene: Scene, backend: str, step: float | None = None, env: envelope.Env
     """Amplitudes (P, probes, B) in u_R, the time each sample stands for (periods), and wall time.
 
     backend 'rk4' (step = steps per period, default 80) or 'envelope' (step in periods, default
-    simulate.ENVELOPE_STEP); `env` runs a variant Envelope (this module's classes) instead."""
+    envelope.DEFAULT_STEP); `env` runs a variant Envelope (this module's classes) instead."""
     p = scene.model.params
     t0 = time.perf_counter()
     if backend == "rk4":
@@ -154,7 +156,7 @@ def run(scene: Scene, backend: str, step: float | None = None, env: envelope.Env
         amp = np.abs(r.amp) / p.u_r
         t = np.arange(scene.periods) + 0.5             # each sample demodulates one whole period
     elif backend == "envelope":
-        step = float(step or simulate.ENVELOPE_STEP)
+        step = float(step or envelope.DEFAULT_STEP)
         if env is None:
             r = envelope.integrate(scene.model, scene.periods, step_periods=step, stimulus=scene.stimulus,
                                    probes=scene.probes)
@@ -191,7 +193,7 @@ def integrate_free(env: envelope.Envelope, scene: Scene, step: float, blowup: fl
     with np.errstate(over="ignore", invalid="ignore"):
         for j in range(nsteps):
             F = env.forcing(scene.stimulus.at(j * h + 1e-9 * h))
-            A, s, sd = envelope._rk4_step(env, A, s, sd, F, h)
+            A, s, sd = envelope.rk4_step(env, A, s, sd, F, h)
             mag = np.abs(A)
             out[j] = mag[prow] / p.u_r
             if not np.all(np.isfinite(mag)) or mag.max() > blowup * p.u_r:
@@ -226,9 +228,9 @@ class EnvelopeA2(envelope.Envelope):
 
     def rhs(self, A, s, sd, F):
         R = self.residual_fast(A, s, F)
-        Ad0 = self._Bsolve(R)
+        Ad0 = self.solve_rate(R)
         dR = -(self.Z0 @ Ad0) - (self.G @ s) * Ad0 - (self.G @ sd) * A
-        Ad = self._Bsolve(R - self.mf * self._Bsolve(dR))
+        Ad = self.solve_rate(R - self.mf * self.solve_rate(dR))
         sdd = (-(self.Ks @ s) - self.Cs @ sd + self.slow_force(A)) / self.ms[:, None]
         return Ad, sd, sdd
 
@@ -445,7 +447,7 @@ def trajectory_states(scene: Scene, step: float, at: list[int]):
         if t > done:
             r = envelope.integrate(scene.model, t - done, step_periods=step, stimulus=scene.stimulus,
                                    state=state, start_period=done, probes=scene.probes)
-            state = r.extra["envelope_state"]
+            state = r.state
             done = t
         out[t] = tuple(x.copy() for x in state)
     return out

@@ -12,7 +12,7 @@ import numpy as np
 
 from . import nor
 from ..errors import Mech2SpiceError
-from ..backends.logic import input_bits, output_bits, pack_inputs
+from ..synthesis.ports import input_bits, output_bits, pack_inputs
 from .model import MechModel
 from .params import NOMINAL0, NOMINAL1, GateParams
 from .stimulus import Stimulus

@@ -378,8 +378,8 @@ def run_envelope_spice(model: MechModel, periods: int, stimulus: Stimulus | None
                        opts: EnvelopeSpiceOptions = EnvelopeSpiceOptions(), workers: int | None = None,
                        timeout: float | None = None):
     """The envelope netlist of every batch member of `stimulus` under ngspice (one process each, up to
-    `workers` at a time); an rk4.Run whose per-period amplitudes are the envelope at each period's end."""
-    from ..backends.rk4 import Run
+    `workers` at a time); a Run whose per-period amplitudes are the envelope at each period's end."""
+    from ..backends._base import Run
     B = stimulus.batch if stimulus is not None else 1
     workers = max(1, min(B, workers or os.cpu_count() or 1))
     with ThreadPoolExecutor(workers) as pool:

@@ -1,4 +1,4 @@
-"""Running emitted netlists under ngspice and reading the results back as an `rk4.Run`.
+"""Running emitted netlists under ngspice and reading the results back as a `backends.Run`.
 
 Default path: a subprocess `ngspice -b -n -r out.raw file.cir` in a temporary directory (binary raw file,
 streamed to disk by ngspice, read here with a header parse + np.frombuffer).  ngspice's own time
@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import DivergenceError, Mech2SpiceError, ToolMissingError
 from ..physics.model import MechModel
-from ..backends.rk4 import Run, default_blowup
+from ..backends._base import Run, blowup_bound
 from .carrier import Namer, SpiceOptions, emit_with_probes
 from ..physics.stimulus import Stimulus
 
@@ -112,7 +112,7 @@ def _node_dof(model: MechModel, node: str) -> str | None:
 def check_divergence(model: MechModel, t: np.ndarray, x: np.ndarray, probe_dofs: list[int],
                      T: float) -> None:
     """DivergenceError at the first sample where a probe is non-finite or beyond the blow-up bound."""
-    bad = ~np.isfinite(x) | (np.abs(x) > default_blowup(model))
+    bad = ~np.isfinite(x) | (np.abs(x) > blowup_bound(model))
     if bad.any():
         row = int(np.flatnonzero(bad.any(axis=1))[0])
         col = int(np.flatnonzero(bad[row])[0])

@@ -1,0 +1,137 @@
+"""What every engine shares: the result type, the interface, the divergence check and the progress bar.
+
+An engine integrates one mechanical model (physics.model.MechModel) under one stimulus for a number
+of drive periods and returns a Run: the complex amplitude of each probe at the drive frequency for
+every period.  Engines differ in fidelity (carrier-resolving RK4, envelope equations, circuit
+simulators) and in what they support (`Capabilities`); the registry in `backends/__init__.py` maps
+names to them.  Adding one: a module with an `Engine` subclass and one registry line
+(docs/architecture.md).
+"""
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..errors import DivergenceError
+from ..physics.model import MechModel
+from ..physics.stimulus import Stimulus
+
+BLOWUP = 1e3     # u_R: an amplitude this large means the integration diverged (logic levels are ~1 u_R)
+
+
+@dataclass
+class Run:
+    """Result of an integration; amplitudes are complex phasors A with u = Re(A e^{i omega t})."""
+    probe_names: list[str]
+    period: float
+    t_end: np.ndarray                 # (P,) time at the end of each recorded period
+    amp: np.ndarray                   # (P, n_probes, B) complex
+    mean: np.ndarray                  # (P, n_probes, B)
+    x: np.ndarray | None              # final displacements (n, B), carrier-level engines
+    v: np.ndarray | None              # final velocities (n, B)
+    t: float                          # final time
+    traces: np.ndarray | None = None  # (S, n_probes, B) raw samples if asked for
+    trace_t: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+    state: Any = None                 # the engine's state at the end, to continue from (Engine.run(state=...))
+    settled_periods: int = 0          # periods held at a settled state instead of integrated (idle skipping)
+
+    def probe(self, name: str) -> int:
+        """Row of a probe in `amp`."""
+        return self.probe_names.index(name)
+
+    def amplitude(self, name: str) -> np.ndarray:
+        """|A| per period, (P, B)."""
+        return np.abs(self.amp[:, self.probe(name), :])
+
+    def final_amplitudes(self, names: list[str], unit: float, average: int = 1) -> np.ndarray:
+        """|A| / unit over the last `average` periods, (len(names), B)."""
+        rows = [self.probe(n) for n in names]
+        return np.abs(self.amp[-average:, rows, :]).mean(axis=0) / unit
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What an engine can do beyond integrating from rest."""
+    physical: bool = True        # integrates the mechanical model (False: the logic-level oracle)
+    batch: bool = True           # many stimuli side by side in one run
+    state: bool = False          # continues from a returned state (chunked runs, settle loops)
+    checkpoint: bool = False     # its state can be saved and restored exactly (processor runs)
+    settle: bool = False         # skips idle time once every channel has settled
+
+
+class Engine(ABC):
+    """An integrator of the mechanical model, configured by its `Options` dataclass."""
+
+    name: ClassVar[str]
+    capabilities: ClassVar[Capabilities]
+    Options: ClassVar[type]
+
+    def __init__(self, options=None):
+        self.options = options if options is not None else self.Options()
+        self.options.validate()
+
+    @abstractmethod
+    def run(self, model: MechModel, periods: int, stimulus: Stimulus | None = None, *, state=None,
+            start_period: int = 0, probes: list[str] | None = None, progress: bool = False) -> Run:
+        """Integrate `periods` drive periods from `start_period` (from rest unless `state` is given)."""
+
+    def describe(self) -> dict:
+        """The options this engine runs with, for results and reports."""
+        return dict(vars(self.options))
+
+
+@dataclass(frozen=True)
+class NoOptions:
+    """For engines without settings."""
+
+    def validate(self) -> None:
+        """Nothing to check."""
+
+
+def blowup_bound(model: MechModel) -> float:
+    """The displacement or amplitude beyond which a run counts as diverged."""
+    return BLOWUP * model.amplitude_unit
+
+
+def check_divergence(model: MechModel, values: np.ndarray, t: float, dofs=None, bound: float | None = None) -> None:
+    """Raise DivergenceError naming the first DOF whose |value| (rows of `values`) is non-finite or past the bound.
+
+    `dofs` maps rows to DOF indices (default: row k is DOF k)."""
+    bound = bound or blowup_bound(model)
+    mag = np.abs(values).max(axis=1) if values.ndim > 1 else np.abs(values)
+    bad = ~np.isfinite(mag) | (mag > bound)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        dof = i if dofs is None else int(dofs[i])
+        raise DivergenceError(model.names[dof], t, model.period, float(mag[i]))
+
+
+class _NoBar:
+    def update(self, n):
+        pass
+
+    def close(self):
+        pass
+
+
+def progress_bar(total: int, enabled: bool, unit: str = "period"):
+    """A tqdm bar with an ETA when enabled (callers enable it on a terminal only), else a no-op."""
+    if not enabled:
+        return _NoBar()
+    from tqdm import tqdm
+    return tqdm(total=total, unit=unit, leave=False)
+
+
+def probe_dofs(model: MechModel, names: list[str]) -> np.ndarray:
+    """DOF index of each probe name or DOF name."""
+    return np.array([model.probes[n] if n in model.probes else model.index(n) for n in names], int)
+
+
+def whole_periods(x: float) -> bool:
+    """True for a whole number of periods."""
+    return abs(x - round(x)) < 1e-9 and math.isfinite(x)

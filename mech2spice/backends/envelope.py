@@ -1,0 +1,237 @@
+"""The envelope engine: RK4 on the slowly-varying amplitude equations (physics.envelope), steps of whole periods.
+
+The step is held below RK4's stability limit for the fastest envelope rate (`max_step_periods`); a
+clocked run may skip idle time: a stretch of constant stimulus ends once every channel has settled
+(`settle_tol`).  The compiled loop (_envelope_kernel.py, numba) and the numpy path compute the same
+equations; what each speed-up costs in accuracy is measured in reports/fidelity.md.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import Mech2SpiceError
+from ..physics.envelope import Envelope, gershgorin_rate, spectral_rate
+from ..physics.model import MechModel
+from ..physics.stimulus import Stimulus
+from . import _envelope_kernel
+from ._base import Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar
+
+RK4_STABILITY = 2.5          # |lambda h| RK4 keeps stable (its region reaches ~2.8 on both axes)
+RATE_SAFETY = 1.5            # x the largest |eigenvalue| at rest: along switching trajectories it moved by
+                             # <= 3 % (reports/envelope.md), so this leaves a wide margin
+
+
+DEFAULT_STEP = 4.0           # periods, at most: no accuracy cost on the adder (reports/envelope.md; bound 15.1)
+
+
+def rate_bound(model: MechModel) -> float:
+    """The envelope rate the step limit uses: RATE_SAFETY x the spectral rate (Gershgorin where that
+    cannot be computed).  Cached with the model."""
+    rate = model.derived.get("envelope_rate")
+    if rate is None:
+        env = Envelope.of(model)
+        rho = spectral_rate(env)
+        rate = model.derived["envelope_rate"] = RATE_SAFETY * rho if rho is not None else gershgorin_rate(env)
+    return rate
+
+
+def max_step_periods(model: MechModel) -> float:
+    """The longest stable RK4 step on this model's envelope equations, in drive periods."""
+    return RK4_STABILITY / rate_bound(model) / model.period
+
+
+def default_step(model: MechModel, cap: float = DEFAULT_STEP) -> float:
+    """The longest of 8, 4, 2, 1 periods within `cap` and the model's stability bound (else half a period):
+    whole steps keep stimulus changes, which fall on whole periods, on step boundaries."""
+    bound = max_step_periods(model)
+    for step in (8, 4, 2, 1):
+        if step <= min(cap, bound):
+            return float(step)
+    return 0.5
+
+
+def kernel(model: MechModel):
+    """The compiled loop's arrays for this model (built once), or None without numba."""
+    if not _envelope_kernel.AVAILABLE:
+        return None
+    kern = model.derived.get("envelope_kernel")
+    if kern is None:
+        kern = model.derived["envelope_kernel"] = _envelope_kernel.Kernel(Envelope.of(model))
+    return kern
+
+
+SETTLE_WINDOW = 200          # periods: more than one gate delay (173 mean, 224 max: reports/gate.md), so
+                             # a signal in flight moves some channel by a large part of a band per window
+SETTLE_MIN = 400             # periods after a stimulus change before a window counts: an input change
+                             # first moves gate oscillators and insulators, not yet channels
+CHUNK_PERIODS = 2000         # periods per compiled call: bounds the progress-bar and Ctrl-C latency
+
+
+def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stimulus=None, state=None,
+              start_period: int = 0, probes: list[str] | None = None, progress: bool = False,
+              settle_tol: float | None = None, compiled: bool = True) -> Run:
+    """RK4 on the envelope equations with a step of `step_periods` drive periods (must divide 1 or be whole).
+
+    Returns a Run whose per-period amplitudes are the envelope itself.  A step beyond the measured
+    stability bound is refused.  With `settle_tol` (u_R), each stretch of constant stimulus ends once every
+    channel's amplitude stayed within a range of `settle_tol` for two SETTLE_WINDOWs in a row: the rest of
+    the stretch is the settled state, held (idle-time skipping; the slow small ringing this ignores and
+    its error are measured in reports/fidelity.md).  compiled=True uses the numba loop
+    (envelope_kernel.py) where numba exists."""
+    env = Envelope.of(model)
+    T = model.period
+    _check_step(model, step_periods)
+    sub, per = _step_layout(step_periods)
+    h = T * per / sub
+    stimulus = stimulus or Stimulus.constant(model)
+    B = stimulus.batch
+    nf, ns = env.fast.size, env.slow.size
+    A, s, sd = (np.zeros((nf, B), complex), np.zeros((ns, B)), np.zeros((ns, B))) if state is None else \
+        (state[0].copy(), state[1].copy(), state[2].copy())
+    names = list(probes or model.probes)
+    prow = _probe_rows(env, probe_dofs(model, names))
+    amp = np.zeros((periods, len(names), B), complex)
+    tol = settle_tol * model.amplitude_unit if settle_tol else 0.0
+    check = sub * max(1, int(round(SETTLE_WINDOW / per)))
+    kern = kernel(model) if compiled else None
+    bound = blowup_bound(model)
+    settled_periods = 0
+    bar = progress_bar(periods, progress)
+    k, seg_now, since = 0, None, 0
+    while k < periods:
+        t = (start_period + k) * T
+        F = env.forcing(stimulus.at(t + 1e-9 * h))
+        if stimulus.segment(t + 1e-9 * h) != seg_now:
+            seg_now, since = stimulus.segment(t + 1e-9 * h), 0
+        settle_from = max(0, SETTLE_MIN - since) // per * sub
+        # chunks until the stimulus next changes (F is read at each chunk's start)
+        span = min(stimulus.next_change(t + 1e-9 * h) - t, periods * T)
+        to_change = min(-(-(periods - k) // per), max(1, int(np.ceil(span / (per * T) - 1e-9))))
+        nchunks = min(to_change, max(1, CHUNK_PERIODS // per))
+        if kern is not None:
+            seg, done, status = kern.run(A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from)
+        else:
+            seg, done, status = _numpy_chunks(env, A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check,
+                                              settle_from)
+        if status == _envelope_kernel.DIVERGED:
+            check_divergence(model, A, t + (done + 1) * h, dofs=env.fast, bound=bound)
+        n = min(nchunks * per, periods - k)
+        amp[k:k + n] = seg[:n]
+        if status == _envelope_kernel.SETTLED:        # hold the settled state up to the stimulus change
+            got = done // sub * per
+            n = min(to_change * per, periods - k)
+            amp[k + got:k + n] = A[prow]
+            settled_periods += n - got
+        k += n
+        since += n
+        bar.update(n)
+    bar.close()
+    t_end = (start_period + 1 + np.arange(periods)) * T
+    return Run(names, T, t_end, amp, np.zeros(amp.shape), None, None, (start_period + periods) * T,
+               state=(A, s, sd), settled_periods=settled_periods)
+
+
+def _check_step(model: MechModel, step_periods: float) -> None:
+    limit = max_step_periods(model)
+    if not step_periods > 0:
+        raise Mech2SpiceError(f"envelope step {step_periods:g} periods: must be positive")
+    if step_periods > limit:
+        raise Mech2SpiceError(f"envelope step {step_periods:g} periods exceeds the stability limit "
+                              f"{limit:.3g} periods for this network (fastest envelope rate "
+                              f"{rate_bound(model):.3g} 1/s)")
+
+
+def _probe_rows(env: Envelope, dofs: np.ndarray) -> np.ndarray:
+    """Rows of the fast block holding these DOFs."""
+    pos = {d: k for k, d in enumerate(env.fast)}
+    return np.array([pos[d] for d in dofs], int)
+
+
+def _numpy_chunks(env, A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from):
+    """The compiled loop's contract in numpy (used without numba); updates A, s, sd in place."""
+    amp = np.zeros((nchunks * per, prow.size, A.shape[1]), complex)
+    w, quiet = env.watch, 0
+    lo = hi = np.abs(A[w])
+    for n in range(nchunks * sub):
+        if tol and n % check == 0:
+            if n >= settle_from + check:
+                quiet = quiet + 1 if (hi - lo).max(initial=0) < tol else 0
+                if quiet >= 2:
+                    return amp, n, _envelope_kernel.SETTLED
+            lo = hi = np.abs(A[w])
+        A[:], s[:], sd[:] = rk4_step(env, A, s, sd, F, h)
+        if not np.all(np.abs(A) < bound):
+            return amp, n, _envelope_kernel.DIVERGED
+        lo, hi = np.minimum(lo, np.abs(A[w])), np.maximum(hi, np.abs(A[w]))
+        if (n + 1) % sub == 0:
+            c = (n + 1) // sub - 1
+            amp[c * per:(c + 1) * per] = A[prow]
+    return amp, nchunks * sub, _envelope_kernel.DONE
+
+
+def _step_layout(step_periods: float) -> tuple[int, int]:
+    """(substeps per chunk, periods per chunk): steps either divide one period or span whole periods,
+    so stimulus changes (at whole periods) fall on step boundaries."""
+    if step_periods >= 1:
+        if abs(step_periods - round(step_periods)) > 1e-9:
+            raise Mech2SpiceError("an envelope step longer than one period must be a whole number of periods")
+        return 1, int(round(step_periods))
+    sub = int(round(1 / step_periods))
+    if abs(sub * step_periods - 1) > 1e-9:
+        raise Mech2SpiceError("an envelope step shorter than one period must divide it (1/2, 1/4, ...)")
+    return sub, 1
+
+
+def rk4_step(env: Envelope, A, s, sd, F, h):
+    """One classical RK4 step of the envelope equations at constant forcing F."""
+    a1, b1, c1 = env.rhs(A, s, sd, F)
+    a2, b2, c2 = env.rhs(A + 0.5 * h * a1, s + 0.5 * h * b1, sd + 0.5 * h * c1, F)
+    a3, b3, c3 = env.rhs(A + 0.5 * h * a2, s + 0.5 * h * b2, sd + 0.5 * h * c2, F)
+    a4, b4, c4 = env.rhs(A + h * a3, s + h * b3, sd + h * c3, F)
+    return (A + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4), s + h / 6 * (b1 + 2 * b2 + 2 * b3 + b4),
+            sd + h / 6 * (c1 + 2 * c2 + 2 * c3 + c4))
+
+
+@dataclass(frozen=True)
+class EnvelopeOptions:
+    """Settings of the envelope engine."""
+    step_periods: float | None = None    # None: default_step(model)
+    settle_tol: float | None = None      # u_R; None: integrate every period (no idle skipping)
+    compiled: bool = True
+
+    def validate(self) -> None:
+        """Refuse steps and tolerances that are not positive numbers."""
+        if self.step_periods is not None:
+            if not (np.isfinite(self.step_periods) and self.step_periods > 0):
+                raise Mech2SpiceError(f"envelope step {self.step_periods!r} periods: must be a positive number")
+            _step_layout(self.step_periods)
+        if self.settle_tol is not None and not (np.isfinite(self.settle_tol) and self.settle_tol > 0):
+            raise Mech2SpiceError(f"settle tolerance {self.settle_tol!r} u_R: must be a positive number")
+
+
+SECONDS_PER_OSCILLATOR_STEP = 1.6e-7   # compiled loop: 0.48 ms per period at 12000 oscillators, step 4 T
+                                       # (reports/performance.md)
+
+
+class EnvelopeEngine(Engine):
+    """RK4 on the slowly-varying amplitude equations, steps of whole drive periods."""
+
+    name = "envelope"
+    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True)
+    Options = EnvelopeOptions
+
+    def estimate_seconds(self, model, periods, batch=1):
+        """Wall time from the measured rate, without idle skipping (an upper bound for settling runs)."""
+        return model.n * batch * periods / self.step(model) * SECONDS_PER_OSCILLATOR_STEP
+
+    def step(self, model: MechModel) -> float:
+        """The step this engine takes on `model`, in drive periods."""
+        return self.options.step_periods or default_step(model)
+
+    def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
+        """The envelope equations over `periods` drive periods (see `integrate`)."""
+        return integrate(model, periods, step_periods=self.step(model), stimulus=stimulus, state=state,
+                         start_period=start_period, probes=probes, progress=progress,
+                         settle_tol=self.options.settle_tol, compiled=self.options.compiled)

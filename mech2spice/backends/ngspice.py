@@ -1,0 +1,43 @@
+"""ngspice as two engines: the carrier-level electrical analogy and the envelope equations as a circuit.
+
+The netlists come from spice.carrier and spice.envelope; spice.runner runs ngspice.  ngspice has no
+cheap restart, so neither engine continues from a state: a run always starts from rest.
+"""
+from __future__ import annotations
+
+from ..errors import Mech2SpiceError
+from ..spice import runner
+from ..spice.carrier import SpiceOptions
+from ..spice.envelope import EnvelopeSpiceOptions, run_envelope_spice
+from ._base import Capabilities, Engine
+
+
+def _from_rest(state, start_period: int) -> None:
+    if state is not None or start_period:
+        raise Mech2SpiceError("the ngspice engines start from rest: they cannot continue from a state")
+
+
+class NgspiceEngine(Engine):
+    """The mobility analogy (VCCS springs, B-source couplings) under ngspice, prewarped trapezoidal steps."""
+
+    name = "ngspice"
+    capabilities = Capabilities(batch=True)
+    Options = SpiceOptions
+
+    def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
+        """Every batch member as its own ngspice process; amplitudes demodulated per period."""
+        _from_rest(state, start_period)
+        return runner.run_batch(model, periods, stimulus=stimulus, options=self.options)
+
+
+class NgspiceEnvelopeEngine(Engine):
+    """The envelope equations as an ngspice netlist (two 1 F nodes per oscillating DOF), steps of whole periods."""
+
+    name = "ngspice-envelope"
+    capabilities = Capabilities(batch=True)
+    Options = EnvelopeSpiceOptions
+
+    def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
+        """Every batch member as its own ngspice process; the envelope at each period's end."""
+        _from_rest(state, start_period)
+        return run_envelope_spice(model, periods, stimulus=stimulus, opts=self.options)

@@ -1,0 +1,48 @@
+"""The synthesized processor (verilog/cpu.v) and how its latches map onto the architectural registers."""
+from __future__ import annotations
+
+import functools
+
+from .. import data
+from ..errors import Mech2SpiceError
+from .iss import FETCH, LDNX, LOAD, REGISTERS
+
+CPU_VERILOG = data.verilog("cpu.v")
+
+
+@functools.lru_cache(maxsize=2)
+def cpu_netlist(path: str = str(CPU_VERILOG), max_fanout: int | None = None):
+    """The synthesized processor (cached: Yosys takes a few seconds)."""
+    from ..synthesis.synth import synthesize
+    return synthesize(path, max_fanout=max_fanout)
+
+
+def register_map(netlist) -> dict[str, tuple[str, int]]:
+    """latch -> (register, bit), read from the net each latch's D input carries (next_<reg>[i])."""
+    g = netlist.graph
+    out = {}
+    for q in netlist.latches():
+        (src,) = g.predecessors(q)
+        net = str(g.nodes[src].get("net", ""))
+        name, _, idx = net.partition("[")
+        if not name.startswith("next_"):
+            raise Mech2SpiceError(f"latch {q} is fed by net '{net}', not a next_<register> net; "
+                                  "cannot read the processor state")
+        out[q] = (name[5:], int(idx.rstrip("]") or 0))
+    return out
+
+
+def registers_from_latches(regmap: dict[str, tuple[str, int]], latch_bit) -> dict:
+    """The architectural registers (pc, a, b, c, d, ov, phase) from each latch's bit, `latch_bit(q)`."""
+    vals = dict.fromkeys(("pc", "a", "b", "c", "d", "ov", "ld", "nx"), 0)
+    for q, (reg, bit) in regmap.items():
+        vals[reg] |= latch_bit(q) << bit
+    ld, nx = vals.pop("ld"), vals.pop("nx")
+    return {**{r: vals[r] for r in REGISTERS if r != "phase"}, "phase": LOAD if ld else LDNX if nx else FETCH}
+
+
+def latches_from_registers(regmap: dict[str, tuple[str, int]], regs: dict) -> dict[str, int]:
+    """Each latch's bit for the architectural registers `regs` (the inverse of registers_from_latches)."""
+    vals = {r: regs[r] for r in REGISTERS if r != "phase"}
+    vals.update(ld=int(regs["phase"] == LOAD), nx=int(regs["phase"] == LDNX))
+    return {q: (vals[reg] >> bit) & 1 for q, (reg, bit) in regmap.items()}

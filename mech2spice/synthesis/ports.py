@@ -1,0 +1,43 @@
+"""Port values <-> the netlist's bit nodes: bit i of port p is node ``p[i]``, LSB = bit 0."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import Mech2SpiceError
+
+
+def input_bits(netlist) -> list[str]:
+    """Input node names in batch-column order (ports in declaration order, LSB first)."""
+    return [f"{p}[{i}]" for p, w in netlist.inputs.items() for i in range(w)]
+
+
+def output_bits(netlist) -> list[str]:
+    """Output node names in batch-column order (ports in declaration order, LSB first)."""
+    return [f"{p}[{i}]" for p, w in netlist.outputs.items() for i in range(w)]
+
+
+def pack_inputs(netlist, values: dict[str, int]) -> dict[str, int]:
+    """Port integers -> {"a[0]": bit, ...} for every input bit (unset ports are 0)."""
+    bits = dict.fromkeys(input_bits(netlist), 0)
+    for port, value in values.items():
+        if port not in netlist.inputs:
+            known = ", ".join(netlist.inputs) or "none"
+            raise Mech2SpiceError(f"unknown input port '{port}' (inputs: {known})")
+        width = netlist.inputs[port]
+        if not isinstance(value, (int, np.integer)) or isinstance(value, bool):
+            raise Mech2SpiceError(f"input '{port}' needs an integer, got {value!r}")
+        if value < 0 or value >> width:
+            raise Mech2SpiceError(f"value {value} does not fit input '{port}' "
+                                  f"({width} bit{'s' * (width != 1)}, 0..{2 ** width - 1})")
+        for i in range(width):
+            bits[f"{port}[{i}]"] = (int(value) >> i) & 1
+    return bits
+
+
+def port_values(netlist, bits: dict[str, int | None]) -> dict[str, int | None]:
+    """Output port -> integer from its bits (None when any bit is None: undecodable)."""
+    out = {}
+    for port, width in netlist.outputs.items():
+        vals = [bits[f"{port}[{i}]"] for i in range(width)]
+        out[port] = None if None in vals else sum(v << i for i, v in enumerate(vals))
+    return out

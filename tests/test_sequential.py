@@ -1,6 +1,7 @@
 """Latches and clocked designs: the latch's pulse sequence on RK4, clocked traces identical across
 backends, and refusal of clocking the mechanical latch cannot honour."""
 import json
+from pathlib import Path
 import subprocess
 import sys
 
@@ -9,6 +10,8 @@ import pytest
 from mech2spice import simulate
 from mech2spice.experiments import characterise
 from mech2spice.synthesis import synth
+
+REPO = Path(__file__).resolve().parent.parent
 
 COUNTER_STEPS = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, "cycles": 2},
                  {"set": {"en": 0}, "cycles": 1}, {"set": {"en": 1}, "cycles": 1}]
@@ -37,7 +40,7 @@ def test_counter_traces_identical_logic_and_rk4(tmp_path):
     stim.write_text(json.dumps(COUNTER_STEPS))
     runs = {}
     for backend in ("logic", "rk4"):
-        rc, out, err = cli("simulate", "verilog/counter4.v", "--stimulus", str(stim), "--backend", backend, "--json")
+        rc, out, err = cli("simulate", str(REPO / "verilog" / "counter4.v"), "--stimulus", str(stim), "--backend", backend, "--json")
         assert rc == 0, err
         runs[backend] = json.loads(out)
     logic_q = [e["outputs"]["q"] for e in runs["logic"]["trace"]]
@@ -48,7 +51,7 @@ def test_counter_traces_identical_logic_and_rk4(tmp_path):
 
 
 def test_counter_envelope_matches_logic(p):
-    nl = synth.synthesize("verilog/counter4.v")
+    nl = synth.synthesize(str(REPO / "verilog" / "counter4.v"))
     cycles = simulate.expand_steps(COUNTER_STEPS + [{"set": {"en": 1}, "cycles": 3}])
     env = simulate.run_clocked_physical(nl, p, cycles, "envelope", simulate.clock_timing(nl))
     log = simulate.run_clocked_logic(nl, cycles)
@@ -59,19 +62,19 @@ def test_counter_envelope_matches_logic(p):
 def test_sqrt_logic_reaches_53(tmp_path):
     stim = tmp_path / "sqrt.json"
     stim.write_text('[{"set": {"rst": 1, "n": 2809}, "cycles": 1}, {"set": {"rst": 0}, "cycles": 6}]')
-    rc, out, err = cli("simulate", "verilog/sqrt.v", "--stimulus", str(stim), "--backend", "logic", "--json")
+    rc, out, err = cli("simulate", str(REPO / "verilog" / "sqrt.v"), "--stimulus", str(stim), "--backend", "logic", "--json")
     assert rc == 0, err
     roots = [e["outputs"]["root"] for e in json.loads(out)["trace"]]
     assert roots == [0, 32, 48, 48, 52, 52, 53]     # one result bit decided per cycle, from the top
     # the issue's form: inputs held, clock pulsed; the all-zero power-up state is the start state
-    rc, out, err = cli("simulate", "verilog/sqrt.v", "--set", "n=2809", "--clock", "clk", "--cycles", "8",
+    rc, out, err = cli("simulate", str(REPO / "verilog" / "sqrt.v"), "--set", "n=2809", "--clock", "clk", "--cycles", "8",
                        "--backend", "logic", "--json")
     assert rc == 0, err
     assert [e["outputs"]["root"] for e in json.loads(out)["trace"]] == [32, 48, 48, 52, 52, 53, 53, 53]
 
 
 def test_fsm_detects_sequence():
-    nl = synth.synthesize("verilog/fsm.v")
+    nl = synth.synthesize(str(REPO / "verilog" / "fsm.v"))
     xs = [1, 1, 0, 1, 1, 0, 1, 0, 1, 1, 0, 1]
     steps = [{"set": {"rst": 1}, "cycles": 1}] + [{"set": {"rst": 0, "x": x}, "cycles": 1} for x in xs]
     trace = simulate.run_clocked_logic(nl, simulate.expand_steps(steps))["trace"]
@@ -81,12 +84,12 @@ def test_fsm_detects_sequence():
 
 
 @pytest.mark.parametrize("args,needle", [
-    (["simulate", "verilog/async_reset.v", "--cycles", "1", "--backend", "logic"], "asynchronous"),
-    (["simulate", "verilog/inferred_latch.v", "--backend", "logic"], "level-sensitive latch"),
-    (["simulate", "verilog/counter4.v", "--backend", "logic"], "--cycles"),
-    (["simulate", "verilog/adder2.v", "--cycles", "2", "--backend", "logic"], "no flip-flops"),
-    (["simulate", "verilog/counter4.v", "--cycles", "2", "--pulse", "5000"], "outlasts"),
-    (["simulate", "verilog/counter4.v", "--cycles", "2", "--pulse", "100"], "shorter"),
+    (["simulate", str(REPO / "verilog" / "async_reset.v"), "--cycles", "1", "--backend", "logic"], "asynchronous"),
+    (["simulate", str(REPO / "verilog" / "inferred_latch.v"), "--backend", "logic"], "level-sensitive latch"),
+    (["simulate", str(REPO / "verilog" / "counter4.v"), "--backend", "logic"], "--cycles"),
+    (["simulate", str(REPO / "verilog" / "adder2.v"), "--cycles", "2", "--backend", "logic"], "no flip-flops"),
+    (["simulate", str(REPO / "verilog" / "counter4.v"), "--cycles", "2", "--pulse", "5000"], "outlasts"),
+    (["simulate", str(REPO / "verilog" / "counter4.v"), "--cycles", "2", "--pulse", "100"], "shorter"),
 ])
 def test_clocking_errors(args, needle):
     rc, _, err = cli(*args)

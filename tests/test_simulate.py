@@ -2,14 +2,18 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mech2spice import simulate
+from mech2spice.errors import Mech2SpiceError
 from mech2spice.backends import logic
 from mech2spice.physics import network
 from mech2spice.synthesis import synth
+
+REPO = Path(__file__).resolve().parent.parent
 
 
 def cli(*args):
@@ -19,7 +23,7 @@ def cli(*args):
 
 @pytest.fixture(scope="module")
 def adder():
-    return synth.synthesize("verilog/adder2.v")
+    return synth.synthesize(str(REPO / "verilog" / "adder2.v"))
 
 
 def test_adder_counts_match_paper_convention(adder, p):
@@ -50,8 +54,8 @@ def test_adder_all_16_sums_rk4_and_envelope(adder, p):
 
 
 @pytest.mark.parametrize("design,vectors", [
-    ("verilog/mux4.v", [{"d": d, "sel": s} for d, s in [(0b0101, 0), (0b0101, 1), (0b1010, 3), (0b0110, 2)]]),
-    ("verilog/mult2.v", [{"a": a, "b": b} for a, b in [(3, 3), (2, 3), (1, 2), (0, 3)]]),
+    (str(REPO / "verilog" / "mux4.v"), [{"d": d, "sel": s} for d, s in [(0b0101, 0), (0b0101, 1), (0b1010, 3), (0b0110, 2)]]),
+    (str(REPO / "verilog" / "mult2.v"), [{"a": a, "b": b} for a, b in [(3, 3), (2, 3), (1, 2), (0, 3)]]),
 ])
 def test_rk4_matches_logic_on_other_designs(design, vectors, p):
     nl = synth.synthesize(design)
@@ -61,7 +65,7 @@ def test_rk4_matches_logic_on_other_designs(design, vectors, p):
         assert r["outputs"] == logic.evaluate(nl, v), (design, v)
 
 
-@pytest.mark.parametrize("design", ["verilog/comparator4.v", "verilog/parity8.v"])
+@pytest.mark.parametrize("design", [str(REPO / "verilog" / "comparator4.v"), str(REPO / "verilog" / "parity8.v")])
 def test_rk4_matches_logic_large(design, p):
     nl = synth.synthesize(design)
     rng = np.random.default_rng(1)
@@ -78,7 +82,7 @@ def test_decode_reports_invalid_bits_instead_of_rounding(adder):
 
 
 def test_cli_synth_json(adder):
-    rc, out, _ = cli("synth", "verilog/adder2.v", "--json")
+    rc, out, _ = cli("synth", str(REPO / "verilog" / "adder2.v"), "--json")
     assert rc == 0
     d = json.loads(out)
     assert d["top"] == "adder2" and d["gates"] <= 17 and d["latches"] == 0
@@ -88,7 +92,7 @@ def test_cli_synth_json(adder):
 
 
 def test_cli_simulate_logic_json():
-    rc, out, _ = cli("simulate", "verilog/adder2.v", "--set", "a=3", "--set", "b=2", "--backend", "logic", "--json")
+    rc, out, _ = cli("simulate", str(REPO / "verilog" / "adder2.v"), "--set", "a=3", "--set", "b=2", "--backend", "logic", "--json")
     d = json.loads(out)
     assert rc == 0 and d["outputs"] == {"s": 5} and d["bits"] == {"s[0]": 1, "s[1]": 0, "s[2]": 1}
     for key in ("backend", "amplitudes", "valid", "min_margin", "periods", "wall_s"):
@@ -96,13 +100,13 @@ def test_cli_simulate_logic_json():
 
 
 @pytest.mark.parametrize("args,needle", [
-    (["synth", "verilog/bad_syntax.v"], "line 5"),
-    (["synth", "verilog/adder2.v", "--top", "nope"], "nope"),
+    (["synth", str(REPO / "verilog" / "bad_syntax.v")], "line 5"),
+    (["synth", str(REPO / "verilog" / "adder2.v"), "--top", "nope"], "nope"),
     (["synth", "missing.v"], "cannot read"),
-    (["synth", "verilog/loop.v"], "combinational loop"),
-    (["simulate", "verilog/adder2.v", "--set", "c=1", "--backend", "logic"], "unknown input port 'c'"),
-    (["simulate", "verilog/adder2.v", "--set", "a=4", "--backend", "logic"], "does not fit"),
-    (["simulate", "verilog/adder2.v", "--set", "a=x", "--backend", "logic"], "not an integer"),
+    (["synth", str(REPO / "verilog" / "loop.v")], "combinational loop"),
+    (["simulate", str(REPO / "verilog" / "adder2.v"), "--set", "c=1", "--backend", "logic"], "unknown input port 'c'"),
+    (["simulate", str(REPO / "verilog" / "adder2.v"), "--set", "a=4", "--backend", "logic"], "does not fit"),
+    (["simulate", str(REPO / "verilog" / "adder2.v"), "--set", "a=x", "--backend", "logic"], "not an integer"),
 ])
 def test_cli_errors_are_one_line(args, needle):
     rc, out, err = cli(*args)
@@ -114,11 +118,11 @@ def test_cli_errors_are_one_line(args, needle):
 @pytest.mark.ngspice
 def test_cli_emit_runs_standalone_and_ngspice_matches_rk4(tmp_path):
     cir = tmp_path / "add.cir"
-    rc, _, err = cli("emit", "verilog/adder2.v", "--set", "a=3", "--set", "b=2", "-o", str(cir))
+    rc, _, err = cli("emit", str(REPO / "verilog" / "adder2.v"), "--set", "a=3", "--set", "b=2", "-o", str(cir))
     assert rc == 0, err
     r = subprocess.run(["ngspice", "-b", str(cir)], capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 0, r.stderr[-500:]
-    common = ["simulate", "verilog/adder2.v", "--set", "a=3", "--set", "b=2", "--json", "--periods", "2900"]
+    common = ["simulate", str(REPO / "verilog" / "adder2.v"), "--set", "a=3", "--set", "b=2", "--json", "--periods", "2900"]
     rc1, out1, err1 = cli(*common, "--backend", "ngspice")
     rc2, out2, _ = cli(*common, "--backend", "rk4")
     assert rc1 == 0 and rc2 == 0, err1
@@ -126,3 +130,29 @@ def test_cli_emit_runs_standalone_and_ngspice_matches_rk4(tmp_path):
     assert ng["outputs"]["s"] == 5 and ng["valid"] and "ngspice_options" in ng
     for bit, a in rk["amplitudes"].items():
         assert abs(ng["amplitudes"][bit] - a) < 0.01
+
+
+@pytest.mark.parametrize("backend", ["ngspice", "ngspice-envelope"])
+def test_clocked_ngspice_runs_honour_method(monkeypatch, backend):
+    """`simulate CLOCKED.v --backend ngspice --method gear` hands gear to ngspice (it used to run trap)."""
+    from mech2spice import cli
+    from mech2spice.backends import ngspice as engines
+    seen = {}
+
+    def capture(model, periods, stimulus=None, options=None, opts=None, **kw):
+        seen["options"] = options or opts
+        raise Mech2SpiceError("captured")
+    monkeypatch.setattr(engines.runner, "run_batch", capture)
+    monkeypatch.setattr(engines, "run_envelope_spice", capture)
+    dff = Path(__file__).resolve().parent.parent / "verilog" / "dff.v"
+    assert cli.main(["simulate", str(dff), "--backend", backend, "--method", "gear", "--max-step", "0.02",
+                     "--cycles", "1", "--set", "d=1"]) == 2
+    assert seen["options"].method == "gear" and seen["options"].max_step_periods == 0.02
+
+
+def test_engine_flags_belong_to_their_engines():
+    """--method is an ngspice setting, --steps a time-stepping one: given to another engine they are refused."""
+    from mech2spice import cli
+    adder = str(Path(__file__).resolve().parent.parent / "verilog" / "adder2.v")
+    assert cli.main(["simulate", adder, "--backend", "rk4", "--method", "gear"]) == 2
+    assert cli.main(["simulate", adder, "--backend", "ngspice", "--steps", "100"]) == 2

@@ -3,6 +3,7 @@ agreement with envelope.integrate on the NOR gate, and the adder through `simula
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import re
 import shutil
 import subprocess
@@ -22,6 +23,8 @@ from mech2spice.errors import DivergenceError, Mech2SpiceError
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT as P
 from mech2spice.physics.stimulus import Stimulus
+
+REPO = Path(__file__).resolve().parent.parent
 
 needs_ngspice = pytest.mark.skipif(shutil.which("ngspice") is None, reason="ngspice not installed")
 pytestmark = [pytest.mark.ngspice, needs_ngspice]
@@ -117,14 +120,14 @@ def test_gate_four_pairs_agree_with_envelope_integrate():
 
 
 def test_adder_3_plus_2_through_simulate():
-    nl = synth.synthesize("verilog/adder2.v")
+    nl = synth.synthesize(str(REPO / "verilog" / "adder2.v"))
     res = simulate.run_physical(nl, P, [{"a": 3, "b": 2}], backend="ngspice-envelope")[0]
     assert res["outputs"] == {"s": 5} and res["valid"], res
     assert res["backend"] == "ngspice-envelope" and res["periods"] == simulate.period_budget(nl)
 
 
 def test_cli_simulate_ngspice_envelope_json():
-    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", "simulate", "verilog/adder2.v", "--set", "a=1",
+    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", "simulate", str(REPO / "verilog" / "adder2.v"), "--set", "a=1",
                         "--set", "b=1", "--backend", "ngspice-envelope", "--max-step", "4", "--json"],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr

@@ -1,0 +1,110 @@
+"""One NOR gate loaded as in a network: the model the sensitivity and tolerance studies use.
+
+    in1.C --spring+dashpot--> gate input 1 pair
+    in2.C --spring+dashpot--> gate input 2 pair        gate.C --spring+dashpot--> load input pair
+
+* Each input comes from an upstream channel (mass, total stiffness and damping of a channel), driven
+  by its own source so that, in the nominal gate, its amplitude is the input level x u_R (drive
+  amplitude x |k_C - m_C w^2 + i w c_C| u_R).  The gate's input oscillators then feel x F_R through
+  the real coupling spring and dashpot, and a mismatch of that pair acts back on the upstream channel,
+  as in a network.  The upstream channel has no insulator of its own: a stand-in with the channel's
+  linear impedance for the logic level it carries.
+* The output drives the input pair of one downstream gate.  load="pair": just that pair (two gate
+  oscillators with the gate's totals) with the load's insulator held at rest, which keeps one slow DOF
+  (the fast all-roots steady-state scan needs that).  load="gate": the whole downstream gate, its
+  second input at a constant '0' (for time-domain checks of the "pair" reduction).
+In the nominal gate every back-action cancels (spring and dashpot pairs are matched), so the gate's
+steady states equal the free-standing `nor.single_gate`'s; spread breaks the cancellation.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import nor
+from .model import MechModel
+from .params import BAND0, BAND1, NOMINAL0, GateParams, band_of
+from .steady_batch import Roots
+
+GATE, INPUTS, LOAD = "gate", ("in1", "in2"), "load"
+PER_BAND = 15           # input levels per band: the grid of characterise.valid_region_margin
+
+
+@dataclass
+class LoadedGate:
+    model: MechModel
+    gate: nor.GateBlock
+    upstream: tuple[int, int]           # DOFs of the two upstream channels
+    input_drives: tuple[int, int]      # their drives; amplitude = level x drive amplitude
+    load_pair: tuple[int, int]         # the downstream (spring, dashpot) gate oscillators
+
+    @property
+    def block_dofs(self) -> list[int]:
+        """DOFs whose elements the spread covers: the gate's own and the load pair's (with every link
+        touching them); the upstream stand-ins and their sources are the inputs, not spread."""
+        g = self.gate
+        return [g.channel, g.insulator, *(d for pair in g.inputs for d in pair), *self.load_pair]
+
+    def input_groups(self) -> np.ndarray:
+        """Per drive: 0 for constant drives, k for drives scaled by input level k (1, 2)."""
+        groups = np.zeros(len(self.model.drives), int)
+        groups[list(self.input_drives)] = [1, 2]
+        return groups
+
+
+def build(p: GateParams, load: str = "pair") -> LoadedGate:
+    """The loaded gate with both upstream drives set for an input level of 1 (scale them per input)."""
+    p.validate()
+    m = MechModel(omega=p.omega)
+    z_c = abs(p.k_c - p.m_c * p.omega ** 2 + 1j * p.omega * p.c_c)
+    ups, drives = [], []
+    for name in INPUTS:
+        ups.append(m.add_dof(f"{name}.C", p.m_c, p.k_c, p.c_c))
+        drives.append(m.add_drive(ups[-1], z_c * p.u_r, 0.0, f"{name}.src"))
+    gate = nor.add_nor(m, p, GATE)
+    for u, pair in zip(ups, gate.inputs):
+        nor.connect(m, p, u, pair)
+    if load == "gate":
+        lg = nor.add_nor(m, p, LOAD)
+        nor.drive_pair(m, p, lg.inputs[1], NOMINAL0, f"{LOAD}.x2")
+        pair = lg.inputs[0]
+    elif load == "pair":
+        pair = tuple(m.add_dof(f"{LOAD}.G1{kind}", p.m_g, p.k_g, p.c_g) for kind in ("s", "d"))
+    else:
+        raise ValueError(f"load must be 'pair' or 'gate', not {load!r}")
+    nor.connect(m, p, gate.channel, pair)
+    return LoadedGate(m, gate, tuple(ups), tuple(drives), pair)
+
+
+def at_inputs(lg: LoadedGate, x1: float, x2: float, model: MechModel | None = None) -> MechModel:
+    """A copy of lg.model (or of `model`, same topology) with the inputs at levels x1, x2 (fractions of
+    F_R / u_R)."""
+    from .spread import Element, scaled
+    ins = [Element("drive", d, "input") for d in lg.input_drives]
+    return scaled(model if model is not None else lg.model, ins, np.array([x1, x2], float))
+
+
+def input_grid(per_band: int = PER_BAND) -> tuple[np.ndarray, np.ndarray]:
+    """Drive-group levels (P, 3) = (1, x1, x2) over both bands of both inputs, and NOR of each point."""
+    lv = np.concatenate([np.linspace(*BAND0, per_band), np.linspace(*BAND1, per_band)])
+    X1, X2 = np.meshgrid(lv, lv, indexing="ij")
+    x1, x2 = X1.ravel(), X2.ravel()
+    expect = np.array([int(not (band_of(a) or band_of(b))) for a, b in zip(x1, x2)])
+    return np.stack([np.ones_like(x1), x1, x2], axis=1), expect
+
+
+def band_margin(a: np.ndarray, expect: np.ndarray) -> np.ndarray:
+    """params.margin, vectorised: distance of amplitudes a (u_R) to the edge of band `expect`, in band widths."""
+    lo = np.where(expect == 1, BAND1[0], BAND0[0])
+    hi = np.where(expect == 1, BAND1[1], BAND0[1])
+    return np.minimum(a - lo, hi - a) / (hi - lo)
+
+
+def point_margins(roots: Roots, expect: np.ndarray, u_r: float) -> np.ndarray:
+    """Per input point: the smallest band margin over its stable states, -1 where none is stable."""
+    m = np.where(roots.stable, band_margin(roots.amp / u_r, expect[roots.point]), np.inf)
+    out = np.full(expect.size, np.inf)
+    np.minimum.at(out, roots.point, m)
+    out[np.isinf(out)] = -1.0
+    return out

@@ -51,6 +51,10 @@ def cmd_gate(args) -> int:
     from .experiments import characterise
     from .physics.params import load_params
     p = load_params(args.params)
+    if args.sens or args.spread is not None:
+        return _gate_robustness(args, p)
+    if args.samples is not None or args.seed is not None:
+        raise Mech2SpiceError("--samples and --seed apply to --spread SIGMA")
     out = characterise.characterise(p, quick=args.quick, log=_log(args))
     if out.get("diverged"):
         raise Mech2SpiceError(f"parameters '{p.name}': the RK4 truth-table run failed: {out['diverged']}")
@@ -64,6 +68,22 @@ def cmd_gate(args) -> int:
         _print_json(out)
     else:
         _print_gate(out)
+    return 0
+
+
+def _gate_robustness(args, p) -> int:
+    """`gate --sens` / `gate --spread`: sensitivities and tolerance instead of the characterisation."""
+    from .experiments import tolerance
+    if args.quick or args.report:
+        raise Mech2SpiceError("--quick and --report apply to the characterisation, not to --sens/--spread")
+    if args.spread is None and (args.samples is not None or args.seed is not None):
+        raise Mech2SpiceError("--samples and --seed apply to --spread SIGMA")
+    out = tolerance.robustness(p, args.sens, args.spread, 200 if args.samples is None else args.samples,
+                               0 if args.seed is None else args.seed, log=_log(args))
+    if args.json:
+        _print_json(out)
+    else:
+        print(tolerance.text(out))
     return 0
 
 
@@ -269,6 +289,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--quick", action="store_true", help="shorter runs (about 1 minute)")
     g.add_argument("--report", metavar="DIR", help="also write DIR/gate.md and PNG figures")
     g.add_argument("--json", action="store_true", help="machine-readable output")
+    g.add_argument("--sens", action="store_true",
+                   help="sensitivity of the outputs and margins to every element (docs/robustness.md)")
+    g.add_argument("--spread", type=float, metavar="SIGMA",
+                   help="relative Gaussian spread on every element: yield, margin quantiles, tolerance")
+    g.add_argument("--samples", type=int, metavar="N", help="Monte-Carlo samples for --spread (default 200)")
+    g.add_argument("--seed", type=int, metavar="S", help="random seed for --spread (default 0)")
     g.set_defaults(func=cmd_gate)
 
     def design_args(sp):

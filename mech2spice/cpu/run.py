@@ -147,11 +147,25 @@ def read_checkpoint(path, program: Program, backend: str) -> dict:
     if state["backend"] != backend:
         raise Mech2SpiceError(f"checkpoint {path} was written by the {state['backend']} backend, "
                               f"not {backend}")
-    if backend in PHYSICAL and state["version"] >= 2 and not (
-            isinstance(state.get("state_file"), str) and _state_file_pattern(Path(path)).fullmatch(state["state_file"])
-            and isinstance(state.get("state_sha256"), str)):
-        raise Mech2SpiceError(f"checkpoint {path} does not name a valid oscillator-state file")
+    if backend in PHYSICAL and state["version"] >= 2:
+        _check_state_file(state, Path(path))
     return state
+
+
+def _check_state_file(state: dict, path: Path) -> None:
+    """The oscillator-state file a checkpoint names exists beside it and is the one it wrote (checked
+    before the model is built, which takes seconds)."""
+    name, digest = state.get("state_file"), state.get("state_sha256")
+    if not (isinstance(name, str) and _state_file_pattern(path).fullmatch(name) and isinstance(digest, str)):
+        raise Mech2SpiceError(f"checkpoint {path} does not name a valid oscillator-state file")
+    try:
+        data = path.with_name(name).read_bytes()
+    except OSError as err:
+        raise Mech2SpiceError(f"cannot read the oscillator state {path.with_name(name)}: "
+                              f"{err.strerror or err}") from None
+    if hashlib.sha256(data).hexdigest() != digest:
+        raise Mech2SpiceError(f"the oscillator state {path.with_name(name)} does not match its checkpoint "
+                              "(changed or damaged since it was written)")
 
 
 def _check_fields(state: dict, path) -> None:

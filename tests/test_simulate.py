@@ -12,6 +12,7 @@ from mech2spice.errors import Mech2SpiceError
 from mech2spice.backends import logic
 from mech2spice.physics import network
 from mech2spice.synthesis import synth
+from mech2spice.experiments.scenes import ADDER_INPUTS
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -38,7 +39,7 @@ def test_adder_counts_match_paper_convention(adder, p):
 
 
 def test_adder_all_16_sums_rk4_and_envelope(adder, p):
-    vals = [{"a": a, "b": b} for a in range(4) for b in range(4)]
+    vals = list(ADDER_INPUTS)
     res = simulate.run_physical(adder, p, vals, "rk4")
     env = simulate.run_physical(adder, p, vals, "envelope")
     for r, e in zip(res, env):

@@ -18,7 +18,7 @@ from mech2spice.physics import nor
 from mech2spice.backends import envelope
 from mech2spice.synthesis import synth
 from mech2spice.spice import envelope as se
-from mech2spice.experiments import validate as V
+from mech2spice.experiments import scenes as S
 from mech2spice.errors import DivergenceError, Mech2SpiceError
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT as P
@@ -109,7 +109,7 @@ def test_netlist_names_sanitised_and_ngspice_exits_0(tmp_path):
 def test_gate_four_pairs_agree_with_envelope_integrate():
     """The gate's 4 nominal input pairs from rest, 2500 periods: settled amplitudes within 0.01 u_R of
     envelope.integrate (step 1/4 period, converged), the whole trajectory within 0.02 u_R."""
-    sc = V.gate_scene(P, "nominal")
+    sc = S.gate_scene(P, "nominal")
     ref = envelope.integrate(sc.model, sc.periods, step_periods=0.25, stimulus=sc.stimulus, probes=sc.probes)
     run = se.run_envelope_spice(sc.model, sc.periods, sc.stimulus)
     a, r = np.abs(run.amp) / P.u_r, np.abs(ref.amp) / P.u_r

@@ -12,38 +12,25 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..physics import nor, steady
-from ..backends import rk4
+from ..backends import make_engine, rk4
 from ..backends._base import Run
-from ..physics.envelope import Envelope
+from ..backends.envelope import EnvelopeOptions
 from ..errors import DivergenceError
+from ..physics import nor, steady
+from ..physics.envelope import Envelope
 from ..physics.params import BAND0, BAND1, NOMINAL0, NOMINAL1, GateParams, band_of, margin
 from ..physics.stimulus import Stimulus
-from .. import data
-
-PAIRS = [(0, 0), (1, 0), (0, 1), (1, 1)]
-LEVEL = {0: NOMINAL0, 1: NOMINAL1}
-MID = (BAND0[1] + BAND1[0]) / 2          # threshold between the bands, for delays
-
+from .scenes import (CASCADE_EDGES, FANOUT_CASES, LEVEL, MID, PAIRS, Scene, chain_scene, fanout_scene, gate_scene,
+                     input_amps, latch_scene, levels_stimulus, nominal_levels)
 
 def _nor(a: int, b: int) -> int:
     return int(not (a or b))
 
 
-def _input_amps(model, drives_of_inputs, levels: np.ndarray, p: GateParams) -> dict[int, np.ndarray]:
-    """{drive index: (B,) amplitudes} for input pairs given levels (B, n_inputs) in units of F_R."""
-    out = {}
-    for k, (ds, dd) in enumerate(drives_of_inputs):
-        out[ds] = out[dd] = levels[:, k] * p.f_r
-    return out
-
-
-def settle(model, p: GateParams, levels: np.ndarray, periods: int, steps: int = rk4.DEFAULT_STEPS_PER_PERIOD,
-           avg: int = 20, **kw):
+def run_from_rest(model, p: GateParams, levels: np.ndarray, periods: int,
+                  steps: int = rk4.DEFAULT_STEPS_PER_PERIOD, avg: int = 20, **kw):
     """RK4 from rest with constant input levels (B, 2); returns (run, amplitude per probe (n_probes, B) in u_R)."""
-    st = Stimulus.from_levels(model, [(0.0, _input_amps(model, model.design.input_drives, levels, p))],
-                              batch=levels.shape[0])
-    run = rk4.integrate(model, periods, steps_per_period=steps, stimulus=st, **kw)
+    run = rk4.integrate(model, periods, steps_per_period=steps, stimulus=levels_stimulus(model, p, [(0, levels)]), **kw)
     return run, np.abs(run.amp[-avg:]).mean(axis=0) / p.u_r
 
 
@@ -54,7 +41,7 @@ def gate_forcing(p: GateParams, x1: np.ndarray, x2: np.ndarray) -> tuple[Envelop
     env = Envelope(m)
     levels = np.stack([np.atleast_1d(x1), np.atleast_1d(x2)], axis=1)
     amps = np.repeat(m.arrays["drive_amp"][:, None], levels.shape[0], axis=1)
-    for d, a in _input_amps(m, m.design.input_drives, levels, p).items():
+    for d, a in input_amps(m.design.input_drives, levels, p).items():
         amps[d] = a
     return env, env.forcing(amps), int(np.flatnonzero(env.fast == m.probes["g0"])[0])
 
@@ -123,10 +110,10 @@ def omega_scan(p: GateParams, omegas: np.ndarray) -> dict:
 
 # --- time-domain side ----------------------------------------------------------
 def truth_table(p: GateParams, periods: int = 3000, steps: int = rk4.DEFAULT_STEPS_PER_PERIOD) -> dict:
-    levels = np.array([[LEVEL[a], LEVEL[b]] for a, b in PAIRS])
+    """The four nominal input pairs on RK4 from rest, decoded (rows) and the run (to continue from)."""
     model = nor.single_gate(p)
     try:
-        run, amp = settle(model, p, levels, periods, steps)
+        run, amp = run_from_rest(model, p, nominal_levels(), periods, steps)
     except DivergenceError as e:
         return {"diverged": str(e), "rows": []}
     rows = []
@@ -142,10 +129,8 @@ def transient(p: GateParams, sequence=((0, 0), (1, 0), (0, 0), (0, 1), (1, 1), (
               hold: int = 1200) -> dict:
     """Single gate under changing inputs; also tests history independence (revisits give the same output)."""
     model = nor.single_gate(p)
-    segs = [(k * hold * p.period, _input_amps(model, model.design.input_drives,
-                                               np.array([[LEVEL[a], LEVEL[b]]]), p))
-            for k, (a, b) in enumerate(sequence)]
-    run = rk4.integrate(model, hold * len(sequence), stimulus=Stimulus.from_levels(model, segs))
+    stim = levels_stimulus(model, p, [(k * hold, np.array([[LEVEL[a], LEVEL[b]]])) for k, (a, b) in enumerate(sequence)])
+    run = rk4.integrate(model, hold * len(sequence), stimulus=stim)
     amp = run.amplitude("g0")[:, 0] / p.u_r
     ends = {}
     for k, pair in enumerate(sequence):
@@ -159,22 +144,14 @@ def cascade(p: GateParams, hold: int = 1500) -> dict:
     """3-gate chain ((x1 NOR x2) NOR 0) NOR 0.
 
     Member 0: inputs 00 -> 10 -> 00, for the delay per gate in both directions.
-    Other members: constant inputs at band edges, for level restoration."""
-    edges = [(0.365, 0.365), (0.67, 0.365), (0.67, 0.67), (0.92, 0.365), (1.025, 0.67), (1.025, 1.025), (0.92, 0.92)]
-    model = nor.chain(p, 3)
-    B = 1 + len(edges)
-    lv0 = np.array([[NOMINAL0, NOMINAL0]] + [list(e) for e in edges])
-    lv1 = lv0.copy()
-    lv1[0] = [NOMINAL1, NOMINAL0]
-    drives = model.design.input_drives
-    segs = [(0.0, _input_amps(model, drives, lv0, p)), (hold * p.period, _input_amps(model, drives, lv1, p)),
-            (2 * hold * p.period, _input_amps(model, drives, lv0, p))]
-    run = rk4.integrate(model, 3 * hold, stimulus=Stimulus.from_levels(model, segs, batch=B))
+    Other members: constant inputs at band edges, for level restoration (scenes.chain_scene)."""
+    sc = chain_scene(p, hold)
+    run = rk4.integrate(sc.model, sc.periods, stimulus=sc.stimulus)
     amp = np.abs(run.amp) / p.u_r                         # (P, 3 stages, B)
     delays = [_crossings(amp[:, :, 0], start) for start in (hold, 2 * hold)]
     per_gate = [d for ds in delays for d in np.diff([0.0] + ds)]
     restoration = []
-    for b, (x1, x2) in enumerate(edges, start=1):
+    for b, (x1, x2) in enumerate(CASCADE_EDGES, start=1):
         settled = amp[-20:, :, b].mean(axis=0)        # constant inputs: settle over all 3 holds
         expect = _nor(band_of(x1), band_of(x2))
         stage_margins = [margin(float(a), (expect + k) % 2) for k, a in enumerate(settled)]
@@ -197,17 +174,12 @@ def _crossings(amp: np.ndarray, start: int) -> list[float]:
 
 def fanout_test(p: GateParams, n_loads: int, periods: int = 2500) -> dict:
     """Driver at 00 / 10 with every load's other input at 0 / 1: loads decode correctly and the
-    driver's channel barely feels the loads switching."""
-    cases = [(0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1)]      # (drv x1, drv x2, load x2)
-    model = nor.fanout(p, n_loads)
-    lv = np.array([[LEVEL[a], LEVEL[b]] for a, b, _ in cases])
-    amps = _input_amps(model, model.design.input_drives, lv, p)
-    for pair in model.design.load_drives:
-        amps.update(_input_amps(model, [pair], np.array([[LEVEL[c]] for *_, c in cases]), p))
-    run = rk4.integrate(model, periods, stimulus=Stimulus.from_levels(model, [(0.0, amps)], batch=len(cases)))
+    driver's channel barely feels the loads switching (scenes.fanout_scene)."""
+    sc = fanout_scene(p, n_loads, periods)
+    run = rk4.integrate(sc.model, sc.periods, stimulus=sc.stimulus)
     amp = np.abs(run.amp[-20:]).mean(axis=0) / p.u_r        # (1 + n_loads, B)
     ok, worst = True, math.inf
-    for b, (a, bb, c) in enumerate(cases):
+    for b, (a, bb, c) in enumerate(FANOUT_CASES):
         d = _nor(a, bb)
         ok &= band_of(amp[0, b]) == d
         for k in range(n_loads):
@@ -231,8 +203,8 @@ def spectrum_purity(run: Run, p: GateParams, periods: int = 20) -> float:
 
 def phase_insensitivity(p: GateParams, periods: int = 2500) -> dict:
     """Shift each input pair's phase; the steady output must not change."""
-    levels = np.array([[LEVEL[a], LEVEL[b]] for a, b in PAIRS])
-    base = settle(nor.single_gate(p), p, levels, periods)[1][0]
+    levels = nominal_levels()
+    base = run_from_rest(nor.single_gate(p), p, levels, periods)[1][0]
     worst = 0.0
     for th1, th2 in [(2.1, 0.7), (4.0, 5.5)]:
         m = nor.single_gate(p)
@@ -240,15 +212,15 @@ def phase_insensitivity(p: GateParams, periods: int = 2500) -> dict:
             m.drives[ds].phase += th
             m.drives[dd].phase += th
         m.invalidate()
-        worst = max(worst, float(np.abs(settle(m, p, levels, periods)[1][0] - base).max()))
+        worst = max(worst, float(np.abs(run_from_rest(m, p, levels, periods)[1][0] - base).max()))
     return {"max_output_change": worst, "phases_tested": [[2.1, 0.7], [4.0, 5.5]]}
 
 
 def convergence(p: GateParams, periods: int = 1500, steps: int = rk4.DEFAULT_STEPS_PER_PERIOD) -> float:
     """Change of the four outputs when the RK4 step is halved from `steps` per period (u_R)."""
-    levels = np.array([[LEVEL[a], LEVEL[b]] for a, b in PAIRS])
-    a1 = settle(nor.single_gate(p), p, levels, periods, steps, avg=1)[1][0]
-    a2 = settle(nor.single_gate(p), p, levels, periods, 2 * steps, avg=1)[1][0]
+    levels = nominal_levels()
+    a1 = run_from_rest(nor.single_gate(p), p, levels, periods, steps, avg=1)[1][0]
+    a2 = run_from_rest(nor.single_gate(p), p, levels, periods, 2 * steps, avg=1)[1][0]
     return float(np.abs(a1 - a2).max())
 
 
@@ -305,9 +277,8 @@ def characterise(p: GateParams, quick: bool = False, log=lambda msg: None) -> di
 
 
 def truth_table_stimulus(p: GateParams) -> Stimulus:
-    m = nor.single_gate(p)
-    levels = np.array([[LEVEL[a], LEVEL[b]] for a, b in PAIRS])
-    return Stimulus.from_levels(m, [(0.0, _input_amps(m, m.design.input_drives, levels, p))], batch=4)
+    """The four nominal input pairs as one batch on a single gate."""
+    return gate_scene(p).stimulus
 
 
 def requirements(out, vm, fo, ph, cas, tr, impurity) -> dict:
@@ -339,38 +310,30 @@ def requirements(out, vm, fo, ph, cas, tr, impurity) -> dict:
 
 
 # --- the latch (paper Fig. 5b, 5d) -----------------------------------------------------------
-def latch_sequence(p: GateParams, backend: str = "rk4", pulse: int = 800, settle: int = 2500) -> dict:
-    """verilog/dff.v through a pulse sequence: store 1, hold while d toggles, store 0, hold while d toggles.
+def latch_sequence(p: GateParams, backend: str = "rk4", pulse: int = 800, hold: int = 2500) -> dict:
+    """verilog/dff.v through scenes.latch_phases: store 1, hold while d toggles, store 0, hold while d toggles.
 
     Returns the output amplitude per period, the decoded output at the end of each phase, and when
     the output crossed the threshold relative to each storing pulse (it must wait out the pulse)."""
-    from pathlib import Path
-    from ..physics import network
-    from ..backends import envelope
-    from ..synthesis import synth
-    nl = synth.synthesize(data.verilog("dff.v"))
-    model = network.build(nl, p)
-    phases = [("power-up d=0", 0, 0, settle), ("store 1", 1, 1, pulse), ("settle", 1, 0, settle),
-              ("hold, d=0", 0, 0, settle), ("hold, d=1", 1, 0, settle), ("hold, d=0", 0, 0, settle),
-              ("store 0", 0, 1, pulse), ("settle", 0, 0, settle), ("hold, d=1", 1, 0, settle),
-              ("hold, d=0", 0, 0, settle)]
-    starts = np.cumsum([0] + [ph[3] for ph in phases])
-    stim = network.stimulus(model, nl, p, [(int(t), [{"d": d}]) for t, (_, d, _, _) in zip(starts, phases)],
-                            clock=[[c] for _, _, c, _ in phases])
-    probes = ["q[0]", "q0.m.C"]                  # the output, and the loop node's channel
-    if backend == "rk4":
-        run = rk4.integrate(model, int(starts[-1]), stimulus=stim, probes=probes)
-    else:                       # 4-period steps: same accuracy as 1/2 (reports/envelope.md), 8x faster
-        run = envelope.integrate(model, int(starts[-1]), step_periods=4.0, stimulus=stim, probes=probes)
-    amp = np.abs(run.amp[:, :, 0]) / p.u_r
-    decoded = [{"phase": name, "d": d, "clock": c, "output": float(amp[int(t1) - 10:int(t1), 0].mean()),
-                "logic": band_of(float(amp[int(t1) - 10:int(t1), 0].mean()))}
+    sc = latch_scene(p, pulse, hold)
+    # envelope: 4-period steps, same accuracy as 1/2 (reports/envelope.md), 8x faster
+    options = EnvelopeOptions(step_periods=4.0) if backend == "envelope" else None
+    run = make_engine(backend, options).run(sc.model, sc.periods, sc.stimulus, probes=sc.probes)
+    return latch_decode(sc, np.abs(run.amp[:, :, 0]) / p.u_r) | {"backend": backend}
+
+
+def latch_decode(scene: Scene, amp: np.ndarray) -> dict:
+    """The latch's output at the end of each phase (mean of its last 10 periods) and the threshold crossing
+    after each storing pulse starts, from per-period amplitudes (P, probes) of a latch_scene run."""
+    phases, starts = scene.extra["phases"], [0] + scene.windows
+    decoded = [{"phase": name, "d": d, "clock": c, "output": float(amp[t1 - 10:t1, 0].mean()),
+                "logic": band_of(float(amp[t1 - 10:t1, 0].mean()))}
                for (name, d, c, _), t1 in zip(phases, starts[1:])]
     delays = []
-    for k, (name, _, c, _) in enumerate(phases):
+    for k, (_, _, c, _) in enumerate(phases):
         if c:
             x = amp[starts[k]:, 0] - MID
             idx = np.flatnonzero(np.sign(x[:-1]) != np.sign(x[1:]))
             delays.append(float(idx[0] + 1) if idx.size else math.nan)
-    return {"amplitude": amp, "starts": starts.tolist(), "phases": phases, "decoded": decoded,
-            "output_delays": delays, "pulse": pulse, "backend": backend}
+    return {"amplitude": amp, "starts": starts, "phases": phases, "decoded": decoded, "output_delays": delays,
+            "pulse": phases[1][3]}

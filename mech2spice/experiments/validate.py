@@ -6,7 +6,7 @@ per-period output amplitudes (u_R) are compared on:
 * settled amplitudes: mean of the last `AVG` periods before each window end (each input change
   and the end of the run); criterion |envelope - RK4| <= AMP_TOL = 0.02 u_R;
 * switching times: after every input change (and from rest), the first and the last time each
-  output crosses the threshold midway between the bands (`characterise.MID`), linearly
+  output crosses the threshold midway between the bands (`scenes.MID`), linearly
   interpolated between samples; criterion |t_env - t_rk4| <= TIME_TOL = 10 % of t_rk4.
 
 What the envelope equations (`envelope.py`) leave out, each made into a variant here so its share
@@ -30,115 +30,19 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from . import characterise as ch
-from .. import simulate
-from ..physics import network, nor
-from ..backends import envelope
-from ..backends import logic, rk4
-from ..synthesis import ports
-from ..synthesis import synth
+from ..backends import envelope, rk4
 from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
-from ..physics.params import BAND0, BAND1, DEFAULT, NOMINAL0, NOMINAL1, GateParams, band_of
-from ..physics.stimulus import Stimulus
-from .. import data
+from ..physics.params import DEFAULT, GateParams
+from . import characterise as ch
+from .scenes import MID, Scene
 
 AMP_TOL = 0.02          # u_R, settled amplitudes
 TIME_TOL = 0.10         # relative, threshold-crossing times
 AVG = 20                # periods averaged for a settled amplitude
-MID = ch.MID
-EDGES = (BAND0[0], BAND0[1], BAND1[0], BAND1[1])
-
-
-# --- scenes ----------------------------------------------------------------------------------
-@dataclass
-class Scene:
-    name: str
-    model: MechModel
-    stimulus: Stimulus
-    periods: int
-    probes: list[str]
-    members: list[str]                 # a label per batch member
-    events: list[int]                  # periods at which inputs change (0: start from rest)
-    windows: list[int]                 # settled amplitudes are compared just before these periods
-    description: str = ""
-    meta: dict = field(default_factory=dict)
-
-
-def _levels_stimulus(model: MechModel, p: GateParams, segments: list[tuple[int, np.ndarray]],
-                     extra=None) -> Stimulus:
-    """Input-pair levels (B, 2) per segment start period -> stimulus on the model's input drives."""
-    B = segments[0][1].shape[0]
-    segs = []
-    for t, lv in segments:
-        amps = ch._input_amps(model, model.design.input_drives, lv, p)
-        if extra:
-            amps.update(extra)
-        segs.append((t * p.period, amps))
-    return Stimulus.from_levels(model, segs, batch=B)
-
-
-def gate_scene(p: GateParams = DEFAULT, which: str = "nominal", periods: int = 2500) -> Scene:
-    """Single gate from rest: the 4 nominal input pairs, or all 16 pairs of band-edge levels."""
-    if which == "nominal":
-        pairs = [(ch.LEVEL[a], ch.LEVEL[b]) for a, b in ch.PAIRS]
-    else:
-        pairs = [(x1, x2) for x1 in EDGES for x2 in EDGES]
-    m = nor.single_gate(p)
-    lv = np.array(pairs, float)
-    return Scene(f"gate_{which}", m, _levels_stimulus(m, p, [(0, lv)]), periods, ["g0"],
-                 [f"{a:g},{b:g}" for a, b in pairs], [0], [periods],
-                 f"single NOR gate, {'nominal' if which == 'nominal' else 'band-edge'} inputs, "
-                 f"{periods} periods from rest")
-
-
-CASCADE_EDGES = [(0.365, 0.365), (0.67, 0.365), (0.67, 0.67), (0.92, 0.365), (1.025, 0.67), (1.025, 1.025),
-                 (0.92, 0.92)]
-
-
-def chain_scene(p: GateParams = DEFAULT, hold: int = 1500, edges: bool = True) -> Scene:
-    """characterise.cascade's experiment: member 0 inputs 00 -> 10 -> 00; the others band-edge inputs."""
-    m = nor.chain(p, 3)
-    rows = [[NOMINAL0, NOMINAL0]] + ([list(e) for e in CASCADE_EDGES] if edges else [])
-    lv0 = np.array(rows)
-    lv1 = lv0.copy()
-    lv1[0] = [NOMINAL1, NOMINAL0]
-    st = _levels_stimulus(m, p, [(0, lv0), (hold, lv1), (2 * hold, lv0)])
-    return Scene("chain3", m, st, 3 * hold, ["g0", "g1", "g2"],
-                 ["00->10->00"] + [f"{a:g},{b:g}" for a, b in rows[1:]], [0, hold, 2 * hold],
-                 [hold, 2 * hold, 3 * hold],
-                 f"3-gate chain ((x1 NOR x2) NOR 0) NOR 0, hold {hold} periods per input setting")
-
-
-def fanout_scene(p: GateParams = DEFAULT, n_loads: int = 2, periods: int = 2500) -> Scene:
-    """characterise.fanout_test's experiment: driver 00 / 10, every load's second input 0 / 1."""
-    cases = [(0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1)]
-    m = nor.fanout(p, n_loads)
-    lv = np.array([[ch.LEVEL[a], ch.LEVEL[b]] for a, b, _ in cases])
-    amps = ch._input_amps(m, m.design.input_drives, lv, p)
-    for pair in m.design.load_drives:
-        amps.update(ch._input_amps(m, [pair], np.array([[ch.LEVEL[c]] for *_, c in cases]), p))
-    st = Stimulus.from_levels(m, [(0.0, amps)], batch=len(cases))
-    return Scene(f"fanout{n_loads}", m, st, periods, list(m.probes), [f"drv {a}{b}, loads x2={c}" for a, b, c in cases],
-                 [0], [periods], f"one driver feeding {n_loads} loads, {periods} periods from rest")
-
-
-def adder_scene(p: GateParams = DEFAULT, hold: int | None = None) -> Scene:
-    """report_adder's experiment: inputs 0 for `hold` periods, then each of the 16 (a, b)."""
-    nl = synth.synthesize(data.verilog("adder2.v"))
-    m = network.build(nl, p)
-    hold = hold or simulate.period_budget(nl)
-    vals = [{"a": a, "b": b} for a in range(4) for b in range(4)]
-    st = network.stimulus(m, nl, p, [(0, [{}] * 16), (hold, vals)])
-    probes = [b for b in ports.output_bits(nl) if b in m.probes]
-    return Scene("adder2", m, st, 2 * hold, probes, [f"a={v['a']} b={v['b']}" for v in vals], [0, hold],
-                 [hold, 2 * hold], f"2-bit adder (17 gates), inputs 0 for {hold} periods then (a, b)",
-                 {"netlist": nl, "values": vals})
 
 
 # --- running ---------------------------------------------------------------------------------
@@ -314,41 +218,6 @@ def scene_table_row(name: str, cmp: dict) -> dict:
     return {"scene": name, "amp_err": cmp["amp_err"], "time_err": cmp["time_err"], "traj_err": cmp["traj_err"],
             "n_crossings": cmp["n_crossings"], "count_mismatch": cmp["crossing_count_mismatch"],
             "pass": bool(cmp["amp_ok"] and cmp["time_ok"] and cmp["crossing_count_mismatch"] == 0)}
-
-
-def latch_scene(p: GateParams = DEFAULT, pulse: int = 800, settle: int = 2500) -> Scene:
-    """The model and stimulus of characterise.latch_sequence (verilog/dff.v), as a Scene."""
-    nl = synth.synthesize(data.verilog("dff.v"))
-    m = network.build(nl, p)
-    phases = [("power-up d=0", 0, 0, settle), ("store 1", 1, 1, pulse), ("settle", 1, 0, settle),
-              ("hold, d=0", 0, 0, settle), ("hold, d=1", 1, 0, settle), ("hold, d=0", 0, 0, settle),
-              ("store 0", 0, 1, pulse), ("settle", 0, 0, settle), ("hold, d=1", 1, 0, settle),
-              ("hold, d=0", 0, 0, settle)]
-    starts = [int(x) for x in np.cumsum([0] + [ph[3] for ph in phases])]
-    st = network.stimulus(m, nl, p, [(t, [{"d": d}]) for t, (_, d, _, _) in zip(starts, phases)],
-                          clock=[[c] for _, _, c, _ in phases])
-    m.add_probe("q0.m.C", m.index("q0.m.C"))          # the loop node's channel (envelope.integrate reads probes only)
-    return Scene("latch", m, st, starts[-1], ["q[0]", "q0.m.C"], ["dff"], starts[:-1], starts[1:],
-                 "verilog/dff.v latch (+3 delay pairs) through characterise.latch_sequence's pulse sequence",
-                 {"phases": phases})
-
-
-def latch_decode(scene: Scene, amp: np.ndarray) -> dict:
-    """characterise.latch_sequence's decoding, from per-period amplitudes (P, probes) of a latch_scene run:
-    the output at the end of each phase (mean of its last 10 periods) and the threshold crossing after each
-    storing pulse starts."""
-    phases, starts = scene.meta["phases"], [0] + scene.windows
-    decoded = [{"phase": name, "d": d, "clock": c, "output": float(amp[t1 - 10:t1, 0].mean()),
-                "logic": band_of(float(amp[t1 - 10:t1, 0].mean()))}
-               for (name, d, c, _), t1 in zip(phases, starts[1:])]
-    delays = []
-    for k, (_, _, c, _) in enumerate(phases):
-        if c:
-            x = amp[starts[k]:, 0] - MID
-            idx = np.flatnonzero(np.sign(x[:-1]) != np.sign(x[1:]))
-            delays.append(float(idx[0] + 1) if idx.size else math.nan)
-    return {"amplitude": amp, "starts": starts, "phases": phases, "decoded": decoded, "output_delays": delays,
-            "pulse": phases[1][3]}
 
 
 # --- the latch --------------------------------------------------------------------------------

@@ -48,7 +48,8 @@ def balance_grid(env: Envelope, F: np.ndarray, s: np.ndarray) -> np.ndarray:
     return env.Ks.diagonal()[0] * s[None, :] + 0.5 * weights @ inv_abs2
 
 
-def _balance(env: Envelope, F: np.ndarray, s: np.ndarray) -> np.ndarray:
+def balance(env: Envelope, F: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """The slow DOFs' force residual K_s s - (slow force of the fast response to s): zero at a steady state."""
     A = env.fast_response(s, F)
     return env.Ks @ s - env.slow_force(A[:, None])[:, 0]
 
@@ -78,7 +79,7 @@ def steady_states(env: Envelope, F: np.ndarray, n_grid: int = 20000,
         raise Mech2SpiceError("a network with several slow DOFs needs starting points for its steady states")
     found: list[SteadyState] = []
     for s0 in starts:
-        s, info, ok, msg = fsolve(lambda s: _balance(env, F, s), np.asarray(s0, float), full_output=True,
+        s, info, ok, msg = fsolve(lambda s: balance(env, F, s), np.asarray(s0, float), full_output=True,
                                   xtol=1e-12)
         if ok == 1 and not any(np.allclose(s, f.s, atol=1e-9) for f in found):
             found.append(_state(env, F, s))

@@ -22,7 +22,8 @@ from mech2spice.backends import Run
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
-from mech2spice.spice.carrier import Namer, SpiceOptions, emit, emit_with_probes, subckt_library, write_subckt_library
+from mech2spice.spice import Namer
+from mech2spice.spice.carrier import SpiceOptions, emit, emit_with_probes, subckt_library, write_subckt_library
 from mech2spice.physics.stimulus import Stimulus
 
 ROOT = Path(__file__).resolve().parent.parent

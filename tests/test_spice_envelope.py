@@ -18,6 +18,7 @@ from mech2spice.physics import nor
 from mech2spice.backends import envelope
 from mech2spice.synthesis import synth
 from mech2spice.spice import envelope as se
+from mech2spice.spice import failure
 from mech2spice.experiments import scenes as S
 from mech2spice.errors import DivergenceError, Mech2SpiceError
 from mech2spice.physics.model import MechModel
@@ -147,5 +148,5 @@ def test_timestep_failure_names_the_dof():
     m = nor.single_gate(P)
     err = Mech2SpiceError('ngspice failed (exit 1): doAnalyses: TRAN:  Timestep too small; time = 12.5, '
                           'timestep = 1e-13: trouble with node "ar_g0_g1s"')
-    out = se._failure(m, err, [])
+    out = failure(m, err, lambda names, data: None, se.NODE_PREFIXES)
     assert isinstance(out, DivergenceError) and out.dof == "g0.G1s"

@@ -26,7 +26,6 @@ other DOF an m2s_osc instance, so any MechModel can be emitted.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,51 +33,24 @@ from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
-
-METHODS = ("trap", "gear")
-
-
-def drive_schedule(model: MechModel, stimulus, b: int, d: int, t_end: float) -> tuple[tuple[float, float], ...]:
-    """(time, amplitude) points where drive d of batch member b changes before t_end."""
-    if stimulus is None:
-        return ((0.0, float(model.drives[d].amplitude)),)
-    if not 0 <= b < stimulus.batch:
-        raise Mech2SpiceError(f"batch index {b} out of range (stimulus has {stimulus.batch})")
-    if stimulus.amps.shape[1] != len(model.drives):
-        raise Mech2SpiceError(f"stimulus has {stimulus.amps.shape[1]} drives, model {len(model.drives)}")
-    pts, last = [], None
-    for t, a in zip(stimulus.times, stimulus.amps[:, d, b]):
-        if t < t_end and a != last:
-            pts.append((float(t), float(a)))
-            last = a
-    return tuple(pts)
-
+from ._common import NgspiceSettings, Namer, comment_text, drive_schedule, num
 
 @dataclass(frozen=True)
-class SpiceOptions:
-    method: str = "trap"             # trap | gear (gear = BDF, numerically damped; see the report)
+class SpiceOptions(NgspiceSettings):
+    """ngspice settings for the carrier-level netlist (defaults measured in reports/speed_accuracy.md)."""
     max_step_periods: float = 1 / 40  # max (and, in steady state, actual) step, in drive periods
     # tolerances measured at T/40 (reports/speed_accuracy.md): reltol 1e-5 costs no time against 1e-3
     # (the step is pinned; only Newton iterations change) and cuts the NOR gate's trajectory error
     # 0.023 -> 0.0065 u_R; vntol 1e-6 (ngspice's default) let the settled gate drift 0.0033 u_R, 0.84 deg
     reltol: float = 1e-5
-    abstol: float = 1e-12             # currents (forces), ngspice's default
-    chgtol: float = 1e-14             # ngspice's default
     vntol: float = 1e-9               # displacements are ~1e-2 (u_R = 0.0182)
     prewarp: bool = True              # trap only: exact phasor response at omega (see module doc)
-    maxord: int = 2                   # gear order
     trtol: float | None = None        # None: 1e4 when prewarped (pins the step, below), else ngspice's 7
+    MAX_STEP_LIMIT = 0.25             # a quarter period: coarser steps cannot resolve the carrier
 
     def validate(self) -> None:
-        if self.method not in METHODS:
-            raise Mech2SpiceError(f"ngspice method '{self.method}' unknown (use {' or '.join(METHODS)})")
-        if not 0 < self.max_step_periods <= 0.25:
-            raise Mech2SpiceError("max_step_periods must be in (0, 0.25] drive periods")
-        for name in ("reltol", "abstol", "chgtol", "vntol"):
-            if not getattr(self, name) > 0:
-                raise Mech2SpiceError(f"SpiceOptions.{name} must be positive")
-        if not 1 <= self.maxord <= 6:
-            raise Mech2SpiceError("maxord must be 1..6")
+        """Refuse settings ngspice would reject or misread."""
+        super().validate()
         if self.trtol is not None and not self.trtol > 0:
             raise Mech2SpiceError("SpiceOptions.trtol must be positive")
 
@@ -100,42 +72,6 @@ class SpiceOptions:
         return half / math.tan(half)
 
 
-# --- names -------------------------------------------------------------------
-_UNSAFE = re.compile(r"[^a-z0-9_]+")
-
-
-class Namer:
-    """Maps user names to SPICE-safe stems: [a-z0-9_] only (ngspice lowercases), unique, letter first."""
-
-    def __init__(self):
-        self.used: set[str] = set()
-
-    def __call__(self, name: str) -> str:
-        stem = _UNSAFE.sub("_", str(name).lower()).strip("_")[:40] or "n"
-        if not stem[0].isalpha():
-            stem = "n" + stem
-        out, k = stem, 1
-        while out in self.used:
-            k += 1
-            out = f"{stem}_{k}"
-        self.used.add(out)
-        return out
-
-
-def comment_text(text: str) -> str:
-    """Free text made safe for a comment line: printable ASCII, no newline, no card."""
-    return re.sub(r"[^A-Za-z0-9_ .,:;=+\-()'\[\]/]", "?", ascii(str(text))[1:-1])[:120]
-
-
-def num(x: float) -> str:
-    """A number ngspice reads back exactly (repr; never a unit suffix)."""
-    x = float(x)
-    if not math.isfinite(x):
-        raise Mech2SpiceError(f"cannot emit non-finite value {x} into a netlist")
-    return repr(x)
-
-
-# --- the subcircuit library ------------------------------------------------------
 OSC = """\
 * m2s_osc: one mechanical oscillator, mobility analogy.
 *   V(v) = velocity, V(x) = displacement; forces are currents injected into v.

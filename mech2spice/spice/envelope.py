@@ -44,10 +44,7 @@ Amplitudes per drive period are the node voltages linearly interpolated at the e
 from __future__ import annotations
 
 import math
-import os
-import re
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -55,38 +52,29 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..physics.envelope import Envelope
-from ..errors import DivergenceError, Mech2SpiceError, ToolMissingError
+from ..errors import Mech2SpiceError, ToolMissingError
 from ..physics.model import MechModel
-from .carrier import Namer, comment_text, drive_schedule, num
+from ._common import (NgspiceSettings, Namer, check_samples, comment_text, drive_schedule, failure, map_batch, num,
+                      probe_dof_names)
 from ..physics.stimulus import Stimulus
 
-METHODS = ("trap", "gear")
 DRIVE_RAMP_PERIODS = 0.25       # tanh time constant of a drive-amplitude change (see _EnvEmitter._source)
 
 
 @dataclass(frozen=True)
-class EnvelopeSpiceOptions:
-    """ngspice settings for the envelope netlist (defaults measured by benchmarks/envelope_spice.py,
-    reports/speed_accuracy.md, section 'SPICE on the envelope equations')."""
-    method: str = "trap"
+class EnvelopeSpiceOptions(NgspiceSettings):
+    """ngspice settings for the envelope netlist (defaults measured in reports/speed_accuracy.md, section
+    'SPICE on the envelope equations')."""
     max_step_periods: float = 2.0     # ngspice's max step, in drive periods (its LTE control may go lower)
-    reltol: float = 1e-4
     abstol: float = 1e-12             # currents = amplitude rates in u_R/s
     vntol: float = 1e-7               # voltages = amplitudes in u_R
-    chgtol: float = 1e-14
     trtol: float = 7.0                # ngspice's default truncation-error factor
-    maxord: int = 2                   # gear order
 
     def validate(self) -> None:
-        if self.method not in METHODS:
-            raise Mech2SpiceError(f"ngspice method '{self.method}' unknown (use {' or '.join(METHODS)})")
-        if not 0 < self.max_step_periods <= 1000:
-            raise Mech2SpiceError("max_step_periods must be in (0, 1000] drive periods")
-        for name in ("reltol", "abstol", "vntol", "chgtol", "trtol"):
-            if not getattr(self, name) > 0:
-                raise Mech2SpiceError(f"EnvelopeSpiceOptions.{name} must be positive")
-        if not 1 <= self.maxord <= 6:
-            raise Mech2SpiceError("maxord must be 1..6")
+        """Refuse settings ngspice would reject or misread."""
+        super().validate()
+        if not self.trtol > 0:
+            raise Mech2SpiceError("EnvelopeSpiceOptions.trtol must be positive")
 
 
 def _amp_scale(model: MechModel) -> float:
@@ -300,39 +288,7 @@ def emit_envelope(model: MechModel, stimulus: Stimulus | None = None, periods: i
 
 
 # --- running ---------------------------------------------------------------------------------------
-_NODE = re.compile(r'trouble with node\s+"?([\w.]+)', re.I)
-_TOO_SMALL = re.compile(r"timestep too small;\s*time\s*=\s*([0-9.eE+-]+)", re.I)
-
-
-def _dof_of_node(model: MechModel, node: str) -> str | None:
-    namer = Namer()
-    stems = {namer(n): n for n in model.names}
-    kind, _, stem = node.lower().partition("_")
-    return stems.get(stem) if kind in ("ar", "ai", "sx", "sv", "dr", "di") else None
-
-
-def _check(model: MechModel, t: np.ndarray, amp: np.ndarray, T: float) -> None:
-    """DivergenceError at the first sample where a probe amplitude is non-finite or beyond 1e3 u_R."""
-    mag = np.abs(amp)
-    bad = ~np.isfinite(mag) | (mag > 1e3 * _amp_scale(model))
-    if bad.any():
-        row = int(np.flatnonzero(bad.any(axis=1))[0])
-        col = int(np.flatnonzero(bad[row])[0])
-        raise DivergenceError(list(model.probes)[col], float(t[row]), T, float(mag[row, col]))
-
-
-def _failure(model: MechModel, err: Mech2SpiceError, vecs: list[str]) -> Mech2SpiceError:
-    T = 2 * math.pi / model.omega
-    names, data = getattr(err, "names", []), getattr(err, "data", np.zeros((0, 0)))
-    if data.ndim == 2 and data.shape[0] and all(v in names for v in vecs):
-        _check(model, data[:, 0], _complex(names, data, vecs, 1.0), T)
-    m = _TOO_SMALL.search(str(err))
-    if m:
-        node = _NODE.search(str(err))
-        dof = (_dof_of_node(model, node.group(1)) if node else None) or next(iter(model.probes), model.names[0])
-        last = float(np.abs(data[-1, 1:]).max()) if data.ndim == 2 and data.size else math.nan
-        return DivergenceError(dof, float(m.group(1)), T, last)
-    return err
+NODE_PREFIXES = ("ar", "ai", "sx", "sv", "dr", "di")     # the envelope netlist's top-level node kinds
 
 
 def _complex(names, data, vecs, u: float) -> np.ndarray:
@@ -356,14 +312,15 @@ def run_one(model: MechModel, periods: int, stimulus: Stimulus | None = None,
     except ToolMissingError:
         raise
     except Mech2SpiceError as e:
-        raise _failure(model, e, vecs) from None
+        raise failure(model, e, lambda names, data: _complex(names, data, vecs, _amp_scale(model)) if set(vecs) <= set(names)
+                      else None, NODE_PREFIXES) from None
     missing = [v for v in vecs if v not in names]
     if missing or names[:1] != ["time"]:
         raise Mech2SpiceError(f"ngspice raw file lacks {missing or ['time']}")
     T = 2 * math.pi / model.omega
     t = data[:, 0]
     z = _complex(names, data, vecs, _amp_scale(model))
-    _check(model, t, z, T)
+    check_samples(model, t, z, probe_dof_names(model))
     t_end = (1 + np.arange(periods)) * T
     amp = np.stack([np.interp(t_end, t, z[:, j].real) + 1j * np.interp(t_end, t, z[:, j].imag)
                     for j in range(z.shape[1])], axis=1) if z.shape[1] else np.zeros((periods, 0), complex)
@@ -381,9 +338,7 @@ def run_envelope_spice(model: MechModel, periods: int, stimulus: Stimulus | None
     `workers` at a time); a Run whose per-period amplitudes are the envelope at each period's end."""
     from ..backends._base import Run
     B = stimulus.batch if stimulus is not None else 1
-    workers = max(1, min(B, workers or os.cpu_count() or 1))
-    with ThreadPoolExecutor(workers) as pool:
-        parts = list(pool.map(lambda b: run_one(model, periods, stimulus, opts, b, timeout), range(B)))
+    parts = map_batch(lambda b: run_one(model, periods, stimulus, opts, b, timeout), B, workers)
     T = 2 * math.pi / model.omega
     amp = np.stack([p[1] for p in parts], axis=2)
     extra = {"backend": "ngspice-envelope", "options": asdict(opts),

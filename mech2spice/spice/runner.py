@@ -19,15 +19,15 @@ import subprocess
 import tempfile
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import DivergenceError, Mech2SpiceError, ToolMissingError
+from ..errors import Mech2SpiceError, ToolMissingError
 from ..physics.model import MechModel
-from ..backends._base import Run, blowup_bound
-from .carrier import Namer, SpiceOptions, emit_with_probes
+from ..backends._base import Run
+from ._common import check_samples, failure, map_batch, probe_dof_names
+from .carrier import SpiceOptions, emit_with_probes
 from ..physics.stimulus import Stimulus
 
 MISSING = "ngspice not found: apt-get install -y ngspice libngspice0"
@@ -101,39 +101,13 @@ def _ngspice_message(log: str) -> str | None:
     return None
 
 
-def _node_dof(model: MechModel, node: str) -> str | None:
-    """DOF name of a top-level x_/v_ node (the emitter's stems are a pure function of the names)."""
-    namer = Namer()
-    stems = {namer(n): n for n in model.names}
-    kind, _, stem = node.lower().partition("_")
-    return stems.get(stem) if kind in ("x", "v") else None
+NODE_PREFIXES = ("x", "v")            # the carrier netlist's top-level node kinds (displacement, velocity)
 
 
-def check_divergence(model: MechModel, t: np.ndarray, x: np.ndarray, probe_dofs: list[int],
-                     T: float) -> None:
-    """DivergenceError at the first sample where a probe is non-finite or beyond the blow-up bound."""
-    bad = ~np.isfinite(x) | (np.abs(x) > blowup_bound(model))
-    if bad.any():
-        row = int(np.flatnonzero(bad.any(axis=1))[0])
-        col = int(np.flatnonzero(bad[row])[0])
-        raise DivergenceError(model.names[probe_dofs[col]], float(t[row]), T, float(abs(x[row, col])))
-
-
-def _fail(model: MechModel, msg: str, names: list[str], data: np.ndarray, vecs: list[str]):
-    """The error for a failed run: DivergenceError if the probes blew up or ngspice's step collapsed
-    (naming the node's DOF), else Mech2SpiceError with ngspice's message."""
-    T = 2 * math.pi / model.omega
-    dofs = list(model.probes.values())
-    if data.ndim == 2 and data.shape[0] and all(v in names for v in vecs):
-        check_divergence(model, data[:, 0], data[:, [names.index(v) for v in vecs]], dofs, T)
-    m = re.search(r"timestep too small;\s*time\s*=\s*([0-9.eE+-]+)", msg, re.I)
-    if m:
-        node = re.search(r'trouble with node\s+"?([\w.]+)', msg)
-        dof = _node_dof(model, node.group(1)) if node else None
-        dof = dof or (model.names[dofs[0]] if dofs else model.names[0])
-        last = float(np.abs(data[-1, 1:]).max()) if data.ndim == 2 and data.size else math.nan
-        return DivergenceError(dof, float(m.group(1)), T, last)
-    return Mech2SpiceError(msg)
+def _failure(model: MechModel, err: Mech2SpiceError, vecs: list[str]) -> Mech2SpiceError:
+    """A failed run's error, naming the DOF where the probes blew up or ngspice's step collapsed."""
+    return failure(model, err, lambda names, data: data[:, [names.index(v) for v in vecs]]
+                   if set(vecs) <= set(names) else None, NODE_PREFIXES)
 
 
 # --- running ---------------------------------------------------------------------------
@@ -230,7 +204,7 @@ def run(model: MechModel, periods: int, stimulus: Stimulus | None = None,
     except ToolMissingError:
         raise
     except Mech2SpiceError as e:
-        raise _fail(model, str(e), getattr(e, "names", []), getattr(e, "data", np.zeros((0, 0))), vecs) from None
+        raise _failure(model, e, vecs) from None
     wall = time.perf_counter() - t0
     return to_run(model, periods, names, data, vecs, options, {"wall_s": wall, "backend": "ngspice"})
 
@@ -243,7 +217,7 @@ def to_run(model: MechModel, periods: int, names: list[str], data: np.ndarray, v
     T = 2 * math.pi / model.omega
     t, x = data[:, 0], data[:, [names.index(v) for v in vecs]]
     dofs = list(model.probes.values())
-    check_divergence(model, t, x, dofs, T)
+    check_samples(model, t, x, probe_dof_names(model))
     h = options.max_step_periods * T
     amp, mean = demodulate(t, x, model.omega, periods)
     dt = np.diff(t)
@@ -266,9 +240,7 @@ def run_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
     """Every batch member of `stimulus` as its own ngspice process (up to `workers` at a time, default
     the CPU count: ngspice itself is single-threaded); results stacked along the batch axis."""
     B = stimulus.batch if stimulus is not None else 1
-    workers = max(1, min(B, workers or os.cpu_count() or 1))
-    with ThreadPoolExecutor(workers) as pool:
-        runs = list(pool.map(lambda b: run(model, periods, stimulus, options, b, timeout), range(B)))
+    runs = map_batch(lambda b: run(model, periods, stimulus, options, b, timeout), B, workers)
     first = runs[0]
     return Run(first.probe_names, first.period, first.t_end,
                np.concatenate([r.amp for r in runs], axis=2), np.concatenate([r.mean for r in runs], axis=2),
@@ -329,7 +301,7 @@ def run_pyspice(model: MechModel, periods: int, stimulus: Stimulus | None = None
     try:
         names, data = run_netlist_shared(text, vecs)
     except Mech2SpiceError as e:
-        raise _fail(model, str(e), getattr(e, "names", []), getattr(e, "data", np.zeros((0, 0))), vecs) from None
+        raise _failure(model, e, vecs) from None
     return to_run(model, periods, names, data, vecs, options,
                   {"wall_s": time.perf_counter() - t0, "backend": "ngspice-shared"})
 

@@ -1,0 +1,149 @@
+"""What the carrier-level and envelope netlists share: names, numbers, drive schedules, ngspice settings,
+failure parsing and the batch of ngspice processes."""
+from __future__ import annotations
+
+import math
+import os
+import re
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DivergenceError, Mech2SpiceError
+from ..physics.model import MechModel
+
+METHODS = ("trap", "gear")   # ngspice's integration methods
+
+
+def drive_schedule(model: MechModel, stimulus, b: int, d: int, t_end: float) -> tuple[tuple[float, float], ...]:
+    """(time, amplitude) points where drive d of batch member b changes before t_end."""
+    if stimulus is None:
+        return ((0.0, float(model.drives[d].amplitude)),)
+    if not 0 <= b < stimulus.batch:
+        raise Mech2SpiceError(f"batch index {b} out of range (stimulus has {stimulus.batch})")
+    if stimulus.amps.shape[1] != len(model.drives):
+        raise Mech2SpiceError(f"stimulus has {stimulus.amps.shape[1]} drives, model {len(model.drives)}")
+    pts, last = [], None
+    for t, a in zip(stimulus.times, stimulus.amps[:, d, b]):
+        if t < t_end and a != last:
+            pts.append((float(t), float(a)))
+            last = a
+    return tuple(pts)
+
+
+# --- names -------------------------------------------------------------------
+_UNSAFE = re.compile(r"[^a-z0-9_]+")
+
+
+class Namer:
+    """Maps user names to SPICE-safe stems: [a-z0-9_] only (ngspice lowercases), unique, letter first."""
+
+    def __init__(self):
+        self.used: set[str] = set()
+
+    def __call__(self, name: str) -> str:
+        stem = _UNSAFE.sub("_", str(name).lower()).strip("_")[:40] or "n"
+        if not stem[0].isalpha():
+            stem = "n" + stem
+        out, k = stem, 1
+        while out in self.used:
+            k += 1
+            out = f"{stem}_{k}"
+        self.used.add(out)
+        return out
+
+
+def comment_text(text: str) -> str:
+    """Free text made safe for a comment line: printable ASCII, no newline, no card."""
+    return re.sub(r"[^A-Za-z0-9_ .,:;=+\-()'\[\]/]", "?", ascii(str(text))[1:-1])[:120]
+
+
+def num(x: float) -> str:
+    """A number ngspice reads back exactly (repr; never a unit suffix)."""
+    x = float(x)
+    if not math.isfinite(x):
+        raise Mech2SpiceError(f"cannot emit non-finite value {x} into a netlist")
+    return repr(x)
+
+
+# --- the subcircuit library ------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class NgspiceSettings:
+    """The transient-analysis settings both netlist forms pass to ngspice (each form sets its own defaults)."""
+    method: str = "trap"              # trap | gear (gear = BDF, numerically damped)
+    max_step_periods: float = 1.0     # ngspice's max step, in drive periods
+    reltol: float = 1e-4
+    abstol: float = 1e-12
+    chgtol: float = 1e-14
+    vntol: float = 1e-9
+    maxord: int = 2                   # gear order
+    MAX_STEP_LIMIT = 1000.0           # longest max step a form accepts, in drive periods
+
+    def validate(self) -> None:
+        """Refuse settings ngspice would reject or misread."""
+        if self.method not in METHODS:
+            raise Mech2SpiceError(f"ngspice method '{self.method}' unknown (use {' or '.join(METHODS)})")
+        if not (isinstance(self.max_step_periods, (int, float)) and 0 < self.max_step_periods <= self.MAX_STEP_LIMIT):
+            raise Mech2SpiceError(f"max_step_periods must be in (0, {self.MAX_STEP_LIMIT:g}] drive periods")
+        for name in ("reltol", "abstol", "chgtol", "vntol"):
+            if not getattr(self, name) > 0:
+                raise Mech2SpiceError(f"{type(self).__name__}.{name} must be positive")
+        if not 1 <= self.maxord <= 6:
+            raise Mech2SpiceError("maxord must be 1..6")
+
+
+# --- failures -----------------------------------------------------------------------------------------
+_TOO_SMALL = re.compile(r"timestep too small;\s*time\s*=\s*([0-9.eE+-]+)", re.I)
+_NODE = re.compile(r'trouble with node\s+"?([\w.]+)', re.I)
+
+
+def dof_of_node(model: MechModel, node: str, prefixes: tuple[str, ...]) -> str | None:
+    """DOF name of a top-level node `<prefix>_<stem>` (the emitters' stems are a pure function of the names)."""
+    namer = Namer()
+    stems = {namer(n): n for n in model.names}
+    kind, _, stem = node.lower().partition("_")
+    return stems.get(stem) if kind in prefixes else None
+
+
+def probe_dof_names(model: MechModel) -> list[str]:
+    """The DOF each probe reads, by name (what a divergence message names)."""
+    return [model.names[d] for d in model.probes.values()]
+
+
+def check_samples(model: MechModel, t: np.ndarray, values: np.ndarray, names: list[str]) -> None:
+    """DivergenceError at the first sample (row) where a probe (column; `names` its DOF) is non-finite or past
+    the bound."""
+    from ..backends._base import blowup_bound
+    mag = np.abs(values)
+    bad = ~np.isfinite(mag) | (mag > blowup_bound(model))
+    if bad.any():
+        row = int(np.flatnonzero(bad.any(axis=1))[0])
+        col = int(np.flatnonzero(bad[row])[0])
+        raise DivergenceError(names[col], float(t[row]), model.period, float(mag[row, col]))
+
+
+def failure(model: MechModel, err: Mech2SpiceError, probe_values, prefixes: tuple[str, ...]) -> Mech2SpiceError:
+    """The error for a failed ngspice run: DivergenceError if the probes blew up (`probe_values(names, data)`
+    gives their samples, or None) or ngspice's step collapsed (naming the node's DOF), else `err` itself."""
+    names, data = getattr(err, "names", []), getattr(err, "data", np.zeros((0, 0)))
+    values = probe_values(names, data) if data.ndim == 2 and data.shape[0] else None
+    if values is not None:
+        check_samples(model, data[:, 0], values, probe_dof_names(model))
+    m = _TOO_SMALL.search(str(err))
+    if not m:
+        return err
+    node = _NODE.search(str(err))
+    dof = (dof_of_node(model, node.group(1), prefixes) if node else None) or (probe_dof_names(model) or model.names)[0]
+    last = float(np.abs(data[-1, 1:]).max()) if data.ndim == 2 and data.size else math.nan
+    return DivergenceError(dof, float(m.group(1)), model.period, last)
+
+
+def map_batch(run_member, batch: int, workers: int | None = None) -> list:
+    """run_member(b) for every batch member, one ngspice process each, up to `workers` (default: the CPU
+    count; ngspice itself is single-threaded) at a time."""
+    workers = max(1, min(batch, workers or os.cpu_count() or 1))
+    with ThreadPoolExecutor(workers) as pool:
+        return list(pool.map(run_member, range(batch)))

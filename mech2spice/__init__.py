@@ -1,3 +1,17 @@
-"""mech2spice: Verilog -> networks of nonlinear mechanical oscillators -> RK4 / envelope / ngspice."""
+"""mech2spice: Verilog -> networks of nonlinear mechanical NOR gates -> RK4, envelope and circuit simulators.
 
-__version__ = "0.1.0"
+    import mech2spice as m2s
+    adder = m2s.synthesize("verilog/adder2.v")
+    m2s.simulate(adder, {"a": 3, "b": 2}, backend="envelope")["outputs"]     # {'s': 5}
+
+The pipeline and how to add an engine: docs/architecture.md.
+"""
+from .api import emit, simulate
+from .backends import BACKENDS
+from .errors import Mech2SpiceError
+from .physics.params import DEFAULT, PRESETS, PRINTED, GateParams, load_params
+from .synthesis.synth import Netlist, synthesize
+
+__version__ = "0.2.0"
+__all__ = ["BACKENDS", "DEFAULT", "GateParams", "Mech2SpiceError", "Netlist", "PRESETS", "PRINTED", "emit",
+           "load_params", "simulate", "synthesize"]

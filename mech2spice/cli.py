@@ -16,6 +16,7 @@ from .errors import Mech2SpiceError
 
 from .backends import BACKENDS
 from .physics.network import MAX_FANOUT
+from .spice._common import DEFAULT_TIMEOUT_S
 
 
 def _jsonable(o):
@@ -152,16 +153,16 @@ def _clocked_steps(args, nl) -> list[dict]:
 
 
 def cmd_simulate_clocked(args, nl) -> int:
-    from . import simulate
+    from . import simulation
     from .physics.params import load_params
     if args.clock and args.clock != nl.clock:
         raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by '{nl.clock}'")
-    cycles = simulate.expand_steps(_clocked_steps(args, nl))
+    cycles = simulation.expand_steps(_clocked_steps(args, nl))
     if args.backend == "logic":
-        res = simulate.run_clocked_logic(nl, cycles)
+        res = simulation.run_clocked_logic(nl, cycles)
     else:
-        timing = simulate.clock_timing(nl, args.pulse, args.pause)
-        res = simulate.run_clocked_physical(nl, load_params(args.params), cycles, args.backend, timing,
+        timing = simulation.clock_timing(nl, args.pulse, args.pause)
+        res = simulation.run_clocked_physical(nl, load_params(args.params), cycles, args.backend, timing,
                                             progress=not args.json and sys.stderr.isatty(),
                                             options=_engine_options(args), log=_log(args))
     if args.json:
@@ -180,7 +181,7 @@ def cmd_simulate_clocked(args, nl) -> int:
 
 
 def cmd_simulate(args) -> int:
-    from . import simulate
+    from . import simulation
     from .physics.params import load_params
     nl = _netlist(args)
     if nl.clock:
@@ -188,7 +189,7 @@ def cmd_simulate(args) -> int:
     if args.cycles or args.stimulus or args.clock:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --clock/--cycles/--stimulus apply to clocked designs")
     values = _parse_sets(args.set)
-    res = simulate.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
+    res = simulation.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
                                 progress=not args.json and sys.stderr.isatty(), options=_engine_options(args),
                                 log=_log(args))[0]
     res["inputs"] = values
@@ -205,7 +206,7 @@ def cmd_simulate(args) -> int:
 
 # --- SPICE --------------------------------------------------------------------------
 def cmd_emit(args) -> int:
-    from . import simulate
+    from . import simulation
     from .physics import network
     from .spice import carrier as spice
     from .synthesis.ports import pack_inputs
@@ -216,7 +217,7 @@ def cmd_emit(args) -> int:
     pack_inputs(nl, values)
     model = network.build(nl, p)
     stim = network.stimulus(model, nl, p, [(0, [values])])
-    periods = args.periods or simulate.period_budget(nl)
+    periods = args.periods or simulation.period_budget(nl)
     opts = _engine_options(args, "ngspice")
     text = spice.emit(model, periods, stim, options=opts,
                       title=f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}")
@@ -237,12 +238,14 @@ def _engine_options(args, backend: str | None = None):
     name = backend or args.backend
     steps, method, max_step = (getattr(args, k, None) for k in ("steps", "method", "max_step"))
     changes = {}
+    timeout = getattr(args, "ngspice_timeout", None)
     if name.startswith("ngspice"):
-        changes.update({k: v for k, v in (("method", method), ("max_step_periods", max_step)) if v is not None})
+        changes.update({k: v for k, v in (("method", method), ("max_step_periods", max_step), ("timeout_s", timeout))
+                        if v is not None})
         if steps:
             raise Mech2SpiceError("--steps applies to rk4 and envelope; ngspice's step is --max-step")
-    elif method or max_step:
-        raise Mech2SpiceError(f"--method and --max-step apply to the ngspice backends, not {name}")
+    elif method or max_step or timeout:
+        raise Mech2SpiceError(f"--method, --max-step and --ngspice-timeout apply to the ngspice backends, not {name}")
     elif steps and name == "rk4":
         changes["steps_per_period"] = steps
     elif steps and name == "envelope":
@@ -272,10 +275,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
-def _ngspice_timeout() -> float:
-    return inputs.NGSPICE_TIMEOUT_S
-
-
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(
         prog="mech2spice",
@@ -291,10 +290,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--json", action="store_true", help="machine-readable output")
     g.add_argument("--sens", action="store_true",
                    help="sensitivity of the outputs and margins to every element (docs/robustness.md)")
-    g.add_argument("--spread", type=float, metavar="SIGMA",
+    g.add_argument("--spread", type=inputs.number(0, 1), metavar="SIGMA",
                    help="relative Gaussian spread on every element: yield, margin quantiles, tolerance")
-    g.add_argument("--samples", type=int, metavar="N", help="Monte-Carlo samples for --spread (default 200)")
-    g.add_argument("--seed", type=int, metavar="S", help="random seed for --spread (default 0)")
+    g.add_argument("--samples", type=inputs.integer(1, 100_000), metavar="N",
+                   help="Monte-Carlo samples for --spread (default 200)")
+    g.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), metavar="S",
+                   help="random seed for --spread (default 0)")
     g.set_defaults(func=cmd_gate)
 
     def design_args(sp):
@@ -341,7 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-step", type=inputs.number(0), help="ngspice max step in drive periods (default 1/40; "
                                                             "ngspice-envelope: 2)")
     s.add_argument("--ngspice-timeout", type=inputs.number(0), default=None, metavar="SECONDS",
-                   help=f"stop an ngspice run after this long (default {_ngspice_timeout():g} s)")
+                   help=f"stop an ngspice run after this long (default {DEFAULT_TIMEOUT_S:g} s)")
     s.add_argument("--clock", metavar="PORT", help="the clock port (default: the one clocking the flip-flops)")
     s.add_argument("--cycles", type=inputs.integer(1, inputs.MAX_CYCLES),
                    help=f"clock cycles to run with the --set inputs held (at most {inputs.MAX_CYCLES:,} on the "
@@ -476,9 +477,6 @@ def _precheck(args) -> None:
         inputs.check_output_dir(args.report, "report directory")
     if getattr(args, "stimulus", None):
         inputs.stimulus_steps(args.stimulus, {}, args.backend)
-    if getattr(args, "ngspice_timeout", None):
-        from .spice import runner
-        runner.set_timeout(args.ngspice_timeout)
 
 
 if __name__ == "__main__":

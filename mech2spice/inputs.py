@@ -21,7 +21,6 @@ MAX_PHYSICAL_CYCLES = 10_000
 MAX_PERIODS = 10_000_000          # drive periods of one run (memory grows ~16 B per period and probe)
 MAX_STEPS = 100_000               # steps per drive period
 MAX_CPU_CYCLES = 1_000_000_000    # `cpu run --max-cycles`: no per-cycle memory, only time
-NGSPICE_TIMEOUT_S = 3600.0        # one ngspice run: the adder takes seconds; `simulate --ngspice-timeout`
 
 
 # --------------------------------------------------------------------------- numbers (argparse types)

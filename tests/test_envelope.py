@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from mech2spice import simulate
+from mech2spice import simulation
 from mech2spice.experiments import characterise
 from mech2spice.backends import envelope
 from mech2spice.experiments import validate as V

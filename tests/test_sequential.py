@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from mech2spice import simulate
+from mech2spice import simulation
 from mech2spice.experiments import characterise
 from mech2spice.synthesis import synth
 
@@ -52,9 +52,9 @@ def test_counter_traces_identical_logic_and_rk4(tmp_path):
 
 def test_counter_envelope_matches_logic(p):
     nl = synth.synthesize(str(REPO / "verilog" / "counter4.v"))
-    cycles = simulate.expand_steps(COUNTER_STEPS + [{"set": {"en": 1}, "cycles": 3}])
-    env = simulate.run_clocked_physical(nl, p, cycles, "envelope", simulate.clock_timing(nl))
-    log = simulate.run_clocked_logic(nl, cycles)
+    cycles = simulation.expand_steps(COUNTER_STEPS + [{"set": {"en": 1}, "cycles": 3}])
+    env = simulation.run_clocked_physical(nl, p, cycles, "envelope", simulation.clock_timing(nl))
+    log = simulation.run_clocked_logic(nl, cycles)
     assert [e["outputs"] for e in env["trace"]] == [e["outputs"] for e in log["trace"]]
     assert env["valid"]
 
@@ -77,7 +77,7 @@ def test_fsm_detects_sequence():
     nl = synth.synthesize(str(REPO / "verilog" / "fsm.v"))
     xs = [1, 1, 0, 1, 1, 0, 1, 0, 1, 1, 0, 1]
     steps = [{"set": {"rst": 1}, "cycles": 1}] + [{"set": {"rst": 0, "x": x}, "cycles": 1} for x in xs]
-    trace = simulate.run_clocked_logic(nl, simulate.expand_steps(steps))["trace"]
+    trace = simulation.run_clocked_logic(nl, simulation.expand_steps(steps))["trace"]
     assert [e["outputs"]["found"] for e in trace] == [0, 0, 0, 0, 1, 0, 0, 1, 0, 0, 0, 0, 1]
     assert trace[8]["outputs"]["state"] == 1                  # "1" then 0 returns to idle
     assert all(bin(e["outputs"]["state"]).count("1") == 1 for e in trace)   # always one-hot

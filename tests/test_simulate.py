@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mech2spice import simulate
+from mech2spice import simulation
 from mech2spice.errors import Mech2SpiceError
 from mech2spice.backends import logic
 from mech2spice.physics import network
@@ -40,8 +40,8 @@ def test_adder_counts_match_paper_convention(adder, p):
 
 def test_adder_all_16_sums_rk4_and_envelope(adder, p):
     vals = list(ADDER_INPUTS)
-    res = simulate.run_physical(adder, p, vals, "rk4")
-    env = simulate.run_physical(adder, p, vals, "envelope")
+    res = simulation.run_physical(adder, p, vals, "rk4")
+    env = simulation.run_physical(adder, p, vals, "envelope")
     for r, e in zip(res, env):
         assert e["outputs"] == r["outputs"] and e["valid"]
         for bit, a in r["amplitudes"].items():
@@ -60,7 +60,7 @@ def test_adder_all_16_sums_rk4_and_envelope(adder, p):
 ])
 def test_rk4_matches_logic_on_other_designs(design, vectors, p):
     nl = synth.synthesize(design)
-    res = simulate.run_physical(nl, p, vectors, "rk4")
+    res = simulation.run_physical(nl, p, vectors, "rk4")
     for v, r in zip(vectors, res):
         assert r["valid"], (design, v, r["amplitudes"])
         assert r["outputs"] == logic.evaluate(nl, v), (design, v)
@@ -71,13 +71,13 @@ def test_rk4_matches_logic_large(design, p):
     nl = synth.synthesize(design)
     rng = np.random.default_rng(1)
     vectors = [{port: int(rng.integers(0, 2 ** w)) for port, w in nl.inputs.items()} for _ in range(6)]
-    for v, r in zip(vectors, simulate.run_physical(nl, p, vectors, "rk4")):
+    for v, r in zip(vectors, simulation.run_physical(nl, p, vectors, "rk4")):
         assert r["valid"] and r["outputs"] == logic.evaluate(nl, v)
 
 
 def test_decode_reports_invalid_bits_instead_of_rounding(adder):
     amps = {"s[0]": 0.97, "s[1]": 0.8, "s[2]": 0.5}      # s[1] sits between the bands
-    d = simulate.decode(adder, amps, {})
+    d = simulation.decode(adder, amps, {})
     assert d["bits"]["s[1]"] is None and d["valid"] is False and d["outputs"]["s"] is None
     assert d["min_margin"] < 0
 

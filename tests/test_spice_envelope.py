@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from mech2spice import simulate
+from mech2spice import simulation
 from mech2spice.physics import nor
 from mech2spice.backends import envelope
 from mech2spice.synthesis import synth
@@ -122,9 +122,9 @@ def test_gate_four_pairs_agree_with_envelope_integrate():
 
 def test_adder_3_plus_2_through_simulate():
     nl = synth.synthesize(str(REPO / "verilog" / "adder2.v"))
-    res = simulate.run_physical(nl, P, [{"a": 3, "b": 2}], backend="ngspice-envelope")[0]
+    res = simulation.run_physical(nl, P, [{"a": 3, "b": 2}], backend="ngspice-envelope")[0]
     assert res["outputs"] == {"s": 5} and res["valid"], res
-    assert res["backend"] == "ngspice-envelope" and res["periods"] == simulate.period_budget(nl)
+    assert res["backend"] == "ngspice-envelope" and res["periods"] == simulation.period_budget(nl)
 
 
 def test_cli_simulate_ngspice_envelope_json():

@@ -20,7 +20,7 @@ import numpy as np
 
 from dataclasses import replace
 
-from .. import simulate
+from .. import simulation
 from ..backends import make_engine
 from ..errors import Mech2SpiceError
 from ..physics import network
@@ -49,7 +49,7 @@ class PhysicalCPU:
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
         self.pulse_engine, self.pause_engine = self._engines(backend, step, settle)
-        t = simulate.clock_timing(self.netlist)
+        t = simulation.clock_timing(self.netlist)
         whole = max(1, int(round(step))) if backend == "envelope" else 1   # changes fall on step boundaries
         self.pulse, self.pause = -(-t["pulse"] // whole) * whole, -(-t["pause"] // whole) * whole
         self.backend, self.p, self.mem = backend, p, memory

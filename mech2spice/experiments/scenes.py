@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import data, simulate
+from .. import data, simulation
 from ..inputs import read_json
 from ..physics import network, nor
 from ..physics.model import MechModel
@@ -125,7 +125,7 @@ def adder_scene(p: GateParams = DEFAULT, hold: int | None = None) -> Scene:
     """verilog/adder2.v: inputs 0 for `hold` periods (default: its period budget), then each of the 16 (a, b)."""
     nl = synth.synthesize(data.verilog("adder2.v"))
     m = network.build(nl, p)
-    hold = hold or simulate.period_budget(nl)
+    hold = hold or simulation.period_budget(nl)
     st = network.stimulus(m, nl, p, [(0, [{}] * len(ADDER_INPUTS)), (hold, ADDER_INPUTS)])
     probes = [b for b in output_bits(nl) if b in m.probes]
     return Scene("adder2", m, st, 2 * hold, probes, [f"a={v['a']} b={v['b']}" for v in ADDER_INPUTS], [0, hold],

@@ -70,6 +70,9 @@ def num(x: float) -> str:
 # --- the subcircuit library ------------------------------------------------------
 
 
+DEFAULT_TIMEOUT_S = 3600.0      # one ngspice process; the adder takes seconds (`simulate --ngspice-timeout`)
+
+
 @dataclass(frozen=True)
 class NgspiceSettings:
     """The transient-analysis settings both netlist forms pass to ngspice (each form sets its own defaults)."""
@@ -80,6 +83,7 @@ class NgspiceSettings:
     chgtol: float = 1e-14
     vntol: float = 1e-9
     maxord: int = 2                   # gear order
+    timeout_s: float | None = None    # one ngspice process's time limit; None: DEFAULT_TIMEOUT_S
     MAX_STEP_LIMIT = 1000.0           # longest max step a form accepts, in drive periods
 
     def validate(self) -> None:
@@ -93,6 +97,13 @@ class NgspiceSettings:
                 raise Mech2SpiceError(f"{type(self).__name__}.{name} must be positive")
         if not 1 <= self.maxord <= 6:
             raise Mech2SpiceError("maxord must be 1..6")
+        if self.timeout_s is not None and not (math.isfinite(self.timeout_s) and self.timeout_s > 0):
+            raise Mech2SpiceError("the ngspice timeout must be a positive number of seconds")
+
+    @property
+    def time_limit(self) -> float:
+        """Seconds one ngspice process may run."""
+        return self.timeout_s or DEFAULT_TIMEOUT_S
 
 
 # --- failures -----------------------------------------------------------------------------------------

@@ -308,7 +308,7 @@ def run_one(model: MechModel, periods: int, stimulus: Stimulus | None = None,
     if keep_netlist:
         Path(keep_netlist).write_text(text, encoding="ascii")
     try:
-        names, data, _ = run_netlist(text, timeout=timeout)
+        names, data, _ = run_netlist(text, timeout=timeout or opts.time_limit)
     except ToolMissingError:
         raise
     except Mech2SpiceError as e:

@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import Mech2SpiceError, ToolMissingError
 from ..physics.model import MechModel
 from ..backends._base import Run
-from ._common import check_samples, failure, map_batch, probe_dof_names
+from ._common import DEFAULT_TIMEOUT_S, check_samples, failure, map_batch, probe_dof_names
 from .carrier import SpiceOptions, emit_with_probes
 from ..physics.stimulus import Stimulus
 
@@ -111,21 +111,9 @@ def _failure(model: MechModel, err: Mech2SpiceError, vecs: list[str]) -> Mech2Sp
 
 
 # --- running ---------------------------------------------------------------------------
-_TIMEOUT_S: float | None = None          # set_timeout(); None: inputs.NGSPICE_TIMEOUT_S
 _LIVE: set[subprocess.Popen] = set()     # running ngspice processes (runs may be in worker threads)
 _LOCK = threading.Lock()
 _STOPPED = threading.Event()
-
-
-def set_timeout(seconds: float) -> None:
-    """The time limit of every later ngspice run that does not give its own."""
-    global _TIMEOUT_S
-    _TIMEOUT_S = float(seconds)
-
-
-def default_timeout() -> float:
-    from ..inputs import NGSPICE_TIMEOUT_S
-    return _TIMEOUT_S or NGSPICE_TIMEOUT_S
 
 
 def stop_all() -> None:
@@ -167,11 +155,11 @@ def _ngspice(argv: list[str], cwd: Path, timeout: float) -> subprocess.Completed
 
 
 def run_netlist(text: str, workdir=None, timeout: float | None = None) -> tuple[list[str], np.ndarray, str]:
-    """Run a netlist under `ngspice -b -r` (timeout default: default_timeout()); returns (vector names,
+    """Run a netlist under `ngspice -b -r` (timeout default: DEFAULT_TIMEOUT_S); returns (vector names,
     data, log).  Raises Mech2SpiceError with ngspice's message on an error (the data of a run cut short is
     in .data).  The temporary directory goes on any exit, an interrupt included."""
     exe = find_ngspice()
-    timeout = timeout or default_timeout()
+    timeout = timeout or DEFAULT_TIMEOUT_S
     with tempfile.TemporaryDirectory(prefix="m2s_ng_") as tmp:
         d = Path(workdir or tmp)
         cir, raw = d / "circuit.cir", d / "out.raw"
@@ -200,7 +188,7 @@ def run(model: MechModel, periods: int, stimulus: Stimulus | None = None,
         Path(keep_netlist).write_text(text, encoding="ascii")
     t0 = time.perf_counter()
     try:
-        names, data, log = run_netlist(text, timeout=timeout)
+        names, data, log = run_netlist(text, timeout=timeout or options.time_limit)
     except ToolMissingError:
         raise
     except Mech2SpiceError as e:

@@ -157,3 +157,29 @@ def test_engine_flags_belong_to_their_engines():
     adder = str(Path(__file__).resolve().parent.parent / "verilog" / "adder2.v")
     assert cli.main(["simulate", adder, "--backend", "rk4", "--method", "gear"]) == 2
     assert cli.main(["simulate", adder, "--backend", "ngspice", "--steps", "100"]) == 2
+
+
+def test_long_runs_say_how_long_they_will_take_before_starting(adder, p):
+    """A run estimated past ESTIMATE_LOG_S announces its size and duration before any integration."""
+    said = []
+
+    class Announced(Exception):
+        pass
+
+    def log(msg):
+        said.append(msg)
+        raise Announced
+    with pytest.raises(Announced):
+        simulation.run_physical(adder, p, [{"a": 1}], "rk4", periods=10 ** 6, log=log)
+    assert "102 oscillators" in said[0] and "estimated" in said[0] and "min" in said[0]
+    quiet = []
+    simulation.run_physical(adder, p, [{"a": 1}], "envelope", periods=200, log=quiet.append)
+    assert quiet == []                                   # short runs say nothing
+
+
+def test_a_clocked_trace_too_large_for_memory_is_refused(p):
+    """The per-period amplitude trace is bounded: a schedule that would need more is refused up front."""
+    nl = synth.synthesize(str(REPO / "verilog" / "counter4.v"))
+    cycles = simulation.expand_steps([{"set": {"rst": 0, "en": 1}, "cycles": 40_000}])
+    with pytest.raises(Mech2SpiceError, match="GB of amplitudes"):
+        simulation.run_clocked_physical(nl, p, cycles, "envelope", simulation.clock_timing(nl))

@@ -22,6 +22,7 @@ from .model import MechModel
 
 
 class Envelope:
+    """The envelope equations' operators (Z0, Bop, G, H, slow block, drive map) for one model."""
     def __init__(self, model: MechModel):
         model.check()
         a = model.arrays
@@ -108,9 +109,11 @@ class Envelope:
         return self.Dmap @ np.asarray(amps, float).reshape(len(self.model.drives), -1)
 
     def residual_fast(self, A, s, F):
+        """The fast equations' right-hand side F^ - Z0 A - (G s) * A."""
         return F - self.Z0 @ A - (self.G @ s) * A
 
     def slow_force(self, A):
+        """The mean force -H |A|^2 / 2 the amplitudes exert on the slow DOFs."""
         return -(self.H @ (np.abs(A) ** 2)) / 2
 
     def rhs(self, A, s, sd, F):
@@ -128,13 +131,16 @@ class Envelope:
 
     # --- real-vector form for Jacobians --------------------------------------
     def pack(self, A, s, sd) -> np.ndarray:
+        """One real vector [Re A, Im A, s, s'] from a single state."""
         return np.concatenate([A.real, A.imag, s, sd])
 
     def unpack(self, y):
+        """(A, s, s') from a real vector made by pack."""
         nf, ns = self.fast.size, self.slow.size
         return (y[:nf] + 1j * y[nf:2 * nf]), y[2 * nf:2 * nf + ns], y[2 * nf + ns:]
 
     def rhs_real(self, y: np.ndarray, F: np.ndarray) -> np.ndarray:
+        """The time derivative of a packed real state y under forcing F (n_fast,)."""
         A, s, sd = self.unpack(y)
         Ad, sd_, sdd = self.rhs(A[:, None], s[:, None], sd[:, None], F[:, None])
         return self.pack(Ad[:, 0], sd_[:, 0], sdd[:, 0])

@@ -30,6 +30,7 @@ from .params import GateParams
 
 @dataclass
 class Drive:
+    """One sinusoidal drive a*sin(omega t + phase) on one DOF."""
     dof: int
     amplitude: float
     phase: float = 0.0
@@ -53,6 +54,7 @@ class Design:
 
 @dataclass
 class MechModel:
+    """DOFs, coupling springs/dashpots, quadratic couplings, drives and probes at one drive frequency."""
     omega: float
     names: list[str] = field(default_factory=list)
     mass: list[float] = field(default_factory=list)
@@ -79,6 +81,7 @@ class MechModel:
 
     # --- building -----------------------------------------------------------
     def add_dof(self, name: str, m: float, k: float, c: float, slow: bool = False) -> int:
+        """Add a DOF with mass, total stiffness and total damping; returns its index."""
         if name in self._index:
             raise Mech2SpiceError(f"duplicate degree of freedom '{name}'")
         if m <= 0 or k <= 0:
@@ -95,14 +98,17 @@ class MechModel:
         return len(self.names) - 1
 
     def add_spring(self, i: int, j: int, k: float) -> None:
+        """Add a coupling spring k between DOFs i and j (their totals are not changed)."""
         self.springs.append((i, j, k))
         self.invalidate()
 
     def add_dashpot(self, i: int, j: int, c: float) -> None:
+        """Add a coupling dashpot c between DOFs i and j (their totals are not changed)."""
         self.dashpots.append((i, j, c))
         self.invalidate()
 
     def add_quad(self, fast: int, slow: int, gamma: float) -> None:
+        """Add a quadratic coupling V = gamma u_fast^2 u_slow (signed gamma) from an oscillating to a slow DOF."""
         if self.slow[fast] or not self.slow[slow]:
             raise Mech2SpiceError(
                 f"quadratic coupling must join an oscillating DOF to a slow one, got "
@@ -111,14 +117,17 @@ class MechModel:
         self.invalidate()
 
     def add_drive(self, dof: int, amplitude: float, phase: float = 0.0, name: str = "") -> int:
+        """Add a drive amplitude*sin(omega t + phase) on `dof`; returns the drive's index."""
         self.drives.append(Drive(dof, amplitude, phase, name or self.names[dof]))
         self.invalidate()
         return len(self.drives) - 1
 
     def add_probe(self, name: str, dof: int) -> None:
+        """Record DOF `dof` under `name` as an observed output."""
         self.probes[name] = dof
 
     def index(self, name: str) -> int:
+        """The index of the DOF called `name`."""
         return self._index[name]
 
     @cached_property
@@ -138,10 +147,12 @@ class MechModel:
     # --- derived arrays -----------------------------------------------------
     @property
     def n(self) -> int:
+        """The number of DOFs."""
         return len(self.names)
 
     @cached_property
     def arrays(self) -> dict[str, np.ndarray]:
+        """The per-DOF, per-quad and per-drive lists as numpy arrays, keyed by name."""
         q = np.array(self.quads, dtype=float).reshape(-1, 3)
         return {
             "mass": np.array(self.mass), "k_total": np.array(self.k_total),
@@ -164,10 +175,12 @@ class MechModel:
 
     @cached_property
     def K(self) -> sp.csr_matrix:
+        """The stiffness matrix: total stiffness on the diagonal, -k of each coupling spring off it."""
         return self._coupling_matrix(self.k_total, self.springs)
 
     @cached_property
     def C(self) -> sp.csr_matrix:
+        """The damping matrix: total damping on the diagonal, -c of each coupling dashpot off it."""
         return self._coupling_matrix(self.c_total, self.dashpots)
 
     def _local(self, total: list[float], links) -> np.ndarray:
@@ -184,6 +197,7 @@ class MechModel:
 
     @cached_property
     def c_local(self) -> np.ndarray:
+        """Each DOF's own dashpot to ground: total minus attached coupling dashpots (may be negative)."""
         return self._local(self.c_total, self.dashpots)
 
     def counts(self) -> dict[str, int]:

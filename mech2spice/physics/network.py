@@ -29,6 +29,7 @@ LATCH_DELAY_PAIRS = 3      # identity pairs (x NOR 0) NOR 0 after each latch: ou
 
 
 def build(netlist: Netlist, p: GateParams, delay_pairs: int = LATCH_DELAY_PAIRS) -> MechModel:
+    """Build the mechanical model of a NOR netlist (gates, latches, input/clock drives, output probes)."""
     g = netlist.graph
     m = nor.new_model(p)
     blocks = {name: nor.add_nor(m, p, name) for name in netlist.gates()}

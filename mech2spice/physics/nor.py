@@ -22,6 +22,7 @@ DASHPOT_PHASE = math.pi / 2     # a dashpot's force leads the spring's by 90 deg
 
 @dataclass
 class GateBlock:
+    """The DOF indices of one NOR gate: its channel, insulator and (spring, dashpot) gate pair per input."""
     name: str
     channel: int
     insulator: int
@@ -29,6 +30,7 @@ class GateBlock:
 
 
 def new_model(p: GateParams) -> MechModel:
+    """Validate `p` and return an empty model at its drive frequency."""
     p.validate()
     return MechModel(omega=p.omega, params=p)
 
@@ -67,6 +69,7 @@ def drive_pair(model: MechModel, p: GateParams, pair: tuple[int, int], level: fl
 
 # --- small circuits used by characterisation, tests and benchmarks ----------
 def single_gate(p: GateParams, x1: float = NOMINAL0, x2: float = NOMINAL0) -> MechModel:
+    """One NOR gate with its two inputs driven externally at levels x1, x2 (fractions of F_R)."""
     m = new_model(p)
     g = add_nor(m, p, "g0")
     m.design.input_drives = [drive_pair(m, p, g.inputs[0], x1, "x1"),

@@ -28,6 +28,7 @@ NOMINAL1 = 0.97
 
 @dataclass(frozen=True)
 class GateParams:
+    """A NOR gate's parameters: masses, Qs, total stiffnesses, gammas, F_R, u_R, source F_C and omega."""
     m_g: float = 0.2
     q_g: float = 200.0
     k_g: float = 467.6433
@@ -48,6 +49,7 @@ class GateParams:
     # --- derived quantities -------------------------------------------------
     @property
     def period(self) -> float:
+        """The drive period 2 pi / omega."""
         return 2 * math.pi / self.omega
 
     @property
@@ -61,18 +63,22 @@ class GateParams:
         return self.k_couple / self.omega
 
     def damping(self, m: float, k: float, q: float) -> float:
+        """Damping c = m sqrt(k/m) / Q for mass m, total stiffness k and quality factor q."""
         return m * math.sqrt(k / m) / q
 
     @property
     def c_g(self) -> float:
+        """The gate oscillators' total damping."""
         return self.damping(self.m_g, self.k_g, self.q_g)
 
     @property
     def c_i(self) -> float:
+        """The insulator's total damping."""
         return self.damping(self.m_i, self.k_i, self.q_i)
 
     @property
     def c_c(self) -> float:
+        """The channel's total damping."""
         return self.damping(self.m_c, self.k_c, self.q_c)
 
     def force(self, level: float) -> float:
@@ -80,6 +86,7 @@ class GateParams:
         return level * self.f_r
 
     def validate(self) -> None:
+        """Raise Mech2SpiceError unless every field is finite and masses, Qs, stiffnesses, omega, F_R, u_R > 0."""
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name != "name" and not (isinstance(v, (int, float)) and math.isfinite(v)):
@@ -89,6 +96,7 @@ class GateParams:
                 raise Mech2SpiceError(f"gate parameter {name} = {getattr(self, name)} must be positive")
 
     def to_dict(self) -> dict:
+        """The fields as a plain dict."""
         return asdict(self)
 
 

@@ -23,6 +23,7 @@ STABLE_TOL = 1e-9     # growth rates (1/time) below this count as stable
 
 @dataclass
 class SteadyState:
+    """One steady state: slow coordinates, fast complex amplitudes, and its largest growth rate."""
     s: np.ndarray            # slow coordinates (n_slow,)
     A: np.ndarray            # complex amplitudes of the oscillating DOFs (n_fast,)
     growth: float            # largest real part of the linearised envelope eigenvalues
@@ -30,6 +31,7 @@ class SteadyState:
 
     @property
     def stable(self) -> bool:
+        """True if no linearised envelope eigenvalue has real part >= STABLE_TOL."""
         return self.growth < STABLE_TOL
 
 
@@ -55,6 +57,7 @@ def balance(env: Envelope, F: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def stability(env: Envelope, A: np.ndarray, s: np.ndarray, F: np.ndarray) -> tuple[float, float]:
+    """(largest real part, |imaginary part| of that eigenvalue) of the envelope Jacobian at (A, s)."""
     ev = np.linalg.eigvals(env.jacobian(env.pack(A, s, np.zeros_like(s)), F))
     k = int(np.argmax(ev.real))
     return float(ev.real[k]), float(abs(ev.imag[k]))

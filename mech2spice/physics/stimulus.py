@@ -17,6 +17,7 @@ from .model import MechModel
 
 @dataclass
 class Stimulus:
+    """Piecewise-constant drive amplitudes: segment start times and (segments, drives, batch) amps."""
     times: np.ndarray          # (K,) segment start times, times[0] == 0, increasing
     amps: np.ndarray           # (K, n_drives, B)
 
@@ -30,20 +31,25 @@ class Stimulus:
 
     @property
     def batch(self) -> int:
+        """The number of batch members B."""
         return self.amps.shape[2]
 
     def segment(self, t: float) -> int:
+        """The index of the segment in force at time t."""
         return int(np.searchsorted(self.times, t, side="right") - 1)
 
     def at(self, t: float) -> np.ndarray:
+        """The (n_drives, B) amplitudes in force at time t."""
         return self.amps[self.segment(t)]
 
     def next_change(self, t: float) -> float:
+        """The start time of the segment after the one at t (inf if none)."""
         k = self.segment(t) + 1
         return self.times[k] if k < self.times.size else np.inf
 
     @classmethod
     def constant(cls, model: MechModel, batch: int = 1) -> "Stimulus":
+        """One segment: every drive at its model amplitude, repeated for `batch` members."""
         amp = model.arrays["drive_amp"][None, :, None]
         return cls([0.0], np.repeat(amp, batch, axis=2))
 

@@ -113,6 +113,7 @@ class Kernel:
         self.N, self.h, self.bound = N, h, bound
 
     def run(self, x, v, amps, nper):
+        """Advance x, v in place by nper periods; return (per-period probe amplitudes, means, first bad period or -1)."""
         B = x.shape[1]
         amp_re = np.zeros((nper, self.pidx.size, B))
         amp_im = np.zeros_like(amp_re)

@@ -8,7 +8,6 @@ mean) over every whole period.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,7 +61,7 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     B, N = stimulus.batch, int(steps_per_period)
     if N < 4:
         raise Mech2SpiceError("RK4 needs at least 4 steps per drive period")
-    T = 2 * math.pi / model.omega
+    T = model.period
     h = T / N
     rhs = _Rhs(model)
     names = list(probes or model.probes)

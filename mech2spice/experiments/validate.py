@@ -85,7 +85,7 @@ def integrate_free(env: envelope.Envelope, scene: Scene, step: float, blowup: fl
     check); forcing is taken at each step's start.  Returns (|A| per step in u_R, step-end times in
     periods).  Stops early (amplitudes NaN from there on) once |A| exceeds `blowup` u_R."""
     p = scene.model.params
-    T = 2 * np.pi / env.omega
+    T = env.model.period
     h = step * T
     nsteps = int(math.ceil(scene.periods / step - 1e-9))
     B = scene.stimulus.batch
@@ -290,7 +290,7 @@ def stability_along(scene: Scene, at: list[int], step: float = 2.0) -> list[dict
     """At each period in `at`: the largest |eigenvalue| of the linearised envelope equations and the largest
     RK4 step (periods) that keeps every decaying mode stable, worst over the batch members."""
     env = envelope.Envelope(scene.model)
-    T = 2 * np.pi / env.omega
+    T = env.model.period
     states = trajectory_states(scene, step, at)
     rows = []
     for t in at:

@@ -60,6 +60,7 @@ class SpiceOptions(NgspiceSettings):
         return self.prewarp and self.method == "trap"
 
     def trtol_value(self) -> float:
+        """The trtol given to ngspice: the set one, else 1e4 when fixed_step (pins the step), else 7."""
         # ngspice's truncation-error control shrank steps below max_step at reltol 1e-6 (all steps;
         # 2 % phasor error on a linear chain); trtol 1e4 keeps them at max_step (error 7e-12)
         return self.trtol if self.trtol is not None else (1e4 if self.fixed_step else 7.0)
@@ -159,6 +160,7 @@ def param_values(p: GateParams, omega: float | None = None, warp: float = 1.0) -
 
 
 def params_text(values: dict[str, float], header: str) -> str:
+    """`.param` lines for `values` under a `* header` comment line."""
     lines = [f"* {header}"]
     lines += [f".param {k}={num(v)}" for k, v in values.items()]
     return "\n".join(lines) + "\n"
@@ -252,7 +254,7 @@ class _Emitter:
                  options: SpiceOptions):
         self.m, self.periods, self.opt = model, int(periods), options
         self.p: GateParams = model.params or DEFAULT
-        self.T = 2 * math.pi / model.omega
+        self.T = model.period
         self.h = options.max_step_periods * self.T
         self.warp = options.warp(model.omega)
         # one namer per prefix: stems are unique within a prefix, prefixes keep kinds apart
@@ -266,16 +268,20 @@ class _Emitter:
         self.stimulus, self.b = stimulus, batch_index
 
     def x(self, i: int) -> str:
+        """The displacement node of DOF i."""
         return f"x_{self.stem[i]}"
 
     def v(self, i: int) -> str:
+        """The velocity node of DOF i."""
         return f"v_{self.stem[i]}"
 
     def probe_node(self, i: int) -> str:
+        """The node holding DOF i's displacement (hierarchical inside an m2s_nor2 instance)."""
         return self.plan.internal.get(i, self.x(i))
 
     # -- drive amplitudes: one voltage source per distinct schedule
     def schedule(self, d: int) -> tuple[tuple[float, float], ...]:
+        """The (time, amplitude) points of drive d for this batch member over the run."""
         return drive_schedule(self.m, self.stimulus, self.b, d, self.periods * self.T)
 
     def amp_node(self, d: int, share: int | None = None) -> str:
@@ -300,6 +306,7 @@ class _Emitter:
 
     # -- blocks
     def gate(self, g) -> None:
+        """Emit gate block g as one m2s_nor2 instance (with its source drive and non-default params)."""
         inst = f"xg_{self.namer['gate'](g.name)}"
         (s1, d1), (s2, d2) = g.inputs
         src = self.inc.drives[g.channel][:1]
@@ -358,6 +365,7 @@ class _Emitter:
                 self.lines.append(f"Gc_{n} {self.v(i)} {self.v(j)} {self.v(i)} {self.v(j)} {num(c)}")
 
     def oscillators(self) -> None:
+        """Emit every DOF outside a gate block as m2s_osc, every uncovered quad as two B sources."""
         m = self.m
         for i in range(m.n):
             if i in self.plan.in_gate:
@@ -390,6 +398,7 @@ class _Emitter:
                               f"m2s_drive ph={num(d.phase)}")
 
     def analysis(self) -> list[str]:
+        """The .options, .tran, .four and .save lines."""
         o = self.opt
         opts = f".options method={o.method} reltol={num(o.reltol)} abstol={num(o.abstol)} " \
                f"chgtol={num(o.chgtol)} vntol={num(o.vntol)} trtol={num(o.trtol_value())}"
@@ -409,6 +418,7 @@ class _Emitter:
         return out
 
     def netlist(self, title: str) -> str:
+        """Emit every element and return the whole netlist text."""
         m, o = self.m, self.opt
         for g in self.plan.gates:
             self.gate(g)

@@ -43,7 +43,6 @@ Amplitudes per drive period are the node voltages linearly interpolated at the e
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -91,7 +90,7 @@ class _EnvEmitter:
             raise Mech2SpiceError("periods must be at least 1")
         self.m, self.opt, self.periods, self.b = model, opts, int(periods), batch_index
         self.env = Envelope.of(model)
-        self.T = 2 * math.pi / model.omega
+        self.T = model.period
         self.u = _amp_scale(model)
         self.stimulus = stimulus
         namer = Namer()
@@ -104,26 +103,33 @@ class _EnvEmitter:
 
     # node names
     def ar(self, j: int) -> str:
+        """The node holding Re A_j / u_R of fast DOF j."""
         return f"ar_{self.stem[self.env.fast[j]]}"
 
     def ai(self, j: int) -> str:
+        """The node holding Im A_j / u_R of fast DOF j."""
         return f"ai_{self.stem[self.env.fast[j]]}"
 
     def sx(self, j: int) -> str:
+        """The displacement node of slow DOF j."""
         return f"sx_{self.stem[self.env.slow[j]]}"
 
     def sv(self, j: int) -> str:
+        """The velocity node of slow DOF j."""
         return f"sv_{self.stem[self.env.slow[j]]}"
 
     def add(self, kind: str, text: str) -> None:
+        """Append an element of type `kind` (C, G, F, B, V), numbered in order, with the rest of its line."""
         self.n_elem[kind] += 1
         self.lines.append(f"{kind}{self.n_elem[kind]} {text}")
 
     # drive amplitudes: one voltage source per distinct schedule
     def schedule(self, d: int) -> tuple[tuple[float, float], ...]:
+        """The (time, amplitude) points of drive d for this batch member over the run."""
         return drive_schedule(self.m, self.stimulus, self.b, d, self.periods * self.T)
 
     def amp_node(self, d: int) -> str:
+        """The amplitude node of drive d: one DC or B voltage source per distinct schedule."""
         sched = self.schedule(d)
         if sched not in self.amp_nodes:
             node = f"a_{self.amp_namer(self.m.drives[d].name or 'drive')}"
@@ -147,6 +153,7 @@ class _EnvEmitter:
 
     # complex coupling k -> j as VCCS: inject Re/Im(z * A_k) into ar_j / ai_j
     def vccs(self, j: int, k: int, z: complex) -> None:
+        """Inject Re / Im of z * A_k into ar_j / ai_j with up to four G sources."""
         zr, zi = float(z.real), float(z.imag)
         for out, coefs in ((self.ar(j), ((self.ar(k), zr), (self.ai(k), -zi))),
                            (self.ai(j), ((self.ar(k), zi), (self.ai(k), zr)))):
@@ -155,6 +162,7 @@ class _EnvEmitter:
                     self.add("G", f"0 {out} {node} 0 {num(g)}")
 
     def fast(self) -> None:
+        """Emit the fast DOFs' rows: capacitors, derivative CCCS, linear VCCS, drives, quadratic B sources."""
         env = self.env
         nf = env.fast.size
         bdiag = env.Bop.diagonal()
@@ -208,6 +216,7 @@ class _EnvEmitter:
             self.add("B", f"0 {self.ai(j)} I = ({gs})*({num(-ci)}*V({self.ar(j)}) + {num(-cr)}*V({self.ai(j)}))")
 
     def slow(self) -> None:
+        """Emit the slow DOFs in mobility form (sv, sx nodes, K_s, C_s VCCS) and their -H |A|^2 / 2 force."""
         env = self.env
         for j in range(env.slow.size):
             self.add("C", f"{self.sv(j)} 0 {num(env.ms[j])}")
@@ -229,6 +238,7 @@ class _EnvEmitter:
             self.add("B", f"{self.sv(j)} 0 I = " + " + ".join(terms))
 
     def probe_rows(self) -> list[int]:
+        """The fast-DOF row of each probe (model.probes order); a probe on a slow DOF is an error."""
         pos = {int(d): k for k, d in enumerate(self.env.fast)}
         rows = []
         for name, dof in self.m.probes.items():
@@ -238,6 +248,7 @@ class _EnvEmitter:
         return rows
 
     def analysis(self, rows: list[int]) -> list[str]:
+        """The .options, .tran, .save and .meas lines for the probed rows."""
         o = self.opt
         h = o.max_step_periods * self.T
         opts = (f".options method={o.method} reltol={num(o.reltol)} abstol={num(o.abstol)} "
@@ -257,6 +268,7 @@ class _EnvEmitter:
         return out
 
     def netlist(self, title: str) -> tuple[str, list[str]]:
+        """Emit every element; return the netlist text and the probes' raw-file vectors."""
         self.fast()
         self.slow()
         rows = self.probe_rows()
@@ -317,7 +329,7 @@ def run_one(model: MechModel, periods: int, stimulus: Stimulus | None = None,
     missing = [v for v in vecs if v not in names]
     if missing or names[:1] != ["time"]:
         raise Mech2SpiceError(f"ngspice raw file lacks {missing or ['time']}")
-    T = 2 * math.pi / model.omega
+    T = model.period
     t = data[:, 0]
     z = _complex(names, data, vecs, _amp_scale(model))
     check_samples(model, t, z, probe_dof_names(model))
@@ -339,7 +351,7 @@ def run_envelope_spice(model: MechModel, periods: int, stimulus: Stimulus | None
     from ..backends._base import Run
     B = stimulus.batch if stimulus is not None else 1
     parts = map_batch(lambda b: run_one(model, periods, stimulus, opts, b, timeout), B, workers)
-    T = 2 * math.pi / model.omega
+    T = model.period
     amp = np.stack([p[1] for p in parts], axis=2)
     extra = {"backend": "ngspice-envelope", "options": asdict(opts),
              **{k: [p[2][k] for p in parts] for k in parts[0][2]}}

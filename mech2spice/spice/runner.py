@@ -34,6 +34,7 @@ MISSING = "ngspice not found: apt-get install -y ngspice libngspice0"
 
 
 def find_ngspice() -> str:
+    """The path of the ngspice executable; ToolMissingError if it is not on PATH."""
     exe = shutil.which("ngspice")
     if exe is None:
         raise ToolMissingError(MISSING)
@@ -125,6 +126,7 @@ def stop_all() -> None:
 
 
 def allow_runs() -> None:
+    """Let ngspice runs start again after stop_all."""
     _STOPPED.clear()
 
 
@@ -199,10 +201,11 @@ def run(model: MechModel, periods: int, stimulus: Stimulus | None = None,
 
 def to_run(model: MechModel, periods: int, names: list[str], data: np.ndarray, vecs: list[str],
            options: SpiceOptions, extra: dict) -> Run:
+    """A carrier-level run's raw data as a Run: per-period probe phasors, step statistics in extra."""
     missing = [v for v in vecs if v not in names]
     if missing or names[:1] != ["time"]:
         raise Mech2SpiceError(f"ngspice raw file lacks {missing or ['time']}")
-    T = 2 * math.pi / model.omega
+    T = model.period
     t, x = data[:, 0], data[:, [names.index(v) for v in vecs]]
     dofs = list(model.probes.values())
     check_samples(model, t, x, probe_dof_names(model))

@@ -37,6 +37,7 @@ class TapeSpec:
 
 @dataclass
 class Program:
+    """An assembled program: memory image, listing, symbols, optional tape, and per-statement rows."""
     image: bytes
     listing: str
     symbols: dict[str, int]
@@ -51,6 +52,7 @@ def assemble(text: str) -> tuple[bytes, str, dict[str, int]]:
 
 
 def assemble_program(text: str) -> Program:
+    """Assemble source text into a Program (image, listing, symbols, tape, rows)."""
     statements = _parse(text)
     symbols = _layout(statements)
     image = [0] * MEM_SIZE

@@ -18,6 +18,7 @@ from .run import load_program, run_program
 
 
 def add_parser(subparsers) -> None:
+    """Register the `cpu` command and its `asm` and `run` subcommands."""
     cpu = subparsers.add_parser(
         "cpu", help="assemble and run programs on the 8-bit mechanical processor",
         description="The paper's 8-bit processor (verilog/cpu.v): assemble programs, run them on the "
@@ -56,6 +57,7 @@ def add_parser(subparsers) -> None:
 
 
 def cmd_asm(args) -> int:
+    """`cpu asm`: write PROG.asm's memory image (and print its listing if asked); returns 0."""
     if Path(args.program).suffix.lower() != ".asm":
         raise Mech2SpiceError(f"{args.program}: expected an assembly source (.asm)")
     check_output_file(args.output, [args.program], "memory image")
@@ -68,6 +70,7 @@ def cmd_asm(args) -> int:
 
 
 def cmd_run(args) -> int:
+    """`cpu run`: run a program on the chosen backend; returns 0 if it halted, 1 if it ran out of cycles."""
     physical = {}
     if args.step is not None:
         physical["step"] = args.step

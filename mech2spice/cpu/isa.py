@@ -50,6 +50,7 @@ CYCLES: dict[str, int] = {name: 2 if name in ("LOAD_AB", "LDNX_AB") else 1 for n
 
 
 def opcode(name: str) -> int:
+    """The opcode of a mnemonic (case-insensitive); Mech2SpiceError if unknown."""
     try:
         return OPCODES[name.upper()]
     except KeyError:

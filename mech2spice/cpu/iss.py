@@ -33,6 +33,7 @@ class Cycle:
 
 
 class ISS:
+    """The cycle-exact instruction-set simulator: registers, memory, one clock cycle per step()."""
     def __init__(self, memory: Memory | bytes | list, trace: Callable[[Cycle], None] | None = None):
         self.mem = memory if isinstance(memory, Memory) else Memory(memory)
         self.trace = trace
@@ -43,9 +44,11 @@ class ISS:
 
     # ------------------------------------------------------------------ state
     def registers(self) -> dict:
+        """The register state (pc, a, b, c, d, ov, phase) as a dict."""
         return {r: getattr(self, r) for r in REGISTERS}
 
     def set_registers(self, regs: dict) -> None:
+        """Restore a register state made by registers(); checks every register and the phase."""
         for r in REGISTERS:
             if r not in regs:
                 raise Mech2SpiceError(f"register state lacks '{r}'")

@@ -14,11 +14,16 @@ from .isa import MEM_SIZE
 
 
 class Device(Protocol):
-    def read(self) -> int: ...
-    def write(self, value: int) -> None: ...
+    """A memory-mapped device: answers reads and takes writes at the address it is mapped to."""
+    def read(self) -> int:
+        """The byte the processor reads at the device's address."""
+
+    def write(self, value: int) -> None:
+        """Take a byte written to the device's address."""
 
 
 class Memory:
+    """The 256-byte memory array plus devices mapped at single addresses."""
     def __init__(self, data=b"", devices: dict[int, Device] | None = None):
         data = list(data)
         if len(data) > MEM_SIZE:
@@ -29,6 +34,7 @@ class Memory:
         self.devices = dict(devices or {})
 
     def read(self, addr: int) -> int:
+        """The byte at addr as the processor sees it within the cycle (a device's, if one is mapped there)."""
         dev = self.devices.get(addr)
         return dev.read() if dev is not None else self.cells[addr]
 

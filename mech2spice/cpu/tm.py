@@ -35,12 +35,15 @@ class Tape:
 
     @classmethod
     def from_digits(cls, digits: str, head: int) -> "Tape":
+        """A tape holding `digits` (cell i = digit i) with the head at `head`."""
         return cls({i: int(c) for i, c in enumerate(digits) if c != "0"}, head)
 
     def read(self) -> int:
+        """The symbol under the head (0 for a blank cell)."""
         return self.cells.get(self.head, 0)
 
     def write(self, value: int) -> None:
+        """Execute a tape command: write bits 2..0, move by bit 3 (1 = right); bit 7 set = do nothing."""
         if value & 0x80:
             self.idle += 1
             return
@@ -54,16 +57,19 @@ class Tape:
         self.steps += 1
 
     def digits(self, lo: int | None = None, hi: int | None = None) -> str:
+        """Cells lo..hi as digits (default: the span of non-blank cells and the head)."""
         used = [i for i, v in self.cells.items() if v] + [self.head]
         lo = min(used) if lo is None else lo
         hi = max(used) if hi is None else hi
         return "".join(str(self.cells.get(i, 0)) for i in range(lo, hi + 1))
 
     def state(self) -> dict:
+        """A JSON-able snapshot: non-blank cells, head, steps and idle count."""
         return {"cells": {str(i): v for i, v in sorted(self.cells.items()) if v},
                 "head": self.head, "steps": self.steps, "idle": self.idle}
 
     def restore(self, state: dict) -> None:
+        """Restore a snapshot made by state() (the log starts empty)."""
         self.cells = {int(i): int(v) for i, v in state["cells"].items()}
         self.head, self.steps, self.idle = int(state["head"]), int(state["steps"]), int(state["idle"])
         self.log = []
@@ -73,6 +79,7 @@ class Tape:
 
 @dataclass(frozen=True)
 class TuringMachine:
+    """A Turing machine: symbols, states, transition table and start state."""
     name: str
     symbols: str                  # display character of each symbol code; code 0 is the blank
     states: tuple[str, ...]
@@ -82,6 +89,7 @@ class TuringMachine:
 
     @property
     def n(self) -> int:
+        """The number of symbols."""
         return len(self.symbols)
 
     def encode(self, text: str) -> str:
@@ -94,6 +102,7 @@ class TuringMachine:
 
 @dataclass
 class TMRun:
+    """The result of simulate: the steps taken, whether it halted, the final tape and state."""
     steps: list = field(default_factory=list)    # (state, head, read, write, move, next)
     halted: bool = False
     tape: Tape | None = None

@@ -282,6 +282,7 @@ def truth_table_stimulus(p: GateParams) -> Stimulus:
 
 
 def requirements(out, vm, fo, ph, cas, tr, impurity) -> dict:
+    """Pass/fail and a one-line figure for each of the gate's six requirements, from the measurements."""
     last_stage = min(min(r["stage_margins"][2] for r in cas["restoration"]), 1.0)
     return {
         "no_multistability": {"pass": vm["multistable_points"] == 0 and tr["revisit_spread"] < 0.01,

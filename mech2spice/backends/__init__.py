@@ -7,8 +7,9 @@ from .envelope import EnvelopeEngine
 from .logic import LogicEngine
 from .ngspice import NgspiceEngine, NgspiceEnvelopeEngine
 from .rk4 import RK4Engine
+from .vacask import VacaskEngine, VacaskEnvelopeEngine
 
-_ENGINES = (LogicEngine, RK4Engine, EnvelopeEngine, NgspiceEngine, NgspiceEnvelopeEngine)
+_ENGINES = (LogicEngine, RK4Engine, EnvelopeEngine, NgspiceEngine, NgspiceEnvelopeEngine, VacaskEngine, VacaskEnvelopeEngine)
 BACKENDS: dict[str, type] = {e.name: e for e in _ENGINES}
 
 

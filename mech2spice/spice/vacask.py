@@ -1,0 +1,515 @@
+"""The mechanical model as a VACASK netlist of compiled Verilog-A devices (spice/veriloga.py), and its runner.
+
+Two forms from one emitter, as for ngspice (docs/vacask.md):
+
+* carrier level: the mobility analogy, every element an OSDI device (m2s_nor2, m2s_couple, m2s_pairdrive,
+  m2s_osc, ...); transient with trapezoidal steps pinned at max_step and the prewarp of spice/carrier.py;
+  per-period phasors by runner.demodulate.  The same netlist takes VACASK's harmonic-balance analysis
+  (`emit_hb`, `run_hb`): the periodic steady state directly, phasors at omega and its harmonics.
+* envelope level: physics/envelope.py's equations as m2s_env_* devices (two amplitude nodes per oscillating
+  DOF); steps of whole periods; amplitudes at each period's end.
+
+Which gate blocks become m2s_nor2 instances is decided as for ngspice (spice.carrier's plan), plus: a
+gate whose insulator is probed is emitted DOF by DOF (the insulator is internal to the block device).
+Drive amplitudes are voltage nodes, one per distinct schedule (spice._common.drive_schedule): a DC source,
+or a chain of series pulse sources, one ramp per change (VACASK has no PWL source).
+"""
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import Mech2SpiceError, ToolMissingError
+from ..physics.model import MechModel
+from ..physics.params import DEFAULT, GateParams
+from ..physics.stimulus import Stimulus
+from ._common import (DEFAULT_TIMEOUT_S, Namer, check_samples, comment_text, drive_schedule, failure, map_batch,
+                      num, probe_dof_names)
+from .carrier import _Incidence, _plan
+
+METHODS = ("trap", "gear")
+CARRIER, ENVELOPE = "carrier", "envelope"     # the two forms (veriloga.CARRIER, veriloga.ENVELOPE)
+TRAN, HB = "tran1", "hb1"
+
+
+# --- options ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class VacaskOptions:
+    """VACASK transient settings for the carrier-level netlist (defaults measured: docs/vacask.md)."""
+    method: str = "trap"              # tran_method: trap | gear (BDF)
+    max_step_periods: float = 1 / 40  # max (and, pinned, actual) step in drive periods
+    reltol: float = 1e-5
+    abstol: float = 1e-12             # residual (force) tolerance
+    vntol: float = 1e-9               # node (displacement, velocity) tolerance
+    chgtol: float = 1e-14
+    lteratio: float = 1e4             # tran_lteratio: a loose LTE bound keeps every step at max_step
+    prewarp: bool = True              # trap only: exact phasor response at omega (spice/carrier.py)
+    timeout_s: float | None = None    # one VACASK process; None: DEFAULT_TIMEOUT_S
+    MAX_STEP_LIMIT = 0.25
+    RAMP_PERIODS = 1e-3               # a drive-amplitude change ramps over this many periods
+
+    def validate(self) -> None:
+        """Refuse settings VACASK would reject or misread."""
+        if self.method not in METHODS:
+            raise Mech2SpiceError(f"VACASK method '{self.method}' unknown (use {' or '.join(METHODS)})")
+        if not (isinstance(self.max_step_periods, (int, float)) and 0 < self.max_step_periods <= self.MAX_STEP_LIMIT):
+            raise Mech2SpiceError(f"max_step_periods must be in (0, {self.MAX_STEP_LIMIT:g}] drive periods")
+        for name in ("reltol", "abstol", "vntol", "chgtol"):
+            if not getattr(self, name) > 0:
+                raise Mech2SpiceError(f"{type(self).__name__}.{name} must be positive")
+        if not self.lteratio > 1:
+            raise Mech2SpiceError(f"{type(self).__name__}.lteratio must be > 1")
+        if self.timeout_s is not None and not (math.isfinite(self.timeout_s) and self.timeout_s > 0):
+            raise Mech2SpiceError("the VACASK timeout must be a positive number of seconds")
+
+    @property
+    def time_limit(self) -> float:
+        """Seconds one VACASK process may run."""
+        return self.timeout_s or DEFAULT_TIMEOUT_S
+
+    @property
+    def fixed_step(self) -> bool:
+        """Prewarped trap needs every step at max_step."""
+        return self.prewarp and self.method == "trap"
+
+    def warp(self, omega: float) -> float:
+        """Capacitor scale making trapezoidal steps of max_step exact at omega (1 without prewarp)."""
+        if not self.fixed_step:
+            return 1.0
+        half = math.pi * self.max_step_periods
+        return half / math.tan(half)
+
+
+@dataclass(frozen=True)
+class VacaskEnvelopeOptions(VacaskOptions):
+    """VACASK transient settings for the envelope netlist (amplitude nodes in u_R)."""
+    max_step_periods: float = 2.0
+    reltol: float = 1e-4
+    vntol: float = 1e-7
+    lteratio: float = 3.5             # VACASK's default: the truncation-error control sets the step
+    prewarp: bool = False             # nothing oscillates in the envelope circuit
+    MAX_STEP_LIMIT = 1000.0
+    RAMP_PERIODS = 0.5
+
+
+# --- the netlist -------------------------------------------------------------------------------------------
+@dataclass
+class Netlist:
+    """An emitted netlist: its text, the raw-file vectors of the probes, and the OSDI it loads."""
+    text: str
+    vectors: list[str]
+    form: str
+
+
+class _Emitter:
+    """Builds one VACASK netlist; `form` is veriloga.CARRIER or veriloga.ENVELOPE."""
+
+    def __init__(self, model: MechModel, periods: int, stimulus: Stimulus | None, batch_index: int,
+                 options: VacaskOptions, form: str):
+        model.check()
+        options.validate()
+        if periods < 1:
+            raise Mech2SpiceError("periods must be at least 1")
+        self.m, self.periods, self.opt, self.form = model, int(periods), options, form
+        self.stimulus, self.b = stimulus, batch_index
+        self.env = form == ENVELOPE
+        if self.env:
+            from ..physics.envelope import Envelope
+            Envelope.of(model)          # refuses what has no envelope form (slow-fast links, driven slow DOFs)
+        self.p: GateParams = DEFAULT      # instance parameters are written where they differ from the library's
+        self.T = 2 * math.pi / model.omega
+        self.namer = {k: Namer() for k in ("dof", "gate", "couple", "drive", "amp", "elem")}
+        self.stem = [self.namer["dof"](n) for n in model.names]
+        self.inc = _Incidence(model)
+        self.plan = _plan(model, self.inc)
+        probed = set(model.probes.values())
+        self.plan.gates = [g for g in self.plan.gates if g.insulator not in probed]
+        self._replan()
+        self.lines: list[str] = []
+        self.amp_nodes: dict[tuple, str] = {}
+        self.amp_lines: list[str] = []
+
+    def _replan(self) -> None:
+        """Recompute what the kept gate blocks cover (after dropping some)."""
+        from .carrier import _nor_quads
+        self.plan.quads, self.plan.in_gate = set(), set()
+        for g in self.plan.gates:
+            self.plan.quads |= set(_nor_quads(self.m, self.inc, g).values())
+            self.plan.in_gate |= {g.channel, g.insulator, *[d for pair in g.inputs for d in pair]}
+
+    # -- nodes: (displacement, velocity) or (Re A, Im A) per DOF; slow DOFs (sx, sv) in the envelope form
+    def nodes(self, i: int) -> tuple[str, str]:
+        s = self.stem[i]
+        if not self.env:
+            return f"x_{s}", f"v_{s}"
+        return (f"sx_{s}", f"sv_{s}") if self.m.slow[i] else (f"ar_{s}", f"ai_{s}")
+
+    def probe_vectors(self) -> list[str]:
+        out = []
+        for name, dof in self.m.probes.items():
+            if self.env and self.m.slow[dof]:
+                raise Mech2SpiceError(f"probe '{name}' is on a slow DOF; the envelope netlist probes oscillating DOFs")
+            p, q = self.nodes(dof)
+            out += [p, q] if self.env else [p]
+        return out
+
+    # -- drive amplitudes
+    def schedule(self, d: int):
+        return drive_schedule(self.m, self.stimulus, self.b, d, self.periods * self.T)
+
+    def amp_node(self, d: int, share: int | None = None) -> str:
+        sched = self.schedule(d)
+        key = (d if share is None else share, sched)
+        if key not in self.amp_nodes:
+            node = f"a_{self.namer['amp'](self.m.drives[d].name or 'drive')}"
+            self.amp_nodes[key] = node
+            self.amp_lines += self._source(node, sched)
+        return self.amp_nodes[key]
+
+    def _source(self, node: str, sched) -> list[str]:
+        """DC, or a DC source and one pulse source in series per change (a ramp of RAMP_PERIODS centred on it)."""
+        if len(sched) == 1:
+            return [f"v{node} ({node} 0) vsource dc={num(sched[0][1])}"]
+        ramp = self.opt.RAMP_PERIODS * self.T
+        out, lo = [f"v{node}_0 ({node}_0 0) vsource dc={num(sched[0][1])}"], f"{node}_0"
+        for k, ((_, a0), (t1, a1)) in enumerate(zip(sched, sched[1:]), 1):
+            hi = node if k == len(sched) - 1 else f"{node}_{k}"
+            out.append(f"v{node}_{k} ({hi} {lo}) vsource type=\"pulse\" val0=0 val1={num(a1 - a0)} "
+                       f"delay={num(max(t1 - ramp / 2, 0.0))} rise={num(ramp)}")
+            lo = hi
+        return out
+
+    # -- instances
+    def inst(self, kind: str, name: str, nodes: list[str], model: str, params) -> None:
+        par = "".join(f" {k}={v}" for k, v in params)
+        self.lines.append(f"{kind}_{self.namer['elem'](name)} ({' '.join(nodes)}) {model}{par}")
+
+    def gate(self, g) -> None:
+        (s1, d1), (s2, d2) = g.inputs
+        src = self.inc.drives[g.channel][:1]
+        self.plan.drives |= set(src)
+        asrc = self.amp_node(src[0]) if src else "0"
+        nodes = [*self.nodes(g.channel), asrc] + [n for dof in (s1, d1, s2, d2) for n in self.nodes(dof)]
+        self.inst("xg", g.name, nodes, "nor2", self._gate_overrides(g, src))
+
+    def _gate_overrides(self, g, src) -> list[tuple[str, str]]:
+        """Instance parameters that differ from the Verilog-A defaults (locals, non-default values)."""
+        p, m = self.p, self.m
+        (s1, d1), (s2, d2) = g.inputs
+        roles = {"c": (g.channel, p.m_c, p.k_c, p.c_c), "i": (g.insulator, p.m_i, p.k_i, p.c_i),
+                 "1s": (s1, p.m_g, p.k_g, p.c_g), "1d": (d1, p.m_g, p.k_g, p.c_g),
+                 "2s": (s2, p.m_g, p.k_g, p.c_g), "2d": (d2, p.m_g, p.k_g, p.c_g)}
+        out = []
+        for r, (i, m0, k0, c0) in roles.items():
+            for key, val, ref in (("m", m.mass[i], m0), ("k", m.k_local[i], k0), ("c", m.c_local[i], c0)):
+                if not math.isclose(val, ref, rel_tol=1e-13, abs_tol=0.0):
+                    out.append((f"{key}{r}", num(val)))
+        gam = {m.quads[q][0]: m.quads[q][2] for q in self.inc.quads[g.insulator] if m.quads[q][1] == g.insulator}
+        for key, dof, ref in (("gc", g.channel, -p.gamma_ic), ("g1s", s1, p.gamma_ig), ("g1d", d1, p.gamma_ig),
+                              ("g2s", s2, p.gamma_ig), ("g2d", d2, p.gamma_ig)):
+            if gam[dof] != ref:
+                out.append((key, num(gam[dof])))
+        if src and m.drives[src[0]].phase != 0.0:
+            out.append(("psrc", num(m.drives[src[0]].phase)))
+        return out
+
+    def couplings(self) -> None:
+        """Channel -> gate-pair spring+dashpot links as one couple device; the rest as single elements."""
+        m = self.m
+        for s, d in (pair for g in self.plan.gates for pair in g.inputs):
+            ks = [(n, sum(m.springs[n][:2]) - s) for n in self.inc.springs[s] if n not in self.plan.springs]
+            cs = [(n, sum(m.dashpots[n][:2]) - d) for n in self.inc.dashpots[d] if n not in self.plan.dashpots]
+            match = [(a, b) for a in ks for b in cs if a[1] == b[1]]
+            if not match:
+                continue
+            (nk, up), (nc, _) = match[0]
+            self.plan.springs.add(nk)
+            self.plan.dashpots.add(nc)
+            k, c = m.springs[nk][2], m.dashpots[nc][2]
+            over = [(n, num(v)) for n, v, ref in (("k", k, self.p.k_couple), ("c", c, self.p.c_couple))
+                    if not math.isclose(v, ref, rel_tol=1e-13)]
+            self.inst("xc", m.names[s], [*self.nodes(up), *self.nodes(s), *self.nodes(d)], "couple", over)
+        for n, (i, j, k) in enumerate(m.springs):
+            if n not in self.plan.springs:
+                self.inst("xk", str(n), [*self.nodes(i), *self.nodes(j)], "spring", [("k", num(k))])
+        for n, (i, j, c) in enumerate(m.dashpots):
+            if n not in self.plan.dashpots:
+                self.inst("xb", str(n), [*self.nodes(i), *self.nodes(j)], "dashpot", [("c", num(c))])
+
+    def oscillators(self) -> None:
+        m = self.m
+        for i in range(m.n):
+            if i not in self.plan.in_gate:
+                model = ("slow" if self.env else "osc_slow") if m.slow[i] else "osc"
+                self.inst("xo", self.stem[i], list(self.nodes(i)), model,
+                          [("mass", num(m.mass[i])), ("k", num(m.k_local[i])), ("c", num(m.c_local[i]))])
+        for n, (f, s, g) in enumerate(m.quads):
+            if n not in self.plan.quads:
+                self.inst("xq", str(n), [*self.nodes(f), *self.nodes(s)], "quad", [("g", num(g))])
+
+    def drives(self) -> None:
+        """External pair drives as pairdrive devices, every other drive as a drive device."""
+        m = self.m
+        used = set(self.plan.drives)
+        for g in self.plan.gates:
+            for s, d in g.inputs:
+                ds = [k for k in self.inc.drives[s] if k not in used]
+                dd = [k for k in self.inc.drives[d] if k not in used]
+                if len(ds) == 1 and len(dd) == 1:
+                    a, b = ds[0], dd[0]
+                    used |= {a, b}
+                    self.inst("xd", m.drives[a].name, [*self.nodes(s), *self.nodes(d), self.amp_node(a),
+                                                       self.amp_node(b, share=a)], "pairdrive",
+                              [("ps", num(m.drives[a].phase)), ("pd", num(m.drives[b].phase))])
+        for k in (k for k in range(len(m.drives)) if k not in used):
+            dr = m.drives[k]
+            self.inst("xd", dr.name, [*self.nodes(dr.dof), self.amp_node(k)], "drive", [("ph", num(dr.phase))])
+
+    # -- the whole file
+    def models(self, osdi: str) -> list[str]:
+        """load + model cards: omega and the prewarp (carrier) or u_R (envelope) are model parameters."""
+        om = num(self.m.omega)
+        if self.env:
+            u = num(self.m.amplitude_unit)
+            common = f"omega={om} u={u}"
+            cards = [("osc", "m2s_env_osc", common), ("slow", "m2s_env_slow", ""), ("nor2", "m2s_env_nor2", common),
+                     ("couple", "m2s_env_couple", common), ("spring", "m2s_env_spring", f"u={u}"),
+                     ("dashpot", "m2s_env_dashpot", common), ("quad", "m2s_env_quad", f"u={u}"),
+                     ("drive", "m2s_env_drive", ""), ("pairdrive", "m2s_env_pairdrive", "")]
+        else:
+            w = num(self.opt.warp(self.m.omega))
+            cards = [("osc", "m2s_osc", f"w={w}"), ("osc_slow", "m2s_osc", "w=1.0"),
+                     ("nor2", "m2s_nor2", f"omega={om} w={w}"), ("couple", "m2s_couple", ""),
+                     ("spring", "m2s_spring", ""), ("dashpot", "m2s_dashpot", ""), ("quad", "m2s_quad", ""),
+                     ("drive", "m2s_drive", f"omega={om}"), ("pairdrive", "m2s_pairdrive", f"omega={om}")]
+        return [f'load "{osdi}"', "model vsource vsource"] + [f"model {a} {b} {c}".rstrip() for a, b, c in cards]
+
+    def options_line(self) -> str:
+        o = self.opt
+        return (f'options tran_method="{o.method}" reltol={num(o.reltol)} abstol={num(o.abstol)} '
+                f"vntol={num(o.vntol)} chgtol={num(o.chgtol)} tran_lteratio={num(o.lteratio)}")
+
+    def tran(self) -> list[str]:
+        h = self.opt.max_step_periods * self.T
+        # carrier: a quarter period past the end keeps the final short steps out of the last period
+        tstop = (self.periods + (0 if self.env else 0.25)) * self.T
+        return [f"analysis {TRAN} tran stop={num(tstop)} step={num(h)} maxstep={num(h)} icmode=\"uic\""]
+
+    def circuit(self) -> None:
+        for g in self.plan.gates:
+            self.gate(g)
+        self.couplings()
+        self.oscillators()
+        self.drives()
+
+    def text(self, title: str, osdi: str, analysis: list[str], extra_head: list[str] = ()) -> str:
+        m, o = self.m, self.opt
+        vecs = self.probe_vectors()
+        head = [comment_text(title or "mech2spice VACASK netlist"),
+                f"// mech2spice ({self.form} level): {m.n} DOFs, {len(self.plan.gates)} NOR blocks, "
+                f"{self.periods} periods of T = {num(self.T)}; method {o.method}, max step {num(o.max_step_periods)} T",
+                "// DOF -> nodes:"]
+        head += [f"//   {comment_text(n)} -> {' '.join(self.nodes(i))}" for i, n in enumerate(m.names)]
+        body = ["", "ground 0", *self.models(osdi), "", "// --- circuit", *self.lines, "// --- drive amplitudes",
+                *self.amp_lines, "", "control", f"  {self.options_line()}", *[f"  {s}" for s in extra_head]]
+        body += [f"  save {' '.join(f'v({v})' for v in vecs[k:k + 8])}" for k in range(0, len(vecs), 8)]
+        body += [f"  {s}" for s in analysis] + ["endc"]
+        return "\n".join(head + body) + "\n"
+
+
+def _osdi_ref(form: str, p: GateParams, standalone: bool) -> str:
+    """What the netlist loads: the cached .osdi (runs) or the .va beside it (standalone files)."""
+    from . import veriloga as va      # imported on use: the engine registry loads this module
+    return va.FILES[form] if standalone else str(va.compiled(form, DEFAULT))
+
+
+def emit(model: MechModel, periods: int, stimulus: Stimulus | None = None, batch_index: int = 0,
+         options: VacaskOptions | None = None, form: str = CARRIER, title: str = "",
+         standalone: bool = False) -> Netlist:
+    """A VACASK transient netlist of `model` (standalone: loads the .va from its own directory, embedded)."""
+    options = options or (VacaskEnvelopeOptions() if form == ENVELOPE else VacaskOptions())
+    e = _Emitter(model, periods, stimulus, batch_index, options, form)
+    e.circuit()
+    ref = _osdi_ref(form, e.p, standalone)
+    text = e.text(title, ref, e.tran())
+    if standalone:
+        text += _embed(form)
+    return Netlist(text, e.probe_vectors(), form)
+
+
+def _embed(form: str) -> str:
+    """The Verilog-A library as an embedded file: the netlist alone is enough (VACASK compiles it on load)."""
+    from . import veriloga as va
+    name = va.FILES[form]
+    return f'\nembed "{name}" <<<FILE\n{va.library(DEFAULT)[name]}>>>FILE\n'
+
+
+# --- running -----------------------------------------------------------------------------------------------
+_ERR = re.compile(r"error|failed|not found|abort|cannot|singular|too small|unknown|syntax", re.I)
+
+
+def _message(log: str) -> str | None:
+    """The first line of VACASK's output that reports a failure (with the location line after a parse error)."""
+    lines = [s.strip() for s in log.splitlines() if s.strip()]
+    for n, line in enumerate(lines):
+        if _ERR.search(line):
+            return " ".join(lines[n:n + 3])[:400]
+    return None
+
+
+def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None,
+                workdir=None) -> tuple[list[str], np.ndarray, str]:
+    """Run a netlist under `vacask` in a temporary directory; returns (vector names, data, log) of the
+    raw file `<analysis>.raw` (real data; complex data come back as complex arrays)."""
+    from . import veriloga as va
+    from .runner import _ngspice       # the process guard: timeout, interrupt and SIGTERM kill the child
+    exe, _ = va.tools()
+    timeout = timeout or DEFAULT_TIMEOUT_S
+    with tempfile.TemporaryDirectory(prefix="m2s_vc_") as tmp:
+        d = Path(workdir or tmp)
+        (d / "circuit.sim").write_text(text, encoding="ascii")
+        try:
+            proc = _ngspice([exe, "-qp", "circuit.sim"], d, timeout)
+        except Mech2SpiceError as e:
+            if "did not finish" in str(e):
+                raise Mech2SpiceError(f"VACASK did not finish within {timeout:g} s "
+                                      "(simulate --ngspice-timeout sets the limit)") from None
+            raise
+        log = proc.stdout + "\n" + proc.stderr
+        raw = d / f"{analysis}.raw"
+        names, data = read_raw_any(raw) if raw.exists() and raw.stat().st_size else ([], np.zeros((0, 0)))
+    msg = _message(log) if proc.returncode != 0 or not len(data) else None
+    if proc.returncode != 0 or msg or not len(data):
+        err = Mech2SpiceError(f"VACASK failed (exit {proc.returncode}): {msg or 'no data written'}")
+        err.names, err.data, err.log = names, data, log
+        raise err
+    return names, data, log
+
+
+def read_raw_any(path) -> tuple[list[str], np.ndarray]:
+    """A binary raw file, real (spice.runner.read_raw) or complex (rows of complex values)."""
+    from .runner import read_raw
+    head = Path(path).read_bytes()[:4096]
+    if b"Flags: complex" not in head:
+        return read_raw(path)
+    data = Path(path).read_bytes()
+    mark = data.find(b"Binary:\n")
+    lines = data[:mark].decode("ascii", "replace").splitlines()
+    nvar = int(next(s.split(":", 1)[1] for s in lines if s.startswith("No. Variables")))
+    at = next(k for k, s in enumerate(lines) if s.startswith("Variables:"))
+    names = [lines[at + 1 + j].split()[1].lower() for j in range(nvar)]
+    rows = (len(data) - mark - 8) // (16 * nvar)
+    v = np.frombuffer(data, dtype="<f8", offset=mark + 8, count=rows * nvar * 2).reshape(rows, nvar, 2)
+    return names, v[..., 0] + 1j * v[..., 1]
+
+
+NODE_PREFIXES = ("x", "v", "ar", "ai", "sx", "sv")
+
+
+def _failure(model: MechModel, err: Mech2SpiceError, vecs: list[str]) -> Mech2SpiceError:
+    """A failed run's error: DivergenceError if the probes blew up, else VACASK's own message."""
+    return failure(model, err, lambda names, data: data[:, [names.index(v) for v in vecs]]
+                   if set(vecs) <= set(names) else None, NODE_PREFIXES)
+
+
+def run(model: MechModel, periods: int, stimulus: Stimulus | None = None, options: VacaskOptions | None = None,
+        batch_index: int = 0, keep_netlist: str | Path | None = None):
+    """One batch member under VACASK (carrier level): a Run with per-period phasors."""
+    from .runner import demodulate
+    from ..backends._base import Run
+    options = options or VacaskOptions()
+    t0 = time.perf_counter()
+    net = emit(model, periods, stimulus, batch_index, options)
+    if keep_netlist:
+        Path(keep_netlist).write_text(net.text, encoding="ascii")
+    try:
+        names, data, log = run_netlist(net.text, timeout=options.time_limit)
+    except ToolMissingError:
+        raise
+    except Mech2SpiceError as e:
+        raise _failure(model, e, net.vectors) from None
+    t, x = data[:, 0], data[:, [names.index(v) for v in net.vectors]]
+    check_samples(model, t, x, probe_dof_names(model))
+    T, h = model.period, options.max_step_periods * model.period
+    amp, mean = demodulate(t, x, model.omega, periods)
+    dt = np.diff(t)
+    uniform = float(np.mean(np.abs(dt - h) < 1e-6 * h)) if dt.size else 0.0
+    extra = {"wall_s": time.perf_counter() - t0, "backend": "vacask", "points": int(t.size),
+             "uniform_fraction": uniform}
+    if options.fixed_step and uniform < 0.9:
+        extra["warning"] = (f"only {uniform:.0%} of VACASK's steps were at max_step: the prewarp is inexact "
+                            "(raise lteratio or lower max_step_periods)")
+    xf = np.zeros((model.n, 1))
+    end = np.searchsorted(t, periods * T * (1 + 1e-12))
+    xf[list(model.probes.values()), 0] = x[max(end - 1, 0)]
+    return Run(list(model.probes), T, (1 + np.arange(periods)) * T, amp[:, :, None], mean[:, :, None],
+               xf, np.zeros((model.n, 1)), periods * T, extra=extra)
+
+
+def run_envelope(model: MechModel, periods: int, stimulus: Stimulus | None = None,
+                 options: VacaskEnvelopeOptions | None = None, batch_index: int = 0,
+                 keep_netlist: str | Path | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """One batch member under VACASK (envelope level): (t_end (P,), amp (P, n_probes) complex, extra)."""
+    options = options or VacaskEnvelopeOptions()
+    t0 = time.perf_counter()
+    net = emit(model, periods, stimulus, batch_index, options, form=ENVELOPE)
+    t_emit = time.perf_counter() - t0
+    if keep_netlist:
+        Path(keep_netlist).write_text(net.text, encoding="ascii")
+    u = model.amplitude_unit
+    probe = lambda names, data: u * (data[:, [names.index(v) for v in net.vectors[0::2]]]
+                                     + 1j * data[:, [names.index(v) for v in net.vectors[1::2]]])
+    try:
+        names, data, log = run_netlist(net.text, timeout=options.time_limit)
+    except ToolMissingError:
+        raise
+    except Mech2SpiceError as e:
+        raise failure(model, e, lambda n, d: probe(n, d) if set(net.vectors) <= set(n) else None,
+                      NODE_PREFIXES) from None
+    t, z = data[:, 0], probe(names, data)
+    check_samples(model, t, z, probe_dof_names(model))
+    t_end = (1 + np.arange(periods)) * model.period
+    amp = np.stack([np.interp(t_end, t, z[:, j].real) + 1j * np.interp(t_end, t, z[:, j].imag)
+                    for j in range(z.shape[1])], axis=1) if z.shape[1] else np.zeros((periods, 0), complex)
+    dt = np.diff(t) / model.period
+    extra = {"wall_s": time.perf_counter() - t0, "emit_s": t_emit, "points": int(t.size),
+             "max_step_used_periods": float(dt.max()) if dt.size else 0.0}
+    return t_end, amp, extra
+
+
+def run_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
+              options: VacaskOptions | None = None, workers: int | None = None):
+    """Every batch member as its own VACASK process (carrier level), stacked along the batch axis."""
+    from ..backends._base import Run
+    B = stimulus.batch if stimulus is not None else 1
+    runs = map_batch(lambda b: run(model, periods, stimulus, options, b), B, workers)
+    first = runs[0]
+    extra = {"backend": "vacask", **{k: [r.extra[k] for r in runs] for k in ("wall_s", "points", "uniform_fraction")}}
+    warn = [r.extra["warning"] for r in runs if "warning" in r.extra]
+    if warn:
+        extra["warning"] = warn[0]
+    return Run(first.probe_names, first.period, first.t_end,
+               np.concatenate([r.amp for r in runs], axis=2), np.concatenate([r.mean for r in runs], axis=2),
+               np.concatenate([r.x for r in runs], axis=1), np.concatenate([r.v for r in runs], axis=1),
+               first.t, extra=extra)
+
+
+def run_envelope_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
+                       options: VacaskEnvelopeOptions | None = None, workers: int | None = None):
+    """Every batch member of the envelope netlist as its own VACASK process; amplitudes at period ends."""
+    from ..backends._base import Run
+    options = options or VacaskEnvelopeOptions()
+    B = stimulus.batch if stimulus is not None else 1
+    parts = map_batch(lambda b: run_envelope(model, periods, stimulus, options, b), B, workers)
+    amp = np.stack([p[1] for p in parts], axis=2)
+    extra = {"backend": "vacask-envelope", "options": asdict(options),
+             **{k: [p[2][k] for p in parts] for k in parts[0][2]}}
+    return Run(list(model.probes), model.period, parts[0][0], amp, np.zeros(amp.shape), None, None,
+               periods * model.period, extra=extra)

@@ -1,30 +1,8 @@
 """Where the envelope model agrees with RK4, measured scene by scene, and why it differs where it does.
 
-A *scene* is one model, one stimulus and a period count; both backends run it from rest and the
-per-period output amplitudes (u_R) are compared on:
-
-* settled amplitudes: mean of the last `AVG` periods before each window end (each input change
-  and the end of the run); criterion |envelope - RK4| <= AMP_TOL = 0.02 u_R;
-* switching times: after every input change (and from rest), the first and the last time each
-  output crosses the threshold midway between the bands (`scenes.MID`), linearly
-  interpolated between samples; criterion |t_env - t_rk4| <= TIME_TOL = 10 % of t_rk4.
-
-What the envelope equations (`envelope.py`) leave out, each made into a variant here so its share
-of the disagreement can be measured rather than argued:
-
-* `Envelope2w`: the 2-omega part of u_f^2.  Each slow DOF s is really s_bar + Re(S e^{2 i omega t})
-  with Z_s(2 omega) S = -H A^2 / 2  (Z_s(w) = K_s - w^2 M_s + i w C_s, quasi-static since 2 omega is far
-  above the insulator's resonance); the product -2 gamma u_f s then has an omega part
-  -gamma S conj(A_f).  A gate pair driven by equal forces 90 degrees apart has A_d = i A_s, so its
-  two A^2 cancel in S; a channel's A_C^2 never cancels.
-* `EnvelopeA2`: the M A'' term.  With u = Re(A e^{i omega t}) exactly,
-  M A'' + (2 i omega M + C) A' = R(A, s) = F - Z0 A - (G s) A;  envelope.py drops M A''.  The variant
-  keeps it to next order:  A' = B^{-1} (R - M d/dt[B^{-1} R]),  d/dt R = -(Z0 + G s) A' - (G s') A.
-* `Envelope2wA2`: both.
-
-Anything left after both is higher harmonics (3 omega), RK4's own error (measured by halving its
-step) and the sampling of amplitudes (RK4 demodulates over a whole period; the envelope state is a
-point value).
+Scenes run on both backends from rest and are compared on settled amplitudes (AMP_TOL) and switching
+times (TIME_TOL); the variants Envelope2w, EnvelopeA2, Envelope2wA2 put back what the envelope equations
+drop.  The criteria and the variants' equations: docs/physics.md, section "What the envelope equations drop".
 """
 from __future__ import annotations
 
@@ -106,7 +84,7 @@ def integrate_free(env: envelope.Envelope, scene: Scene, step: float, blowup: fl
 
 
 class Envelope2w(envelope.Envelope):
-    """envelope.Envelope plus the omega part of (2-omega insulator motion) x (fast DOF), see module doc."""
+    """envelope.Envelope plus the omega part of (2-omega insulator motion) x (fast DOF), see docs/physics.md."""
 
     def __init__(self, model: MechModel):
         super().__init__(model)
@@ -120,17 +98,19 @@ class Envelope2w(envelope.Envelope):
         return -(self.Zs2_inv @ (self.H @ (A * A))) / 2
 
     def residual_fast(self, A, s, F):
+        """Envelope.residual_fast minus (G S) conj(A) / 2: the omega part of the 2-omega slow motion."""
         return super().residual_fast(A, s, F) - 0.5 * (self.G @ self.s2(A)) * np.conj(A)
 
 
 class EnvelopeA2(envelope.Envelope):
-    """envelope.Envelope keeping M A'' to next order in the slow time, see module doc."""
+    """envelope.Envelope keeping M A'' to next order in the slow time, see docs/physics.md."""
 
     def __init__(self, model: MechModel):
         super().__init__(model)
         self.mf = model.arrays["mass"][self.fast][:, None]
 
     def rhs(self, A, s, sd, F):
+        """(A', s', s'') with A' corrected for M A'' to next order in the slow time."""
         R = self.residual_fast(A, s, F)
         Ad0 = self.solve_rate(R)
         dR = -(self.Z0 @ Ad0) - (self.G @ s) * Ad0 - (self.G @ sd) * A
@@ -215,6 +195,7 @@ def _trajectory_diff(ref: dict, test: dict) -> float:
 
 
 def scene_table_row(name: str, cmp: dict) -> dict:
+    """One summary row of a scene's compare() result: errors, crossing counts, pass."""
     return {"scene": name, "amp_err": cmp["amp_err"], "time_err": cmp["time_err"], "traj_err": cmp["traj_err"],
             "n_crossings": cmp["n_crossings"], "count_mismatch": cmp["crossing_count_mismatch"],
             "pass": bool(cmp["amp_ok"] and cmp["time_ok"] and cmp["crossing_count_mismatch"] == 0)}
@@ -283,6 +264,7 @@ def jacobian(env: envelope.Envelope, y: np.ndarray, F: np.ndarray) -> np.ndarray
 
 
 def jacobian_eigs(env: envelope.Envelope, A: np.ndarray, s: np.ndarray, sd: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Eigenvalues of the envelope Jacobian at the state (A, s, sd) under forcing F."""
     return np.linalg.eigvals(jacobian(env, env.pack(A, s, sd), F))
 
 

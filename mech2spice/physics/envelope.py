@@ -1,15 +1,10 @@
-"""Slowly-varying amplitude (envelope) equations, generated from the mechanical model.
-
-Each oscillating DOF is written u = Re(A e^{i omega t}) with A slowly varying;
-slow DOFs (insulators) keep their own real coordinate s.  Averaging over one
-drive period (dropping the 2*omega part of u^2 and terms of order A'') gives
+"""Slowly-varying amplitude (envelope) equations, generated from the mechanical model:
 
     (2 i omega M + C) A' = F^ - Z0 A - (G s) * A         Z0 = K - omega^2 M + i omega C  (fast block)
     M_s s'' = -K_s s - C_s s' - H |A|^2 / 2
 
-with F^ = -i a e^{i phase} for a drive a sin(omega t + phase), G[f, s] = 2 gamma
-and H[s, f] = gamma for every quadratic coupling.  The same equations give the
-paper's semi-analytic steady state (A' = 0, s' = 0) and its linear stability.
+Derivation, the meaning of F^, G, H and what the averaging drops: docs/physics.md, section
+"The envelope equations".
 """
 from __future__ import annotations
 

@@ -1,20 +1,8 @@
 """The one mechanical model that every backend (RK4, envelope, ngspice) reads.
 
-Equations of motion, for each degree of freedom (DOF) i:
-
-    m_i u_i'' = - sum_j K_ij u_j - sum_j C_ij u_j' + F_i(t) + f_i^NL
-
-* K, C are symmetric: the diagonal holds each DOF's *total* stiffness/damping
-  (its local value plus every coupling spring/dashpot attached to it), the
-  off-diagonals hold -k / -c of each coupling.  Local values = total - couplings
-  and may be negative, as the paper allows.
-* Quadratic couplings come from the potential  V = gamma * u_f^2 * u_s
-  (u_f an oscillating DOF, u_s a slow one) with a *signed* gamma:
-      force on u_f: -2 gamma u_f u_s,   force on u_s: -gamma u_f^2.
-  The paper's eqs. 1-4 are gamma = +gamma_IG (gate-insulator) and
-  gamma = -gamma_IC (channel-insulator).
-* Drives are F(t) = a(t) sin(omega t + phase) on one DOF each; a(t) is the
-  drive's amplitude, constant unless a stimulus schedule overrides it.
+`MechModel` holds per-DOF masses, total stiffness and damping, coupling springs and dashpots, signed
+quadratic couplings, drives and probes.  Its equations of motion and sign conventions (total vs local
+values, the signed gamma): docs/physics.md, section "The mechanical model".
 """
 from __future__ import annotations
 

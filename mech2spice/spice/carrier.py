@@ -1,27 +1,8 @@
 """The mechanical model as an ngspice circuit (mobility analogy) and its netlist.
 
-Analogy (force = current, velocity = voltage), two nodes per DOF u:
-    node v:  C = m (mass), conductance c_local to ground (damper), VCCS k_local * V(x) to ground
-             (spring), drives and couplings as currents into the node;
-    node x:  a 1 F capacitor fed by the VCCS V(v), so V(x) = integral of velocity = u.
-Coupling springs are one VCCS k * (V(x_i) - V(x_j)) between v_i and v_j, dashpots one conductance
-between v_i and v_j, quadratic couplings B current sources in the V(x) nodes.  The DOF's own element
-carries the LOCAL value (total minus attached couplings, may be negative); with the coupling elements
-the circuit's matrices are exactly the model's K and C (totals on the diagonal).
-
-Prewarp (default): the trapezoidal rule at a fixed step h answers a sinusoid at omega exactly as the
-continuous circuit would at omega' = (2/h) tan(omega h / 2).  For Q = 200 oscillators that warp is
-fatal at ordinary steps (T/40: +21 % amplitude, -42 degrees phase on a lone oscillator).  Scaling every
-capacitor of an oscillating DOF by w = (omega h/2) / tan(omega h/2) makes each capacitor's discrete
-admittance at omega exactly i*omega*C, so the linear response at the drive frequency is exact
-whatever h (measured on a linear 3-DOF chain at T/40: phasor error 7e-12, plain trap 2.4e-2), as long
-as every step is h (so trtol is raised to pin it).  The price: slow envelope dynamics (settling, gate
-delays) run slower by omega h / sin(omega h), +0.4 % at T/40.  Slow DOFs (insulators) keep w = 1.
-See reports/speed_accuracy.md for the measurements behind the defaults.
-
-Emission is hierarchical: the library (``subckt_library``) defines m2s_osc, m2s_nor2, m2s_couple,
-m2s_drive and m2s_pairdrive; gate blocks of ``model.design.gates`` become m2s_nor2 instances, every
-other DOF an m2s_osc instance, so any MechModel can be emitted.
+Two nodes per DOF (velocity v, displacement x), trapezoidal prewarping for an exact phasor response at
+the drive frequency, and hierarchical emission through the `.subckt` library (m2s_osc, m2s_nor2, ...).
+The analogy, the prewarp and its measured errors: docs/spice.md, section "The carrier-level netlist".
 """
 from __future__ import annotations
 

@@ -1,45 +1,8 @@
 """The envelope equations (mech2spice.physics.envelope) as an ngspice netlist, and a runner for it.
 
-The carrier-level netlist (spice.py) must resolve every drive period (max step T/40); the envelope
-netlist carries only the slowly varying complex amplitudes, so ngspice can take steps of whole drive
-periods and run scenes far too long or too large for the carrier-level form.
-
-Equations (envelope.py), for the complex amplitudes A of the fast DOFs and the slow DOFs s:
-
-    B A' = F^ - Z0 A - (G s) * A,       B = 2 i omega M + C       (fast block)
-    M_s s'' = -K_s s - C_s s' - H |A|^2 / 2
-
-Circuit form (time is real time; every number below is computed from the one `Envelope` operator):
-
-* Each fast DOF j has two nodes, ar_<dof> = Re A_j / u_R and ai_<dof> = Im A_j / u_R (voltages in units
-  of u_R = params.u_r, so ngspice's vntol reads directly as an amplitude tolerance).
-* Row j of the fast equations is divided by b_j = B_jj (complex, never 0: 2 omega m_j > 0), so that
-
-      A_j' + sum_{k != j} beta_jk A_k' = sum_k zeta_jk A_k + F_j / b_j - (G s)_j A_j / b_j,
-      beta_jk = B_jk / b_j,  zeta_jk = -Z0_jk / b_j.
-
-  The left side's diagonal is then real: a 1 F capacitor from each of ar_j, ai_j to ground, whose current
-  is Re / Im A_j'.  (Without the division 2 i omega m_j would couple Re and Im through the *derivatives*,
-  an antisymmetric "capacitive gyrator" that no capacitor can be.)
-* The remaining derivative couplings beta_jk are only those of dashpots between fast DOFs (B's
-  off-diagonal is the damping matrix C).  For such a DOF k the capacitors are returned to ground through
-  0 V sources Vdr_k / Vdi_k, whose currents are Re / Im A_k' exactly; linear CCCS (F sources) inject
-  -Re(beta_jk A_k') and -Im(beta_jk A_k') into node j.  DOFs without dashpots to other fast DOFs get a
-  plain capacitor.  (B sources with ddt() would do the same but are nonlinear and slower.)
-* zeta (detuning, damping, coupling springs and dashpots) are linear VCCS (G sources): a complex
-  coefficient zeta couples Re and Im as [[zr, -zi], [zi, zr]].
-* Drives: F^_j = -i a e^{i phase} (envelope.Dmap); each drive amplitude a(t) is a voltage on node
-  a_<drive> (one per distinct schedule, as in spice.py), fed into ar_j / ai_j by two VCCS with gains Re, Im
-  of Dmap_jd / (b_j u_R).  A constant amplitude is a DC source; a schedule is a B voltage source of smooth
-  tanh steps centred on each change (time constant T/4), not PWL: PWL corners are ngspice breakpoints,
-  after which ngspice stalled at its minimum step in some runs (reports/speed_accuracy.md).
-* Only the quadratic couplings are B sources: per fast DOF, Re and Im of -(G s)_j A_j / b_j (a product
-  of V(sx) and a linear form in V(ar), V(ai)); per slow DOF the force -H |A|^2 / 2.
-* Slow DOFs keep the carrier-level mobility form: velocity node sv_<dof> with C = m, displacement node
-  sx_<dof> (1 F fed by a VCCS V(sv)); K_s and C_s are VCCS stamped from their sparse matrices.
-
-Amplitudes per drive period are the node voltages linearly interpolated at the end of each period
-(envelope.integrate records the amplitude at the end of each period too).
+Two nodes (Re, Im of A / u_R) per oscillating DOF and the carrier-level mobility form per slow DOF, so
+ngspice can take steps of whole drive periods.  The circuit form, element by element: docs/spice.md,
+section "The envelope netlist".
 """
 from __future__ import annotations
 

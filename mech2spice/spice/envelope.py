@@ -240,7 +240,7 @@ class _EnvEmitter:
                 f"* mech2spice envelope form: {self.env.fast.size} oscillating DOFs (2 amplitude nodes each), "
                 f"{self.env.slow.size} slow DOFs; {self.periods} periods of T = {num(self.T)} s (real time);",
                 f"* amplitudes V(ar_*) + i V(ai_*) in u_R = {num(self.u)}; method={o.method}, max step "
-                f"{num(o.max_step_periods)} T.  See mech2spice/spice_envelope.py for the circuit form.",
+                f"{num(o.max_step_periods)} T.  See docs/spice.md for the circuit form.",
                 "* probe -> amplitude nodes:"]
         head += [f"*   {comment_text(n)} -> {self.ar(j)} {self.ai(j)}" for n, j in zip(m.probes, rows)]
         body = ["* --- circuit", *self.lines, "* --- drive amplitudes", *self.amp_lines,

@@ -13,7 +13,7 @@ demo: setup  ## the main job end to end: gate, adder from Verilog on RK4, sqrt(2
 	mech2spice synth verilog/adder2.v
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend logic
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend rk4
-	$(PY) -m mech2spice.reports.adder reports
+	mech2spice report adder
 	mech2spice simulate verilog/sqrt.v --stimulus verilog/sqrt_2809.json --backend envelope
 	mech2spice cpu run programs/sieve.asm --backend envelope
 
@@ -23,15 +23,5 @@ test: setup  ## the CI suite (long physical runs marked slow are left out)
 test-all: setup
 	$(PY) -m pytest -q
 
-reports: setup  ## regenerate every report in reports/
-	mech2spice gate --report reports
-	$(PY) -m mech2spice.reports.adder reports
-	$(PY) -m mech2spice.reports.sequential reports
-	$(PY) -m mech2spice.reports.spice reports
-	$(PY) benchmarks/fidelity.py
-	$(PY) scripts/cpu_physical.py
-	$(PY) scripts/cpu_report.py
-	$(PY) benchmarks/envelope_validation.py
-	$(PY) benchmarks/performance.py
-	$(PY) benchmarks/speed_accuracy.py
-	$(PY) benchmarks/envelope_spice.py
+reports: setup  ## regenerate every report in reports/ (hours; `mech2spice report --list` gives each one's cost)
+	mech2spice report all

@@ -1,51 +1,45 @@
-"""benchmarks/speed_accuracy.py's markdown writer keeps the envelope-spice section another tool writes."""
+"""speed_accuracy.md has one writer: the report itself, with the envelope-spice section rendered last."""
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
+import json
 
-import pytest
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-@pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("speed_accuracy_bench", ROOT / "benchmarks" / "speed_accuracy.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
+from mech2spice.reports import envelope_spice, speed_accuracy
 
 BLOCK = ("<!-- envelope-spice:begin -->\n## Envelope vs ngspice\n\n| a | b |\n|---|---|\n| 1 | 2 |\n\n"
          "text with  two spaces and a trailing space \n<!-- envelope-spice:end -->")
 
 
-def test_block_is_carried_over_verbatim_at_the_end(bench, tmp_path, monkeypatch):
-    monkeypatch.setattr(bench, "markdown", lambda res: "# Speed vs accuracy\n\nnew body\n")
+def test_envelope_section_is_written_last_and_the_old_file_is_not_kept(tmp_path, monkeypatch):
+    monkeypatch.setattr(speed_accuracy, "markdown", lambda res: "# Speed vs accuracy\n\nnew body\n")
     md = tmp_path / "speed_accuracy.md"
-    md.write_text("# old title\n\nold body\n\n" + BLOCK + "\n\n## a section after it\n")
-    text = bench.write_markdown(md, {})
+    md.write_text("# old title\n\nold body\n\n" + BLOCK.replace("| 1 | 2 |", "| stale |") + "\n\n## after it\n")
+    text = speed_accuracy.write_markdown(md, {"any": 1}, BLOCK)
     assert md.read_text() == text
-    assert text.startswith("# Speed vs accuracy\n\nnew body\n")
-    assert "old body" not in text and "a section after it" not in text
-    assert text.endswith(BLOCK + "\n")
-    assert text.count("<!-- envelope-spice:begin -->") == 1
-    # idempotent: regenerating again keeps exactly one copy
-    assert bench.write_markdown(md, {}) == text
+    assert text == "# Speed vs accuracy\n\nnew body\n\n" + BLOCK + "\n"
+    assert "old body" not in text and "stale" not in text and "after it" not in text
+    assert speed_accuracy.write_markdown(md, {"any": 1}, BLOCK) == text          # idempotent
 
 
-def test_no_markers_no_block(bench, tmp_path, monkeypatch):
-    monkeypatch.setattr(bench, "markdown", lambda res: "# Speed vs accuracy\n")
-    md = tmp_path / "speed_accuracy.md"
-    assert bench.write_markdown(md, {}) == "# Speed vs accuracy\n"          # no file yet
-    md.write_text("# old\n<!-- envelope-spice:begin -->\nunterminated\n")
-    assert "envelope-spice" not in bench.write_markdown(md, {})           # no end marker: nothing carried
+def test_no_envelope_results_no_section(tmp_path, monkeypatch):
+    monkeypatch.setattr(speed_accuracy, "markdown", lambda res: "# Speed vs accuracy\n")
+    assert envelope_spice.block(tmp_path) == ""                                    # no envelope_spice.json
+    assert speed_accuracy.write_markdown(tmp_path / "s.md", {"any": 1}, "") == "# Speed vs accuracy\n"
+
+
+def test_render_only_composes_both_results(tmp_path, monkeypatch):
+    """--render measures nothing: both JSONs in, one .md out (charts stubbed)."""
+    (tmp_path / "speed_accuracy.json").write_text(json.dumps({"body": "main"}))
+    (tmp_path / "envelope_spice.json").write_text(json.dumps({"body": "env"}))
+    monkeypatch.setattr(speed_accuracy, "charts", lambda res, out: [])
+    monkeypatch.setattr(speed_accuracy, "markdown", lambda res: f"# {res['body']}\n")
+    monkeypatch.setattr(envelope_spice, "charts", lambda res, out: "chart.png")
+    monkeypatch.setattr(envelope_spice, "render", lambda res: f"{envelope_spice.BEGIN}\n{res['body']}\n"
+                                                              f"{envelope_spice.END}\n")
+    path = speed_accuracy.write(tmp_path, render=True)
+    assert path.read_text() == f"# main\n\n{envelope_spice.BEGIN}\nenv\n{envelope_spice.END}\n"
 
 
 def test_spice_md_states_the_form_choice_from_the_measurement(tmp_path):
-    import json
-
     from mech2spice.reports.spice import UNMEASURED_WHY, why_this_form
     assert why_this_form(tmp_path / "missing.json") == UNMEASURED_WHY
     row = {"amp_err_ur": 1e-4, "phase_err_deg": 0.05, "traj_err_ur": 0.006, "uniform_fraction": 1.0}

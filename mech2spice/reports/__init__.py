@@ -1,0 +1,49 @@
+"""The reports in reports/*.md: one module each, one entry point (`mech2spice report NAME`).
+
+Every module in REPORTS exposes ``write(directory, **options) -> Path`` (the markdown it wrote) and is the
+only writer of the files listed in its entry.  Importing this package imports none of them (the command
+line lists reports without loading numpy, matplotlib or numba).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import import_module
+
+
+@dataclass(frozen=True)
+class Report:
+    """One report: what it shows, roughly how long it takes, what it writes and the options of its write()."""
+    description: str
+    cost: str
+    writes: tuple[str, ...]
+    options: tuple[str, ...] = ()
+
+
+# In `all` order: a report reading another's JSON comes after it (cpu_physical reads fidelity.json; cpu and
+# performance read cpu_physical.json).  spice reads speed_accuracy.json, the last one written.
+REPORTS: dict[str, Report] = {
+    "gate": Report("the NOR gate against the paper's six requirements; why the printed parameters fail",
+                   "~1 min", ("gate.md",), ("quick",)),
+    "adder": Report("the 2-bit adder from Verilog, all 16 sums on RK4 (paper Fig. 4)", "~1 min", ("adder.md",)),
+    "sequential": Report("the latch, a counter, the FSM and sqrt(2809) = 53 (paper Figs. 5, 6)", "~4 min",
+                         ("sequential.md", "sqrt.md"), ("sqrt_rk4",)),
+    "spice": Report("the electrical analogy; ngspice against RK4 on four scenes", "~4 min", ("spice.md",)),
+    "fidelity": Report("what each envelope speed-up (step, settle detection, cone pruning) costs in accuracy",
+                       "~20 min", ("fidelity.md",), ("only", "cycles", "render")),
+    "cpu_physical": Report("the processor as 6486 oscillators against the ISS, cycle by cycle, to the halt",
+                           "~5 min", ("cpu_physical.md",),
+                           ("cycles", "program", "backend", "step", "settle", "checkpoint", "resume", "name")),
+    "cpu": Report("the 8-bit processor: ISA, gate counts, the sieve, Turing machines", "~2 min", ("cpu.md",),
+                  ("skip_slow",)),
+    "envelope": Report("where the envelope model agrees with RK4, why it differs, the step bound", "~6 min",
+                       ("envelope.md",), ("cache", "render")),
+    "performance": Report("what every fidelity level costs as circuits grow, and where the time goes",
+                          "~15 min", ("performance.md",), ("only", "quick", "sqrt_rk4_full", "render")),
+    "speed_accuracy": Report("RK4 and ngspice (carrier and envelope netlists): speed, accuracy, failure points",
+                             "~40 min", ("speed_accuracy.md",), ("only", "design", "quick", "render")),
+}
+
+
+def module(name: str):
+    """The module behind report `name` (imported on first use)."""
+    return import_module(f"{__name__}.{name}")

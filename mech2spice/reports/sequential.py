@@ -1,6 +1,6 @@
-"""reports/sequential.md: the mechanical latch, clocked designs, the FSM and the square root of 2809.
+"""reports/sequential.md and sqrt.md: the mechanical latch, clocked designs, the FSM and sqrt(2809).
 
-Run: python -m mech2spice.reports.sequential reports [--sqrt-rk4]
+Run: mech2spice report sequential [--sqrt-rk4]
 (--sqrt-rk4 adds the oscillator-level RK4 run of the square root: ~15-30 min on 2 cores.)
 """
 from __future__ import annotations
@@ -8,34 +8,25 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .. import simulate
+from .. import data, simulation
+from ..backends import envelope
 from ..experiments import characterise
+from ..experiments.scenes import COUNTER_STEPS, FSM_STEPS, FSM_X, sqrt_steps
 from ..physics import network
-from ..synthesis import synth  # noqa: E402
-from ..physics.params import BAND0, BAND1, DEFAULT  # noqa: E402
-from .gate import MACHINE  # noqa: E402
+from ..physics.params import DEFAULT
+from ..synthesis import synth
+from ._common import MACHINE, md_table, out_dir, pyplot, save_figure, shade_bands
+
+plt = pyplot()
 
 PAPER_SQRT = {"gates": 501, "oscillators": 3006, "linear_springs": 685, "nonlinear_springs": 2505, "dashpots": 685}
-SQRT_STEPS = [{"set": {"rst": 1, "n": 2809}, "cycles": 1}, {"set": {"rst": 0}, "cycles": 6}]
-COUNTER_STEPS = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, "cycles": 3},
-                 {"set": {"en": 0}, "cycles": 2}, {"set": {"en": 1}, "cycles": 2}, {"set": {"rst": 1}, "cycles": 1}]
-FSM_X = [1, 1, 0, 1, 1, 0, 1, 0]
-
-
-def _bands(ax, offset=0.0):
-    ax.axhspan(offset + BAND0[0], offset + BAND0[1], color="tab:red", alpha=0.1, lw=0)
-    ax.axhspan(offset + BAND1[0], offset + BAND1[1], color="tab:blue", alpha=0.1, lw=0)
 
 
 def plot_latch(res: dict, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(11, 3.4))
-    _bands(ax)
+    shade_bands(ax)
     t = np.arange(1, res["amplitude"].shape[0] + 1)
     ax.plot(t, res["amplitude"][:, 0], label="latch output q")
     ax.plot(t, res["amplitude"][:, 1], lw=0.8, alpha=0.7, label="loop node m (before the delay line)")
@@ -48,68 +39,64 @@ def plot_latch(res: dict, path: Path) -> None:
     ax.set_ylabel("amplitude / $u_R$")
     ax.set_title(f"mechanical latch ({res['backend']}): grey = enable pulse ({res['pulse']} periods)")
     ax.legend(fontsize=8, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_trace(res: dict, path: Path, title: str) -> None:
     """Output-bit amplitudes over the whole clocked run, read points marked (paper Fig. 6b style)."""
-    amp, names = res["_amplitude_trace"], res["_probe_names"]
+    amp, names = res["waveform"].amplitude, res["waveform"].probes
     fig, ax = plt.subplots(figsize=(11, 0.55 * len(names) + 1.5))
     t = np.arange(1, amp.shape[0] + 1)
     for k, n in enumerate(names):
         off = 1.3 * k
-        _bands(ax, off)
+        shade_bands(ax, off)
         ax.plot(t, off + amp[:, k], lw=0.9)
         ax.text(-0.01 * t[-1], off + 0.7, n, ha="right", fontsize=8)
-    for r in res["_reads"]:
+    for r in res["waveform"].reads:
         ax.axvline(r, color="k", lw=0.4, ls=":")
     ax.set_yticks([])
     ax.set_xlabel("drive periods")
     ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _trace_table(runs: dict[str, dict]) -> str:
     names = list(runs)
-    head = "| cycle | " + " | ".join(names) + " | min margin (" + ", ".join(n for n in names if n != "logic") + ") |"
-    rows = [head, "|" + "---|" * (len(names) + 2)]
+    physical = [n for n in names if n != "logic"]
+    rows = []
     for k in range(len(runs[names[0]]["trace"])):
         cells = [", ".join(f"{p}={v}" for p, v in runs[n]["trace"][k]["outputs"].items()) for n in names]
-        mg = ", ".join(f"{runs[n]['trace'][k]['min_margin']:+.3f}" for n in names if n != "logic")
-        rows.append(f"| {k} | " + " | ".join(cells) + f" | {mg} |")
-    return "\n".join(rows)
+        rows.append([k, *cells, ", ".join(f"{runs[n]['trace'][k]['min_margin']:+.3f}" for n in physical)])
+    return "\n".join(md_table(["cycle", *names, f"min margin ({', '.join(physical)})"], rows))
 
 
 def _clocked(design: str, steps: list[dict], backends=("logic", "envelope")) -> tuple:
-    nl = synth.synthesize(design)
-    cycles = simulate.expand_steps(steps)
-    timing = simulate.clock_timing(nl)
+    nl = synth.synthesize(data.verilog(design))
+    cycles = simulation.expand_steps(steps)
+    timing = simulation.clock_timing(nl)
     runs = {}
     for b in backends:
-        runs[b] = simulate.run_clocked_logic(nl, cycles) if b == "logic" else \
-            simulate.run_clocked_physical(nl, DEFAULT, cycles, b, timing, progress=sys.stderr.isatty())
+        runs[b] = simulation.run_clocked_logic(nl, cycles) if b == "logic" else \
+            simulation.run_clocked_physical(nl, DEFAULT, cycles, b, timing, progress=sys.stderr.isatty(),
+                                          waveform=True)
     return nl, runs, timing
 
 
-def write(directory: str = "reports", sqrt_rk4: bool = False) -> Path:
-    d = Path(directory)
-    d.mkdir(parents=True, exist_ok=True)
+def write(directory="reports", sqrt_rk4: bool = False) -> Path:
+    """Write sequential.md and sqrt.md with their figures (`sqrt_rk4`: also the ~20-min RK4 square root)."""
+    d = out_dir(directory)
     p = DEFAULT
     latch = characterise.latch_sequence(p, "rk4")
     latch_env = characterise.latch_sequence(p, "envelope")
     plot_latch(latch, d / "latch.png")
     short = characterise.latch_sequence(p, "envelope", pulse=300)
-    ctr_nl, ctr, ctr_t = _clocked("verilog/counter4.v", COUNTER_STEPS, ("logic", "rk4", "envelope"))
-    fsm_steps = [{"set": {"rst": 1}, "cycles": 1}] + [{"set": {"rst": 0, "x": x}, "cycles": 1} for x in FSM_X]
-    fsm_nl, fsm, fsm_t = _clocked("verilog/fsm.v", fsm_steps, ("logic", "rk4"))
+    ctr_nl, ctr, ctr_t = _clocked("counter4.v", COUNTER_STEPS, ("logic", "rk4", "envelope"))
+    fsm_steps = FSM_STEPS
+    fsm_nl, fsm, fsm_t = _clocked("fsm.v", fsm_steps, ("logic", "rk4"))
     plot_trace(fsm["rk4"], d / "fsm.png", "FSM (1101 detector), RK4: output amplitudes; dotted = read points")
-    sq_nl, sq, sq_t = _clocked("verilog/sqrt.v", SQRT_STEPS, ("logic", "envelope") + (("rk4",) if sqrt_rk4 else ()))
+    sq_nl, sq, sq_t = _clocked("sqrt.v", sqrt_steps(), ("logic", "envelope") + (("rk4",) if sqrt_rk4 else ()))
     plot_trace(sq["envelope"], d / "sqrt.png", "sqrt(2809), envelope model: |root[i]| over time; dotted = read points")
-    counts = {"gates": len(network.build(sq_nl, p).meta["gates"]), **network.build(sq_nl, p).counts()}
+    counts = {"gates": len(network.build(sq_nl, p).design.gates), **network.build(sq_nl, p).counts()}
     latch_rows = "\n".join(f"| {ph['phase']} | {ph['d']} | {ph['clock']} | {ph['output']:.3f} | {ph['logic']} |"
                            for ph in latch["decoded"])
     fmt_t = lambda t: f"pulse {t['pulse']}, pause {t['pause']} periods (logic depth {t['logic_depth']})"
@@ -117,8 +104,8 @@ def write(directory: str = "reports", sqrt_rk4: bool = False) -> Path:
     counts_md = "\n".join(f"| {k} | {counts[k]} | {PAPER_SQRT[k]} |" for k in PAPER_SQRT)
     sq_rk4_md = "" if sqrt_rk4 else ("The oscillator-level RK4 run of the square root is optional "
                                      "(`--sqrt-rk4`, ~15-30 min here) and was not part of this report run.")
-    env_desc = (f"envelope model at {simulate.ENVELOPE_STEP:g}-period steps (clocked runs end each pause once "
-                f"every channel has settled within {simulate.CLOCKED_SETTLE} u_R: `fidelity.md`)")
+    env_desc = (f"envelope model at {envelope.DEFAULT_STEP:g}-period steps (clocked runs end each pause once "
+                f"every channel has settled within {simulation.CLOCKED_SETTLE_TOL} u_R: `fidelity.md`)")
     text = SEQ_MD.format(env_desc=env_desc,
         machine=MACHINE, latch_rows=latch_rows, delays=latch["output_delays"], env_delays=latch_env["output_delays"],
         pulse=latch["pulse"], short_ok=[ph["logic"] for ph in short["decoded"]][6:8],
@@ -137,7 +124,7 @@ def write(directory: str = "reports", sqrt_rk4: bool = False) -> Path:
 
 SQRT_MD = """# The square root of 2809 (paper Fig. 6)
 
-Generated by `python -m mech2spice.reports.sequential reports` on {machine}; {env_desc}, default gate
+Generated by `mech2spice report sequential` on {machine}; {env_desc}, default gate
 parameters.
 
 `verilog/sqrt.v`: binary search, 16 lines.
@@ -163,7 +150,7 @@ One result bit is decided per cycle, from the top: 32, 48, 48 (bit 3 rejected: 5
 
 SEQ_MD = """# Memory and time: the latch, clocked designs, the FSM and sqrt(2809)
 
-Generated by `python -m mech2spice.reports.sequential reports`; measured on {machine}. RK4 at 80 steps
+Generated by `mech2spice report sequential`; measured on {machine}. RK4 at 80 steps
 per drive period, {env_desc}, default gate parameters (`gate.md`).
 
 ## The mechanical latch (paper Fig. 5a, 5b)
@@ -223,7 +210,3 @@ A one-hot state register of 4 latches and a registered `found` flag detect the i
 
 See [sqrt.md](sqrt.md).
 """.replace("{fsm_x}", str(FSM_X))
-
-if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    print(write(args[0] if args else "reports", sqrt_rk4="--sqrt-rk4" in sys.argv))

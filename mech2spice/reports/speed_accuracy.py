@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import data, simulate
+from .. import data, simulation
 from ..backends import rk4
 from ..errors import DivergenceError, Mech2SpiceError
 from ..physics import network, nor
@@ -60,7 +60,7 @@ AVG = 20
 ADDER_V = data.verilog("adder2.v")
 ADDER_CASES = [(3, 2), (1, 3)]     # 3+2 = 101 and 1+3 = 100 (carry from bit 0 through bit 1): two ngspice
                                    # processes, one per core
-# the gate's '11' case still beats at 1500 periods; the adder gets simulate.period_budget (800 + 300 per
+# the gate's '11' case still beats at 1500 periods; the adder gets simulation.period_budget (800 + 300 per
 # level of logic depth 7): its outputs are within 1e-3 u_R of their final values by ~2150 periods (the
 # measured settle_1e-3 in the JSON / md)
 PERIODS = {"nor_gate": 2500, "chain3": 1500, "adder2": 2900}
@@ -102,7 +102,7 @@ def adder_design():
     nl = synth.synthesize(ADDER_V)
     m = network.build(nl, P)
     st = network.stimulus(m, nl, P, [(0, [{"a": a, "b": b} for a, b in ADDER_CASES])])
-    m.bench = {"logic_depth": network.logic_depth(nl), "period_budget": simulate.period_budget(nl),
+    m.bench = {"logic_depth": network.logic_depth(nl), "period_budget": simulation.period_budget(nl),
                        "case_labels": [f"a={a}, b={b} (s={a + b:03b})" for a, b in ADDER_CASES]}
     return m, st
 
@@ -694,7 +694,7 @@ def _adder_recheck(res: dict) -> list[str]:
     st = dd.get("settle_period", {})
     out = ["", f"**Rechecked on the 2-bit adder** (`verilog/adder2.v`: {dd.get('oscillators', '?')} oscillators, "
            f"logic depth {dd.get('logic_depth', '?')}; cases {'; '.join(dd.get('case_labels', [])) or dd['cases']}; "
-           f"probes {', '.join(dd['probes'])}; {dd['periods']} periods, `simulate.period_budget` "
+           f"probes {', '.join(dd['probes'])}; {dd['periods']} periods, `simulation.period_budget` "
            f"{dd.get('period_budget', '?')}; {MACHINE}). "
            f"In the RK4 reference every output is within 0.01 u_R of its settled value after period "
            f"{st.get('0.01', '?')} and within 0.001 u_R after period {st.get('0.001', '?')}, so the last "

@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """Envelope vs RK4, scene by scene; the envelope step on the adder; the enforced stability bound.
 
 Writes reports/envelope.md and reports/envelope_*.png (~6 min on a 2-core machine).
@@ -6,39 +5,34 @@ Writes reports/envelope.md and reports/envelope_*.png (~6 min on a 2-core machin
 Scenes (mech2spice/validate.py): single gate (4 nominal inputs; 16 band-edge input pairs), the 3-gate
 chain with its 00 -> 10 -> 00 switching transient and band-edge members (characterise.cascade), fan-out
 2 and 3 (characterise.fanout_test), the 2-bit adder (all 16 inputs after 2900 periods at 0, as in
-report_adder.py) and the latch pulse sequence (characterise.latch_sequence).  Each runs on RK4 at 80
+reports/adder.py) and the latch pulse sequence (characterise.latch_sequence).  Each runs on RK4 at 80
 steps/period (the reference the issue names), on RK4 at 160 (to measure the reference's own error) and
 on the envelope model; variants of the envelope equations (validate.VARIANTS) apportion what is left.
 
-usage: python benchmarks/envelope_validation.py [--out reports] [--cache DIR]
+usage: mech2spice report envelope [--cache DIR [--render]]
 """
 from __future__ import annotations
 
-import argparse
 import math
 import pickle
 import platform
-import sys
 import time
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from ..errors import Mech2SpiceError
+from ..experiments import characterise as ch
+from ..experiments import validate as V
+from ..experiments import scenes as S
+from ..backends import envelope
+from ..physics.params import DEFAULT
+from ._common import SANDBOX, log, out_dir, pyplot, save_figure, shade_bands, timed
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from mech2spice.experiments import characterise as ch  # noqa: E402
-from mech2spice import simulate
-from mech2spice.physics import envelope  # noqa: E402
-from mech2spice.experiments import validate as V  # noqa: E402
-from mech2spice.errors import Mech2SpiceError  # noqa: E402
-from mech2spice.physics.params import BAND0, BAND1, DEFAULT  # noqa: E402
-
-MACHINE = "2-core Debian 12 sandbox, shared"
+plt = pyplot()
+MACHINE = f"{SANDBOX}, shared"
 P = DEFAULT
-STEPS = sorted({0.5, 2.0, simulate.ENVELOPE_STEP})   # envelope steps per scene (periods); 2 was the default until 5c6b8d2
+STEPS = sorted({0.5, 2.0, envelope.DEFAULT_STEP})   # envelope steps per scene (periods); 2 was the default until 5c6b8d2
 SWEEP = [0.25, 0.5, 1, 2, 4, 6, 8, 12]          # adder, through envelope.integrate
 REFUSE = [16, 20, 24]                            # beyond the enforced bound: must be refused (24: unstable)
 FREE = [6, 8, 10, 12, 16, 20, 21, 22, 23, 24, 26, 28, 32]   # adder, no bound check (validate.integrate_free)
@@ -57,17 +51,13 @@ def cached(cache: Path | None, key: str, fn):
     return out
 
 
-def log(msg: str) -> None:
-    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
-
-
 # --- measurements --------------------------------------------------------------------------------
-def scenes() -> list[V.Scene]:
-    return [V.gate_scene(P, "nominal"), V.gate_scene(P, "edge"), V.chain_scene(P), V.fanout_scene(P, 2),
-            V.fanout_scene(P, 3), V.adder_scene(P), V.latch_scene(P)]
+def scenes() -> list[S.Scene]:
+    return [S.gate_scene(P, "nominal"), S.gate_scene(P, "edge"), S.chain_scene(P), S.fanout_scene(P, 2),
+            S.fanout_scene(P, 3), S.adder_scene(P), S.latch_scene(P)]
 
 
-def measure_scene(sc: V.Scene, cache) -> dict:
+def measure_scene(sc: S.Scene, cache) -> dict:
     log(f"{sc.name}: RK4 80 and 160 steps/period, {sc.periods} periods, batch {sc.stimulus.batch}")
     r80 = cached(cache, f"{sc.name}_rk4_80", lambda: V.run(sc, "rk4", 80))
     r160 = cached(cache, f"{sc.name}_rk4_160", lambda: V.run(sc, "rk4", 160))
@@ -99,28 +89,22 @@ def latch_official(cache) -> dict:
     """characterise.latch_sequence on both backends; if its envelope path fails, the identical model, schedule
     and decoding through validate.latch_scene / latch_decode (checked equal on RK4), with the error recorded."""
     log("latch: characterise.latch_sequence on rk4 and envelope")
-    r = cached(cache, "latch_seq_rk4", lambda: _timed(lambda: ch.latch_sequence(P, "rk4")))
+    r = cached(cache, "latch_seq_rk4", lambda: timed(lambda: ch.latch_sequence(P, "rk4")))
     error = None
     try:
-        e = _timed(lambda: ch.latch_sequence(P, "envelope"))
+        e = timed(lambda: ch.latch_sequence(P, "envelope"))
     except Exception as ex:                       # noqa: BLE001 - reported, not hidden
         error = f"{type(ex).__name__}: {ex}"
         log(f"  characterise.latch_sequence(p, 'envelope') failed: {error}; using validate.latch_scene")
-        sc = V.latch_scene(P)
+        sc = S.latch_scene(P)
         run = V.run(sc, "envelope", 0.5)
-        e = (V.latch_decode(sc, run["amp"][1:, :, 0]), run["wall_s"])
+        e = (ch.latch_decode(sc, run["amp"][1:, :, 0]), run["wall_s"])
     res = V.latch_compare(P, env_result=e[0], rk4_result=r[0])
     res["wall_rk4"], res["wall_env"], res["envelope_error"] = r[1], e[1], error
     return res
 
 
-def _timed(fn):
-    t0 = time.perf_counter()
-    out = fn()
-    return out, time.perf_counter() - t0
-
-
-def adder_sweep(sc: V.Scene, r80: dict, r160: dict) -> dict:
+def adder_sweep(sc: S.Scene, r80: dict, r160: dict) -> dict:
     log("adder: envelope step sweep")
     rows = []
     for step in SWEEP:
@@ -150,34 +134,33 @@ def adder_sweep(sc: V.Scene, r80: dict, r160: dict) -> dict:
         log(f"  free step {step:g}: {'finite ' + _short(row['vs80']) if ok else 'BLEW UP at %.0f' % row['blowup_period']}")
     log("adder: linearised envelope eigenvalues along the trajectory")
     stab = V.stability_along(sc, STAB_AT)
-    gate_stab = V.stability_along(V.gate_scene(P, "nominal"), [0, 100, 2500])
-    chain_stab = V.stability_along(V.chain_scene(P, edges=False), [0, 200, 1500, 1700, 3000, 3200, 4500])
+    gate_stab = V.stability_along(S.gate_scene(P, "nominal"), [0, 100, 2500])
+    chain_stab = V.stability_along(S.chain_scene(P, edges=False), [0, 200, 1500, 1700, 3000, 3200, 4500])
     env = envelope.Envelope(sc.model)
     return {"sweep": rows, "refused": refused, "free": free, "stability": stab, "bound": envelope.max_step_periods(sc.model),
             "gershgorin_rate": envelope.gershgorin_rate(env), "spectral_rate": envelope.spectral_rate(env),
             "rate_safety": envelope.RATE_SAFETY, "gate_stability": gate_stab, "chain_stability": chain_stab,
-            "gate_bound": envelope.max_step_periods(V.gate_scene(P).model),
-            "chain_bound": envelope.max_step_periods(V.chain_scene(P).model),
+            "gate_bound": envelope.max_step_periods(S.gate_scene(P).model),
+            "chain_bound": envelope.max_step_periods(S.chain_scene(P).model),
             "T": P.period}
 
 
 # --- figures ---------------------------------------------------------------------------------------
 def _bands(ax, off=0.0):
-    ax.axhspan(off + BAND0[0], off + BAND0[1], color="tab:red", alpha=0.08, lw=0)
-    ax.axhspan(off + BAND1[0], off + BAND1[1], color="tab:blue", alpha=0.08, lw=0)
+    shade_bands(ax, off, alpha=0.08)
 
 
 def fig_chain(res: dict, path: Path) -> None:
     sc_name = "chain3"
-    r, e = res["r80"], res["env"][simulate.ENVELOPE_STEP]["run"]
+    r, e = res["r80"], res["env"][envelope.DEFAULT_STEP]["run"]
     r160 = res["r160"]
     fig, axs = plt.subplots(1, 2, figsize=(13, 4.2))
     for j, col in enumerate(["tab:blue", "tab:orange", "tab:green"]):
         axs[0].plot(r["t"], r["amp"][:, j, 0], color=col, lw=1.2, label=f"g{j} RK4 80/T")
         axs[0].plot(e["t"], e["amp"][:, j, 0], color="k", lw=0.8, ls="--")
-    axs[0].plot([], [], "k--", lw=0.8, label=f"envelope, step {simulate.ENVELOPE_STEP:g} T")
+    axs[0].plot([], [], "k--", lw=0.8, label=f"envelope, step {envelope.DEFAULT_STEP:g} T")
     _bands(axs[0])
-    axs[0].axhline(V.MID, color="grey", lw=0.5, ls=":")
+    axs[0].axhline(S.MID, color="grey", lw=0.5, ls=":")
     axs[0].set(xlabel="drive periods", ylabel="|A| [u_R]", title=f"{sc_name}: inputs 00 -> 10 -> 00 (member 0)")
     axs[0].legend(fontsize=8)
     b = 3                                      # the 0.67, 0.67 member: the slowest, most marginal switch
@@ -186,17 +169,15 @@ def fig_chain(res: dict, path: Path) -> None:
         axs[1].plot(r160["t"], r160["amp"][:, j, b], color=col, lw=0.8, ls=":", label=f"g{j} RK4 160/T")
         axs[1].plot(e["t"], e["amp"][:, j, b], color="k", lw=0.8, ls="--")
     _bands(axs[1])
-    axs[1].axhline(V.MID, color="grey", lw=0.5, ls=":")
+    axs[1].axhline(S.MID, color="grey", lw=0.5, ls=":")
     axs[1].set(xlim=(0, 3000), xlabel="drive periods",
                title="band-edge member: inputs held at (0.67, 0.67) F_R; dashed = envelope")
     axs[1].legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 def fig_adder(res: dict, path: Path) -> None:
-    r, e = res["r80"], res["env"][simulate.ENVELOPE_STEP]["run"]
+    r, e = res["r80"], res["env"][envelope.DEFAULT_STEP]["run"]
     hold = res["periods"] // 2
     fig, axs = plt.subplots(4, 4, figsize=(13, 9), sharex=True, sharey=True)
     for b in range(16):
@@ -212,10 +193,8 @@ def fig_adder(res: dict, path: Path) -> None:
     for ax in axs[-1]:
         ax.set_xlabel("periods after the inputs change")
     fig.suptitle(f"2-bit adder: |s[0]| (top), |s[1]|, |s[2]| [u_R]; RK4 80 steps/period (colour) vs envelope "
-                 f"step {simulate.ENVELOPE_STEP:g} periods (black dashed)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+                 f"step {envelope.DEFAULT_STEP:g} periods (black dashed)")
+    save_figure(fig, path, dpi=90)
 
 
 def fig_latch(res: dict, latch: dict, path: Path) -> None:
@@ -237,9 +216,7 @@ def fig_latch(res: dict, latch: dict, path: Path) -> None:
                 label="envelope (1 T) - RK4 80, q[0]")
     axs[1].set(xlabel="drive periods", ylabel="difference [u_R]")
     axs[1].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 def fig_sweep(sw: dict, path: Path) -> None:
@@ -279,9 +256,7 @@ def fig_sweep(sw: dict, path: Path) -> None:
     ax.set(xlabel="Re(h lambda)", ylabel="Im(h lambda)", title="RK4 stability region, adder eigenvalues")
     ax.set_aspect("equal")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 # --- report ------------------------------------------------------------------------------------------
@@ -292,7 +267,7 @@ def fmt_pct(x: float) -> str:
 def scene_rows(results: list[dict]) -> str:
     out = []
     for r in results:
-        step = simulate.ENVELOPE_STEP
+        step = envelope.DEFAULT_STEP
         for st, e in r["env"].items():
             c80, c160 = e["vs80"], e["vs160"]
             ok = c80["amp_ok"] and c80["time_ok"] and c80["crossing_count_mismatch"] == 0
@@ -330,43 +305,45 @@ def variant_rows(results: list[dict]) -> str:
     return "\n".join(out)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--out", default="reports")
-    ap.add_argument("--cache", default=None, help="directory to keep RK4 runs between invocations")
-    ap.add_argument("--report-only", action="store_true", help="re-render from CACHE/all.pkl")
-    args = ap.parse_args()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    cache = Path(args.cache) if args.cache else None
-    t_start = time.perf_counter()
-    if args.report_only:
+def write(directory="reports", cache=None, render: bool = False) -> Path:
+    """Measure every scene (RK4 runs kept in `cache` if given) and write envelope.md and its figures;
+    `render`: only re-render from CACHE/all.pkl."""
+    out = out_dir(directory)
+    cache = Path(cache) if cache else None
+    if render:
+        if cache is None:
+            raise Mech2SpiceError("envelope: --render needs --cache DIR (it re-renders DIR/all.pkl)")
         results, latch, sw = pickle.loads((cache / "all.pkl").read_bytes())
-        by = {r["scene"]: r for r in results}
-        render(out, results, by, latch, sw, float(sw.get("total_s", 0.0)))
-        return
+        return _render(out, results, latch, sw, float(sw.get("total_s", 0.0)))
+    t_start = time.perf_counter()
     results = [measure_scene(sc, cache) for sc in scenes()]
     by = {r["scene"]: r for r in results}
     latch = latch_official(cache)
     adder = scenes()[5]
     sw = adder_sweep(adder, by["adder2"]["r80"], by["adder2"]["r160"])
-    # eigenvalues at the state that limits the step most, for the stability-region plot
+    sw.update(worst_state(adder, sw))
+    sw["total_s"] = time.perf_counter() - t_start
+    if cache is not None:
+        (cache / "all.pkl").write_bytes(pickle.dumps((results, latch, sw)))
+    return _render(out, results, latch, sw, sw["total_s"])
+
+
+def worst_state(adder: S.Scene, sw: dict) -> dict:
+    """Eigenvalues at the state that limits the step most (for the stability-region plot) and the
+    2-omega split of the insulators' forcing along the adder's trajectory."""
     worst = min(sw["stability"], key=lambda s: s["rk4_stable_step_periods"])
     env = envelope.Envelope(adder.model)
     st = V.trajectory_states(adder, 2.0, [worst["period"]])[worst["period"]]
     F = env.forcing(adder.stimulus.at(worst["period"] * P.period + 1e-9))
     eigs = [V.jacobian_eigs(env, st[0][:, b], st[1][:, b], st[2][:, b], F[:, b]) for b in range(16)]
-    sw["eigs_worst"] = np.concatenate(eigs)
-    sw["two_omega"] = {t: V.two_omega_split(adder.model, x[0])
-                       for t, x in V.trajectory_states(adder, 2.0, [2920, 3100, 5800]).items()}
-    sw["Zs2"] = abs(P.k_i - 4 * P.omega ** 2 * P.m_i + 2j * P.omega * P.c_i)
-    sw["total_s"] = time.perf_counter() - t_start
-    if cache is not None:
-        (cache / "all.pkl").write_bytes(pickle.dumps((results, latch, sw)))
-    render(out, results, by, latch, sw, sw["total_s"])
+    return {"eigs_worst": np.concatenate(eigs),
+            "two_omega": {t: V.two_omega_split(adder.model, x[0])
+                          for t, x in V.trajectory_states(adder, 2.0, [2920, 3100, 5800]).items()},
+            "Zs2": abs(P.k_i - 4 * P.omega ** 2 * P.m_i + 2j * P.omega * P.c_i)}
 
 
-def render(out: Path, results, by, latch, sw, total) -> None:
+def _render(out: Path, results, latch, sw, total) -> Path:
+    by = {r["scene"]: r for r in results}
     log("figures")
     fig_chain(by["chain3"], out / "envelope_chain.png")
     fig_adder(by["adder2"], out / "envelope_adder.png")
@@ -374,10 +351,11 @@ def render(out: Path, results, by, latch, sw, total) -> None:
     fig_sweep(sw, out / "envelope_step_sweep.png")
     (out / "envelope.md").write_text(report(results, by, latch, sw, total))
     log(f"wrote {out / 'envelope.md'} ({total / 60:.1f} min)")
+    return out / "envelope.md"
 
 
 def report(results, by, latch, sw, total) -> str:
-    E = simulate.ENVELOPE_STEP
+    E = envelope.DEFAULT_STEP
     worst_amp = max(r["env"][E]["vs80"]["amp_err"] for r in results)
     worst_time = max(r["env"][E]["vs80"]["time_err"] for r in results)
     worst_scene = max(results, key=lambda r: r["env"][E]["vs80"]["time_err"])
@@ -437,14 +415,14 @@ def report(results, by, latch, sw, total) -> str:
     a2_lo, a2_hi = min(a2), max(a2)
     lines = f"""# The envelope model against RK4
 
-Generated by `python benchmarks/envelope_validation.py` (scenes and comparisons in `mech2spice/validate.py`) on
+Generated by `mech2spice report envelope` (scenes and comparisons in `mech2spice/experiments/validate.py`) on
 the **{MACHINE}** (Python {platform.python_version()}), {total / 60:.1f} min in all. The machine is shared with
 other jobs, so the wall times here are indicative only; `reports/performance.md` measures speed properly.
 
 ## Verdict
 
-**Every scene meets both criteria at the default envelope step ({E:g} drive periods, `simulate.ENVELOPE_STEP`;
-`simulate.envelope_step` would lower it below a model's stability bound, which does not bind in any scene here),
+**Every scene meets both criteria at the default envelope step ({E:g} drive periods, `envelope.DEFAULT_STEP`;
+`simulation.envelope_step` would lower it below a model's stability bound, which does not bind in any scene here),
 at 2 periods (the default when this study started) and at 1/2 period**: settled amplitudes within {worst_amp:.1e} u_R of RK4 at 80 steps/period (criterion
 {V.AMP_TOL} u_R), threshold-crossing times within {100 * worst_time:.2f} % (criterion {100 * V.TIME_TOL:.0f} %;
 worst: {worst_scene['scene']}), the same number of crossings in all {ncross} (output, input change, batch member)
@@ -472,7 +450,7 @@ cases that cross the threshold ({mism} mismatches), and the latch sequence decod
 
 All from rest; RK4 at 80 steps/period is the reference the criteria use, RK4 at 160 shows the reference's own
 error. 'time err' = largest relative difference of the first and of the last threshold crossing (the midpoint
-between the bands, `characterise.MID` = {V.MID:.4f} u_R) after each input change, over every output and batch
+between the bands, `scenes.MID` = {S.MID:.4f} u_R) after each input change, over every output and batch
 member that crosses it; 'crossings' counts those cases (in brackets: cases where the two backends cross a
 different number of times, i.e. a hazard one of them misses). 'traj' = largest |envelope - RK4| anywhere on the
 per-period amplitude trajectory (envelope interpolated to RK4's period midpoints), transients included; it has
@@ -485,7 +463,7 @@ no criterion. Settled = mean of the {V.AVG} periods before each input change and
 Scenes: gate_nominal = the 4 nominal input pairs; gate_edge = all 16 pairs of band-edge levels (0.365, 0.67,
 0.92, 1.025 F_R); chain3 = `characterise.cascade` (member 0: inputs 00 -> 10 -> 00 at 1500-period holds;
 members 1-7: band-edge inputs held); fanoutN = `characterise.fanout_test` (driver 00/10, loads' second input
-0/1); adder2 = `report_adder.py` (16 members: inputs 0 for 2900 periods, then (a, b)); latch = the model and
+0/1); adder2 = `reports/adder.py` (16 members: inputs 0 for 2900 periods, then (a, b)); latch = the model and
 schedule of `characterise.latch_sequence` (its 'settled' windows include the ends of the two 800-period store
 pulses, where the output is mid-flight; every other window is settled).
 
@@ -626,7 +604,3 @@ whose sieve runs at 8 periods per step (reports/fidelity.md measures what that c
 ![step sweep](envelope_step_sweep.png)
 """
     return lines
-
-
-if __name__ == "__main__":
-    main()

@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """What every fidelity level costs: RK4 (numba kernel), RK4 (numpy), envelope, ngspice.
 
 Sections (each writes its part of reports/performance.json; reports/performance.md and the charts
@@ -7,22 +6,24 @@ reports/performance_*.png are rebuilt from the whole JSON every time):
   scaling   chains of NOR gates (nor.chain: 6 oscillators per gate, gate k+1 driven by gate k) from
             12 to 12000 oscillators: wall time per simulated period, oscillator-steps/s, peak memory
             (ru_maxrss of a fresh worker process per measurement; ngspice's own process separately).
-  adder     verilog/adder2.v, all 16 input pairs from rest through simulate.run_physical (same settle
+  adder     verilog/adder2.v, all 16 input pairs from rest through simulation.run_physical (same settle
             rule for every backend), one worker per backend, run back to back.
-  sqrt      verilog/sqrt.v (n = 2809, 7 clock cycles) through simulate.run_clocked_physical on the
+  sqrt      verilog/sqrt.v (n = 2809, 7 clock cycles) through simulation.run_clocked_physical on the
             envelope backend; RK4 per-period cost measured on the same model and stimulus over the
             first periods, the whole run estimated from it (or run in full with --sqrt-rk4-full).
   profile   cProfile of envelope.integrate at 400 and 2000 oscillators (and 12000), a timing
             breakdown of the compiled RK4 kernel, and prototypes of the two fixes proposed in the report.
   sieve     (no measurement) the 8-bit processor running the sieve, estimated from the measured
-            per-period costs at 12000 oscillators and simulate.clock_timing's formula.
+            per-period costs at 12000 oscillators and simulation.clock_timing's formula.
 
-usage: python benchmarks/performance.py [--sections scaling,adder,sqrt,profile] [--out reports] [--quick]
-       (~15 min for all sections on a 2-core machine)
+  sqrt_rk4  (only when asked for) the whole sqrt schedule on RK4.
+
+usage: mech2spice report performance [--only SECTION ...] [--out reports] [--quick] [--sqrt-rk4-full]
+       (~15 min for all sections on a 2-core machine).  Each measurement runs in a worker process,
+       `python -m mech2spice.reports.performance --worker SPEC`.
 """
 from __future__ import annotations
 
-import argparse
 import cProfile
 import json
 import math
@@ -37,14 +38,17 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from .. import data
+from ..errors import Mech2SpiceError
+from ._common import SANDBOX, log, out_dir, pyplot, read_json, save_figure, write_json
+from ..experiments.scenes import ADDER_INPUTS, sqrt_steps
 
-MACHINE = "2-core Debian 12 sandbox, shared"
+MACHINE = f"{SANDBOX}, shared"
+SECTIONS = ("scaling", "adder", "sqrt", "cpu", "profile")     # the default run
+EXTRA_SECTIONS = ("sqrt_rk4",)                               # only when named
 GATES = [2, 10, 50, 170, 500, 1000, 2000]           # x 6 oscillators: 12 ... 12000
 SIEVE = {"gates": 2000, "oscillators": 12000, "cycles": 700, "logic_depth": 40}
 NG_LIMIT_S = 240          # a single ngspice measurement predicted beyond this is not run
-SQRT_STEPS = [{"set": {"rst": 1, "n": 2809}, "cycles": 1}, {"set": {"rst": 0}, "cycles": 6}]
 
 # target work per measurement, per backend: periods = clamp(target / oscillators, lo, hi)
 PLAN = {
@@ -68,16 +72,16 @@ def _rss_mb(who=resource.RUSAGE_SELF) -> float:
 
 def _warm_rk4(compiled: bool = True) -> None:
     """Load (or compile) the numba kernel outside the timed region."""
-    from mech2spice.physics import nor
-    from mech2spice.backends import rk4
-    from mech2spice.physics.params import DEFAULT
+    from ..physics import nor
+    from ..backends import rk4
+    from ..physics.params import DEFAULT
     rk4.integrate(nor.single_gate(DEFAULT), 1, compiled=compiled)
 
 
 def _ngspice_with_peak_memory(tmp: Path) -> Path:
     """Make ngspice.run start ngspice under GNU time, which writes ngspice's own peak RSS (KiB) to a file.
     (RUSAGE_CHILDREN would report the forking Python's RSS: the child's high-water mark survives exec.)"""
-    from mech2spice.spice import runner as ngspice
+    from ..spice import runner as ngspice
     exe = ngspice.find_ngspice()
     out = tmp / "ngspice_maxrss_kb"
     wrapper = tmp / "ngspice_timed.sh"
@@ -91,9 +95,10 @@ def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, netlis
     """One backend on nor.chain(p, gates), or on a synthesized design (netlist_pickle) with its drives at
     their model amplitudes (inputs '0', clock low): the cost per period does not depend on the values."""
     import numpy as np
-    from mech2spice.physics import envelope, network, nor
-    from mech2spice.backends import rk4
-    from mech2spice.physics.params import DEFAULT as p
+    from ..backends import envelope
+    from ..physics import network, nor
+    from ..backends import rk4
+    from ..physics.params import DEFAULT as p
     if backend.startswith("rk4"):
         _warm_rk4(backend == "rk4")
     t0 = time.perf_counter()
@@ -120,11 +125,11 @@ def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, netlis
         setup = time.perf_counter() - t0
         t0 = time.perf_counter()
         r = envelope.integrate(model, periods, step_periods=step)   # reuses the cached Envelope and kernel
-        A = r.extra["envelope_state"][0]
+        A = r.state[0]
         wall = time.perf_counter() - t0 + setup                     # s_per_period subtracts setup again
         out.update(step_periods=step, final_amp_ur=float(np.abs(A).max() / p.u_r))
     elif backend == "ngspice":
-        from mech2spice.spice import runner as ngspice
+        from ..spice import runner as ngspice
         with tempfile.TemporaryDirectory() as td:
             peak_file = _ngspice_with_peak_memory(Path(td)) if os.path.exists("/usr/bin/time") else None
             t0 = time.perf_counter()
@@ -142,18 +147,18 @@ def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, netlis
 
 
 def task_adder(backend: str, netlist_pickle: str) -> dict:
-    from mech2spice import simulate
-    from mech2spice.backends import logic, _rk4_kernel as rk4_kernel
-    from mech2spice.physics.params import DEFAULT as p
+    from .. import simulation
+    from ..backends import logic, _rk4_kernel as rk4_kernel
+    from ..physics.params import DEFAULT as p
     nl = pickle.loads(Path(netlist_pickle).read_bytes())
-    values = [{"a": a, "b": b} for a in range(4) for b in range(4)]
+    values = list(ADDER_INPUTS)
     if backend == "rk4_numpy":
         rk4_kernel.AVAILABLE = False            # rk4.integrate then takes its numpy path
     if backend in ("rk4", "rk4_numpy"):
         _warm_rk4(backend == "rk4")
     rss0 = _rss_mb()
     t0 = time.perf_counter()
-    res = simulate.run_physical(nl, p, values, "rk4" if backend.startswith("rk4") else backend)
+    res = simulation.run_physical(nl, p, values, "rk4" if backend.startswith("rk4") else backend)
     wall = time.perf_counter() - t0
     correct = sum(r["valid"] and r["outputs"]["s"] == logic.evaluate(nl, v)["s"] for r, v in zip(res, values))
     return {"backend": backend, "wall_s": wall, "periods": res[0]["periods"], "correct": int(correct),
@@ -164,19 +169,19 @@ def task_adder(backend: str, netlist_pickle: str) -> dict:
 
 def task_sqrt(backend: str, netlist_pickle: str, probe_periods: int = 0) -> dict:
     """backend 'envelope': the whole run; 'rk4_probe': RK4 over the first `probe_periods` of the same schedule."""
-    from mech2spice import simulate
-    from mech2spice.physics import network
-    from mech2spice.backends import rk4
-    from mech2spice.physics.params import DEFAULT as p
+    from .. import simulation
+    from ..physics import network
+    from ..backends import rk4
+    from ..physics.params import DEFAULT as p
     nl = pickle.loads(Path(netlist_pickle).read_bytes())
-    cycles = simulate.expand_steps(SQRT_STEPS)
-    timing = simulate.clock_timing(nl)
+    cycles = simulation.expand_steps(sqrt_steps())
+    timing = simulation.clock_timing(nl)
     rss0 = _rss_mb()
     if backend in ("envelope", "rk4"):
         if backend == "rk4":
             _warm_rk4()
         t0 = time.perf_counter()
-        res = simulate.run_clocked_physical(nl, p, cycles, backend, timing)
+        res = simulation.run_clocked_physical(nl, p, cycles, backend, timing)
         wall = time.perf_counter() - t0
         return {"backend": backend, "wall_s": wall, "periods": res["periods"], "valid": res["valid"],
                 "root_trace": [t["outputs"].get("root") for t in res["trace"]], "timing": timing,
@@ -185,7 +190,7 @@ def task_sqrt(backend: str, netlist_pickle: str, probe_periods: int = 0) -> dict
     # RK4 probe: same model and stimulus as run_clocked_physical, first periods only
     _warm_rk4()
     model = network.build(nl, p)
-    segs, reads, total = simulate.clocked_schedule(cycles, timing)
+    segs, reads, total = simulation.clocked_schedule(cycles, timing)
     stim = network.stimulus(model, nl, p, [(t, [v]) for t, v, _ in segs], clock=[[c] for *_, c in segs])
     outs = list(model.probes)
     rk4.integrate(model, 2, stimulus=stim, probes=outs)
@@ -199,9 +204,10 @@ def task_sqrt(backend: str, netlist_pickle: str, probe_periods: int = 0) -> dict
 
 def task_profile(gates_list: list[int]) -> dict:
     import numpy as np
-    from mech2spice.physics import envelope, nor
-    from mech2spice.backends import rk4, _rk4_kernel as rk4_kernel
-    from mech2spice.physics.params import DEFAULT as p
+    from ..backends import envelope
+    from ..physics import nor
+    from ..backends import rk4, _rk4_kernel as rk4_kernel
+    from ..physics.params import DEFAULT as p
     out = {"envelope": [], "rk4": []}
     for gates in gates_list:
         model = nor.chain(p, gates)
@@ -227,7 +233,7 @@ def task_profile(gates_list: list[int]) -> dict:
         for name, fn in {"`-self.Ks @ s` as written in rhs (negates the matrix every call)": lambda: -env.Ks @ s,
                          "`-(self.Ks @ s)`": lambda: -(env.Ks @ s), "`negK @ s` (negated once)": lambda: negK @ s,
                          "Cs @ sd": lambda: env.Cs @ s,
-                         "B^-1 solve (SuperLU)": lambda: env._Bsolve(A),
+                         "B^-1 solve (SuperLU)": lambda: env.solve_rate(A),
                          "residual_fast": lambda: env.residual_fast(A, s, A),
                          "slow_force": lambda: env.slow_force(A),
                          "whole rhs": lambda: env.rhs(A, s, s, A)}.items():
@@ -363,13 +369,13 @@ def _fused_run():
 
 
 def task_logic(netlist_pickle: str, steps: list | None = None) -> dict:
-    from mech2spice import simulate
+    from .. import simulation
     nl = pickle.loads(Path(netlist_pickle).read_bytes())
-    cycles = simulate.expand_steps(steps or SQRT_STEPS)
+    cycles = simulation.expand_steps(steps or sqrt_steps())
     t0 = time.perf_counter()
     reps = 20
     for _ in range(reps):
-        res = simulate.run_clocked_logic(nl, cycles)
+        res = simulation.run_clocked_logic(nl, cycles)
     wall = (time.perf_counter() - t0) / reps
     return {"backend": "logic", "wall_s": wall, "cycles": len(cycles), "s_per_cycle": wall / len(cycles),
             "gates": len(nl.gates()), "latches": len(nl.latches()), "root": res["outputs"].get("root")}
@@ -390,8 +396,8 @@ def spawn(task: str, timeout: float = 1500, **kw) -> dict:
     spec = json.dumps({"task": task, **kw})
     t0 = time.perf_counter()
     try:
-        r = subprocess.run([sys.executable, __file__, "--worker", spec], capture_output=True, text=True,
-                           timeout=timeout, cwd=ROOT)
+        r = subprocess.run([sys.executable, "-m", "mech2spice.reports.performance", "--worker", spec],
+                           capture_output=True, text=True, timeout=timeout, env=_worker_env())
     except subprocess.TimeoutExpired:
         return {"failed": f"timed out after {timeout:.0f} s", **kw}
     line = next((ln for ln in r.stdout.splitlines()[::-1] if ln.startswith("@@RESULT@@")), None)
@@ -402,12 +408,16 @@ def spawn(task: str, timeout: float = 1500, **kw) -> dict:
     return out
 
 
+def _worker_env() -> dict:
+    """This environment, with the directory holding this mech2spice package first on PYTHONPATH, so the
+    worker imports the same code whatever its working directory."""
+    root = str(Path(__file__).resolve().parents[2])
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
+
+
 # ==================================================================================================
 # driver side
 # ==================================================================================================
-def log(msg: str) -> None:
-    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
-
 
 def periods_for(backend: str, n_osc: int, quick: bool) -> int:
     target, lo, hi = PLAN[backend]
@@ -493,16 +503,16 @@ def fits(rows: list[dict]) -> dict:
     return out
 
 
-def _netlist_pickle(path: str, tmp: Path) -> str:
-    from mech2spice.synthesis import synth
-    nl = synth.synthesize(ROOT / path)
-    f = tmp / (Path(path).stem + ".pkl")
+def _netlist_pickle(name: str, tmp: Path) -> str:
+    from ..synthesis import synth
+    nl = synth.synthesize(data.verilog(name))
+    f = tmp / (Path(name).stem + ".pkl")
     f.write_bytes(pickle.dumps(nl))
     return str(f)
 
 
 def section_adder(tmp: Path) -> dict:
-    nlp = _netlist_pickle("verilog/adder2.v", tmp)
+    nlp = _netlist_pickle("adder2.v", tmp)
     rows = {}
     # envelope first and last: the ratio to RK4 is taken against their mean (shared machine)
     for backend in ("envelope", "rk4", "rk4_numpy", "ngspice", "envelope"):
@@ -518,7 +528,7 @@ def section_adder(tmp: Path) -> dict:
 
 
 def section_sqrt(tmp: Path, full_rk4: bool) -> dict:
-    nlp = _netlist_pickle("verilog/sqrt.v", tmp)
+    nlp = _netlist_pickle("sqrt.v", tmp)
     log("sqrt on the envelope backend (whole run)")
     env = spawn("sqrt", backend="envelope", netlist_pickle=nlp)
     log(f"  {env.get('wall_s', float('nan')):.1f} s, roots {env.get('root_trace')}")
@@ -537,14 +547,14 @@ def section_sqrt(tmp: Path, full_rk4: bool) -> dict:
 
 def section_cpu(tmp: Path, quick: bool) -> dict:
     """Per-period cost of every backend on the real processor model (verilog/cpu.v), for the sieve estimate."""
-    from mech2spice.physics import network
-    from mech2spice.synthesis import synth
-    from mech2spice.physics.params import DEFAULT as p
-    nlp = _netlist_pickle("verilog/cpu.v", tmp)
+    from ..physics import network
+    from ..synthesis import synth
+    from ..physics.params import DEFAULT as p
+    nlp = _netlist_pickle("cpu.v", tmp)
     nl = pickle.loads(Path(nlp).read_bytes())
     model = network.build(nl, p)
-    from mech2spice import simulate
-    timing = simulate.clock_timing(nl)
+    from .. import simulation
+    timing = simulation.clock_timing(nl)
     out = {"oscillators": model.n, "gate_blocks": model.n // 6, "logic_gates": len(nl.gates()),
            "latches": len(nl.latches()), "logic_depth": timing["logic_depth"], "timing": timing, "rows": []}
     del synth
@@ -582,18 +592,19 @@ SIEVE_CPU_CYCLES = 457     # programs/sieve.asm on verilog/cpu.v: cycles to halt
 
 
 def _clocked_periods(depth: int, cycles: int) -> dict:
-    """simulate.clock_timing's pulse and pause for a logic depth, and simulate.clocked_schedule's total."""
-    from mech2spice import simulate
-    pulse = int(1.6 * simulate.LATCH_MIN_PULSE)
-    pause = simulate.LATCH_OUTPUT_DELAY - pulse + simulate.GATE_DELAY_MAX * (depth + 1) + simulate.SETTLE_MARGIN
+    """simulation.clock_timing's pulse and pause for a logic depth, and simulation.clocked_schedule's total."""
+    from .. import simulation
+    pulse = int(1.6 * simulation.LATCH_MIN_PULSE)
+    pause = simulation.LATCH_OUTPUT_DELAY - pulse + simulation.GATE_DELAY_MAX * (depth + 1) + simulation.SETTLE_MARGIN
     return {"pulse": pulse, "pause": pause, "periods_per_cycle": pulse + pause, "cycles": cycles,
             "logic_depth": depth, "total_periods": pause + cycles * (pulse + pause)}
 
 
-def sieve_estimate(res: dict) -> dict:
+def sieve_estimate(res: dict, directory: Path) -> dict:
     """Wall time of the sieve at every fidelity: (a) the issue's processor (12000 oscillators, 700 cycles,
     depth 40) from the 12000-oscillator chain measurements; (b) this repository's verilog/cpu.v (457 cycles,
-    its own depth) from measurements on the cpu.v model itself."""
+    its own depth) from measurements on the cpu.v model itself, and the whole physical run from
+    DIRECTORY/cpu_physical.json where there is one."""
     out = {}
     sc = res.get("scaling", {})
     a = _clocked_periods(SIEVE["logic_depth"], SIEVE["cycles"])
@@ -636,15 +647,13 @@ def sieve_estimate(res: dict) -> dict:
             est["envelope_dense"] = {"s_per_period": old, "how": "measured on the cpu.v model before commit c97a5be "
                                      "(dense slow block), 300 periods, step 1 T"}
         out["cpu_v"] = {**b, "oscillators": cpu["oscillators"], "estimates": _totals(est, b)}
-        phys = ROOT / "reports" / "cpu_physical.json"       # the whole run, measured (scripts/cpu_physical.py)
-        if phys.exists():
-            r = json.loads(phys.read_text())
-            if r.get("halted") and not r.get("resumed"):
-                out["cpu_v"]["estimates"]["envelope_settle"] = {
-                    "total_s": r["wall_s"], "s_per_cycle": r["s_per_cycle"],
-                    "how": f"**measured**: the whole run to the halt ({r['cycles']} cycles, `{r['command']}`, "
-                           f"reports/cpu_physical.md); {r['simulated_periods']:,} of {r['periods']:,} periods "
-                           f"integrated"}
+        r = read_json(Path(directory) / "cpu_physical.json", {})     # the whole run, measured (cpu_physical)
+        if r.get("halted") and not r.get("resumed"):
+            out["cpu_v"]["estimates"]["envelope_settle"] = {
+                "total_s": r["wall_s"], "s_per_cycle": r["s_per_cycle"],
+                "how": f"**measured**: the whole run to the halt ({r['cycles']} cycles, `{r['command']}`, "
+                       f"reports/cpu_physical.md); {r['simulated_periods']:,} of {r['periods']:,} periods "
+                       f"integrated"}
     return out
 
 
@@ -661,9 +670,7 @@ def _totals(est: dict, sched: dict) -> dict:
 # report
 # ==================================================================================================
 def charts(res: dict, out: Path) -> list[str]:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     made = []
     rows = res.get("scaling", {}).get("rows", [])
     if rows:
@@ -692,9 +699,7 @@ def charts(res: dict, out: Path) -> list[str]:
         axs[0].legend(fontsize=7)
         axs[2].legend(fontsize=7)
         fig.suptitle(f"chains of NOR gates, {MACHINE}")
-        fig.tight_layout()
-        fig.savefig(out / "performance_scaling.png", dpi=90)
-        plt.close(fig)
+        save_figure(fig, out / "performance_scaling.png", dpi=90)
         made.append("performance_scaling.png")
     ad = res.get("adder", {}).get("rows", {})
     sv = {f"{k} ({w})": v for w, blk in res.get("sieve", {}).items() for k, v in blk["estimates"].items()}
@@ -712,9 +717,7 @@ def charts(res: dict, out: Path) -> list[str]:
         axs[1].set(xlabel="estimated wall time [days]", title="sieve on an 8-bit processor (estimate)")
         for i, k in enumerate(names):
             axs[1].annotate(_dur(sv[k]["total_s"]), (sv[k]["total_s"] / 86400, i), fontsize=8)
-        fig.tight_layout()
-        fig.savefig(out / "performance_designs.png", dpi=90)
-        plt.close(fig)
+        save_figure(fig, out / "performance_designs.png", dpi=90)
         made.append("performance_designs.png")
     return made
 
@@ -733,55 +736,59 @@ def _dur(s: float) -> str:
     return f"{s / 86400 / 365:.1f} years"
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--worker")
-    ap.add_argument("--sections", default="scaling,adder,sqrt,cpu,profile")
-    ap.add_argument("--out", default="reports")
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--sqrt-rk4-full", action="store_true", help="also run the whole sqrt schedule on RK4")
-    args = ap.parse_args()
-    if args.worker:
-        worker(args.worker)
-        return
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+def write(directory="reports", only=None, quick: bool = False, sqrt_rk4_full: bool = False,
+          render: bool = False) -> Path:
+    """Measure the sections in `only` (default: all but sqrt_rk4; `quick`: fewer points; `render`: none),
+    merge them into performance.json and rebuild performance.md and its charts from the whole JSON."""
+    sections = [] if render else _sections(only)
+    out = out_dir(directory)
     jf = out / "performance.json"
-    res = json.loads(jf.read_text()) if jf.exists() else {}
+    res = read_json(jf, {})
     res["machine"] = MACHINE
     res["platform"] = {"python": platform.python_version(), "cpus": os.cpu_count(), "machine": platform.machine()}
     with tempfile.TemporaryDirectory() as td:
-        tmp = Path(td)
-        for sec in args.sections.split(","):
+        for sec in sections or [""]:          # none: the sieve estimate and the report from the JSON
             t0 = time.perf_counter()
-            if sec == "scaling":
-                res["scaling"] = section_scaling(args.quick)
-            elif sec == "adder":
-                res["adder"] = section_adder(tmp)
-            elif sec == "sqrt":
-                res["sqrt"] = section_sqrt(tmp, args.sqrt_rk4_full)
-            elif sec == "profile":
-                res["profile"] = section_profile()
-            elif sec == "sqrt_rk4":
-                log("sqrt on RK4 (whole run)")
-                res.setdefault("sqrt", {})["rk4"] = spawn("sqrt", backend="rk4",
-                                                          netlist_pickle=_netlist_pickle("verilog/sqrt.v", tmp),
-                                                          timeout=2400)
-                log(f"  {res['sqrt']['rk4'].get('wall_s', float('nan')) / 60:.1f} min")
-            elif sec == "cpu":
-                res["cpu"] = section_cpu(tmp, args.quick)
-            elif sec:
-                raise SystemExit(f"unknown section {sec}")
             if sec:
+                res.update(_section(sec, res, Path(td), quick, sqrt_rk4_full))
                 res.setdefault("section_wall_s", {})[sec] = time.perf_counter() - t0
-            res["sieve"] = sieve_estimate(res)
-            jf.write_text(json.dumps(res, indent=1, default=float))
+            res["sieve"] = sieve_estimate(res, out)
+            write_json(jf, res, default=float)
     made = charts(res, out)
-    render(res, out, made)
+    write_markdown(res, out, made)
     log(f"wrote {jf}, {out / 'performance.md'}")
+    return out / "performance.md"
 
 
-def render(res: dict, out: Path, charts_made: list[str]) -> None:
+def _sections(only) -> list[str]:
+    """The sections to measure, in the order given; unknown names are an error."""
+    wanted = list(SECTIONS if only is None else only)
+    bad = [s for s in wanted if s not in SECTIONS + EXTRA_SECTIONS]
+    if bad:
+        raise Mech2SpiceError(f"performance: unknown section {', '.join(bad)} "
+                              f"(choose from {', '.join(SECTIONS + EXTRA_SECTIONS)})")
+    return wanted
+
+
+def _section(sec: str, res: dict, tmp: Path, quick: bool, sqrt_rk4_full: bool) -> dict:
+    """One section's measurements, as the JSON keys they replace."""
+    if sec == "scaling":
+        return {"scaling": section_scaling(quick)}
+    if sec == "adder":
+        return {"adder": section_adder(tmp)}
+    if sec == "sqrt":
+        return {"sqrt": section_sqrt(tmp, sqrt_rk4_full)}
+    if sec == "profile":
+        return {"profile": section_profile()}
+    if sec == "cpu":
+        return {"cpu": section_cpu(tmp, quick)}
+    log("sqrt on RK4 (whole run)")                 # sqrt_rk4
+    rk = spawn("sqrt", backend="rk4", netlist_pickle=_netlist_pickle("sqrt.v", tmp), timeout=2400)
+    log(f"  {rk.get('wall_s', float('nan')) / 60:.1f} min")
+    return {"sqrt": {**res.get("sqrt", {}), "rk4": rk}}
+
+
+def write_markdown(res: dict, out: Path, charts_made: list[str]) -> None:
     """reports/performance.md from the JSON (filled in below)."""
     (out / "performance.md").write_text(markdown(res, charts_made))
 
@@ -792,7 +799,7 @@ def _f(x, fmt="{:.3g}"):
 
 def markdown(res: dict, charts_made: list[str]) -> str:
     L = ["# Performance: what every fidelity level costs", "",
-         f"Generated by `python benchmarks/performance.py` on the **{res['machine']}** (Python "
+         f"Generated by `mech2spice report performance` on the **{res['machine']}** (Python "
          f"{res['platform']['python']}, {res['platform']['cpus']} CPUs, numba kernel single-threaded, ngspice 39 "
          "without KLU). Section wall times: " + ", ".join(f"{k} {v / 60:.1f} min" for k, v in
                                                         res.get("section_wall_s", {}).items()) + ".",
@@ -852,7 +859,7 @@ def _dur_ms(s: float) -> str:
 
 
 ADDER_LABEL = {"rk4": "RK4, numba kernel (80 steps/T)", "rk4_numpy": "RK4, numpy (80 steps/T)",
-               "envelope": "envelope (default step: `simulate.envelope_step`, 4 T here)",
+               "envelope": "envelope (default step: `simulation.envelope_step`, 4 T here)",
                "envelope_again": "envelope, run again after the others",
                "envelope_step4": "what-if: envelope with ENVELOPE_STEP = 4",
                "envelope_step4_cached": "what-if: ENVELOPE_STEP = 4 and one Envelope per run (not per chunk)",
@@ -863,7 +870,7 @@ def adder_md(res: dict) -> list[str]:
     ad = res.get("adder", {}).get("rows", {})
     if not ad:
         return []
-    L = ["## The 2-bit adder: all 16 inputs, `simulate.run_physical`", "",
+    L = ["## The 2-bit adder: all 16 inputs, `simulation.run_physical`", "",
          "`verilog/adder2.v` (17 gates, 102 oscillators), the 16 input pairs as one batch from rest, each backend "
          "in its own worker, one after the other in this run; the settle rule is `run_physical`'s (chunks of 100 "
          "periods until every output moved < 0.002 u_R over 100 periods and sits in a band; ngspice has no cheap "
@@ -902,7 +909,7 @@ def sqrt_md(res: dict) -> list[str]:
     e, pr, lg = sq.get("envelope", {}), sq.get("rk4_probe", {}), sq.get("logic", {})
     L = ["## Square root of 2809 (`verilog/sqrt.v`, 7 clock cycles)", ""]
     if "wall_s" in e:
-        L += [f"`simulate.run_clocked_physical` with `simulate.clock_timing(nl)` (pulse {e['timing']['pulse']}, "
+        L += [f"`simulation.run_clocked_physical` with `simulation.clock_timing(nl)` (pulse {e['timing']['pulse']}, "
               f"pause {e['timing']['pause']} periods, logic depth {e['timing']['logic_depth']}): "
               f"{e['periods']} periods.", "",
               "| backend | wall | per period | result | how |", "|---|---|---|---|---|",
@@ -938,9 +945,9 @@ def sieve_md(res: dict) -> list[str]:
     if not sv:
         return []
     L = ["## The sieve on an 8-bit processor: estimated wall time per fidelity", "",
-         "Clock schedule from `simulate.clock_timing`'s formula: pulse = 1.6 x 500 = 800 periods, pause = "
+         "Clock schedule from `simulation.clock_timing`'s formula: pulse = 1.6 x 500 = 800 periods, pause = "
          "1640 - pulse + 225 x (depth + 1) + 600, total = pause + cycles x (pulse + pause) "
-         "(`simulate.clocked_schedule`). Cost per period measured at the design's size (batch 1) and multiplied "
+         "(`simulation.clocked_schedule`). Cost per period measured at the design's size (batch 1) and multiplied "
          "out; memory for every backend stays far below the machine's (see the scaling table).", ""]
     names = {"issue_processor": "the issue's processor: 12000 oscillators (~2000 NOR blocks), 700 cycles, depth 40",
              "cpu_v": "this repository's `verilog/cpu.v` running `programs/sieve.asm`"}
@@ -1125,5 +1132,7 @@ def DETAIL_HOOK(res):
     return adder_md(res) + sqrt_md(res) + cpu_md(res) + sieve_md(res) + profile_md(res)
 
 
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":             # a measurement worker: python -m mech2spice.reports.performance --worker SPEC
+    if len(sys.argv) != 3 or sys.argv[1] != "--worker":
+        sys.exit("usage: python -m mech2spice.reports.performance --worker SPEC (reports: mech2spice report performance)")
+    worker(sys.argv[2])

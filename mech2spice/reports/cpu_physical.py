@@ -1,28 +1,29 @@
 """The processor at oscillator level against the ISS, cycle by cycle: reports/cpu_physical.md.
 
-Usage: python scripts/cpu_physical.py [--cycles N] [--program programs/sieve.asm] [--backend envelope]
-                                      [--step 4] [--settle TOL] [--checkpoint FILE [--resume]]
+Run: mech2spice report cpu_physical [--cycles N] [--program programs/sieve.asm] [--backend envelope]
+                                    [--step 4] [--settle TOL] [--checkpoint FILE [--resume]] [--name STEM]
 --cycles 0 runs to the halt.  Each cycle's port activity (read address, data, write port) and the
 registers decoded from the latch amplitudes are compared with the ISS; the run stops at the first
 disagreement.  The run goes through `run_program` (checkpoints every 10 cycles with --checkpoint, so an
 interrupted run continues with --resume); the figures come from the physical run's own trace.
-The fidelity table comes from benchmarks/fidelity.py (reports/fidelity.json) when present.
+The fidelity table comes from `mech2spice report fidelity` (fidelity.json beside the report) when present.
 """
-import argparse
+from __future__ import annotations
+
 import json
-import platform
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-import matplotlib
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+from .. import data
+from ..cpu import run as R
+from ..cpu.iss import ISS
+from ..cpu.physical import PROCESSOR_STEP as ENVELOPE_STEP, SETTLE_TOL as SETTLE
+from ..errors import Mech2SpiceError
+from ._common import HOST, out_dir, pyplot, read_json, save_figure, write_json
+from .cpu import fig_sieve, plot_traffic, sieve_moments
 
-from mech2spice.cpu import figures  # noqa: E402
-from mech2spice.cpu import run as R  # noqa: E402
-from mech2spice.cpu.iss import ISS  # noqa: E402
-from mech2spice.cpu.physical import ENVELOPE_STEP, SETTLE  # noqa: E402
-from mech2spice.errors import Mech2SpiceError  # noqa: E402
+plt = pyplot()
 
 PAPER_CYCLES, PAPER_WALL = 719, "50 h 22 min"
 
@@ -64,21 +65,14 @@ class Tracker:
 
 def fig_activity(rows, path: Path, backend: str) -> None:
     fig, ax = plt.subplots(figsize=(10, 3.4))
-    ax.plot([r["cycle"] for r in rows], [r["raddr"] for r in rows], ".", ms=2.5, color="tab:green",
-            label="read address (decoded from amplitudes)")
-    w = [r for r in rows if r["we"]]
-    ax.plot([r["cycle"] for r in w], [r["waddr"] for r in w], "s", ms=3.5, color="tab:red", label="write address")
+    plot_traffic(ax, ((r["cycle"], r["raddr"], r["we"], r["waddr"]) for r in rows),
+                 "read address (decoded from amplitudes)")
     ax2 = ax.twinx()
     ax2.plot([r["cycle"] for r in rows], [r["wall_s"] for r in rows], lw=0.6, color="0.4")
     ax2.set_ylabel("wall time per cycle (s)", color="0.4")
-    ax.axhspan(128, 159, color="0.9", zorder=0)
-    ax.set_xlabel("clock cycle")
-    ax.set_ylabel("address")
     ax.legend(loc="upper left", fontsize=8)
     ax.set_title(f"{backend} fidelity: memory traffic per cycle (grey: the sieve's primality array)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    save_figure(fig, path, dpi=130)
 
 
 def devices_md(res: dict) -> str:
@@ -92,11 +86,11 @@ def devices_md(res: dict) -> str:
 
 
 def fidelity_section(path: Path) -> str:
-    """The processor table of benchmarks/fidelity.py (reports/fidelity.json), when it has been run."""
-    if not path.exists() or "cpu" not in json.loads(path.read_text()):
+    """The processor table of `mech2spice report fidelity` (fidelity.json), when it has been run."""
+    d = read_json(path, {})
+    if "cpu" not in d:
         return ""
-    d = json.loads(path.read_text())
-    lines = [f"\n## What each speed-up costs (`python benchmarks/fidelity.py`, [fidelity.md](fidelity.md))\n",
+    lines = ["\n## What each speed-up costs (`mech2spice report fidelity`, [fidelity.md](fidelity.md))\n",
              f"The first {d['cycles']} sieve cycles under each setting, side by side in one run on the "
              f"{d['machine']}. *Amplitude difference*: the largest difference of any probed amplitude (the "
              "output bits and all 43 latch outputs) at the end of each cycle against the reference setting; "
@@ -111,54 +105,95 @@ def fidelity_section(path: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cycles", type=int, default=0, help="cycles to run (0: to the halt)")
-    ap.add_argument("--program", default="programs/sieve.asm")
-    ap.add_argument("--backend", default="envelope", choices=["envelope", "rk4"])
-    ap.add_argument("--step", type=float, default=ENVELOPE_STEP)
-    ap.add_argument("--settle", type=float, default=SETTLE)
-    ap.add_argument("--checkpoint", default=None)
-    ap.add_argument("--resume", action="store_true")
-    ap.add_argument("--out", default="reports")
-    ap.add_argument("--name", default="cpu_physical", help="report file stem (default cpu_physical)")
-    a = ap.parse_args()
-    out = Path(a.out)
-    sieve = Path(a.program).name == "sieve.asm"
-    prog = R.load_program(a.program)
-    tracker = Tracker(prog)
+def write(directory="reports", cycles: int = 0, program: str = "programs/sieve.asm", backend: str = "envelope",
+          step: float = ENVELOPE_STEP, settle: float = SETTLE, checkpoint=None, resume: bool = False,
+          name: str = "cpu_physical") -> Path:
+    """Run `program` on the oscillators (`cycles` 0: to its halt), compare every cycle with the ISS and write
+    NAME.md, NAME.json and the figures."""
+    a = Options(cycles, program, backend, step, settle, checkpoint, resume, name)
+    out = out_dir(directory)
+    tracker = Tracker(R.load_program(a.path))
     if a.resume:
-        tracker.fast_forward(json.loads(Path(a.checkpoint).read_text())["cycle"])
-    physical = {"step": a.step, "settle": a.settle or None} if a.backend == "envelope" else {}
+        tracker.fast_forward(read_json(a.checkpoint)["cycle"])
     t0 = time.perf_counter()
-    try:
-        res = R.run_program(a.program, a.backend, a.cycles or 100_000, checkpoint=a.checkpoint,
-                            resume=a.resume, trace=tracker, **physical)
-    except Mech2SpiceError as err:       # keep what was measured: the rows up to the failure
-        (out / f"{a.name}_failed.md").write_text(f"# Physical run stopped\n\n{err}\n\n" + "\n".join(
-            json.dumps(r) for r in tracker.rows) + "\n")
-        raise SystemExit(f"{err} (rows in {out / (a.name + '_failed.md')})")
+    res = _run(a, tracker, out)
     wall = time.perf_counter() - t0
-    golden = R.run_program(a.program, "iss")
+    golden = R.run_program(a.path, "iss")
     final_same = res["memory"] == golden["memory"] and res["cycles"] == golden["cycles"]
-    moments = figures.sieve_moments(tracker.frames) if res["halted"] and sieve else []
+    moments = sieve_moments(tracker.frames) if res["halted"] and a.sieve else []
     if moments:
-        figures.fig_sieve(tracker.frames, moments, out / "cpu_sieve_physical.png",
-                          f"the processor's oscillators at {a.backend} fidelity ({res.get('simulated_periods', 0):,} periods integrated)")
+        fig_sieve(tracker.frames, moments, out / "cpu_sieve_physical.png",
+                  f"the processor's oscillators at {a.backend} fidelity ({res.get('simulated_periods', 0):,} periods integrated)")
     fig_activity(tracker.rows, out / f"{a.name}_trace.png", a.backend)
     rows = tracker.rows
     per_cycle = sum(r["wall_s"] for r in rows) / max(len(rows), 1)
-    primes = [n for n in range(2, 32) if res["memory"][128 + n] == 0] if sieve else None
-    cmd = (f"python scripts/cpu_physical.py --cycles {a.cycles} --backend {a.backend}"
-           + ("" if sieve else f" --program {a.program} --name {a.name}")
-           + (f" --step {a.step:g} --settle {a.settle}" if a.backend == "envelope" else ""))
+    primes = [n for n in range(2, 32) if res["memory"][128 + n] == 0] if a.sieve else None
+    cmd = _command(a)
+    (out / f"{a.name}.md").write_text(_markdown(a, res, tracker, cmd, wall, per_cycle, primes, final_same,
+                                                moments, out))
+    summary = {**res, "agree_every_cycle": tracker.agree, "final_memory_equals_iss": final_same,
+               "wall_s": wall, "s_per_cycle": per_cycle, "primes": primes, "command": cmd,
+               "resumed": a.resume, "machine": f"{HOST}, 2 cores (shared)"}
+    write_json(out / f"{a.name}.json", summary, default=None)
+    print(out / f"{a.name}.md", f"{wall:.0f} s")
+    return out / f"{a.name}.md"
+
+
+@dataclass
+class Options:
+    """One physical run's settings, as given (the program as named, for the report's text)."""
+    cycles: int
+    program: str
+    backend: str
+    step: float
+    settle: float
+    checkpoint: str | None
+    resume: bool
+    name: str
+
+    def __post_init__(self):
+        if self.backend not in ("envelope", "rk4"):
+            raise Mech2SpiceError(f"cpu_physical: backend must be envelope or rk4, not {self.backend!r}")
+
+    @property
+    def path(self) -> Path:
+        """The program file: as given, else the package's copy of a program of that name."""
+        p = Path(self.program)
+        return p if p.exists() else data.program(p.name)
+
+    @property
+    def sieve(self) -> bool:
+        return Path(self.program).name == "sieve.asm"
+
+
+def _run(a: Options, tracker: Tracker, out: Path) -> dict:
+    """The physical run; on a failure the rows measured up to it go to NAME_failed.md."""
+    physical = {"step": a.step, "settle": a.settle or None} if a.backend == "envelope" else {}
+    try:
+        return R.run_program(a.path, a.backend, a.cycles or 100_000, checkpoint=a.checkpoint,
+                             resume=a.resume, trace=tracker, **physical)
+    except Mech2SpiceError as err:       # keep what was measured: the rows up to the failure
+        (out / f"{a.name}_failed.md").write_text(f"# Physical run stopped\n\n{err}\n\n" + "\n".join(
+            json.dumps(r) for r in tracker.rows) + "\n")
+        raise Mech2SpiceError(f"{err} (rows in {out / (a.name + '_failed.md')})") from None
+
+
+def _command(a: Options) -> str:
+    """The command that reproduces this run."""
+    return (f"mech2spice report cpu_physical --cycles {a.cycles} --backend {a.backend}"
+            + ("" if a.sieve else f" --program {a.program} --name {a.name}")
+            + (f" --step {a.step:g} --settle {a.settle}" if a.backend == "envelope" else ""))
+
+
+def _markdown(a: Options, res, tracker, cmd, wall, per_cycle, primes, final_same, moments, out) -> str:
+    sieve, rows = a.sieve, tracker.rows
     paper_wall = f" (the paper's sieve run: {PAPER_WALL})" if sieve else ""
     settle_txt = (f"each pause ends once every channel has stayed within {a.settle} u_R for two 200-period "
-                  "windows (`envelope.integrate(settle=...)`; pulses always run in full)" if a.settle else
+                  "windows (`envelope.integrate(settle_tol=...)`; pulses always run in full)" if a.settle else
                   "fixed-length pauses")
-    text = f"""# The processor at oscillator level ({a.backend})
+    return f"""# The processor at oscillator level ({a.backend})
 
-Generated by `{cmd}` on {platform.machine()} {platform.system()}, 2 cores (shared with other jobs),
+Generated by `{cmd}` on {HOST}, 2 cores (shared with other jobs),
 program `{a.program}`{' (resumed from a checkpoint: wall time is this session only)' if a.resume else ''}.
 
 `verilog/cpu.v` synthesised with the fan-out limit: 6486 oscillators. Simulated at {a.backend} fidelity
@@ -189,13 +224,3 @@ commits writes at the clock edge (`mech2spice/cpu/physical.py`). Every cycle is 
 """ + "\n".join(f"| {r['cycle']} | {r['pc']} | {r['instr']} | {r['raddr']} | {r['rdata']} | {r['we']} | "
                 f"{r['waddr']} | {r['wdata']} | {'yes' if r['same'] else 'NO'} | {r['wall_s']:.1f} |"
                 for r in rows) + "\n\n</details>\n"
-    (out / f"{a.name}.md").write_text(text)
-    summary = {**res, "agree_every_cycle": tracker.agree, "final_memory_equals_iss": final_same,
-               "wall_s": wall, "s_per_cycle": per_cycle, "primes": primes, "command": cmd,
-               "resumed": a.resume, "machine": f"{platform.machine()} {platform.system()}, 2 cores (shared)"}
-    (out / f"{a.name}.json").write_text(json.dumps(summary, indent=1))
-    print(out / f"{a.name}.md", f"{wall:.0f} s")
-
-
-if __name__ == "__main__":
-    main()

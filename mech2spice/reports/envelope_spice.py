@@ -1,8 +1,8 @@
-#!/usr/bin/env python3
-"""ngspice on the envelope equations (mech2spice/spice_envelope.py): speed vs accuracy, failure points, scaling.
+"""ngspice on the envelope equations (mech2spice/spice/envelope.py): speed vs accuracy, failure points, scaling.
 
-Sections (all written to reports/envelope_spice.json, the chart reports/speed_accuracy_envelope_spice.png
-and a marked section of reports/speed_accuracy.md):
+Not a report of its own: the envelope-spice sections of `mech2spice report speed_accuracy`, which is the one
+writer of speed_accuracy.md and puts `block()` at its end.  Sections (written to envelope_spice.json and the
+chart speed_accuracy_envelope_spice.png beside the report):
   accuracy  the NOR gate (4 nominal input pairs, 2500 periods from rest), chain(3) (8 members, inputs
             00 -> 10 -> 00 and band-edge levels, 4500 periods) and the 2-bit adder (4 of its 16 input pairs,
             2900 periods at 0 then (a, b), 5800 periods): ngspice-envelope at max steps 8..0.5 periods x
@@ -15,18 +15,16 @@ and a marked section of reports/speed_accuracy.md):
             for 50 and 2500 periods; ngspice carrier-level from reports/speed_accuracy.json ('scaling', 50
             periods; its 2500-period cost extrapolated linearly, as its step is pinned).
 
-usage: python benchmarks/envelope_spice.py [--quick] [--out reports] [--render]
+usage: mech2spice report speed_accuracy --only envelope_spice [--quick]       # all three sections
+       mech2spice report speed_accuracy --only envelope_spice.scaling       # one, merged into the JSON
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import platform
 import re
 import subprocess
-import sys
 import tempfile
 import time
 from dataclasses import asdict
@@ -34,16 +32,18 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from mech2spice import simulate
-from mech2spice.physics import envelope, nor  # noqa: E402
-from mech2spice.spice import envelope as se  # noqa: E402
-from mech2spice.experiments import validate as V  # noqa: E402
-from mech2spice.errors import Mech2SpiceError  # noqa: E402
-from mech2spice.physics.params import DEFAULT, NOMINAL0  # noqa: E402
-from mech2spice.physics.stimulus import Stimulus  # noqa: E402
+from ..errors import Mech2SpiceError
+from ..experiments import validate as V
+from ..experiments import scenes as S
+from ..physics import nor
+from ..backends import envelope
+from ..physics.params import DEFAULT, NOMINAL0
+from ..physics.stimulus import Stimulus
+from ..spice import envelope as se
+from ._common import SANDBOX, log, pyplot, read_json, save_figure, write_json
 
-MACHINE = "2-core Debian 12 sandbox, shared"
+MACHINE = f"{SANDBOX}, shared"
+SECTIONS = ("accuracy", "failures", "scaling")
 P = DEFAULT
 REF_STEP = 0.125                 # periods: the Python envelope reference
 CHECK_STEP = 0.25                # the reference's own error: against this step
@@ -59,23 +59,18 @@ ACCT_MIN_GATES = 170             # sizes whose 2500-period run is repeated under
 WORKERS = 2
 STALL_TIMEOUT = 20.0             # s per ngspice process in the PWL-stall experiment (normal runs: < 4 s)
 BEGIN, END = "<!-- envelope-spice:begin -->", "<!-- envelope-spice:end -->"
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def log(msg: str) -> None:
-    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
 
 # --- scenes ------------------------------------------------------------------------------------------
-def subset(sc: V.Scene, members: list[int]) -> V.Scene:
+def subset(sc: S.Scene, members: list[int]) -> S.Scene:
     st = Stimulus(sc.stimulus.times, sc.stimulus.amps[:, :, members])
-    return V.Scene(sc.name, sc.model, st, sc.periods, sc.probes, [sc.members[k] for k in members], sc.events,
+    return S.Scene(sc.name, sc.model, st, sc.periods, sc.probes, [sc.members[k] for k in members], sc.events,
                    sc.windows, sc.description + f" (members {', '.join(sc.members[k] for k in members)})")
 
 
-def scenes(quick: bool) -> dict[str, V.Scene]:
-    out = {"nor_gate": V.gate_scene(P, "nominal"), "chain3": V.chain_scene(P),
-           "adder": subset(V.adder_scene(P), ADDER_MEMBERS)}
+def scenes(quick: bool) -> dict[str, S.Scene]:
+    out = {"nor_gate": S.gate_scene(P, "nominal"), "chain3": S.chain_scene(P),
+           "adder": subset(S.adder_scene(P), ADDER_MEMBERS)}
     if quick:
         out["chain3"] = subset(out["chain3"], [0, 1])
         out["adder"] = subset(out["adder"], [2])
@@ -83,7 +78,7 @@ def scenes(quick: bool) -> dict[str, V.Scene]:
 
 
 # --- runners -----------------------------------------------------------------------------------------
-def run_spice(sc: V.Scene, opts: se.EnvelopeSpiceOptions, timeout: float | None = None) -> dict:
+def run_spice(sc: S.Scene, opts: se.EnvelopeSpiceOptions, timeout: float | None = None) -> dict:
     """ngspice-envelope on every member (WORKERS processes at a time); amplitudes in u_R at each period's
     end, like validate.run's envelope samples.  wall_s: the sum of the processes' own times (one-core
     cost); elapsed_s: the wall clock with WORKERS processes."""
@@ -100,7 +95,7 @@ def run_spice(sc: V.Scene, opts: se.EnvelopeSpiceOptions, timeout: float | None 
             "max_step_used": float(np.max(run.extra["max_step_used_periods"]))}
 
 
-def scored(sc: V.Scene, ref: dict, r: dict) -> dict:
+def scored(sc: S.Scene, ref: dict, r: dict) -> dict:
     if "failed" in r:
         return {"failed": r["failed"]}
     c = V.compare(sc, ref, r)
@@ -182,7 +177,7 @@ def run_text(text: str, timeout: float) -> dict:
             p = subprocess.run(["ngspice", "-b", "-n", "-r", str(raw), str(cir)], capture_output=True, text=True,
                                timeout=timeout, stdin=subprocess.DEVNULL)
         except subprocess.TimeoutExpired:
-            from mech2spice.spice.runner import read_raw
+            from ..spice.runner import read_raw
             out = {"stalled": True, "wall_s": time.perf_counter() - t0}
             if raw.exists() and raw.stat().st_size:
                 _, data = read_raw(raw)
@@ -198,7 +193,7 @@ def run_text(text: str, timeout: float) -> dict:
 
 
 def failures(quick: bool) -> dict:
-    sc = V.adder_scene(P)
+    sc = S.adder_scene(P)
     out = {"pwl_stall": [], "large_steps": {}}
     members = [1, 15] if not quick else [1]
     log(f"[failures] PWL vs smooth drive steps, adder members {members}")
@@ -237,7 +232,7 @@ def gate_array(n: int):
 def acct(model, periods: int, opts, drop_b: bool = False) -> dict:
     """ngspice's own accounting (.options acct) of one run: where its time goes.  drop_b: the same netlist
     without its B sources (a linear circuit, physically meaningless: a cost probe only)."""
-    from mech2spice.spice.runner import run_netlist
+    from ..spice.runner import run_netlist
     text = se.emit_envelope(model, None, periods, opts).replace(".options ", ".options acct ", 1)
     if drop_b:
         text = "\n".join(ln for ln in text.splitlines() if not ln.startswith("B")) + "\n"
@@ -258,13 +253,15 @@ def acct(model, periods: int, opts, drop_b: bool = False) -> dict:
     return out
 
 
-def scaling(quick: bool) -> dict:
+def scaling(quick: bool, directory: Path) -> dict:
+    """Independent NOR gates on ngspice-envelope and the Python envelope; the carrier-level times come
+    from DIRECTORY/speed_accuracy.json."""
     carrier = {}
     try:
-        sa = json.loads((ROOT / "reports" / "speed_accuracy.json").read_text())["scaling"]
+        sa = read_json(Path(directory) / "speed_accuracy.json")["scaling"]
         carrier = {"periods": sa["periods"], "options": sa["ngspice_options"],
                    "rows": {r["oscillators"]: r["ngspice_s"] for r in sa["rows"]}}
-    except (OSError, KeyError, ValueError):
+    except (OSError, KeyError, TypeError, ValueError):
         pass
     rows = []
     opts = se.EnvelopeSpiceOptions()
@@ -272,7 +269,7 @@ def scaling(quick: bool) -> dict:
         m = gate_array(n)
         t0 = time.perf_counter()
         envelope.Envelope.of(m)          # the operator both backends read (cached on the model)
-        step = simulate.envelope_step(m)
+        step = envelope.default_step(m)
         row = {"gates": n, "oscillators": m.n, "python_step": step, "operator_s": time.perf_counter() - t0}
         envelope.integrate(m, 1, step_periods=1.0)     # the compiled loop's per-model set-up, outside timing
         for per in SCALING_PERIODS:
@@ -298,9 +295,7 @@ def scaling(quick: bool) -> dict:
 
 # --- output ----------------------------------------------------------------------------------------------
 def charts(res: dict, out: Path) -> str:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     acc = res["accuracy"]
     fig, axes = plt.subplots(2, 2, figsize=(12, 9.5))
     axes = axes.ravel()
@@ -343,10 +338,8 @@ def charts(res: dict, out: Path) -> str:
            title=f"scaling ({MACHINE})")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=6)
-    fig.tight_layout()
     path = out / "speed_accuracy_envelope_spice.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return path.name
 
 
@@ -363,7 +356,7 @@ def render(res: dict) -> str:
     acc, fail, sc = res["accuracy"], res.get("failures", {}), res["scaling"]
     o = asdict(se.EnvelopeSpiceOptions())
     L = [BEGIN, "## SPICE on the envelope equations (ngspice-envelope)", "",
-         f"Measured by `benchmarks/envelope_spice.py` on the **{MACHINE}** (Python {res['python']}, ngspice 39, "
+         f"Measured by `mech2spice report speed_accuracy --only envelope_spice` on the **{MACHINE}** (Python {res['python']}, ngspice 39, "
          f"no KLU); total script time {res['total_wall_s'] / 60:.1f} min; load average {res['load_before']} before, "
          f"{res['load_after']} after (other jobs shared the two cores: read wall times as +-25 %)"
          + (f"; sections {', '.join(res['rerun_sections'])} re-measured alone afterwards (last rerun "
@@ -581,60 +574,43 @@ def render(res: dict) -> str:
     return "\n".join(L) + "\n"
 
 
-def insert_section(md_path: Path, block: str) -> None:
-    text = md_path.read_text() if md_path.exists() else ""
-    if BEGIN in text and END in text:
-        a, b = text.index(BEGIN), text.index(END) + len(END)
-        text = text[:a] + block.rstrip("\n") + text[b:]
-    else:
-        text = text.rstrip("\n") + "\n\n" + block
-    md_path.write_text(text if text.endswith("\n") else text + "\n")
+def measure(directory: Path, only=None, quick: bool = False) -> dict:
+    """Run the sections in `only` (None: all three, from scratch; else merged into envelope_spice.json as a
+    rerun), then redraw the chart; returns the results."""
+    jpath = Path(directory) / "envelope_spice.json"
+    res = read_json(jpath, {}) if only else {}
+    # compile the Python envelope loop and start ngspice once, outside every timing
+    g = S.gate_scene(P, "nominal", periods=20)
+    V.run(g, "envelope", 1.0)
+    se.run_envelope_spice(g.model, 20, g.stimulus, workers=1)
+    t0 = time.perf_counter()
+    pre = "rerun_" if only else ""
+    res.update(machine=MACHINE, python=platform.python_version(), default_options=asdict(se.EnvelopeSpiceOptions()))
+    res[pre + "load_before"] = " / ".join(f"{x:.1f}" for x in os.getloadavg())
+    for name, fn in (("accuracy", accuracy), ("failures", failures),
+                     ("scaling", lambda q: scaling(q, directory))):
+        if not only or name in only:
+            res[name] = fn(quick)
+    res[pre + "load_after"] = " / ".join(f"{x:.1f}" for x in os.getloadavg())
+    res["total_wall_s" if not only else "partial_rerun_s"] = time.perf_counter() - t0
+    res["rerun_sections"] = sorted(set(res.get("rerun_sections", [])) | set(only)) if only else []
+    res.setdefault("total_wall_s", res.get("partial_rerun_s", 0.0))
+    write_json(jpath, res)
+    return redraw(directory, res)
 
 
-def _json(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    raise TypeError(type(o))
+def redraw(directory: Path, res: dict | None = None) -> dict | None:
+    """The chart from the results (default: envelope_spice.json), recorded in the JSON."""
+    jpath = Path(directory) / "envelope_spice.json"
+    res = res if res is not None else read_json(jpath)
+    if res is not None:
+        res["chart"] = charts(res, Path(directory))
+        write_json(jpath, res)
+    return res
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="fewer points (a smoke run)")
-    ap.add_argument("--out", default=str(ROOT / "reports"))
-    ap.add_argument("--render", action="store_true", help="only rewrite the chart and the .md section from the .json")
-    ap.add_argument("--only", choices=["accuracy", "failures", "scaling"], action="append")
-    args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    jpath = out / "envelope_spice.json"
-    if args.render:
-        res = json.loads(jpath.read_text())
-    else:
-        res = json.loads(jpath.read_text()) if args.only and jpath.exists() else {}
-        # compile the Python envelope loop and start ngspice once, outside every timing
-        g = V.gate_scene(P, "nominal", periods=20)
-        V.run(g, "envelope", 1.0)
-        se.run_envelope_spice(g.model, 20, g.stimulus, workers=1)
-        t0 = time.perf_counter()
-        pre = "rerun_" if args.only else ""
-        res.update(machine=MACHINE, python=platform.python_version(), default_options=asdict(se.EnvelopeSpiceOptions()))
-        res[pre + "load_before"] = " / ".join(f"{x:.1f}" for x in os.getloadavg())
-        for name, fn in (("accuracy", accuracy), ("failures", failures), ("scaling", scaling)):
-            if not args.only or name in args.only:
-                res[name] = fn(args.quick)
-        res[pre + "load_after"] = " / ".join(f"{x:.1f}" for x in os.getloadavg())
-        res["total_wall_s" if not args.only else "partial_rerun_s"] = time.perf_counter() - t0
-        res["rerun_sections"] = sorted(set(res.get("rerun_sections", [])) | set(args.only)) if args.only else []
-        res.setdefault("total_wall_s", res.get("partial_rerun_s", 0.0))
-        jpath.write_text(json.dumps(res, indent=1, default=_json))
-    res["chart"] = charts(res, out)
-    jpath.write_text(json.dumps(res, indent=1, default=_json))
-    insert_section(out / "speed_accuracy.md", render(res))
-    log(f"wrote {jpath}, {out / res['chart']}, section in {out / 'speed_accuracy.md'}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+def block(directory: Path) -> str:
+    """The speed_accuracy.md section between the envelope-spice markers, from envelope_spice.json; ''
+    before the first run."""
+    res = read_json(Path(directory) / "envelope_spice.json")
+    return render(res) if res else ""

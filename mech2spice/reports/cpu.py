@@ -1,15 +1,13 @@
-"""Write reports/cpu.md and reports/cpu_*.png: the 8-bit processor, its programs, Turing machines.
+"""reports/cpu.md and reports/cpu_*.png: the 8-bit processor, its programs, Turing machines.
 
-    python scripts/cpu_report.py [--out reports] [--skip-slow]
+Run: mech2spice report cpu [--skip-slow]
 
-Every number in the report is measured by this script on the machine running it.  --skip-slow
+Every number in the report is measured by this module on the machine running it.  --skip-slow
 leaves out the logic-level run of Minsky's machine (about 2.5 minutes).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import collections
 import os
 import platform
@@ -17,19 +15,22 @@ import time
 from pathlib import Path
 
 import matplotlib
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
+from matplotlib.patches import Rectangle
 
-from mech2spice.physics import network, params
-from mech2spice.cpu import figures, tm
-from mech2spice.cpu.asm import assemble_program
-from mech2spice.cpu.isa import CYCLES, OPCODES, SEMANTICS
-from mech2spice.cpu.iss import ISS
-from mech2spice.cpu.run import CPU_VERILOG, LogicCPU, cpu_netlist, load_program, make_memory, run_program
-from mech2spice.synthesis.synth import synthesize
+from .. import data
+from ..cpu import tm
+from ..cpu.asm import assemble_program
+from ..cpu.isa import CYCLES, OPCODES, SEMANTICS
+from ..cpu.iss import ISS
+from ..cpu.machines import LogicCPU
+from ..cpu.netlist import CPU_VERILOG, cpu_netlist
+from ..cpu.run import load_program, make_memory, run_program
+from ..physics import network, params
+from ..synthesis.synth import synthesize
+from ._common import md_table, out_dir, pyplot, read_json, save_figure
 
-ROOT = Path(__file__).resolve().parent.parent
-PROGRAMS = ROOT / "programs"
+plt = pyplot()
+
 PAPER = {"gates": 1959, "oscillators": 11754, "linear_springs": 2744, "nonlinear_springs": 9795,
          "dashpots": 2744, "sieve_cycles": 719, "sieve_bytes": 48}
 
@@ -95,7 +96,7 @@ def hardware() -> dict:
     out = {"synth_s": synth_s, "latches": len(plain.latches()), "depth": network.logic_depth(plain)}
     for key, nl in (("plain", plain), ("buffered", buffered)):
         model = network.build(nl, params.DEFAULT)
-        out[key] = {"logic": len(nl.gates()), "blocks": len(model.meta["gates"]), **model.counts()}
+        out[key] = {"logic": len(nl.gates()), "blocks": len(model.design.gates), **model.counts()}
     out["behavioural"] = behavioural_check()
     g = plain.graph
     out["by_block"] = collections.Counter(block_of(str(g.nodes[n].get("net", "?"))) for n in plain.gates())
@@ -105,12 +106,12 @@ def hardware() -> dict:
 def behavioural_check() -> dict:
     """Synthesize BEHAVIOURAL and check it against the ISS on the sieve, cycle by cycle (ports)."""
     import tempfile
-    from mech2spice.backends.logic import ClockedLogic
+    from ..backends.logic import ClockedLogic
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "cpu_behavioural.v"
         path.write_text(BEHAVIOURAL)
         nl = synthesize(path)
-    prog = load_program(PROGRAMS / "sieve.asm")
+    prog = load_program(data.program("sieve.asm"))
     iss, mem, cl = ISS(make_memory(prog)), make_memory(prog), ClockedLogic(nl)
     same = True
     while not iss.halted:
@@ -125,15 +126,15 @@ def behavioural_check() -> dict:
 
 
 def sieve_runs() -> dict:
-    prog = load_program(PROGRAMS / "sieve.asm")
+    prog = load_program(data.program("sieve.asm"))
     frames, moments = [], []
     iss = ISS(make_memory(prog))
     while not iss.halted:
         mem_before = iss.mem.snapshot()
         rec = iss.step()
         frames.append((rec, mem_before, iss.mem.snapshot()))
-    runs = {b: run_program(PROGRAMS / "sieve.asm", b) for b in ("iss", "logic")}
-    moments = figures.sieve_moments(frames)
+    runs = {b: run_program(data.program("sieve.asm"), b) for b in ("iss", "logic")}
+    moments = sieve_moments(frames)
     return {"prog": prog, "frames": frames, "runs": runs, "moments": moments,
             "writes": sum(1 for rec, _, _ in frames if rec.we)}
 
@@ -142,7 +143,7 @@ def tm_runs(skip_slow: bool) -> dict:
     out = {}
     net = cpu_netlist()
     for name, machine in (("tm_increment.asm", tm.INCREMENT), ("tm_minsky.asm", tm.MINSKY)):
-        text = (PROGRAMS / name).read_text()
+        text = data.program(name).read_text()
         prog = assemble_program(text)
         t0 = time.perf_counter()
         emu = tm.run_emulation(text, 10_000_000)
@@ -178,25 +179,75 @@ def tm_runs(skip_slow: bool) -> dict:
 
 # --------------------------------------------------------------------------- figures
 
-def fig_sieve(s: dict, path: Path) -> None:
-    figures.fig_sieve(s["frames"], s["moments"], path, "the ISS")
+def sieve_moments(frames) -> list[int]:
+    """Four moments of the sieve like the paper's Fig. 8: the last mark of 2's multiples, of 3's, the
+    first mark of 5's, and the end."""
+    writes = [k for k, (rec, _, _) in enumerate(frames) if rec.we]
+    last = {frames[k][0].wdata: k for k in writes}       # last write of each step p (the value written)
+    first5 = next(k for k in writes if frames[k][0].wdata == 5)
+    return [last[2], last[3], first5, len(frames) - 1]
 
 
-def fig_trace(s: dict, path: Path) -> None:
-    frames = s["frames"]
-    fig, ax = plt.subplots(figsize=(10, 3.4))
-    ax.plot([r.cycle for r, _, _ in frames], [r.raddr for r, _, _ in frames], ".", ms=2.5, color="tab:green",
-            label="read address")
-    w = [r for r, _, _ in frames if r.we]
-    ax.plot([r.cycle for r in w], [r.waddr for r in w], "s", ms=3.5, color="tab:red", label="write address")
+def _grid_xy(addr: int) -> tuple[int, int]:
+    return addr % 16, addr // 16               # address 0 bottom-left, along rows, then up
+
+
+def fig_sieve(frames, moments, path, source: str) -> None:
+    """The paper's Fig. 8: memory at four moments (frames: (Cycle, memory before, memory after))."""
+    fig, axes = plt.subplots(1, 4, figsize=(14, 5.6))
+    norm = matplotlib.colors.PowerNorm(0.3, vmin=0, vmax=255)     # marks are small values (2..5)
+    for ax, k in zip(axes, moments):
+        rec, _, mem = frames[k]
+        img = [[mem[16 * r + c] for c in range(16)] for r in range(16)]
+        ax.imshow(img, origin="lower", cmap="viridis", norm=norm, extent=(0, 16, 0, 16))
+        # magnified primality region (addresses 128..159 = n 0..31) above the grid
+        for n in range(32):
+            x, y = (n % 16), 17.2 + 2 * (n // 16)
+            val = mem[128 + n]
+            ax.add_patch(Rectangle((x, y), 1, 2, facecolor=plt.cm.viridis(norm(val)), edgecolor="w", lw=0.5))
+            ax.text(x + 0.5, y + 1, str(n), ha="center", va="center", fontsize=5.5,
+                    color="w" if norm(val) < 0.5 else "k")
+        ax.add_patch(Rectangle((0, 8), 16, 2, fill=False, ls=":", ec="w", lw=1.2))
+        for addr, color in ((rec.raddr, "lime"), (rec.waddr if rec.we else None, "red")):
+            if addr is not None:
+                x, y = _grid_xy(addr)
+                ax.add_patch(Rectangle((x, y), 1, 1, fill=False, ec=color, lw=2))
+        ax.set_xlim(0, 16)
+        ax.set_ylim(0, 21.4)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        what = f"{rec.instr}" if rec.instr else f"{rec.phase} data"
+        ax.set_title(f"cycle {rec.cycle} ({what})\nread {rec.raddr}" + (f", write {rec.waddr}" if rec.we else ""),
+                     fontsize=9)
+    fig.suptitle(f"Sieve of Eratosthenes on {source}: memory (address 0 bottom left, 16 per row); green: read, "
+                 "red: write;\ndotted: primality array 128..159, magnified above (label n, non-zero = composite)",
+                 fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.9))
+    save_figure(fig, path, dpi=130, tight=False)
+
+
+def plot_traffic(ax, rows, read_label: str) -> None:
+    """Memory traffic per cycle, rows of (cycle, raddr, we, waddr): reads green, writes red, over the
+    primality array (grey)."""
+    rows = list(rows)
+    ax.plot([r[0] for r in rows], [r[1] for r in rows], ".", ms=2.5, color="tab:green", label=read_label)
+    w = [r for r in rows if r[2]]
+    ax.plot([r[0] for r in w], [r[3] for r in w], "s", ms=3.5, color="tab:red", label="write address")
     ax.axhspan(128, 159, color="0.9", zorder=0)
     ax.set_xlabel("clock cycle")
     ax.set_ylabel("address")
+
+
+def fig_iss_sieve(s: dict, path: Path) -> None:
+    fig_sieve(s["frames"], s["moments"], path, "the ISS")
+
+
+def fig_trace(s: dict, path: Path) -> None:
+    fig, ax = plt.subplots(figsize=(10, 3.4))
+    plot_traffic(ax, ((r.cycle, r.raddr, r.we, r.waddr) for r, _, _ in s["frames"]), "read address")
     ax.legend(loc="center right", fontsize=8)
     ax.set_title("Sieve on the ISS: memory traffic per cycle (grey band: primality array)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    save_figure(fig, path, dpi=130)
 
 
 def fig_tm(t: dict, path: Path) -> None:
@@ -216,23 +267,23 @@ def fig_tm(t: dict, path: Path) -> None:
     ax.set_xlabel("tape cell (symbols 0 white, 1 grey, y blue, A orange)")
     ax.set_ylabel("Turing-machine step")
     ax.set_title("Minsky's U(7,4) emulated on the ISS, tape after each step (every 4th shown)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    save_figure(fig, path, dpi=130)
 
 
 # --------------------------------------------------------------------------- report
 
-def write_report(out: Path, skip_slow: bool) -> None:
+def write(directory="reports", skip_slow: bool = False) -> Path:
+    """Measure everything and write cpu.md with its figures (`skip_slow`: no logic-level Minsky run)."""
+    out = out_dir(directory)
     t_start = time.perf_counter()
     hw, s, t = hardware(), sieve_runs(), tm_runs(skip_slow)
-    fig_sieve(s, out / "cpu_sieve.png")
+    fig_iss_sieve(s, out / "cpu_sieve.png")
     fig_trace(s, out / "cpu_trace.png")
     fig_tm(t, out / "cpu_tm.png")
     L = []
     add = L.append
     add("# The 8-bit mechanical processor, its programs, and Turing completeness\n")
-    add(f"Generated by `scripts/cpu_report.py` in {time.perf_counter() - t_start:.0f} s on "
+    add(f"Generated by `mech2spice report cpu` in {time.perf_counter() - t_start:.0f} s on "
         f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; every number "
         "below was measured by that run unless it is marked as the paper's.\n")
     add("```sh\nmech2spice cpu asm programs/sieve.asm -o sieve.bin --listing\n"
@@ -248,9 +299,9 @@ def write_report(out: Path, skip_slow: bool) -> None:
         "**halts** when it executes JMP_C with C equal to its own address; that cycle is counted. The ISS "
         "(`mech2spice/cpu/iss.py`) is cycle-exact with `verilog/cpu.v`: the tests step both and compare "
         "every cycle's read address, data, write port and all registers.\n")
-    add("| opcode | mnemonic | operation | cycles |\n|---|---|---|---|")
-    for name, op in sorted(OPCODES.items(), key=lambda kv: kv[1]):
-        add(f"| 0x{op:X} | `{name}` | {SEMANTICS[name]} | {CYCLES[name]} |")
+    L.extend(md_table(["opcode", "mnemonic", "operation", "cycles"],
+                      ([f"0x{op:X}", f"`{name}`", SEMANTICS[name], CYCLES[name]]
+                       for name, op in sorted(OPCODES.items(), key=lambda kv: kv[1]))))
     add("")
     add("## Hardware: `verilog/cpu.v`\n")
     add("Paper Fig. 7 architecture: registers (pc, A, B, C, D, overflow, and two phase bits saying that "
@@ -279,9 +330,7 @@ def write_report(out: Path, skip_slow: bool) -> None:
         add(f"| {k.replace('_', ' ')} | {PAPER[k]} | {p_[k]} | {b_[k]} |")
     add("")
     add("Logic gates by block (no fan-out limit):\n")
-    add("| block | NOR gates |\n|---|---|")
-    for block, n in sorted(hw["by_block"].items(), key=lambda kv: -kv[1]):
-        add(f"| {block} | {n} |")
+    L.extend(md_table(["block", "NOR gates"], sorted(hw["by_block"].items(), key=lambda kv: -kv[1])))
     add("")
     add("## The sieve of Eratosthenes (`programs/sieve.asm`)\n")
     r_iss, r_log = s["runs"]["iss"], s["runs"]["logic"]
@@ -354,15 +403,15 @@ def write_report(out: Path, skip_slow: bool) -> None:
     add("- The logic-level run of Minsky's machine is in the slow test set "
         "(`tests/test_cpu.py::test_minsky_utm_on_netlist`).")
     (out / "cpu.md").write_text("\n".join(L) + "\n")
+    return out / "cpu.md"
 
 
 def physical_section(add, out: Path) -> None:
-    """The sieve at oscillator level, from the last `scripts/cpu_physical.py` run (reports/cpu_physical.json)."""
-    path = out / "cpu_physical.json"
-    if not path.exists():
-        add("## The sieve at oscillator level\n\nNot run yet: `python scripts/cpu_physical.py`.\n")
+    """The sieve at oscillator level, from the last `mech2spice report cpu_physical` run (cpu_physical.json)."""
+    r = read_json(out / "cpu_physical.json")
+    if r is None:
+        add("## The sieve at oscillator level\n\nNot run yet: `mech2spice report cpu_physical`.\n")
         return
-    r = json.loads(path.read_text())
     add("## The sieve at oscillator level (envelope)\n")
     add(f"Measured by `{r['command']}` on the {r['machine']} (details, every cycle and what each speed-up "
         f"costs: [cpu_physical.md](cpu_physical.md)). The processor runs as {6486} oscillators at envelope "
@@ -376,9 +425,8 @@ def physical_section(add, out: Path) -> None:
         f"for its (larger) processor; {r['periods']:,} drive periods of processor time, "
         f"{r['simulated_periods']:,} of them integrated (step {r['step']:g} periods, settle {r['settle']}).\n")
     add("![sieve memory, physical run](cpu_sieve_physical.png)\n")
-    tm_path = out / "cpu_physical_tm_increment.json"
-    if tm_path.exists():
-        r = json.loads(tm_path.read_text())
+    r = read_json(out / "cpu_physical_tm_increment.json")
+    if r is not None:
         tape = next(iter(r.get("devices", {}).values()), None)
         add(f"**Binary increment on the oscillators** (`{r['command']}`, "
             f"[cpu_physical_tm_increment.md](cpu_physical_tm_increment.md)): "
@@ -386,18 +434,3 @@ def physical_section(add, out: Path) -> None:
             + (f", {tape['steps']} Turing-machine steps on the memory-mapped tape" if tape else "")
             + f"; every cycle (ports, registers, memory, tape) identical to the ISS: {r['agree_every_cycle']}; "
               f"wall time {r['wall_s']:.0f} s.\n")
-
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=str(ROOT / "reports"))
-    ap.add_argument("--skip-slow", action="store_true")
-    args = ap.parse_args()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_report(out, args.skip_slow)
-    print(f"wrote {out / 'cpu.md'}")
-
-
-if __name__ == "__main__":
-    main()

@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """What each envelope speed-up (a longer step, settle detection) costs in accuracy (issue 6, multi-fidelity).
 
 Section cpu: runs the first N sieve cycles of `verilog/cpu.v` at envelope fidelity under several settings, side by
@@ -7,30 +6,33 @@ with the reference setting (the full fixed-length pauses, step 2 periods): the l
 any probed amplitude (output bits and latch outputs) at the end of each cycle, the smallest band
 margin of any decoded bit, the drive periods actually integrated and the wall time.
 
-Section clocked: the counter, the FSM and the square root of 2809 (`simulate.run_clocked_physical`)
+Section clocked: the counter, the FSM and the square root of 2809 (`simulation.run_clocked_physical`)
 under the same settings against the envelope at step 1 with full pauses (the setting validated against
 RK4 in reports/envelope.md and reports/sequential.md): the decoded trace against the logic backend, the
 largest amplitude difference at the read points, the smallest margin, integrated periods and wall time.
 
 Section cone: cone pruning (`--observe`) on comparator4, all 256 inputs.
 
-usage: python benchmarks/fidelity.py [--sections cpu,clocked,cone] [--cycles 30]
+usage: mech2spice report fidelity [--only cpu|clocked|cone ...] [--cycles 30] [--render]
 Writes reports/fidelity.json and reports/fidelity.md (~20 min on the 2-core machine).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from pathlib import Path
 
-from mech2spice import simulate
-from mech2spice.cpu import run as R
-from mech2spice.cpu.iss import ISS
-from mech2spice.cpu.physical import PhysicalCPU
-from mech2spice.physics.params import DEFAULT, margin
-from mech2spice.reports.sequential import COUNTER_STEPS, FSM_X
-from mech2spice.synthesis.synth import synthesize
+from .. import data, simulation
+from ..backends.envelope import EnvelopeOptions
+from ..cpu import run as R
+from ..cpu.iss import ISS
+from ..cpu.physical import PhysicalCPU
+from ..errors import Mech2SpiceError
+from ..physics.params import DEFAULT, margin
+from ..synthesis.synth import synthesize
+from ._common import SANDBOX, out_dir, read_json, write_json
+from ..experiments.scenes import COUNTER_STEPS, FSM_STEPS, sqrt_steps
+
+SECTIONS = ("cpu", "clocked", "cone")
 
 # (label, envelope step in periods, settle tolerance in u_R or None)
 SETTINGS = [("reference: step 2, full pauses", 2.0, None),
@@ -83,31 +85,32 @@ def compare(res: dict) -> list[dict]:
     return out
 
 
-# --- clocked designs through simulate.run_clocked_physical -------------------------------------------
+# --- clocked designs through simulation.run_clocked_physical -------------------------------------------
 CLOCKED_SETTINGS = [("reference: step 1, full pauses", 1, None), ("step 4, full pauses", 4, None),
                     ("step 4, settle 0.05", 4, 0.05), ("step 4, settle 0.1", 4, 0.1)]
 
 
 def clocked_designs() -> dict:
-    fsm = [{"set": {"rst": 1}, "cycles": 1}] + [{"set": {"rst": 0, "x": x}, "cycles": 1} for x in FSM_X]
-    sqrt = json.loads(Path("verilog/sqrt_2809.json").read_text())
-    return {"counter4": ("verilog/counter4.v", COUNTER_STEPS), "fsm": ("verilog/fsm.v", fsm),
-            "sqrt(2809)": ("verilog/sqrt.v", sqrt)}
+    fsm = FSM_STEPS
+    sqrt = sqrt_steps()
+    return {"counter4": (data.verilog("counter4.v"), COUNTER_STEPS), "fsm": (data.verilog("fsm.v"), fsm),
+            "sqrt(2809)": (data.verilog("sqrt.v"), sqrt)}
 
 
 def clocked() -> list[dict]:
     rows = []
     for name, (path, steps) in clocked_designs().items():
         nl = synthesize(path)
-        cycles = simulate.expand_steps(steps)
-        timing = simulate.clock_timing(nl)
-        want = [e["outputs"] for e in simulate.run_clocked_logic(nl, cycles)["trace"]]
+        cycles = simulation.expand_steps(steps)
+        timing = simulation.clock_timing(nl)
+        want = [e["outputs"] for e in simulation.run_clocked_logic(nl, cycles)["trace"]]
         ref = None
         for label, step, settle in CLOCKED_SETTINGS:
             t = time.perf_counter()
-            # steps=None: simulate.envelope_step(model), 4 periods where the stability bound allows
-            r = simulate.run_clocked_physical(nl, DEFAULT, cycles, "envelope", timing,
-                                              steps=1 if step == 1 else None, settle=settle)
+            # step None: envelope.default_step(model), 4 periods where the stability bound allows
+            r = simulation.run_clocked_physical(nl, DEFAULT, cycles, "envelope", timing,
+                                              options=EnvelopeOptions(step_periods=1.0 if step == 1 else None),
+                                              settle_tol=settle)
             wall = time.perf_counter() - t
             ref = ref or r
             got = [e["outputs"] for e in r["trace"]]
@@ -125,17 +128,17 @@ def clocked() -> list[dict]:
 def cone() -> list[dict]:
     """comparator4 on all 256 input pairs (envelope, one batch): the full netlist against the netlist
     pruned to the cone of one output port."""
-    from mech2spice.synthesis.synth import observe
-    full_nl = synthesize("verilog/comparator4.v")
+    from ..synthesis.synth import observe
+    full_nl = synthesize(data.verilog("comparator4.v"))
     values = [{"a": a, "b": b} for a in range(16) for b in range(16)]
     t = time.perf_counter()
-    full = simulate.run_physical(full_nl, DEFAULT, values, "envelope")
+    full = simulation.run_physical(full_nl, DEFAULT, values, "envelope")
     full_s = time.perf_counter() - t
     rows = []
     for port in full_nl.outputs:
         nl = observe(full_nl, [port])
         t = time.perf_counter()
-        got = simulate.run_physical(nl, DEFAULT, values, "envelope")
+        got = simulation.run_physical(nl, DEFAULT, values, "envelope")
         wall = time.perf_counter() - t
         same = all(g["outputs"][port] == f["outputs"][port] for g, f in zip(got, full))
         diff = max(abs(g["amplitudes"][b] - f["amplitudes"][b]) for g, f in zip(got, full) for b in g["amplitudes"])
@@ -151,11 +154,11 @@ TOL = 0.02     # u_R: issue 6's agreement tolerance for reduced models
 
 def defaults_md(d: dict) -> list[str]:
     """Which settings are on by default, checked against the measured rows."""
-    from mech2spice.cpu import physical
+    from ..cpu import physical
     rows = [(r.get("design", "processor"), r) for r in d.get("cpu", []) + d.get("clocked", [])]
     L = ["## Defaults", ""]
-    for what, step, settle in (("`cpu run --backend envelope`", physical.ENVELOPE_STEP, physical.SETTLE),
-                               ("clocked `simulate --backend envelope`", None, simulate.CLOCKED_SETTLE)):
+    for what, step, settle in (("`cpu run --backend envelope`", physical.PROCESSOR_STEP, physical.SETTLE_TOL),
+                               ("clocked `simulate --backend envelope`", None, simulation.CLOCKED_SETTLE_TOL)):
         hit = [(n, r) for n, r in rows if r["settle"] == settle and (step is None or r["step"] == step)
                and (n == "processor") == (step is not None)]
         if not hit:
@@ -175,7 +178,7 @@ def defaults_md(d: dict) -> list[str]:
 
 def markdown(d: dict) -> str:
     L = ["# What each envelope speed-up costs", "",
-         f"Generated by `python benchmarks/fidelity.py` on the {d['machine']}; every setting of a table ran in "
+         f"Generated by `mech2spice report fidelity` on the {d['machine']}; every setting of a table ran in "
          "the same process, one after another (wall times compare within a table; the machine was shared).",
          "", "Two options trade accuracy for speed at envelope fidelity:", "",
          "- **step**: RK4 on the envelope equations with steps of whole drive periods (refused above the "
@@ -198,7 +201,7 @@ def markdown(d: dict) -> str:
                      f"| {r['min_margin']:+.3f} | {r['simulated']:,} / {r['periods']:,} | {r['s_per_cycle']:.2f} |")
         L.append("")
     if "clocked" in d:
-        L += ["## Clocked designs (`simulate.run_clocked_physical`)", "",
+        L += ["## Clocked designs (`simulation.run_clocked_physical`)", "",
               "Against the envelope at step 1 with full pauses, which reports/sequential.md and "
               "reports/envelope.md validate against RK4. *trace = logic*: every cycle's decoded outputs equal "
               "the logic backend's.", "",
@@ -223,32 +226,34 @@ def markdown(d: dict) -> str:
     return "\n".join(L) + "\n"
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sections", default="cpu,clocked,cone")
-    ap.add_argument("--cycles", type=int, default=30)
-    ap.add_argument("--out", default="reports")
-    ap.add_argument("--render", action="store_true", help="only rewrite fidelity.md from fidelity.json")
-    a = ap.parse_args()
-    if a.render:
-        a.sections = ""
-    out = Path(a.out) / "fidelity.json"
-    d = json.loads(out.read_text()) if out.exists() else {}
-    d["machine"] = "2-core Debian 12 sandbox (shared)"
-    if "cpu" in a.sections:
-        prog = R.load_program("programs/sieve.asm")
+def write(directory="reports", only=None, cycles: int = 30, render: bool = False) -> Path:
+    """Measure the sections in `only` (default all; `render`: none), merge them into fidelity.json and
+    rewrite fidelity.md from the whole JSON."""
+    sections = [] if render else _sections(only)
+    out = out_dir(directory)
+    path = out / "fidelity.json"
+    d = read_json(path, {})
+    d["machine"] = f"{SANDBOX} (shared)"
+    if "cpu" in sections:
+        prog = R.load_program(data.program("sieve.asm"))
         res = {}
         for label, step, settle in SETTINGS:
-            res[label] = run_setting(prog, a.cycles, step, settle)
+            res[label] = run_setting(prog, cycles, step, settle)
             print(label, f"{res[label]['wall_s']:.0f} s", flush=True)
-        d["cpu"], d["cycles"] = compare(res), a.cycles
-    if "clocked" in a.sections:
+        d["cpu"], d["cycles"] = compare(res), cycles
+    if "clocked" in sections:
         d["clocked"] = clocked()
-    if "cone" in a.sections:
+    if "cone" in sections:
         d["cone"] = cone()
-    out.write_text(json.dumps(d, indent=1))
-    (Path(a.out) / "fidelity.md").write_text(markdown(d))
+    write_json(path, d, default=None)
+    (out / "fidelity.md").write_text(markdown(d))
+    return out / "fidelity.md"
 
 
-if __name__ == "__main__":
-    main()
+def _sections(only) -> list[str]:
+    """The sections to measure: all by default; unknown names are an error."""
+    wanted = list(only or SECTIONS)
+    bad = [s for s in wanted if s not in SECTIONS]
+    if bad:
+        raise Mech2SpiceError(f"fidelity: unknown section {', '.join(bad)} (choose from {', '.join(SECTIONS)})")
+    return wanted

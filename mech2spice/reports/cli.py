@@ -1,0 +1,132 @@
+"""`mech2spice report NAME [NAME...] | all`: regenerate reports/*.md.
+
+Registered by the main command line with ``add_parser(subparsers)``; also ``python -m mech2spice.reports``.
+The handler returns the exit code and raises Mech2SpiceError for user errors (one line on stderr, exit 2).
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+import time
+
+from ..errors import Mech2SpiceError
+from . import REPORTS, module
+
+# Options a report's write() takes, as command-line flags: (flag, dest, argparse keywords).  Defaults are
+# left to each write(); an option a named report does not take is an error.
+OPTIONS = [
+    ("--quick", "quick", dict(action="store_true", help="fewer points / shorter runs")),
+    ("--only", "only", dict(action="append", metavar="SECTION",
+                            help="measure these sections only, merged into the existing JSON (repeatable; "
+                                 "see the report's module docstring for its sections)")),
+    ("--render", "render", dict(action="store_true", help="measure nothing: rewrite the report from its stored "
+                                                          "results")),
+    ("--design", "design", dict(action="append", metavar="NAME", help="accuracy section for these designs only")),
+    ("--cycles", "cycles", dict(type=int, metavar="N", help="processor cycles to run (cpu_physical: 0 = to the "
+                                                            "halt; fidelity: the first N sieve cycles, default 30)")),
+    ("--sqrt-rk4", "sqrt_rk4", dict(action="store_true", help="also run sqrt(2809) on RK4 (~20 min)")),
+    ("--sqrt-rk4-full", "sqrt_rk4_full", dict(action="store_true", help="also the whole sqrt schedule on RK4")),
+    ("--skip-slow", "skip_slow", dict(action="store_true", help="leave out the logic-level run of Minsky's "
+                                                                "machine (~2.5 min)")),
+    ("--cache", "cache", dict(metavar="DIR", help="keep the RK4 runs in DIR between invocations")),
+    ("--program", "program", dict(metavar="FILE", help="program to run (default programs/sieve.asm)")),
+    ("--backend", "backend", dict(choices=["envelope", "rk4"], help="oscillator-level backend (default envelope)")),
+    ("--step", "step", dict(type=float, metavar="PERIODS", help="envelope step in drive periods")),
+    ("--settle", "settle", dict(type=float, metavar="TOL", help="envelope settle tolerance in u_R (0: full pauses)")),
+    ("--checkpoint", "checkpoint", dict(metavar="FILE", help="checkpoint file (with --resume: continue from it)")),
+    ("--resume", "resume", dict(action="store_true", help="continue from --checkpoint FILE")),
+    ("--name", "name", dict(metavar="STEM", help="report file stem (default cpu_physical)")),
+]
+
+
+def add_parser(subparsers) -> None:
+    """Add `report` to the main command line's subcommands."""
+    p = subparsers.add_parser("report", help="regenerate reports (reports/*.md): NAME... or all",
+                              formatter_class=argparse.RawDescriptionHelpFormatter,
+                              description=__doc__.splitlines()[0], epilog=_epilog())
+    add_arguments(p)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The `report` arguments, on any parser."""
+    p.add_argument("names", nargs="*", metavar="NAME", help="reports to write, in the order given; 'all' = "
+                                                            "every report, in the order of --list")
+    p.add_argument("--out", default="reports", metavar="DIR", help="directory to write (default reports/)")
+    p.add_argument("--list", action="store_true", help="list the reports (name, cost, what it shows) and exit")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    g = p.add_argument_group("report options (each applies to the reports named in brackets)")
+    for flag, dest, kw in OPTIONS:
+        takers = [n for n, r in REPORTS.items() if dest in r.options]
+        g.add_argument(flag, dest=dest, default=argparse.SUPPRESS,
+                       **{**kw, "help": f"{kw['help']} [{', '.join(takers)}]"})
+    p.set_defaults(func=cmd_report)
+
+
+def _epilog() -> str:
+    return "reports:\n" + "\n".join(f"  {n:15s} {r.cost:>8s}  {r.description}" for n, r in REPORTS.items())
+
+
+def cmd_report(args) -> int:
+    """List the reports, or write the ones named with the options given."""
+    if args.list:
+        return _list(args.json)
+    names = _names(args.names)
+    options = {dest: getattr(args, dest) for _, dest, _ in OPTIONS if hasattr(args, dest)}
+    for name in names:
+        unused = sorted(set(options) - set(REPORTS[name].options))
+        if unused:
+            flags = ", ".join(f for f, d, _ in OPTIONS if d in unused)
+            raise Mech2SpiceError(f"report {name} takes no {flags}")
+    done = []
+    for name in names:
+        done.append(_write(name, args.out, options))
+        if not args.json:
+            print(f"{done[-1]['path']} ({done[-1]['wall_s']:.0f} s)", flush=True)
+    if args.json:
+        print(json.dumps({"reports": done}, indent=2))
+    return 0
+
+
+def _names(given: list[str]) -> list[str]:
+    """The report names to run: 'all' expands to every report; unknown names are an error."""
+    if not given:
+        raise Mech2SpiceError("name a report (or 'all'); `mech2spice report --list` lists them")
+    unknown = [n for n in given if n != "all" and n not in REPORTS]
+    if unknown:
+        raise Mech2SpiceError(f"unknown report {', '.join(unknown)} (reports: {', '.join(REPORTS)}, all)")
+    return list(REPORTS) if "all" in given else list(dict.fromkeys(given))
+
+
+def _write(name: str, directory: str, options: dict) -> dict:
+    """Run one report; its progress goes to stderr, so stdout carries only the result."""
+    t0 = time.perf_counter()
+    print(f"mech2spice report {name}: writing to {directory}", file=sys.stderr, flush=True)
+    with contextlib.redirect_stdout(sys.stderr):
+        path = module(name).write(directory, **options)
+    return {"name": name, "path": str(path), "wall_s": round(time.perf_counter() - t0, 1)}
+
+
+def _list(as_json: bool) -> int:
+    if as_json:
+        print(json.dumps([{"name": n, "description": r.description, "cost": r.cost, "writes": list(r.writes),
+                           "options": [f for f, d, _ in OPTIONS if d in r.options]}
+                          for n, r in REPORTS.items()], indent=2))
+    else:
+        for n, r in REPORTS.items():
+            print(f"{n:15s} {r.cost:>8s}  {r.description}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m mech2spice.reports ...`: the same as `mech2spice report ...`."""
+    p = argparse.ArgumentParser(prog="python -m mech2spice.reports", description=__doc__.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=_epilog())
+    add_arguments(p)
+    args = p.parse_args(argv)
+    try:
+        return args.func(args)
+    except Mech2SpiceError as e:
+        print(f"mech2spice: error: {e}", file=sys.stderr)
+        return 2

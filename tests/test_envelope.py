@@ -1,6 +1,6 @@
 """The envelope model against RK4 (80 steps/period): settled amplitudes within 0.02 u_R, threshold-crossing
 (switching) times within 10 %, the same number of crossings, the same decoded logic.  Full numbers per
-scene: reports/envelope.md (benchmarks/envelope_validation.py)."""
+scene: reports/envelope.md (`mech2spice report envelope`)."""
 import math
 
 import numpy as np

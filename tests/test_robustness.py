@@ -164,8 +164,8 @@ def test_cli_spread_json(capsys):
 
 
 @pytest.mark.parametrize("argv, msg", [
-    (["gate", "--spread", "-1"], "finite sigma"),
-    (["gate", "--spread", "1e-4", "--samples", "0"], "at least 1"),
+    (["gate", "--spread", "-1"], "argument --spread: must be a finite number above 0"),
+    (["gate", "--spread", "1e-4", "--samples", "0"], "argument --samples: must be from 1"),
     (["gate", "--samples", "5"], "apply to --spread"),
     (["gate", "--sens", "--report", "x"], "--quick and --report"),
 ])

@@ -208,26 +208,47 @@ def cmd_simulate(args) -> int:
 def cmd_emit(args) -> int:
     from . import simulation
     from .physics import network
-    from .spice import carrier as spice
     from .synthesis.ports import pack_inputs
     from .physics.params import load_params
     p = load_params(args.params)
+    if args.format == "veriloga":                  # the device library, defaults from --params
+        import re
+        from .spice import veriloga
+        text = veriloga.combined(p)
+        inputs.write_text(args.output, text, encoding="ascii")
+        info = {"netlist": args.output, "format": "veriloga", "modules": re.findall(r"^module (\w+)", text, re.M)}
+        if args.json:
+            _print_json(info)
+        else:
+            print(f"wrote {args.output}: Verilog-A, {len(info['modules'])} modules; compile with openvaf-r")
+        return 0
     nl = _netlist(args)
     values = _parse_sets(args.set)
     pack_inputs(nl, values)
     model = network.build(nl, p)
     stim = network.stimulus(model, nl, p, [(0, [values])])
     periods = args.periods or simulation.period_budget(nl)
-    opts = _engine_options(args, "ngspice")
-    text = spice.emit(model, periods, stim, options=opts,
-                      title=f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}")
+    title = f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}"
+    if args.format == "ngspice":
+        from .spice import carrier as spice
+        opts = _engine_options(args, "ngspice")
+        text, run_with = spice.emit(model, periods, stim, options=opts, title=title), f"ngspice -b {args.output}"
+    else:                                          # vacask | vacask-envelope: Verilog-A embedded, one file
+        from dataclasses import replace
+        from .spice import vacask
+        form = vacask.ENVELOPE if args.format == "vacask-envelope" else vacask.CARRIER
+        opts = (vacask.VacaskEnvelopeOptions if form == vacask.ENVELOPE else vacask.VacaskOptions)()
+        opts = replace(opts, **{k: v for k, v in (("method", args.method), ("max_step_periods", args.max_step))
+                                if v is not None})
+        text = vacask.emit(model, periods, stim, options=opts, form=form, title=title, standalone=True).text
+        run_with = f"vacask {args.output} (in its folder: it writes the .va and tran1.raw there)"
     inputs.write_text(args.output, text, encoding="ascii")    # the path was checked before the work
-    info = {"netlist": args.output, "periods": periods, "oscillators": model.n, "probes": list(model.probes),
-            "options": _jsonable(opts.__dict__)}
+    info = {"netlist": args.output, "format": args.format, "periods": periods, "oscillators": model.n,
+            "probes": list(model.probes), "options": _jsonable(opts.__dict__)}
     if args.json:
         _print_json(info)
     else:
-        print(f"wrote {args.output}: {model.n} oscillators, {periods} periods; run with: ngspice -b {args.output}")
+        print(f"wrote {args.output}: {model.n} oscillators, {periods} periods; run with: {run_with}")
     return 0
 
 
@@ -354,17 +375,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="settle time between pulses in drive periods (default: from logic depth)")
     s.set_defaults(func=cmd_simulate)
 
-    s = sub.add_parser("emit", help="write a self-contained ngspice netlist of a design",
-                       description="Write DESIGN as a hierarchical ngspice netlist (library .subckts inlined, "
-                                   "stimulus, .tran, .options, .save of the output probes). "
-                                   "`ngspice -b OUT.cir` runs it with nothing else.")
+    s = sub.add_parser("emit", help="write a self-contained ngspice or VACASK netlist of a design, or the Verilog-A library",
+                       description="Write DESIGN as a hierarchical netlist: ngspice (library .subckts inlined, "
+                                   "stimulus, .tran, .options, .save of the output probes; `ngspice -b OUT.cir` "
+                                   "runs it), vacask / vacask-envelope (the Verilog-A devices embedded; `vacask "
+                                   "OUT.sim` runs it), or veriloga (the device library, defaults from --params).")
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
     s.add_argument("-o", "--output", required=True, help="netlist file to write")
+    s.add_argument("--format", choices=["ngspice", "vacask", "vacask-envelope", "veriloga"], default="ngspice",
+                   help="netlist for ngspice (default) or VACASK (carrier or envelope level), or the Verilog-A library")
     s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
                    help="simulated drive periods (default: settle budget)")
     s.add_argument("--method", choices=["trap", "gear"], help="integration method (default trap)")
-    s.add_argument("--max-step", type=inputs.number(0), help="max step in drive periods (default 1/40)")
+    s.add_argument("--max-step", type=inputs.number(0), help="max step in drive periods (default 1/40; "
+                                                            "vacask-envelope: 2)")
     s.set_defaults(func=cmd_emit)
 
     from .cpu.cli import add_parser as add_cpu_parser

@@ -26,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import Mech2SpiceError, ToolMissingError
+from ..errors import DivergenceError, Mech2SpiceError, ToolMissingError
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
-from ._common import (DEFAULT_TIMEOUT_S, Namer, check_samples, comment_text, drive_schedule, failure, map_batch,
-                      num, probe_dof_names)
+from ._common import (DEFAULT_TIMEOUT_S, Namer, check_samples, comment_text, drive_schedule, map_batch, num,
+                      probe_dof_names)
 from .carrier import _Incidence, _plan
 
 METHODS = ("trap", "gear")
@@ -125,7 +125,7 @@ class _Emitter:
             Envelope.of(model)          # refuses what has no envelope form (slow-fast links, driven slow DOFs)
         self.p: GateParams = DEFAULT      # instance parameters are written where they differ from the library's
         self.T = 2 * math.pi / model.omega
-        self.namer = {k: Namer() for k in ("dof", "gate", "couple", "drive", "amp", "elem")}
+        self.namer = {k: Namer() for k in ("dof", "amp")}
         self.stem = [self.namer["dof"](n) for n in model.names]
         self.inc = _Incidence(model)
         self.plan = _plan(model, self.inc)
@@ -189,7 +189,8 @@ class _Emitter:
     # -- instances
     def inst(self, kind: str, name: str, nodes: list[str], model: str, params) -> None:
         par = "".join(f" {k}={v}" for k, v in params)
-        self.lines.append(f"{kind}_{self.namer['elem'](name)} ({' '.join(nodes)}) {model}{par}")
+        namer = self.namer.setdefault(kind, Namer())      # names are unique per kind; kinds keep prefixes apart
+        self.lines.append(f"{kind}_{namer(name)} ({' '.join(nodes)}) {model}{par}")
 
     def gate(self, g) -> None:
         (s1, d1), (s2, d2) = g.inputs
@@ -294,7 +295,9 @@ class _Emitter:
     def options_line(self) -> str:
         o = self.opt
         return (f'options tran_method="{o.method}" reltol={num(o.reltol)} abstol={num(o.abstol)} '
-                f"vntol={num(o.vntol)} chgtol={num(o.chgtol)} tran_lteratio={num(o.lteratio)}")
+                f"vntol={num(o.vntol)} chgtol={num(o.chgtol)} tran_lteratio={num(o.lteratio)} "
+                # strictoutput=0: a run that fails keeps the rows it wrote (they name the DOF that diverged)
+                "strictoutput=0")
 
     def tran(self) -> list[str]:
         h = self.opt.max_step_periods * self.T
@@ -358,6 +361,8 @@ _ERR = re.compile(r"error|failed|not found|abort|cannot|singular|too small|unkno
 def _message(log: str) -> str | None:
     """The first line of VACASK's output that reports a failure (with the location line after a parse error)."""
     lines = [s.strip() for s in log.splitlines() if s.strip()]
+    banner = next((k for k, s in enumerate(lines) if s.startswith("OpenBLAS CPUs")), -1)
+    lines = lines[banner + 1:]                 # the banner says 'vacask unknown' (its version), no error
     for n, line in enumerate(lines):
         if _ERR.search(line):
             return " ".join(lines[n:n + 3])[:400]
@@ -410,13 +415,26 @@ def read_raw_any(path) -> tuple[list[str], np.ndarray]:
     return names, v[..., 0] + 1j * v[..., 1]
 
 
-NODE_PREFIXES = ("x", "v", "ar", "ai", "sx", "sv")
+def _failure(model: MechModel, err: Mech2SpiceError, probe_values) -> Mech2SpiceError:
+    """A failed run's error: DivergenceError naming the DOF if the probes blew up or VACASK's step collapsed
+    ('Timestep too small'), else VACASK's own message.  `probe_values(names, data)`: the probes' samples."""
+    names, data = getattr(err, "names", []), getattr(err, "data", np.zeros((0, 0)))
+    values = probe_values(names, data) if data.ndim == 2 and data.shape[0] else None
+    if values is not None:
+        check_samples(model, data[:, 0].real, values, probe_dof_names(model))
+    if "too small" not in str(err).lower():
+        return err
+    dofs = probe_dof_names(model) or model.names
+    if values is None or not values.size:
+        return DivergenceError(dofs[0], math.nan, model.period, math.nan)
+    last = np.abs(values[-1])
+    k = int(np.argmax(last))
+    return DivergenceError(dofs[k], float(data[-1, 0].real), model.period, float(last[k]))
 
 
-def _failure(model: MechModel, err: Mech2SpiceError, vecs: list[str]) -> Mech2SpiceError:
-    """A failed run's error: DivergenceError if the probes blew up, else VACASK's own message."""
-    return failure(model, err, lambda names, data: data[:, [names.index(v) for v in vecs]]
-                   if set(vecs) <= set(names) else None, NODE_PREFIXES)
+def _columns(vecs: list[str]):
+    """probe_values for carrier-level vectors (None when the raw file lacks one)."""
+    return lambda names, data: data[:, [names.index(v) for v in vecs]] if set(vecs) <= set(names) else None
 
 
 def run(model: MechModel, periods: int, stimulus: Stimulus | None = None, options: VacaskOptions | None = None,
@@ -434,7 +452,7 @@ def run(model: MechModel, periods: int, stimulus: Stimulus | None = None, option
     except ToolMissingError:
         raise
     except Mech2SpiceError as e:
-        raise _failure(model, e, net.vectors) from None
+        raise _failure(model, e, _columns(net.vectors)) from None
     t, x = data[:, 0], data[:, [names.index(v) for v in net.vectors]]
     check_samples(model, t, x, probe_dof_names(model))
     T, h = model.period, options.max_step_periods * model.period
@@ -471,8 +489,7 @@ def run_envelope(model: MechModel, periods: int, stimulus: Stimulus | None = Non
     except ToolMissingError:
         raise
     except Mech2SpiceError as e:
-        raise failure(model, e, lambda n, d: probe(n, d) if set(net.vectors) <= set(n) else None,
-                      NODE_PREFIXES) from None
+        raise _failure(model, e, lambda n, d: probe(n, d) if set(net.vectors) <= set(n) else None) from None
     t, z = data[:, 0], probe(names, data)
     check_samples(model, t, z, probe_dof_names(model))
     t_end = (1 + np.arange(periods)) * model.period
@@ -513,3 +530,87 @@ def run_envelope_batch(model: MechModel, periods: int, stimulus: Stimulus | None
              **{k: [p[2][k] for p in parts] for k in parts[0][2]}}
     return Run(list(model.probes), model.period, parts[0][0], amp, np.zeros(amp.shape), None, None,
                periods * model.period, extra=extra)
+
+
+# --- harmonic balance --------------------------------------------------------------------------------------
+HB_NHARM = 4        # harmonics of omega kept: the insulator's 2 omega and the channel's 3 omega are ~1e-8 u_R
+
+
+def _hb_line(model: MechModel, nharm: int) -> str:
+    # the frequency must be omega / 2 pi to the last digit: the drives read $abstime, off the HB grid otherwise
+    return f"analysis {HB} hb freq=[{num(model.omega / (2 * math.pi))}] nharm={int(nharm)}"
+
+
+def emit_hb(model: MechModel, nharm: int = HB_NHARM, sweeps: list[tuple[str, list[float]]] = (),
+            title: str = "") -> tuple[str, list[str], dict]:
+    """A harmonic-balance netlist of `model` with its drives at their constant amplitudes (carrier level, no
+    prewarp); `sweeps` are (amplitude-source instance, values), outermost first.  Returns (text, probe
+    vectors, drive index -> its amplitude-source instance)."""
+    if nharm < 1:
+        raise Mech2SpiceError("harmonic balance needs at least one harmonic")
+    e = _Emitter(model, 1, None, 0, VacaskOptions(prewarp=False), CARRIER)
+    e.circuit()
+    sources = {d: f"v{node}" for (d, _), node in e.amp_nodes.items()}
+    lines = [f"{'  ' * k}sweep s{k} instance=\"{inst}\" parameter=\"dc\" values=[{', '.join(num(v) for v in vals)}]"
+             for k, (inst, vals) in enumerate(sweeps)]
+    lines.append("  " * len(sweeps) + _hb_line(model, nharm))
+    return e.text(title or "mech2spice harmonic balance", _osdi_ref(CARRIER, DEFAULT, False), lines), \
+        e.probe_vectors(), sources
+
+
+def run_hb(model: MechModel, nharm: int = HB_NHARM, timeout: float | None = None) -> dict:
+    """VACASK's harmonic balance of `model` (constant drives): the phasor of each probe at every harmonic."""
+    text, vecs, _ = emit_hb(model, nharm)
+    t0 = time.perf_counter()
+    names, z, _ = run_netlist(text, HB, timeout)
+    return {"freq": z[:, names.index("frequency")].real, "wall_s": time.perf_counter() - t0,
+            "phasors": {p: z[:, names.index(v)] for p, v in zip(model.probes, vecs)}}
+
+
+def hb_map(levels, p: GateParams = DEFAULT, nharm: int = HB_NHARM, timeout: float | None = None) -> list[dict]:
+    """The single gate's channel amplitude by harmonic balance for input levels [(x1, x2)] (fractions of F_R):
+    one VACASK process sweeps every level (each point starts from the last one's solution).  A point where HB
+    fails is retried alone; {'amp_ur', 'phase_deg', 'converged'} per level."""
+    from ..physics import nor
+    levels = [tuple(map(float, lv)) for lv in levels]
+    out: list[dict | None] = [None] * len(levels)
+    start = 0
+    while start < len(levels):
+        got = _hb_sweep(levels[start:], p, nharm, timeout)
+        for k, r in enumerate(got):
+            out[start + k] = r
+        start += len(got)
+        if start < len(levels):              # the sweep stopped at `start`: that point alone, then go on
+            out[start] = (_hb_sweep([levels[start]], p, nharm, timeout) or [None])[0] or \
+                {"amp_ur": math.nan, "phase_deg": math.nan, "converged": False}
+            start += 1
+    return out
+
+
+def _hb_sweep(levels, p: GateParams, nharm: int, timeout) -> list[dict]:
+    """HB over `levels` in one process (as a sweep over both input sources); the points it finished."""
+    from ..physics import nor
+    m = nor.single_gate(p)
+    (s1, _), (s2, _) = m.design.input_drives
+    _, _, sources = emit_hb(m, nharm)
+    f1 = [lv[0] * p.f_r for lv in levels]
+    f2 = [lv[1] * p.f_r for lv in levels]
+    # one sweep over a point index would need a table; two sweeps over the distinct values cover the grid
+    # when `levels` is one, and a single point otherwise
+    if len(levels) > 1 and len(set(zip(f1, f2))) == len(set(f1)) * len(set(f2)) == len(levels) and \
+            [(a, b) for a in dict.fromkeys(f1) for b in dict.fromkeys(f2)] == list(zip(f1, f2)):
+        sweeps = [(sources[s1], list(dict.fromkeys(f1))), (sources[s2], list(dict.fromkeys(f2)))]
+    else:
+        sweeps = [(sources[s1], f1[:1]), (sources[s2], f2[:1])]
+        levels = levels[:1]
+    text, vecs, _ = emit_hb(m, nharm, sweeps)
+    try:
+        names, z, _ = run_netlist(text, HB, timeout)
+    except Mech2SpiceError as e:
+        names, z = getattr(e, "names", []), getattr(e, "data", np.zeros((0, 0)))
+        if not len(z):
+            return []
+    rows = z.shape[0] // (nharm + 1)
+    x = z[: rows * (nharm + 1), names.index(vecs[0])].reshape(rows, nharm + 1)[:, 1]
+    return [{"amp_ur": float(abs(a) / p.u_r), "phase_deg": float(np.degrees(np.angle(a))), "converged": True}
+            for a in x[:len(levels)]]

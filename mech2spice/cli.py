@@ -296,6 +296,12 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
+def _backends_help() -> str:
+    """Each registered engine with the first line of its docstring (the registry is the one list)."""
+    return "the engine (default rk4): " + "; ".join(
+        f"{name}: {(cls.__doc__ or '').strip().splitlines()[0].rstrip('.')}" for name, cls in BACKENDS.items())
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(
         prog="mech2spice",
@@ -353,7 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
   logic backend (which starts them at 0): reset them synchronously in the first cycle.""")
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
-    s.add_argument("--backend", default="rk4", choices=list(BACKENDS))
+    s.add_argument("--backend", default="rk4", choices=list(BACKENDS), help=_backends_help())
     s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
                    help="simulate exactly this many drive periods (default: until the outputs settle)")
     s.add_argument("--steps", type=inputs.integer(1, inputs.MAX_STEPS), default=None,

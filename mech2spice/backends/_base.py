@@ -113,10 +113,10 @@ def check_divergence(model: MechModel, values: np.ndarray, t: float, dofs=None, 
 
 class _NoBar:
     def update(self, n):
-        pass
+        """Do nothing (the progress bar is off)."""
 
     def close(self):
-        pass
+        """Do nothing (the progress bar is off)."""
 
 
 def progress_bar(total: int, enabled: bool, unit: str = "period"):

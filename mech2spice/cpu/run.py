@@ -228,10 +228,10 @@ def check_checkpoint_path(checkpoint, program_source, resume: bool) -> None:
 
 class _NoBar:
     def update(self, n: int) -> None:
-        pass
+        """Do nothing (the progress bar is off)."""
 
     def close(self) -> None:
-        pass
+        """Do nothing (the progress bar is off)."""
 
 
 def _cycle_bar(enabled: bool, done: int, total: int, backend: str):

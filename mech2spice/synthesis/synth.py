@@ -40,6 +40,8 @@ __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propag
 
 @dataclass
 class Netlist:
+    """A synthesized design: its NOR/latch graph (conventions above), ports and clock."""
+
     top: str
     graph: nx.DiGraph
     inputs: dict[str, int]    # port name -> width, in declaration order
@@ -53,6 +55,7 @@ class Netlist:
         return self._order()[0]
 
     def latches(self) -> list[str]:
+        """Latch (flip-flop) nodes sorted by number."""
         return self._order()[1]
 
     def _order(self) -> tuple[list[str], list[str]]:
@@ -66,6 +69,7 @@ class Netlist:
         return cache[1], cache[2]
 
     def fanout(self, node) -> int:
+        """How many sinks `node` drives (its out-edges: gates, latches, output bits)."""
         return self.graph.out_degree(node)
 
 

@@ -49,6 +49,7 @@ def _log(args):
 
 # --- gate ----------------------------------------------------------------------
 def cmd_gate(args) -> int:
+    """`mech2spice gate`: characterise the NOR gate (or --sens/--spread); print text or JSON, return 0."""
     from .experiments import characterise
     from .physics.params import load_params
     p = load_params(args.params)
@@ -118,6 +119,7 @@ def _netlist(args):
 
 
 def cmd_synth(args) -> int:
+    """`mech2spice synth`: synthesize a design and print its gate, latch, oscillator and spring counts."""
     from .physics import network
     from .physics.params import load_params
     nl = _netlist(args)
@@ -153,6 +155,7 @@ def _clocked_steps(args, nl) -> list[dict]:
 
 
 def cmd_simulate_clocked(args, nl) -> int:
+    """`simulate` for a clocked design: run the cycles and print the trace; 0 if every cycle is valid, else 1."""
     from . import simulation
     from .physics.params import load_params
     if args.clock and args.clock != nl.clock:
@@ -181,6 +184,7 @@ def cmd_simulate_clocked(args, nl) -> int:
 
 
 def cmd_simulate(args) -> int:
+    """`mech2spice simulate`: run one input set (or the clock cycles); 0 if the outputs are valid, else 1."""
     from . import simulation
     from .physics.params import load_params
     nl = _netlist(args)
@@ -206,6 +210,7 @@ def cmd_simulate(args) -> int:
 
 # --- SPICE --------------------------------------------------------------------------
 def cmd_emit(args) -> int:
+    """`mech2spice emit`: write the design as an ngspice or VACASK netlist, or the Verilog-A library."""
     from . import simulation
     from .physics import network
     from .synthesis.ports import pack_inputs
@@ -277,6 +282,7 @@ def _engine_options(args, backend: str | None = None):
 
 
 def cmd_subckts(args) -> int:
+    """`mech2spice subckts`: write the ngspice .subckt library for --params and list its files."""
     from .physics.params import load_params
     from .spice.carrier import write_subckt_library
     paths = write_subckt_library(args.output, load_params(args.params))
@@ -293,6 +299,7 @@ class _Parser(argparse.ArgumentParser):
     """argparse with usage errors as one line (exit 2), like every other error."""
 
     def error(self, message):
+        """Print the usage error as one line on stderr and exit 2."""
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
@@ -303,6 +310,7 @@ def _backends_help() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The `mech2spice` argument parser with every subcommand."""
     ap = _Parser(
         prog="mech2spice",
         description="Verilog -> networks of nonlinear mechanical NOR gates -> RK4 / envelope / ngspice.")

@@ -48,6 +48,7 @@ def run(design=data.verilog("adder2.v"), hold: int | None = None) -> dict:
 
 
 def plot(res: dict, path: Path) -> None:
+    """The three sum bits' amplitudes over time for each of the 16 input pairs (the paper's Fig. 4)."""
     fig, axs = plt.subplots(4, 4, figsize=(12, 9), sharex=True, sharey=True)
     t = np.arange(1, res["amps"].shape[0] + 1)
     for b, row in enumerate(res["rows"]):

@@ -79,6 +79,7 @@ BLOCKS = {
 
 
 def block_of(net: str) -> str:
+    """The block of BLOCKS a gate's Yosys net belongs to ('other' if none)."""
     top = "$abc" if net.startswith("$abc") else net.split("[")[0].split(".")[0]
     for block, names in BLOCKS.items():
         if top in names.split():
@@ -89,6 +90,7 @@ def block_of(net: str) -> str:
 # --------------------------------------------------------------------------- measurements
 
 def hardware() -> dict:
+    """Synthesize verilog/cpu.v: time, depth, counts with/without fan-out buffers, gates by block, behavioural."""
     t0 = time.perf_counter()
     plain = synthesize(CPU_VERILOG)
     synth_s = time.perf_counter() - t0
@@ -126,6 +128,7 @@ def behavioural_check() -> dict:
 
 
 def sieve_runs() -> dict:
+    """The sieve on the ISS frame by frame (with Fig. 8's moments), and its ISS and logic runs."""
     prog = load_program(data.program("sieve.asm"))
     frames, moments = [], []
     iss = ISS(make_memory(prog))
@@ -140,6 +143,7 @@ def sieve_runs() -> dict:
 
 
 def tm_runs(skip_slow: bool) -> dict:
+    """The TM programs on the ISS (and logic level) checked against the reference machines; a tag-system run."""
     out = {}
     net = cpu_netlist()
     for name, machine in (("tm_increment.asm", tm.INCREMENT), ("tm_minsky.asm", tm.MINSKY)):
@@ -239,10 +243,12 @@ def plot_traffic(ax, rows, read_label: str) -> None:
 
 
 def fig_iss_sieve(s: dict, path: Path) -> None:
+    """Fig. 8 (memory at four moments) from the ISS's sieve run."""
     fig_sieve(s["frames"], s["moments"], path, "the ISS")
 
 
 def fig_trace(s: dict, path: Path) -> None:
+    """The sieve's memory traffic per cycle on the ISS."""
     fig, ax = plt.subplots(figsize=(10, 3.4))
     plot_traffic(ax, ((r.cycle, r.raddr, r.we, r.waddr) for r, _, _ in s["frames"]), "read address")
     ax.legend(loc="center right", fontsize=8)
@@ -251,6 +257,7 @@ def fig_trace(s: dict, path: Path) -> None:
 
 
 def fig_tm(t: dict, path: Path) -> None:
+    """The tape of Minsky's U(7,4) after every 4th step, as an image."""
     row = t["tm_minsky.asm"]
     log = row["emu"]["tape"].log
     cells = dict(tm.Tape.from_digits(row["tape_in"], 0).cells)

@@ -64,6 +64,7 @@ class Tracker:
 
 
 def fig_activity(rows, path: Path, backend: str) -> None:
+    """The physical run's memory traffic per cycle, with the wall time per cycle."""
     fig, ax = plt.subplots(figsize=(10, 3.4))
     plot_traffic(ax, ((r["cycle"], r["raddr"], r["we"], r["waddr"]) for r in rows),
                  "read address (decoded from amplitudes)")
@@ -163,6 +164,7 @@ class Options:
 
     @property
     def sieve(self) -> bool:
+        """Whether the program is the sieve (sieve.asm): the report then adds Fig. 8 and the primes."""
         return Path(self.program).name == "sieve.asm"
 
 

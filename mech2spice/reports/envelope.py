@@ -40,6 +40,7 @@ STAB_AT = [0, 20, 100, 300, 1000, 2900, 2920, 3000, 3200, 3500, 4000, 5800]
 
 
 def cached(cache: Path | None, key: str, fn):
+    """fn()'s result, pickled as CACHE/KEY.pkl and read back from there later (no cache: just fn())."""
     if cache is None:
         return fn()
     f = cache / f"{key}.pkl"
@@ -53,11 +54,13 @@ def cached(cache: Path | None, key: str, fn):
 
 # --- measurements --------------------------------------------------------------------------------
 def scenes() -> list[S.Scene]:
+    """The seven scenes: the gate (nominal, band edge), the chain, fan-out 2 and 3, the adder, the latch."""
     return [S.gate_scene(P, "nominal"), S.gate_scene(P, "edge"), S.chain_scene(P), S.fanout_scene(P, 2),
             S.fanout_scene(P, 3), S.adder_scene(P), S.latch_scene(P)]
 
 
 def measure_scene(sc: S.Scene, cache) -> dict:
+    """One scene on RK4 at 80 and 160 steps/period and on the envelope (steps, variants), compared."""
     log(f"{sc.name}: RK4 80 and 160 steps/period, {sc.periods} periods, batch {sc.stimulus.batch}")
     r80 = cached(cache, f"{sc.name}_rk4_80", lambda: V.run(sc, "rk4", 80))
     r160 = cached(cache, f"{sc.name}_rk4_160", lambda: V.run(sc, "rk4", 160))
@@ -105,6 +108,7 @@ def latch_official(cache) -> dict:
 
 
 def adder_sweep(sc: S.Scene, r80: dict, r160: dict) -> dict:
+    """The adder over envelope steps: the sweep, steps that must be refused, unchecked steps, eigenvalues."""
     log("adder: envelope step sweep")
     rows = []
     for step in SWEEP:
@@ -151,6 +155,7 @@ def _bands(ax, off=0.0):
 
 
 def fig_chain(res: dict, path: Path) -> None:
+    """The chain's 00 -> 10 -> 00 transient and its (0.67, 0.67) band-edge member: RK4 vs envelope."""
     sc_name = "chain3"
     r, e = res["r80"], res["env"][envelope.DEFAULT_STEP]["run"]
     r160 = res["r160"]
@@ -177,6 +182,7 @@ def fig_chain(res: dict, path: Path) -> None:
 
 
 def fig_adder(res: dict, path: Path) -> None:
+    """The adder's three sum amplitudes for all 16 inputs: RK4 at 80 steps/period vs the envelope."""
     r, e = res["r80"], res["env"][envelope.DEFAULT_STEP]["run"]
     hold = res["periods"] // 2
     fig, axs = plt.subplots(4, 4, figsize=(13, 9), sharex=True, sharey=True)
@@ -198,6 +204,7 @@ def fig_adder(res: dict, path: Path) -> None:
 
 
 def fig_latch(res: dict, latch: dict, path: Path) -> None:
+    """The latch pulse sequence on RK4 and on the envelope, and their difference."""
     r, e = res["r80"], res["env"][1.0]["run"]
     ra, ea = latch["rk4"]["amplitude"], latch["env"]["amplitude"]
     fig, axs = plt.subplots(2, 1, figsize=(13, 6), sharex=True)
@@ -220,6 +227,7 @@ def fig_latch(res: dict, latch: dict, path: Path) -> None:
 
 
 def fig_sweep(sw: dict, path: Path) -> None:
+    """The adder's error against envelope step and wall time; the RK4 stability region and the eigenvalues."""
     fig, axs = plt.subplots(1, 3, figsize=(15, 4.2))
     rows = [r for r in sw["sweep"]]
     free = [r for r in sw["free"] if r["finite"]]
@@ -261,10 +269,12 @@ def fig_sweep(sw: dict, path: Path) -> None:
 
 # --- report ------------------------------------------------------------------------------------------
 def fmt_pct(x: float) -> str:
+    """A fraction as a percentage ('-' for None, 'inf' if not finite)."""
     return "-" if x is None else ("inf" if not math.isfinite(x) else f"{100 * x:.2f} %")
 
 
 def scene_rows(results: list[dict]) -> str:
+    """Markdown rows: each scene at each envelope step against RK4 80 and 160, pass or FAIL."""
     out = []
     for r in results:
         step = envelope.DEFAULT_STEP
@@ -282,6 +292,7 @@ def scene_rows(results: list[dict]) -> str:
 
 
 def worst_crossings(r: dict, step: float, k: int = 3) -> str:
+    """Markdown rows: the k threshold crossings of a scene with the largest relative time error at `step`."""
     c = r["env"][step]["vs80"]["crossings"]
     c160 = {(x["event"], x["probe"], x["member"]): x for x in r["env"][step]["vs160"]["crossings"]}
     rows = sorted(c, key=lambda x: -max(x["first_rel"], x["last_rel"]))[:k]
@@ -296,6 +307,7 @@ def worst_crossings(r: dict, step: float, k: int = 3) -> str:
 
 
 def variant_rows(results: list[dict]) -> str:
+    """Markdown rows: each variant of the envelope equations on each scene against RK4 160 and 80."""
     out = []
     for r in results:
         for name, v in r["variants"].items():
@@ -355,6 +367,7 @@ def _render(out: Path, results, latch, sw, total) -> Path:
 
 
 def report(results, by, latch, sw, total) -> str:
+    """The text of envelope.md."""
     E = envelope.DEFAULT_STEP
     worst_amp = max(r["env"][E]["vs80"]["amp_err"] for r in results)
     worst_time = max(r["env"][E]["vs80"]["time_err"] for r in results)

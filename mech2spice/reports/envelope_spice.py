@@ -63,12 +63,14 @@ BEGIN, END = "<!-- envelope-spice:begin -->", "<!-- envelope-spice:end -->"
 
 # --- scenes ------------------------------------------------------------------------------------------
 def subset(sc: S.Scene, members: list[int]) -> S.Scene:
+    """The scene restricted to the batch members at indices `members`."""
     st = Stimulus(sc.stimulus.times, sc.stimulus.amps[:, :, members])
     return S.Scene(sc.name, sc.model, st, sc.periods, sc.probes, [sc.members[k] for k in members], sc.events,
                    sc.windows, sc.description + f" (members {', '.join(sc.members[k] for k in members)})")
 
 
 def scenes(quick: bool) -> dict[str, S.Scene]:
+    """The accuracy scenes: the gate's 4 nominal pairs, chain(3), 4 adder members (fewer when `quick`)."""
     out = {"nor_gate": S.gate_scene(P, "nominal"), "chain3": S.chain_scene(P),
            "adder": subset(S.adder_scene(P), ADDER_MEMBERS)}
     if quick:
@@ -96,6 +98,7 @@ def run_spice(sc: S.Scene, opts: se.EnvelopeSpiceOptions, timeout: float | None 
 
 
 def scored(sc: S.Scene, ref: dict, r: dict) -> dict:
+    """`r` against the reference `ref` (validate.compare): errors in u_R, crossings; or its failure."""
     if "failed" in r:
         return {"failed": r["failed"]}
     c = V.compare(sc, ref, r)
@@ -104,6 +107,7 @@ def scored(sc: S.Scene, ref: dict, r: dict) -> dict:
 
 
 def accuracy(quick: bool) -> dict:
+    """The accuracy section: each scene on ngspice-envelope and the Python envelope, against the reference."""
     out = {}
     for name, sc in scenes(quick).items():
         log(f"[accuracy] {name}: {sc.model.n} oscillators, {sc.stimulus.batch} members, {sc.periods} periods")
@@ -155,7 +159,7 @@ _TERM = re.compile(r"([-0-9.e+]+)\*\(1 \+ tanh\(\(time - ([-0-9.e+]+)\)/[-0-9.e+
 
 def pwl_variant(text: str, T: float, ramp_periods: float = 1e-3) -> str:
     """The netlist with its smooth drive steps written as PWL voltage sources (ramp centred on each
-    change, as spice.py writes the carrier-level drives): the form spice_envelope.py does not use."""
+    change, as spice/carrier.py writes the carrier-level drives): the form spice/envelope.py does not use."""
     def sub(m):
         name, node, expr = m.groups()
         a = float(expr.split(" + ", 1)[0])
@@ -169,6 +173,7 @@ def pwl_variant(text: str, T: float, ramp_periods: float = 1e-3) -> str:
 
 
 def run_text(text: str, timeout: float) -> dict:
+    """Run one netlist text in ngspice; on a timeout, how far it got and its step sizes into the stall."""
     with tempfile.TemporaryDirectory(prefix="m2s_es_") as d:
         cir, raw = Path(d) / "c.cir", Path(d) / "c.raw"
         cir.write_text(text)
@@ -193,6 +198,7 @@ def run_text(text: str, timeout: float) -> dict:
 
 
 def failures(quick: bool) -> dict:
+    """The failures section: the PWL-drive stall on adder members, and very large max steps per scene."""
     sc = S.adder_scene(P)
     out = {"pwl_stall": [], "large_steps": {}}
     members = [1, 15] if not quick else [1]
@@ -221,6 +227,7 @@ def failures(quick: bool) -> dict:
 
 # --- scaling --------------------------------------------------------------------------------------------
 def gate_array(n: int):
+    """A model of `n` independent NOR gates, both inputs of each driven at the nominal 0 (0.5 F_R)."""
     m = nor.new_model(P)
     for k in range(n):
         g = nor.add_nor(m, P, f"g{k}")
@@ -295,6 +302,7 @@ def scaling(quick: bool, directory: Path) -> dict:
 
 # --- output ----------------------------------------------------------------------------------------------
 def charts(res: dict, out: Path) -> str:
+    """Draw speed_accuracy_envelope_spice.png (error vs wall time per scene, scaling); returns its name."""
     plt = pyplot()
     acc = res["accuracy"]
     fig, axes = plt.subplots(2, 2, figsize=(12, 9.5))
@@ -353,6 +361,7 @@ def _lab(r):
 
 
 def render(res: dict) -> str:
+    """The envelope-spice section of speed_accuracy.md, markers included."""
     acc, fail, sc = res["accuracy"], res.get("failures", {}), res["scaling"]
     o = asdict(se.EnvelopeSpiceOptions())
     L = [BEGIN, "## SPICE on the envelope equations (ngspice-envelope)", "",

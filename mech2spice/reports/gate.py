@@ -27,6 +27,7 @@ def _shade_bands(ax):
 
 
 def plot_map(p: GateParams, path: Path, n: int = 71) -> dict:
+    """Plot the steady-state output over both input forces; returns the grid size and the multistable count."""
     xs, out, nstable = characterise.steady_map(p, n=n)
     cls = np.full(out.shape, 0.5)                     # ambiguous
     cls[(out >= BAND0[0]) & (out <= BAND0[1])] = 0.0
@@ -51,6 +52,7 @@ def plot_map(p: GateParams, path: Path, n: int = 71) -> dict:
 
 
 def plot_transient(tr: dict, path: Path) -> None:
+    """Plot one gate's channel amplitude as its inputs change (RK4)."""
     fig, ax = plt.subplots(figsize=(10, 3.2))
     _shade_bands(ax)
     ax.plot(tr["t_periods"], tr["amplitude"], lw=1.2)
@@ -64,6 +66,7 @@ def plot_transient(tr: dict, path: Path) -> None:
 
 
 def plot_cascade(cas: dict, path: Path) -> None:
+    """Plot the 3-gate cascade's transient and its level restoration of band-edge inputs."""
     fig, axs = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios": [2, 1]})
     _shade_bands(axs[0])
     for k in range(3):
@@ -90,6 +93,7 @@ def plot_cascade(cas: dict, path: Path) -> None:
 
 
 def plot_printed_scan(scan: dict, path: Path) -> None:
+    """Plot the printed (Appendix A) gate's steady state over drive frequency."""
     fig, ax = plt.subplots(figsize=(7, 3.2))
     ax.semilogy(scan["omega"], scan["amp00"], label="inputs 00")
     ax.semilogy(scan["omega"], np.maximum(scan["amp00"] - scan["amp11"], 1e-12), label="|out(00) - out(11)|")

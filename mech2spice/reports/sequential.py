@@ -25,6 +25,7 @@ PAPER_SQRT = {"gates": 501, "oscillators": 3006, "linear_springs": 685, "nonline
 
 
 def plot_latch(res: dict, path: Path) -> None:
+    """Plot the latch's output and loop-node amplitudes through its pulse sequence (enable pulses shaded)."""
     fig, ax = plt.subplots(figsize=(11, 3.4))
     shade_bands(ax)
     t = np.arange(1, res["amplitude"].shape[0] + 1)

@@ -41,6 +41,7 @@ def compare(model, periods: int, stim: Stimulus) -> dict:
 
 
 def scenes() -> dict:
+    """The suite's scenes by name, each (model, periods, stimulus): gate, 3-gate chain, fan-out 2, adder."""
     p = DEFAULT
     out = {}
     out["NOR gate, 4 input pairs"] = (nor.single_gate(p), 2500, characterise.truth_table_stimulus(p))

@@ -89,6 +89,7 @@ ADDER_SWEEP = {"rk4": [20, 25, 30, 40, 80],
 
 # --- designs -----------------------------------------------------------------------------------
 def gate_design():
+    """The lone NOR gate with its 4 nominal input pairs as one batch: (model, stimulus)."""
     m = nor.single_gate(P)
     lv = np.array(PAIRS) * P.f_r
     ch = {}
@@ -111,10 +112,12 @@ DESIGNS = {"nor_gate": gate_design, "chain3": lambda: (nor.chain(P, 3), None), "
 
 
 def designs(names=SMALL) -> dict:
+    """The named designs, each built as (model, stimulus or None)."""
     return {n: DESIGNS[n]() for n in names}
 
 
 def settled(amp: np.ndarray) -> np.ndarray:
+    """The settled amplitudes: the mean over the last AVG periods."""
     return amp[-AVG:].mean(axis=0)
 
 
@@ -136,6 +139,7 @@ def cpu_seconds() -> float:
 
 
 def run_rk4(model, st, steps, periods) -> dict:
+    """RK4 at `steps` per period: wall and CPU time and the amplitudes, or its failure."""
     c0 = cpu_seconds()
     try:
         run, wall = timed(lambda: rk4.integrate(model, periods, steps_per_period=steps, stimulus=st))
@@ -160,6 +164,7 @@ def run_ng(model, st, opts: SpiceOptions, periods) -> dict:
 
 # --- sections ------------------------------------------------------------------------------------
 def accuracy(quick: bool, names=tuple(DESIGNS)) -> dict:
+    """The accuracy section: RK4 and ngspice sweeps on each design, scored against RK4 at 160 steps/T."""
     out = {}
     for name, (m, st) in designs(names).items():
         periods = PERIODS[name] // (3 if quick else 1)
@@ -288,6 +293,7 @@ def fit_ringdown(amp: np.ndarray) -> dict:
 
 
 def damping(quick: bool) -> dict:
+    """The damping section: Q and frequency error of a lone oscillator's ring-down per method and step."""
     m, st = lone_oscillator()
     rows = []
     for steps in RK4_STEPS:
@@ -349,6 +355,7 @@ def gate_array(n: int) -> MechModel:
 
 
 def scaling(quick: bool) -> dict:
+    """The scaling section: RK4 and ngspice wall time for 50 periods on arrays of independent NOR gates."""
     rows = []
     for n in SCALING_GATES[:3] if quick else SCALING_GATES:
         m = gate_array(n)
@@ -519,6 +526,7 @@ def run_form(emitter, model: MechModel, st: Stimulus | None, o: SpiceOptions, pe
 
 
 def forms(quick: bool) -> dict:
+    """The forms section: each analogy form on ngspice against the RK4 reference (least CPU of the runs)."""
     out = {}
     o = SpiceOptions()
     for name, (m, st) in designs(FORM_DESIGNS[:2] if quick else FORM_DESIGNS).items():
@@ -540,6 +548,7 @@ def forms(quick: bool) -> dict:
 
 # --- output ------------------------------------------------------------------------------------------------
 def charts(res: dict, out: Path) -> list[str]:
+    """Draw the trade-off, damping and scaling charts; returns their file names."""
     plt = pyplot()
     files = []
     acc = res["accuracy"]
@@ -777,6 +786,7 @@ def _forms_section(res: dict) -> list[str]:
 
 
 def render(res: dict) -> str:
+    """The text of speed_accuracy.md from `res`, without the envelope-spice section."""
     acc, dmp, sc, pin = res.get("accuracy", {}), res.get("damping", {}), res.get("scaling", {}), res.get("pinning", {})
     d = res["default_options"]
     conv = [r["amp_err_ur"] for dd in acc.values() for r in dd["rows"]
@@ -916,6 +926,7 @@ def render(res: dict) -> str:
 
 
 def markdown(res: dict) -> str:
+    """The report's markdown from `res` (see render)."""
     return render(res)
 
 

@@ -2,7 +2,7 @@
 
 Writes reports/envelope.md and reports/envelope_*.png (~6 min on a 2-core machine).
 
-Scenes (mech2spice/validate.py): single gate (4 nominal inputs; 16 band-edge input pairs), the 3-gate
+Scenes (mech2spice/experiments/scenes.py): single gate (4 nominal inputs; 16 band-edge input pairs), the 3-gate
 chain with its 00 -> 10 -> 00 switching transient and band-edge members (characterise.cascade), fan-out
 2 and 3 (characterise.fanout_test), the 2-bit adder (all 16 inputs after 2900 periods at 0, as in
 reports/adder.py) and the latch pulse sequence (characterise.latch_sequence).  Each runs on RK4 at 80
@@ -90,7 +90,7 @@ def _short(c: dict) -> str:
 
 def latch_official(cache) -> dict:
     """characterise.latch_sequence on both backends; if its envelope path fails, the identical model, schedule
-    and decoding through validate.latch_scene / latch_decode (checked equal on RK4), with the error recorded."""
+    and decoding through scenes.latch_scene / characterise.latch_decode (checked equal on RK4), with the error recorded."""
     log("latch: characterise.latch_sequence on rk4 and envelope")
     r = cached(cache, "latch_seq_rk4", lambda: timed(lambda: ch.latch_sequence(P, "rk4")))
     error = None

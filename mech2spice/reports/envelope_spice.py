@@ -8,9 +8,10 @@ chart speed_accuracy_envelope_spice.png beside the report):
             2900 periods at 0 then (a, b), 5800 periods): ngspice-envelope at max steps 8..0.5 periods x
             {trap, gear} x reltol {1e-3, 1e-4, 1e-5}, and the Python envelope integrator (envelope.integrate,
             RK4) at its steps; errors against envelope.integrate at 1/8 period (converged), and against RK4
-            at 160 steps/period for the gate.  Scenes and error measures: mech2spice/validate.py.
+            at 160 steps/period for the gate.  Scenes and error measures: experiments/scenes.py,
+            experiments/validate.py.
   failures  what breaks: very large max steps (ngspice's own truncation-error control takes over), and the
-            stall ngspice fell into right after a PWL breakpoint (the drive form spice_envelope.py avoids).
+            stall ngspice fell into right after a PWL breakpoint (the drive form spice/envelope.py avoids).
   scaling   arrays of independent NOR gates up to 4200 oscillators: ngspice-envelope and the Python envelope
             for 50 and 2500 periods; ngspice carrier-level from reports/speed_accuracy.json ('scaling', 50
             periods; its 2500-period cost extrapolated linearly, as its step is pinned).

@@ -57,7 +57,7 @@ def number(lo: float, hi: float = math.inf, *, lo_open: bool = True):
 
 
 def parse_sets(items: list[str] | None) -> dict[str, int]:
-    """--set PORT=INT ... -> {port: value}; ranges are checked against the design (logic.pack_inputs)."""
+    """--set PORT=INT ... -> {port: value}; ranges are checked against the design (ports.pack_inputs)."""
     values = {}
     for item in items or []:
         port, sep, val = item.partition("=")

@@ -79,7 +79,7 @@ def combinational_view(g: nx.DiGraph) -> nx.DiGraph:
 
 
 def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -> Netlist:
-    """Synthesize the Verilog file ``path`` into a clean NOR-only Netlist."""
+    """Synthesize the Verilog file ``path`` into a clean Netlist of 2-input NOR gates (and latches)."""
     path = Path(path)
     _check_source(path, _read_source(path))
     if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):

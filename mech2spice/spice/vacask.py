@@ -36,6 +36,7 @@ from .carrier import _Incidence, _plan
 
 METHODS = ("trap", "gear")
 CARRIER, ENVELOPE = "carrier", "envelope"     # the two forms (veriloga.CARRIER, veriloga.ENVELOPE)
+OSDI = {CARRIER: "m2s_carrier.osdi", ENVELOPE: "m2s_envelope.osdi"}   # veriloga.FILES, compiled
 TRAN, HB = "tran1", "hb1"
 
 
@@ -327,10 +328,10 @@ class _Emitter:
         return "\n".join(head + body) + "\n"
 
 
-def _osdi_ref(form: str, p: GateParams, standalone: bool) -> str:
-    """What the netlist loads: the cached .osdi (runs) or the .va beside it (standalone files)."""
-    from . import veriloga as va      # imported on use: the engine registry loads this module
-    return va.FILES[form] if standalone else str(va.compiled(form, DEFAULT))
+def _osdi_ref(form: str, standalone: bool) -> str:
+    """What the netlist loads: the compiled library, placed beside it at run time (`run_netlist(forms=...)`),
+    or, standalone, the .va embedded in the file (VACASK compiles it on load)."""
+    return OSDI[form].replace(".osdi", ".va") if standalone else OSDI[form]
 
 
 def emit(model: MechModel, periods: int, stimulus: Stimulus | None = None, batch_index: int = 0,
@@ -340,7 +341,7 @@ def emit(model: MechModel, periods: int, stimulus: Stimulus | None = None, batch
     options = options or (VacaskEnvelopeOptions() if form == ENVELOPE else VacaskOptions())
     e = _Emitter(model, periods, stimulus, batch_index, options, form)
     e.circuit()
-    ref = _osdi_ref(form, e.p, standalone)
+    ref = _osdi_ref(form, standalone)
     text = e.text(title, ref, e.tran())
     if standalone:
         text += _embed(form)
@@ -369,10 +370,10 @@ def _message(log: str) -> str | None:
     return None
 
 
-def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None,
-                workdir=None) -> tuple[list[str], np.ndarray, str]:
-    """Run a netlist under `vacask` in a temporary directory; returns (vector names, data, log) of the
-    raw file `<analysis>.raw` (real data; complex data come back as complex arrays)."""
+def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None, workdir=None,
+                forms: tuple[str, ...] = ()) -> tuple[list[str], np.ndarray, str]:
+    """Run a netlist under `vacask` in a temporary directory, the compiled libraries of `forms` beside it;
+    returns (vector names, data, log) of the raw file `<analysis>.raw` (complex data as complex arrays)."""
     from . import veriloga as va
     from .runner import _ngspice       # the process guard: timeout, interrupt and SIGTERM kill the child
     exe, _ = va.tools()
@@ -380,6 +381,10 @@ def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None,
     with tempfile.TemporaryDirectory(prefix="m2s_vc_") as tmp:
         d = Path(workdir or tmp)
         (d / "circuit.sim").write_text(text, encoding="ascii")
+        for form in forms:
+            link = d / OSDI[form]
+            link.unlink(missing_ok=True)
+            link.symlink_to(va.compiled(form))
         try:
             proc = _ngspice([exe, "-qp", "circuit.sim"], d, timeout)
         except Mech2SpiceError as e:
@@ -448,7 +453,7 @@ def run(model: MechModel, periods: int, stimulus: Stimulus | None = None, option
     if keep_netlist:
         Path(keep_netlist).write_text(net.text, encoding="ascii")
     try:
-        names, data, log = run_netlist(net.text, timeout=options.time_limit)
+        names, data, log = run_netlist(net.text, timeout=options.time_limit, forms=(CARRIER,))
     except ToolMissingError:
         raise
     except Mech2SpiceError as e:
@@ -485,7 +490,7 @@ def run_envelope(model: MechModel, periods: int, stimulus: Stimulus | None = Non
     probe = lambda names, data: u * (data[:, [names.index(v) for v in net.vectors[0::2]]]
                                      + 1j * data[:, [names.index(v) for v in net.vectors[1::2]]])
     try:
-        names, data, log = run_netlist(net.text, timeout=options.time_limit)
+        names, data, log = run_netlist(net.text, timeout=options.time_limit, forms=(ENVELOPE,))
     except ToolMissingError:
         raise
     except Mech2SpiceError as e:
@@ -554,7 +559,7 @@ def emit_hb(model: MechModel, nharm: int = HB_NHARM, sweeps: list[tuple[str, lis
     lines = [f"{'  ' * k}sweep s{k} instance=\"{inst}\" parameter=\"dc\" values=[{', '.join(num(v) for v in vals)}]"
              for k, (inst, vals) in enumerate(sweeps)]
     lines.append("  " * len(sweeps) + _hb_line(model, nharm))
-    return e.text(title or "mech2spice harmonic balance", _osdi_ref(CARRIER, DEFAULT, False), lines), \
+    return e.text(title or "mech2spice harmonic balance", _osdi_ref(CARRIER, False), lines), \
         e.probe_vectors(), sources
 
 
@@ -562,7 +567,7 @@ def run_hb(model: MechModel, nharm: int = HB_NHARM, timeout: float | None = None
     """VACASK's harmonic balance of `model` (constant drives): the phasor of each probe at every harmonic."""
     text, vecs, _ = emit_hb(model, nharm)
     t0 = time.perf_counter()
-    names, z, _ = run_netlist(text, HB, timeout)
+    names, z, _ = run_netlist(text, HB, timeout, forms=(CARRIER,))
     return {"freq": z[:, names.index("frequency")].real, "wall_s": time.perf_counter() - t0,
             "phasors": {p: z[:, names.index(v)] for p, v in zip(model.probes, vecs)}}
 
@@ -605,7 +610,7 @@ def _hb_sweep(levels, p: GateParams, nharm: int, timeout) -> list[dict]:
         levels = levels[:1]
     text, vecs, _ = emit_hb(m, nharm, sweeps)
     try:
-        names, z, _ = run_netlist(text, HB, timeout)
+        names, z, _ = run_netlist(text, HB, timeout, forms=(CARRIER,))
     except Mech2SpiceError as e:
         names, z = getattr(e, "names", []), getattr(e, "data", np.zeros((0, 0)))
         if not len(z):

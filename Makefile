@@ -6,7 +6,7 @@ PY ?= python3
 setup:  ## install ngspice (Debian) and the package with its Python dependencies
 	@dpkg -s ngspice libngspice0 >/dev/null 2>&1 || \
 	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq ngspice libngspice0)
-	$(PY) -m pip install -q --root-user-action=ignore -e '.[test,vacask]'
+	$(PY) -m pip install -q --root-user-action=ignore -e '.[test,vacask,mc]'
 
 demo: setup  ## the main job end to end: gate, adder from Verilog on RK4, sqrt(2809), the sieve on 6486 oscillators
 	mech2spice gate --report reports

@@ -409,6 +409,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .cpu.cli import add_parser as add_cpu_parser
     add_cpu_parser(sub)
     from .reports.cli import add_parser as add_report_parser; add_report_parser(sub)  # noqa: E702
+    from .experiments.mc_cli import add_parser as add_mc_parser; add_mc_parser(sub)  # noqa: E702
 
     s = sub.add_parser("subckts", help="regenerate the .subckt library (checked in under subckts/)")
     s.add_argument("-o", "--output", default="subckts", help="directory (default subckts/)")

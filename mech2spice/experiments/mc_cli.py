@@ -1,0 +1,112 @@
+"""`mech2spice montecarlo DESIGN.v`: yield of a design under element spread, on Dask, resumable."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from .. import inputs
+from ..errors import Mech2SpiceError
+
+BACKENDS = ("envelope", "rk4", "ngspice")
+
+
+def add_parser(subparsers) -> None:
+    """Register the `montecarlo` command."""
+    s = subparsers.add_parser(
+        "montecarlo", help="yield of a design under per-element spread (Monte-Carlo on Dask, resumable)",
+        description="Sample the design's mechanical model with a relative Gaussian spread on every element "
+                    "(local mismatch, optionally a wafer-level shift per element kind), simulate every input "
+                    "vector of each sample, compare every output with the logic oracle. Results stream to a "
+                    "JSON-lines file (--out) that a rerun of the same command resumes. Exit 0 when every "
+                    "sample passed, 1 otherwise.")
+    s.add_argument("design", help="Verilog file (combinational)")
+    s.add_argument("--params", default="default", help="gate parameters: default, printed or a JSON file")
+    s.add_argument("--set", action="append", metavar="PORT=INT",
+                   help="one input vector (repeatable ports; default: every input combination, up to 256)")
+    s.add_argument("--stimulus", metavar="FILE.json", help="input vectors: a list of {\"set\": {PORT: INT}} steps")
+    s.add_argument("--samples", type=inputs.integer(1, 10_000_000), required=True, metavar="N")
+    s.add_argument("--spread", required=True, metavar="SIGMA|JSON",
+                   help='relative sigma on every element, or {"local": SIGMA|{KIND: SIGMA}, "wafer": '
+                        'SIGMA|{KIND: SIGMA}, "wafer_rho": RHO} (inline or a file); kinds k m c spring '
+                        'dashpot gamma drive, "*" for all')
+    s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, metavar="S")
+    s.add_argument("--backend", default="envelope", choices=BACKENDS)
+    s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
+                   help="simulate exactly this many periods (default: until the outputs settle)")
+    s.add_argument("--batch", type=inputs.integer(1, 4096), default=None, metavar="B",
+                   help="samples per engine run and task (default 8 on envelope/rk4, 1 on ngspice)")
+    s.add_argument("--scheduler", default="local", metavar="local|inline|ADDRESS",
+                   help="local: a LocalCluster, one worker per core (default); inline: no Dask; or a "
+                        "Dask scheduler address (tcp://host:8786)")
+    s.add_argument("--workers", type=inputs.integer(1, 4096), default=None, help="LocalCluster workers")
+    s.add_argument("--out", metavar="RESULTS.jsonl",
+                   help="results file, appended and resumed (default: a temporary file, removed after)")
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.set_defaults(func=cmd_montecarlo)
+
+
+def vectors_of(args, netlist) -> list[dict[str, int]]:
+    """The input vectors: --set (one), --stimulus (a list of sets) or every combination."""
+    from ..synthesis.ports import pack_inputs
+    from . import montecarlo as mc
+    if args.set and args.stimulus:
+        raise Mech2SpiceError("give --set or --stimulus, not both")
+    if args.stimulus:
+        vecs = [step.get("set", {}) for step in inputs.stimulus_steps(args.stimulus, {}, args.backend)]
+    elif args.set:
+        vecs = [inputs.parse_sets(args.set)]
+    else:
+        vecs = mc.all_vectors(netlist)
+    for v in vecs:
+        pack_inputs(netlist, v)
+    return vecs
+
+
+def job_of(args) -> dict:
+    """The job a results file is keyed by."""
+    from ..physics import network
+    from ..synthesis.synth import synthesize
+    from . import montecarlo as mc
+    path = mc.design_path(args.design).resolve()
+    nl = synthesize(path, max_fanout=network.MAX_FANOUT)
+    if nl.clock:
+        raise Mech2SpiceError(f"{nl.top} is clocked: montecarlo runs combinational designs (the processor: "
+                              "not yet)")
+    return {"design": str(path), "params": args.params, "vectors": vectors_of(args, nl), "backend": args.backend,
+            "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "periods": args.periods,
+            "union": args.batch}
+
+
+def cmd_montecarlo(args) -> int:
+    """Run the sweep; print the summary (text or JSON); 0 if every sample passed, else 1."""
+    import tempfile
+    from ..cli import _log, _print_json
+    from . import mc_run
+    job = job_of(args)
+    log = _log(args)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(args.out) if args.out else Path(tmp) / "results.jsonl"
+        if args.out:
+            inputs.check_output_file(out, [args.design], "results file")
+        res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
+                         progress=not args.json and sys.stderr.isatty(), log=log)
+    res.update({"design": job["design"], "backend": job["backend"], "spread": job["spread"], "seed": job["seed"]})
+    if not args.out:
+        res.pop("out")
+    if args.json:
+        _print_json(res)
+    else:
+        _print(res)
+    return 0 if res["failures"] == 0 else 1
+
+
+def _print(res: dict) -> None:
+    lo, hi = res["yield_ci95"]
+    print(f"{res['samples']} samples, {res['failures']} failures: yield {res['yield']:.4f} (95 % CI {lo:.4f} - {hi:.4f})")
+    if res["margin_quantiles"]:
+        print("margin quantiles (band widths): " + ", ".join(f"{q} {v:+.3f}" for q, v in res["margin_quantiles"].items()))
+    if res["failing_bits"]:
+        print("failing bits (samples): " + ", ".join(f"{b} {n}" for b, n in res["failing_bits"].items()))
+    print(f"gate failure rate {res['gate_failure_rate']:.3g} per gate and sample ({res['gates']} gates)")
+    print(f"{res['ran']} run here ({res['resumed']} resumed), {res['samples_per_s']:.2f} samples/s on "
+          f"{res['workers']} worker(s), {res['wall_s']:.1f} s")

@@ -1,0 +1,178 @@
+"""Monte-Carlo sweeps on Dask, streamed to an append-only JSON-lines file that a later run resumes.
+
+The file's first line is a header naming the job (design, parameters, vectors, spread spec, seed,
+backend, periods); every other line is one sample's record.  A run reads what is there, skips the
+sample indices already recorded (a torn last line from a killed run is cut off), and appends the rest,
+one task's records per write.  Sample i's draws depend only on (seed, i), so a resumed sweep gives the
+records an uninterrupted one would.
+
+Tasks hold `DesignMC.union` samples (the engine's batch: one union model); the driver keeps at most
+IN_FLIGHT tasks per worker submitted, so its memory and the workers' stay bounded whatever the count.
+"""
+from __future__ import annotations
+
+import json
+import os
+import resource
+import time
+from pathlib import Path
+
+from ..backends._base import progress_bar
+from ..errors import Mech2SpiceError
+from . import montecarlo as mc
+
+IN_FLIGHT = 2                  # tasks submitted per worker at a time
+_DESIGNS: dict = {}            # per process: job key -> DesignMC (synthesis and model built once)
+
+
+class Interrupted(Exception):
+    """Raised by the `stop_after` hook (tests): the run stops as a Ctrl-C would."""
+
+
+def design_for(job: dict) -> mc.DesignMC:
+    """The job's DesignMC, built once per process."""
+    key = mc.job_key(job)
+    if key not in _DESIGNS:
+        from ..physics import network
+        from ..physics.params import load_params
+        from ..synthesis.synth import synthesize
+        nl = synthesize(job["design"], max_fanout=network.MAX_FANOUT)
+        _DESIGNS.clear()                 # one design per worker at a time bounds its memory
+        _DESIGNS[key] = mc.DesignMC(nl, load_params(job["params"]), job["vectors"], job["backend"],
+                                    mc.spec_of(job["spread"]), job["seed"], job.get("periods"),
+                                    union=job.get("union"))
+    return _DESIGNS[key]
+
+
+def task(job: dict, indices: list[int]) -> list[dict]:
+    """Evaluate samples `indices` of `job` (runs on a worker)."""
+    return design_for(job).evaluate(indices)
+
+
+def read_results(path: Path, job: dict) -> dict[int, dict]:
+    """Records already in `path` by sample index (first one kept); checks the header matches `job`."""
+    if not path.exists() or path.stat().st_size == 0:
+        return {}
+    _cut_torn_line(path)
+    done, header = {}, None
+    with open(path, encoding="utf-8") as fh:
+        for n, line in enumerate(fh):
+            rec = json.loads(line)
+            if n == 0:
+                header = rec
+            elif rec.get("type") == "sample":
+                done.setdefault(int(rec["i"]), rec)
+    if header is None or header.get("key") != mc.job_key(job):
+        raise Mech2SpiceError(f"{path} holds results of another job (design, spread, seed, backend or "
+                              "inputs differ): give another --out")
+    return done
+
+
+def _cut_torn_line(path: Path) -> None:
+    """Drop a last line without its newline (the run was killed while writing it)."""
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        with open(path, "r+b") as fh:
+            fh.truncate(data.rfind(b"\n") + 1)
+
+
+def _append(fh, records: list[dict]) -> None:
+    fh.write("".join(json.dumps({"type": "sample", **r}, default=_num) + "\n" for r in records))
+    fh.flush()
+    os.fsync(fh.fileno())
+
+
+def _num(x):
+    return float(x) if hasattr(x, "__float__") else str(x)
+
+
+def tasks_of(todo: list[int], size: int) -> list[list[int]]:
+    """Consecutive groups of `size` sample indices."""
+    return [todo[k:k + size] for k in range(0, len(todo), size)]
+
+
+def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: int | None = None,
+        progress: bool = False, stop_after: int | None = None, log=lambda msg: None) -> dict:
+    """Evaluate samples 0..samples-1 of `job` (those not yet in `out`), appending to `out`; the summary."""
+    t0 = time.time()
+    out = Path(out)
+    done = read_results(out, job)
+    if not out.exists() or out.stat().st_size == 0:
+        out.write_text(json.dumps({"type": "header", "key": mc.job_key(job), "job": job}) + "\n", encoding="utf-8")
+    todo = [i for i in range(samples) if i not in done]
+    size = job.get("union") or design_for(job).union
+    groups = tasks_of(todo, size)
+    log(f"{samples} samples: {len(done)} already in {out}, {len(todo)} to run in {len(groups)} tasks")
+    bar = _bar(samples, len(done), progress)
+    t_run = time.time()
+    stats = {"workers": 0, "worker_peak_rss_mb": None}
+    try:
+        with open(out, "a", encoding="utf-8") as fh:
+            if scheduler == "inline":
+                stats["workers"] = 1
+                for n, g in enumerate(groups):
+                    _stream(fh, task(job, g), done, bar, n, stop_after)
+            else:
+                stats.update(_run_dask(job, groups, fh, done, bar, scheduler, workers, stop_after))
+    finally:
+        bar.close()
+    ran = len(todo)
+    wall = time.time() - t0
+    recs = [done[i] for i in range(samples) if i in done]
+    res = mc.summary(recs, len(design_for(job).gates))
+    return {**res, "ran": ran, "resumed": samples - ran, "samples_per_s": ran / max(time.time() - t_run, 1e-9),
+            "wall_s": wall, "driver_peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            **stats, "out": str(out)}
+
+
+def _stream(fh, records, done, bar, n, stop_after) -> None:
+    _append(fh, records)
+    for r in records:
+        done.setdefault(r["i"], r)
+    bar.update(len(records))
+    if stop_after is not None and n + 1 >= stop_after:
+        raise Interrupted(f"stopped after {stop_after} tasks")
+
+
+def _run_dask(job, groups, fh, done, bar, scheduler, workers, stop_after) -> dict:
+    """Tasks on a LocalCluster (one single-threaded worker per core) or the scheduler at an address."""
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise Mech2SpiceError("montecarlo needs Dask: pip install 'mech2spice[mc]' (or --scheduler inline)") from None
+    cluster = None
+    if scheduler == "local":
+        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                               dashboard_address=":0", memory_limit="4GiB")
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        n_workers = len(client.scheduler_info()["workers"])
+        pending, queue = as_completed(), list(groups)
+        for _ in range(min(len(queue), IN_FLIGHT * n_workers)):
+            pending.add(client.submit(task, job, queue.pop(0), pure=False))
+        n = 0
+        for fut in pending:
+            records = fut.result()
+            fut.release()
+            if queue:
+                pending.add(client.submit(task, job, queue.pop(0), pure=False))
+            _stream(fh, records, done, bar, n, stop_after)
+            n += 1
+        peaks = client.run(_peak_rss_mb)
+        return {"workers": n_workers, "worker_peak_rss_mb": max(peaks.values()) if peaks else None}
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _bar(total: int, initial: int, enabled: bool):
+    bar = progress_bar(total, enabled, unit="sample")
+    bar.update(initial)
+    return bar

@@ -1,0 +1,302 @@
+"""Monte-Carlo of whole designs under element spread: the spread spec, sampled models, per-sample results.
+
+A sample is the design's mechanical model with every element (physics/spread.py: each DOF's local k,
+m, c, each coupling spring and dashpot, each gamma, each drive) multiplied by its own factor
+
+    factor = 1 + sigma_local[kind] * z_element + sigma_wafer[kind] * w_kind
+
+z_element independent standard normals (local mismatch); w_kind one standard normal per kind and sample
+shared by every element of that kind (a wafer-level shift), correlated across kinds with coefficient
+`wafer_rho`.  Sample i draws from numpy's Generator seeded with (seed, i), so a sample is the same
+whatever task, worker or resumed run computes it.
+
+It passes when, for every input vector, every output bit decodes to the logic oracle's value.  Each
+gate channel is checked against its own logic value too: a *root* gate failure is a gate out of its
+expected band while every gate feeding it is in its band (the failure starts there); the per-gate
+failure rate is root failures / (samples x gates), which is what a gate count extrapolates.
+
+Engines that batch (envelope, rk4) run many samples as one model: the block-diagonal union of the
+sampled copies (experiments/tolerance.union), with the stimulus batch holding the input vectors.
+"""
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import simulation
+from ..backends import logic, make_engine
+from ..backends._base import DivergenceError
+from ..errors import Mech2SpiceError
+from ..physics import network, spread
+from ..physics.params import GateParams, band_of, margin
+from ..physics.stimulus import Stimulus
+from ..synthesis.ports import output_bits
+from ..synthesis.synth import Netlist
+from .tolerance import QUANTILES, wilson
+
+KINDS = ("k", "m", "c", "spring", "dashpot", "gamma", "drive")
+MAX_ALL_VECTORS = 256          # a design with at most this many input combinations is checked on all of them
+
+
+@dataclass(frozen=True)
+class SpreadSpec:
+    """Relative Gaussian spread per element kind: local mismatch plus a wafer-level shift per kind."""
+    local: dict = field(default_factory=dict)     # kind -> sigma (independent per element)
+    wafer: dict = field(default_factory=dict)     # kind -> sigma (one shift per kind and sample)
+    wafer_rho: float = 0.0                        # correlation of the wafer shifts across kinds
+
+    @property
+    def zero(self) -> bool:
+        """True when no element is spread (the nominal design)."""
+        return not any(self.local.values()) and not any(self.wafer.values())
+
+    def factors(self, elems: list, seed: int, index: int) -> np.ndarray:
+        """The factor of every element of sample `index`."""
+        rng = np.random.default_rng([seed, index])
+        z = rng.standard_normal(len(elems))
+        common, own = rng.standard_normal(), rng.standard_normal(len(KINDS))
+        w = math.sqrt(self.wafer_rho) * common + math.sqrt(1 - self.wafer_rho) * own
+        kind = np.array([KINDS.index(e.kind) for e in elems], int)
+        loc = np.array([self.local.get(k, 0.0) for k in KINDS])[kind]
+        waf = np.array([self.wafer.get(k, 0.0) for k in KINDS])[kind]
+        return 1.0 + loc * z + waf * w[kind]
+
+    def describe(self) -> dict:
+        """The spec as JSON fields."""
+        return asdict(self)
+
+
+def _sigmas(value, where: str) -> dict:
+    """A sigma (every kind) or {kind or "*": sigma} -> {kind: sigma}."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = {"*": value}
+    if not isinstance(value, dict):
+        raise Mech2SpiceError(f"spread spec '{where}': expected a sigma or {{kind: sigma}}, got {value!r}")
+    out = dict.fromkeys(KINDS, 0.0)
+    for key, s in sorted(value.items(), key=lambda kv: kv[0] != "*"):
+        if key != "*" and key not in KINDS:
+            raise Mech2SpiceError(f"spread spec '{where}': unknown kind '{key}' (kinds: *, {', '.join(KINDS)})")
+        if isinstance(s, bool) or not isinstance(s, (int, float)) or not (math.isfinite(s) and 0 <= s < 1):
+            raise Mech2SpiceError(f"spread spec '{where}.{key}': sigma must be a number in [0, 1), got {s!r}")
+        out.update(dict.fromkeys(KINDS, float(s)) if key == "*" else {key: float(s)})
+    return out
+
+
+def parse_spread(text: str) -> SpreadSpec:
+    """`--spread`: a sigma (local, every kind), a JSON object, or a JSON file of one:
+    {"local": SIGMA | {KIND: SIGMA}, "wafer": SIGMA | {KIND: SIGMA}, "wafer_rho": RHO}."""
+    text = str(text).strip()
+    try:
+        return spec_of(float(text))
+    except ValueError:
+        pass
+    if text.startswith("{"):
+        try:
+            obj = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise Mech2SpiceError(f"--spread: invalid JSON ({e.msg} at character {e.pos})") from None
+    else:
+        from ..inputs import read_json
+        obj = read_json(text, "spread spec")
+    return spec_of(obj)
+
+
+def spec_of(obj) -> SpreadSpec:
+    """A SpreadSpec from a sigma or the JSON object `parse_spread` describes."""
+    if not isinstance(obj, dict):
+        return SpreadSpec(_sigmas(obj, "local"), _sigmas(0.0, "wafer"))
+    unknown = set(obj) - {"local", "wafer", "wafer_rho"}
+    if unknown:
+        raise Mech2SpiceError(f"spread spec: unknown field(s) {', '.join(sorted(unknown))} (local, wafer, wafer_rho)")
+    rho = obj.get("wafer_rho", 0.0)
+    if isinstance(rho, bool) or not isinstance(rho, (int, float)) or not 0 <= rho <= 1:
+        raise Mech2SpiceError(f"spread spec 'wafer_rho': must be a number in [0, 1], got {rho!r}")
+    return SpreadSpec(_sigmas(obj.get("local", 0.0), "local"), _sigmas(obj.get("wafer", 0.0), "wafer"), float(rho))
+
+
+def all_vectors(netlist: Netlist) -> list[dict[str, int]]:
+    """Every input combination (port integers), for designs with at most MAX_ALL_VECTORS of them."""
+    ports = list(netlist.inputs.items())
+    n = sum(w for _, w in ports)
+    if 2 ** n > MAX_ALL_VECTORS:
+        raise Mech2SpiceError(f"{netlist.top} has {2 ** n} input combinations: give the inputs with --set P=V")
+    return [dict(zip([p for p, _ in ports], combo)) for combo in itertools.product(*[range(2 ** w) for _, w in ports])]
+
+
+class DesignMC:
+    """A combinational design's nominal model, stimulus and logic expectations; evaluates samples."""
+
+    def __init__(self, netlist: Netlist, p: GateParams, vectors: list[dict[str, int]], backend: str,
+                 spec: SpreadSpec, seed: int, periods: int | None = None, options=None, union: int | None = None):
+        if netlist.clock:
+            raise Mech2SpiceError(f"{netlist.top} is clocked: montecarlo runs combinational designs")
+        self.netlist, self.p, self.vectors, self.spec, self.seed = netlist, p, vectors, spec, seed
+        self.engine = make_engine(backend, options)
+        if not self.engine.capabilities.physical:
+            raise Mech2SpiceError(f"montecarlo needs a physical backend, not '{backend}'")
+        self.model = network.build(netlist, p)
+        self.stim = network.stimulus(self.model, netlist, p, [(0, vectors)])
+        self.elems = spread.elements(self.model)
+        self.budget = periods or simulation.period_budget(netlist)
+        self.fixed = periods is not None
+        self.outs = [b for b in output_bits(netlist) if b in self.model.probes]
+        self.gates = list(self.model.design.blocks)
+        self.channels = [self.model.design.blocks[g].channel for g in self.gates]
+        gi = {g: k for k, g in enumerate(self.gates)}
+        self.feeders = [[gi[s] for s in netlist.graph.predecessors(g) if s in gi] for g in self.gates]
+        bits = [logic.evaluate_bits(netlist, v) for v in vectors]
+        self.want_out = np.array([[b[o] for b in bits] for o in self.outs], int)        # (outs, B)
+        self.want_gate = np.array([[b[g] for b in bits] for g in self.gates], int)      # (gates, B)
+        self.union = union or (1 if backend.startswith(("ngspice", "vacask")) else 8)
+
+    def sample(self, i: int):
+        """Sample i's model and stimulus (the nominal ones when the spec spreads nothing)."""
+        if self.spec.zero:
+            return self.model, self.stim
+        f = self.spec.factors(self.elems, self.seed, i)
+        model = spread.scaled(self.model, self.elems, f)
+        fd = np.ones(len(self.model.drives))
+        for e, x in zip(self.elems, f):
+            if e.kind == "drive":
+                fd[e.index] = x
+        return model, Stimulus(self.stim.times, self.stim.amps * fd[None, :, None])
+
+    def evaluate(self, indices: list[int]) -> list[dict]:
+        """One record per sample index, `self.union` samples per engine run."""
+        out = []
+        for k in range(0, len(indices), self.union):
+            out += self._run_group(list(indices[k:k + self.union]))
+        return out
+
+    def amplitudes(self, idx: list[int]) -> tuple[np.ndarray, int]:
+        """Final amplitudes (u_R) of samples idx run as one model: (samples, outputs + gates, vectors), periods."""
+        model, stim, probes = self._joined([self.sample(i) for i in idx])
+        amps, used = self._integrate(model, stim, probes)
+        return amps.reshape(len(idx), len(self.outs) + len(self.gates), -1), used
+
+    def _run_group(self, idx: list[int]) -> list[dict]:
+        try:
+            amps, used = self.amplitudes(idx)
+        except (DivergenceError, Mech2SpiceError) as e:
+            if len(idx) > 1:                 # find the sample that failed: run them one by one
+                return [r for i in idx for r in self._run_group([i])]
+            return [{"i": idx[0], "pass": False, "margin": -math.inf, "reason": str(e).splitlines()[0]}]
+        return [self._record(i, amps[s], len(self.outs), used) for s, i in enumerate(idx)]
+
+    def _joined(self, pairs):
+        """One model (the union of the samples) and stimulus, and the probes: outputs then gate channels."""
+        if len(pairs) == 1:
+            model, stim = pairs[0]
+            model = _with_probes(model, self.channels, self.gates, "")
+            return model, stim, self.outs + [f"gate:{g}" for g in self.gates]
+        from .tolerance import union
+        big = union([m for m, _ in pairs], [f"s{k}/" for k in range(len(pairs))])
+        big.params, n, probes = self.p, self.model.n, []
+        for k in range(len(pairs)):
+            for o in self.outs:
+                big.add_probe(f"s{k}/{o}", k * n + self.model.probes[o])
+            for g, ch in zip(self.gates, self.channels):
+                big.add_probe(f"s{k}/gate:{g}", k * n + ch)
+            probes += [f"s{k}/{o}" for o in self.outs] + [f"s{k}/gate:{g}" for g in self.gates]
+        amps = np.concatenate([s.amps for _, s in pairs], axis=1)
+        return big, Stimulus(self.stim.times, amps), probes
+
+    def _integrate(self, model, stim, probes):
+        """Amplitudes of every probe at the end; engines with a state stop once the outputs have settled
+        (simulation's settle rule on the output probes only, so a nominal sample matches `simulate`)."""
+        if not self.engine.capabilities.state:
+            run = self.engine.run(model, self.budget, stim, probes=probes)
+            return run.final_amplitudes(probes, model.amplitude_unit), self.budget
+        n_o, n_g = len(self.outs), len(self.gates)
+        rows = [k for k in range(len(probes)) if k % (n_o + n_g) < n_o]
+        state, done, history = None, 0, []
+        while done < self.budget:
+            n = min(simulation.CHUNK, self.budget - done)
+            run = self.engine.run(model, n, stim, state=state, start_period=done, probes=probes)
+            state, done = run.state, done + n
+            history.append(run.final_amplitudes(probes, model.amplitude_unit))
+            if not self.fixed and simulation._settled([h[rows] for h in history]):
+                break
+        return history[-1], done
+
+    def _record(self, i: int, a: np.ndarray, n_o: int, used: int) -> dict:
+        """Pass/fail, margins, wrong output bits and root gate failures of one sample from its amplitudes."""
+        ao, ag = a[:n_o], a[n_o:]
+        got_o = np.vectorize(lambda x: -1 if band_of(x) is None else band_of(x))(ao) if ao.size else ao
+        m_o = np.vectorize(margin)(ao, self.want_out) if ao.size else np.zeros((0, 1))
+        bad_g = np.vectorize(lambda x, w: band_of(x) != w)(ag, self.want_gate) if ag.size else np.zeros((0, 1), bool)
+        m_g = np.vectorize(margin)(ag, self.want_gate) if ag.size else np.zeros((0, 1))
+        roots = set()
+        for g in range(len(self.gates)):
+            up_ok = np.all(~bad_g[self.feeders[g]], axis=0) if self.feeders[g] else np.ones(bad_g.shape[1], bool)
+            if np.any(bad_g[g] & up_ok):
+                roots.add(self.gates[g])
+        wrong = {o: int(np.sum(got_o[k] != self.want_out[k])) for k, o in enumerate(self.outs)}
+        return {"i": i, "pass": not any(wrong.values()), "margin": float(m_o.min()) if m_o.size else None,
+                "gate_margin": float(m_g.min()) if m_g.size else None,
+                "failing_bits": {o: c for o, c in wrong.items() if c}, "failing_gates": sorted(roots),
+                "worst_gate": self.gates[int(np.argmin(m_g.min(axis=1)))] if m_g.size else None,
+                "periods": int(used)}
+
+
+def _with_probes(model, channels, gates, prefix):
+    """A shallow copy of `model` whose probes add every gate channel (as "gate:NAME")."""
+    from dataclasses import replace
+    probes = dict(model.probes)
+    probes.update({f"{prefix}gate:{g}": ch for g, ch in zip(gates, channels)})
+    return replace(model, probes=probes)
+
+
+def job_key(job: dict) -> str:
+    """A short hash naming what a results file holds (design, params, vectors, spec, seed, backend...)."""
+    return hashlib.sha256(json.dumps(job, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def summary(records: list[dict], n_gates: int) -> dict:
+    """samples, failures, yield with its Wilson interval, margin quantiles, failing bits, per-gate rate."""
+    n = len(records)
+    passed = sum(bool(r["pass"]) for r in records)
+    margins = np.array([r["margin"] if r.get("margin") is not None else np.nan for r in records], float)
+    finite = margins[~np.isnan(margins)]
+    bits, gates = {}, {}
+    for r in records:
+        for b, c in r.get("failing_bits", {}).items():
+            bits[b] = bits.get(b, 0) + 1
+        for g in r.get("failing_gates", []):
+            gates[g] = gates.get(g, 0) + 1
+    roots = sum(gates.values())
+    rate = roots / (n * n_gates) if n and n_gates else 0.0
+    lo, hi = wilson(roots, n * n_gates) if n and n_gates else (0.0, 1.0)
+    return {"samples": n, "failures": n - passed, "yield": passed / n if n else None,
+            "yield_ci95": list(wilson(passed, n)),
+            "margin_quantiles": {f"{q}%": float(np.percentile(finite, q)) for q in QUANTILES} if finite.size else {},
+            "failing_bits": dict(sorted(bits.items(), key=lambda kv: -kv[1])),
+            "gate_failure_rate": rate, "gate_failure_rate_ci95": [lo, hi], "gates": n_gates,
+            "failing_gates": dict(sorted(gates.items(), key=lambda kv: -kv[1])[:20]),
+            "reasons": _reasons(records)}
+
+
+def _reasons(records: list[dict]) -> dict:
+    out = {}
+    for r in records:
+        if r.get("reason"):
+            out[r["reason"][:80]] = out.get(r["reason"][:80], 0) + 1
+    return out
+
+
+def design_path(path) -> Path:
+    """The Verilog file of a design argument (a path, or a shipped design's file name)."""
+    from .. import data
+    p = Path(path)
+    if p.exists():
+        return p
+    shipped = Path(data.verilog(p.name)) if p.suffix == ".v" else None
+    if shipped is not None and shipped.exists():
+        return shipped
+    raise Mech2SpiceError(f"no such design file: {path}")

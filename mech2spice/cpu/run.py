@@ -22,7 +22,7 @@ from ..inputs import check_output_file, is_int, read_json
 from .isa import MEM_SIZE
 from .iss import FETCH, LDNX, LOAD, REGISTERS
 from .asm import Program, assemble_program
-from .machines import BACKENDS, PHYSICAL, make_cpu
+from .machines import PHYSICAL, make_cpu
 from .memory import Memory
 from .tm import Tape
 

@@ -374,7 +374,7 @@ def render(res: dict) -> str:
             if res.get("rerun_sections") else "") + ". Raw numbers: "
          "`reports/envelope_spice.json`; chart: `reports/speed_accuracy_envelope_spice.png`.", "",
          "### Circuit form", "",
-         "`mech2spice/spice_envelope.py` writes the envelope equations (2iwM + C) A' = F - Z0 A - (G s) A and "
+         "`mech2spice/spice/envelope.py` writes the envelope equations (2iwM + C) A' = F - Z0 A - (G s) A and "
          "M_s s'' = -K_s s - C_s s' - H |A|^2 / 2 as a circuit in real time: two nodes per oscillating DOF "
          "(V = Re A, Im A in u_R), each row divided by its diagonal b_j = 2iw m_j + c_jj so that the left side "
          "is a 1 F capacitor per node (2iwM alone would couple Re and Im through the *derivatives*, which no "
@@ -441,7 +441,7 @@ def render(res: dict) -> str:
                     f"{bad[0].get('stall_from_period', float('nan')):.5f} on every step was "
                     f"{bad[0].get('last_step_periods', float('nan')):.1e} T; the steps into it, in T: "
                     + ", ".join(f"{x:.1e}" for x in bad[0].get("steps_into_stall_periods", [])) + ")" if bad else "")
-                 + f". The same runs with the smooth tanh steps that spice_envelope.py writes: {len(good)} of "
+                 + f". The same runs with the smooth tanh steps that spice/envelope.py writes: {len(good)} of "
                    f"{sum(s['form'].startswith('tanh') for s in stalls)} finished. At t ~ 2900 T = 374 s, delmin "
                    "(0.6 to 2.6 ps for max steps 0.5 to 2 T) is only 10 to 50 ulps of t: a step that small is "
                    "rounded by up to 10 %, the drive is evaluated at the rounded time, and the truncation-error "

@@ -20,7 +20,6 @@ from mech2spice.backends import rk4
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
 from mech2spice.experiments import scenes
 from mech2spice.physics import network, nor
-from mech2spice.physics.envelope import Envelope
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
 from mech2spice.physics.stimulus import Stimulus

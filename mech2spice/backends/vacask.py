@@ -9,7 +9,7 @@ from ..spice import vacask
 from ._base import Capabilities, Engine
 from .ngspice import _from_rest
 
-SECONDS_PER_OSCILLATOR_PERIOD = 4.4e-5    # carrier level, T/40: measured on the gate and the adder (docs/vacask.md)
+SECONDS_PER_OSCILLATOR_PERIOD = 1.5e-5    # carrier level, T/40, CPU: the adder, 2 x 2900 periods in 9.0 s (docs/vacask.md)
 
 
 class VacaskEngine(Engine):

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
 import tempfile
 import time
 from dataclasses import asdict, dataclass
@@ -573,49 +572,39 @@ def run_hb(model: MechModel, nharm: int = HB_NHARM, timeout: float | None = None
 
 
 def hb_map(levels, p: GateParams = DEFAULT, nharm: int = HB_NHARM, timeout: float | None = None) -> list[dict]:
-    """The single gate's channel amplitude by harmonic balance for input levels [(x1, x2)] (fractions of F_R):
-    one VACASK process sweeps every level (each point starts from the last one's solution).  A point where HB
-    fails is retried alone; {'amp_ur', 'phase_deg', 'converged'} per level."""
-    from ..physics import nor
-    levels = [tuple(map(float, lv)) for lv in levels]
-    out: list[dict | None] = [None] * len(levels)
-    start = 0
-    while start < len(levels):
-        got = _hb_sweep(levels[start:], p, nharm, timeout)
-        for k, r in enumerate(got):
-            out[start + k] = r
-        start += len(got)
-        if start < len(levels):              # the sweep stopped at `start`: that point alone, then go on
-            out[start] = (_hb_sweep([levels[start]], p, nharm, timeout) or [None])[0] or \
-                {"amp_ur": math.nan, "phase_deg": math.nan, "converged": False}
-            start += 1
-    return out
+    """The single gate's channel amplitude by harmonic balance for input levels [(x1, x2)] (fractions of F_R).
+    A full grid (every x1 with every x2, x1 outermost) runs as one VACASK process sweeping both inputs, each
+    point starting from the last one's solution; other lists, and any point the sweep did not deliver, run
+    alone.  {'amp_ur', 'phase_deg', 'converged'} per level."""
+    levels = [(float(a), float(b)) for a, b in levels]
+    x1, x2 = list(dict.fromkeys(a for a, _ in levels)), list(dict.fromkeys(b for _, b in levels))
+    found = _hb_sweep(x1, x2, p, nharm, timeout) if [(a, b) for a in x1 for b in x2] == levels else {}
+    for lv in levels:
+        if lv not in found:
+            found.update(_hb_sweep([lv[0]], [lv[1]], p, nharm, timeout))
+    failed = {"amp_ur": math.nan, "phase_deg": math.nan, "converged": False}
+    return [found.get(lv, failed) for lv in levels]
 
 
-def _hb_sweep(levels, p: GateParams, nharm: int, timeout) -> list[dict]:
-    """HB over `levels` in one process (as a sweep over both input sources); the points it finished."""
+def _hb_sweep(x1: list[float], x2: list[float], p: GateParams, nharm: int, timeout) -> dict:
+    """HB of the single gate over the grid x1 x x2 in one process; {(x1, x2): result} for the points it
+    delivered (read from the sweep variables in the raw file, so a skipped or aborted point is just absent)."""
     from ..physics import nor
     m = nor.single_gate(p)
     (s1, _), (s2, _) = m.design.input_drives
     _, _, sources = emit_hb(m, nharm)
-    f1 = [lv[0] * p.f_r for lv in levels]
-    f2 = [lv[1] * p.f_r for lv in levels]
-    # one sweep over a point index would need a table; two sweeps over the distinct values cover the grid
-    # when `levels` is one, and a single point otherwise
-    if len(levels) > 1 and len(set(zip(f1, f2))) == len(set(f1)) * len(set(f2)) == len(levels) and \
-            [(a, b) for a in dict.fromkeys(f1) for b in dict.fromkeys(f2)] == list(zip(f1, f2)):
-        sweeps = [(sources[s1], list(dict.fromkeys(f1))), (sources[s2], list(dict.fromkeys(f2)))]
-    else:
-        sweeps = [(sources[s1], f1[:1]), (sources[s2], f2[:1])]
-        levels = levels[:1]
+    sweeps = [(sources[s1], [a * p.f_r for a in x1]), (sources[s2], [b * p.f_r for b in x2])]
     text, vecs, _ = emit_hb(m, nharm, sweeps)
     try:
         names, z, _ = run_netlist(text, HB, timeout, forms=(CARRIER,))
     except Mech2SpiceError as e:
         names, z = getattr(e, "names", []), getattr(e, "data", np.zeros((0, 0)))
-        if not len(z):
-            return []
-    rows = z.shape[0] // (nharm + 1)
-    x = z[: rows * (nharm + 1), names.index(vecs[0])].reshape(rows, nharm + 1)[:, 1]
-    return [{"amp_ur": float(abs(a) / p.u_r), "phase_deg": float(np.degrees(np.angle(a))), "converged": True}
-            for a in x[:len(levels)]]
+    if not len(z) or not {"s0", "s1", "frequency"} <= set(names):
+        return {}
+    level = {round(a * p.f_r, 12): a for a in x1}, {round(b * p.f_r, 12): b for b in x2}
+    out = {}
+    for row in z[np.abs(z[:, names.index("frequency")].real - m.omega / (2 * math.pi)) < 1e-9 * m.omega]:
+        key = (level[0].get(round(row[names.index("s0")].real, 12)), level[1].get(round(row[names.index("s1")].real, 12)))
+        a = row[names.index(vecs[0])]
+        out[key] = {"amp_ur": float(abs(a) / p.u_r), "phase_deg": float(np.degrees(np.angle(a))), "converged": True}
+    return out

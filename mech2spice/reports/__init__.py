@@ -41,6 +41,9 @@ REPORTS: dict[str, Report] = {
                           "~15 min", ("performance.md",), ("only", "quick", "sqrt_rk4_full", "render")),
     "speed_accuracy": Report("RK4 and ngspice (carrier and envelope netlists): speed, accuracy, failure points",
                              "~40 min", ("speed_accuracy.md",), ("only", "design", "quick", "render")),
+    "robustness": Report("yield of the gate, a 3-gate chain and the adder under per-element spread (Monte-Carlo "
+                         "on Dask), per-gate failure rate, the processor extrapolated", "~30 min",
+                         ("robustness.md", "robustness.json", "robustness_yield.png"), ("quick",)),
 }
 
 

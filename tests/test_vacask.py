@@ -381,3 +381,20 @@ def test_emitted_standalone_netlist_runs(tmp_path, capsys):
     assert proc.returncode == 0, proc.stdout
     names, data = read_raw(tmp_path / "tran1.raw")
     assert data.shape[0] > 20 * 40 and names[0] == "time"
+
+
+def test_report_section_renders_and_splices_once(tmp_path):
+    """The measured section (reports/vacask.json) renders; splicing it twice leaves one copy."""
+    from mech2spice.reports import vacask as rep
+    from mech2spice.reports._common import read_json
+    res = read_json(ROOT / "reports" / "vacask.json")
+    if res is None:
+        pytest.skip("reports/vacask.json not measured yet")
+    block = rep.render(res)
+    assert block.startswith(rep.BEGIN) and block.rstrip().endswith(rep.END)
+    md = tmp_path / "speed_accuracy.md"
+    md.write_text("# Speed vs accuracy\n\nbody\n")
+    rep.splice(md, block)
+    rep.splice(md, block)
+    text = md.read_text()
+    assert text.count(rep.BEGIN) == 1 and text.startswith("# Speed vs accuracy\n\nbody\n")

@@ -381,10 +381,13 @@ def render(res: dict) -> str:
               f"**{h['converged']} of {h['points']} points converged; largest difference {h['max_diff_ur']:.1e} u_R** "
               f"(to the nearest of the solver's roots; {h['max_diff_unique_ur']:.1e} u_R over the "
               f"{h['unique_points']} points with a single, stable root; {h['valid_region_max_ur']:.1e} u_R over the valid "
-              f"input bands). HB landed on an unstable root at {h['hb_on_unstable_root']} points "
-              f"(HB solves for a periodic state, stable or not; the sweep follows a branch through the multistable "
-              f"cells). Wall time: HB {h['hb_wall_s']:.1f} s for the whole map, the steady-state solver "
+              f"input bands). At {h['hb_on_unstable_root']} points HB converged to an unstable root: there the "
+              f"solver's only root is unstable (the insulator self-oscillates; the grey cells of reports/gate.md), "
+              f"and a one-tone HB solves for the periodic state, stable or not; it cannot show the quasi-periodic "
+              f"motion a transient would. Wall time: HB {h['hb_wall_s']:.1f} s for the whole map, the steady-state solver "
               f"{h['steady_wall_s']:.1f} s (all roots and their stability)." + _hb_outliers(h), ""]
+        if res.get("chart"):
+            L += [f"![HB against the steady-state solver over the map]({res['chart']})", ""]
         tt = h.get("truth_table")
         if tt:
             L += md_table(["inputs (F_R)", "HB [u_R]", "steady-state solver [u_R]", "difference [u_R]"],

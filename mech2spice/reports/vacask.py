@@ -182,8 +182,36 @@ def hb(n: int = 71, lo: float = 0.2, hi: float = 1.15) -> dict:
            "hb_on_unstable_root": on_unstable, "diff": diff.reshape(n, n).tolist(), "xs": xs.tolist(),
            "valid_region_max_ur": float(np.nanmax([d for (a, b), d in zip(grid, diff)
                                                    if _valid(a) and _valid(b)] or [np.nan]))}
+    worst = np.unravel_index(np.nanargmax(np.where(unique.reshape(n, n), diff.reshape(n, n), np.nan)), (n, n))
+    out["fixed_point"] = fixed_point_check((float(xs[worst[0]]), float(xs[worst[1]])))
     out["truth_table"] = hb_truth_table()
     out["adder"] = hb_adder()
+    return out
+
+
+def fixed_point_check(lv, periods: int = 3000) -> dict:
+    """Which is the carrier-level steady state at input `lv`: RK4 (T/160) started at HB's periodic state and at
+    the solver's, each run `periods` periods; the true one stays put (up to RK4's own error)."""
+    import re
+    from ..physics import steady
+    from ..physics.envelope import Envelope
+    m = nor.single_gate(P, *lv)
+    g = m.design.gates[0]
+    m.add_probe("ins", g.insulator)              # the block unpacked: every DOF's nodes are top-level
+    text, _, _ = vc.emit_hb(m, 8)
+    names, z, _ = vc.run_netlist(re.sub(r"\n  save [^\n]*", "\n  save default", text), vc.HB, forms=(vc.CARRIER,))
+    stem = vc._Emitter(m, 1, None, 0, vc.VacaskOptions(prewarp=False), vc.CARRIER).stem
+    hb_x = np.array([z[:, names.index(f"x_{s}")].real.sum() for s in stem])    # u(0) = Re sum_k X_k
+    hb_v = np.array([z[:, names.index(f"v_{s}")].real.sum() for s in stem])
+    env = Envelope.of(m)
+    ss = steady.steady_states(env, env.forcing(np.array([d.amplitude for d in m.drives]))[:, 0])[0]
+    so_x, so_v = np.zeros(m.n), np.zeros(m.n)
+    so_x[env.fast], so_v[env.fast], so_x[env.slow] = ss.A.real, (1j * m.omega * ss.A).real, ss.s
+    out = {"inputs": list(lv), "periods": periods}
+    for key, (x, v) in (("from_hb", (hb_x, hb_v)), ("from_solver", (so_x, so_v))):
+        r = rk4.integrate(m, periods, steps_per_period=160, state=(x[:, None], v[:, None]))
+        a = np.abs(r.amp[:, r.probe("g0"), 0]) / P.u_r
+        out[key] = {"first": float(a[0]), "last": float(a[-1])}
     return out
 
 
@@ -209,7 +237,19 @@ def _hb_outliers(h: dict) -> str:
               "There HB with 4 and with 8 harmonics agree to 1e-10 u_R (measured at the worst point), so the "
               "difference is the solver's model, not HB's truncation: the envelope equations average over a period "
               "(they drop, among others, the insulator's 2 omega motion, which feeds back on the channel), and the "
-              "steep response magnifies such a term: 1.8e-3 u_R is the output change of a 3e-5 F_R input shift there.")
+              "steep response magnifies such a term: 1.8e-3 u_R is the output change of a 3e-5 F_R input shift there."
+            + _fixed_text(h.get("fixed_point")))
+
+
+def _fixed_text(fp: dict | None) -> str:
+    """What RK4 says about the worst point: which state the oscillators keep."""
+    if not fp:
+        return ""
+    a, b = fp["from_hb"], fp["from_solver"]
+    return (f" Which one is the oscillators' steady state, at the worst point ({fp['inputs'][0]:.3f}, "
+            f"{fp['inputs'][1]:.3f}): RK4 at T/160 started on HB's periodic state stays there ({a['first']:.5f} -> "
+            f"{a['last']:.5f} u_R after {fp['periods']} periods); started on the solver's state it drifts away, "
+            f"towards HB's ({b['first']:.5f} -> {b['last']:.5f} u_R; the dynamics near the fold are slow).")
 
 
 def _valid(x: float) -> bool:

@@ -56,12 +56,13 @@ class Sampler:
 
     def run(self, sigma: float, max_failures: int | None = None) -> dict:
         """Margin of every sample at sigma; stops early once more than max_failures samples failed."""
-        worst, at = [], []
+        worst, at, fails = [], [], 0
         for i in range(self.eps.shape[0]):
             m = self.margins(self.model(sigma, i))
             worst.append(float(m.min()))
             at.append(int(m.argmin()))
-            if max_failures is not None and sum(w <= 0 for w in worst) > max_failures:
+            fails += worst[-1] <= 0
+            if max_failures is not None and fails > max_failures:
                 break
         return {"margins": np.array(worst), "worst_point": np.array(at), "complete": len(worst) == self.eps.shape[0]}
 

@@ -54,7 +54,8 @@ class Stack:
 def stack(models: list[MechModel], groups: np.ndarray, out_dof: int) -> Stack:
     """Stack B models of one topology with exactly one slow DOF; groups[d] is drive d's group."""
     parts = [_arrays(m, np.asarray(groups), out_dof) for m in models]
-    return Stack(models[0].omega, *(np.stack([p[k] for p in parts]) for k in range(8)), parts[0][8])
+    per_copy = ("Z0", "Binv", "g", "h", "ks", "cs", "ms", "f")
+    return Stack(models[0].omega, **{k: np.stack([p[k] for p in parts]) for k in per_copy}, out=parts[0]["out"])
 
 
 def _arrays(m: MechModel, groups: np.ndarray, out_dof: int):
@@ -76,8 +77,8 @@ def _arrays(m: MechModel, groups: np.ndarray, out_dof: int):
     for d, grp in zip(m.drives, groups):
         f[pos[d.dof], grp] += -1j * d.amplitude * np.exp(1j * d.phase)
     s = slow[0]
-    return (Kf - w * w * Mf + 1j * w * Cf, np.linalg.inv(2j * w * Mf + Cf), g, h, K[s, s], C[s, s], M[s], f,
-            int(pos[out_dof]))
+    return {"Z0": Kf - w * w * Mf + 1j * w * Cf, "Binv": np.linalg.inv(2j * w * Mf + Cf), "g": g, "h": h,
+            "ks": K[s, s], "cs": C[s, s], "ms": M[s], "f": f, "out": int(pos[out_dof])}
 
 
 def responses(st: Stack, b: int, s: np.ndarray) -> np.ndarray:

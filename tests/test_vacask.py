@@ -398,3 +398,37 @@ def test_report_section_renders_and_splices_once(tmp_path):
     rep.splice(md, block)
     text = md.read_text()
     assert text.count(rep.BEGIN) == 1 and text.startswith("# Speed vs accuracy\n\nbody\n")
+
+
+def test_same_named_scheduled_drives_get_separate_sources():
+    """Two drives named alike, both scheduled: their pulse chains must not share a node (a clocked design's
+    clock pairs are all named 'clk'; sharing shorted two source chains and VACASK got NaN at the first step)."""
+    m = nor.chain(P, 2)
+    for pair in m.design.input_drives:
+        for d in pair:
+            m.drives[d].name = "clk.s"
+    st = Stimulus.from_levels(m, [(0.0, {}), (5 * P.period, {d: 0.6 for pair in m.design.input_drives for d in pair})])
+    text = vc.emit(m, 10, st).text.split("// --- drive amplitudes")[1].split("control")[0]
+    lines = [ln for ln in text.strip().splitlines()]
+    insts = [ln.split()[0] for ln in lines]
+    assert len(insts) == len(set(insts))
+    driven = [ln.split("(")[1].split()[0] for ln in lines]          # each source's + node
+    assert len(driven) == len(set(driven))
+
+
+@needs_vacask
+def test_an_aborted_analysis_is_an_error_although_vacask_exits_0():
+    text = ('loop\nground 0\nmodel vsource vsource\nv1 (a 0) vsource dc=1\nv2 (a 0) vsource dc=2\ncontrol\n'
+            '  options strictoutput=0\n  analysis tran1 tran stop=1 step=0.1 icmode="uic"\nendc\n')
+    with pytest.raises(Mech2SpiceError, match=r"VACASK failed \(exit 0\): Factorization failed"):
+        vc.run_netlist(text)
+
+
+@needs_vacask
+def test_clocked_design_runs_on_vacask():
+    """The counter's clock pairs (many drives, one name, scheduled) through simulate's clocked path, 1 cycle."""
+    from mech2spice import simulation
+    nl = synth.synthesize(str(ROOT / "verilog" / "counter4.v"))
+    timing = {"pulse": 200, "pause": 800}
+    res = simulation.run_clocked_physical(nl, P, [{"rst": 1}], "vacask", timing)
+    assert res["valid"] and res["outputs"]["q"] == 0, res["amplitudes"]

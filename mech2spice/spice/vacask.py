@@ -168,20 +168,21 @@ class _Emitter:
         sched = self.schedule(d)
         key = (d if share is None else share, sched)
         if key not in self.amp_nodes:
-            node = f"a_{self.namer['amp'](self.m.drives[d].name or 'drive')}"
-            self.amp_nodes[key] = node
-            self.amp_lines += self._source(node, sched)
+            stem = self.namer["amp"](self.m.drives[d].name or "drive")
+            self.amp_nodes[key] = f"a_{stem}"
+            self.amp_lines += self._source(stem, sched)
         return self.amp_nodes[key]
 
-    def _source(self, node: str, sched) -> list[str]:
-        """DC, or a DC source and one pulse source in series per change (a ramp of RAMP_PERIODS centred on it)."""
+    def _source(self, stem: str, sched) -> list[str]:
+        """DC, or a DC source and one pulse source in series per change (a ramp of RAMP_PERIODS centred on it).
+        The chain's inner nodes and sources have prefixes of their own (ap<k>_, vp<k>_): no stem can reach them."""
         if len(sched) == 1:
-            return [f"v{node} ({node} 0) vsource dc={num(sched[0][1])}"]
+            return [f"va_{stem} (a_{stem} 0) vsource dc={num(sched[0][1])}"]
         ramp = self.opt.RAMP_PERIODS * self.T
-        out, lo = [f"v{node}_0 ({node}_0 0) vsource dc={num(sched[0][1])}"], f"{node}_0"
+        out, lo = [f"vp0_{stem} (ap0_{stem} 0) vsource dc={num(sched[0][1])}"], f"ap0_{stem}"
         for k, ((_, a0), (t1, a1)) in enumerate(zip(sched, sched[1:]), 1):
-            hi = node if k == len(sched) - 1 else f"{node}_{k}"
-            out.append(f"v{node}_{k} ({hi} {lo}) vsource type=\"pulse\" val0=0 val1={num(a1 - a0)} "
+            hi = f"a_{stem}" if k == len(sched) - 1 else f"ap{k}_{stem}"
+            out.append(f"vp{k}_{stem} ({hi} {lo}) vsource type=\"pulse\" val0=0 val1={num(a1 - a0)} "
                        f"delay={num(max(t1 - ramp / 2, 0.0))} rise={num(ramp)}")
             lo = hi
         return out
@@ -355,6 +356,7 @@ def _embed(form: str) -> str:
 
 
 # --- running -----------------------------------------------------------------------------------------------
+_ABORTED = re.compile(r"^Analysis '\w+' aborted|^\s*error", re.I | re.M)
 _ERR = re.compile(r"error|failed|not found|abort|cannot|singular|too small|unknown|syntax", re.I)
 
 
@@ -394,7 +396,8 @@ def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None, w
         log = proc.stdout + "\n" + proc.stderr
         raw = d / f"{analysis}.raw"
         names, data = read_raw_any(raw) if raw.exists() and raw.stat().st_size else ([], np.zeros((0, 0)))
-    msg = _message(log) if proc.returncode != 0 or not len(data) else None
+    # VACASK exits 0 when an analysis aborts: its log says so
+    msg = _message(log) if proc.returncode != 0 or not len(data) or _ABORTED.search(log) else None
     if proc.returncode != 0 or msg or not len(data):
         err = Mech2SpiceError(f"VACASK failed (exit {proc.returncode}): {msg or 'no data written'}")
         err.names, err.data, err.log = names, data, log
@@ -554,7 +557,7 @@ def emit_hb(model: MechModel, nharm: int = HB_NHARM, sweeps: list[tuple[str, lis
         raise Mech2SpiceError("harmonic balance needs at least one harmonic")
     e = _Emitter(model, 1, None, 0, VacaskOptions(prewarp=False), CARRIER)
     e.circuit()
-    sources = {d: f"v{node}" for (d, _), node in e.amp_nodes.items()}
+    sources = {d: f"v{node}" for (d, _), node in e.amp_nodes.items()}     # constant drives: va_<stem>
     lines = [f"{'  ' * k}sweep s{k} instance=\"{inst}\" parameter=\"dc\" values=[{', '.join(num(v) for v in vals)}]"
              for k, (inst, vals) in enumerate(sweeps)]
     lines.append("  " * len(sweeps) + _hb_line(model, nharm))

@@ -171,7 +171,7 @@ def test_schedule_is_a_chain_of_pulse_sources():
     st = Stimulus.from_levels(m, [(0.0, {}), (10 * P.period, {s1: 0.7, d1: 0.7}), (20 * P.period, {s1: 0.1, d1: 0.1})])
     amps = vc.emit(m, 30, st).text.split("// --- drive amplitudes")[1].split("control")[0]
     assert amps.count('type="pulse"') == 2
-    assert re.search(r"^va_x1_s_2 \(a_x1_s a_x1_s_1\) vsource type=\"pulse\" val0=0 val1=-0\.6", amps, re.M)
+    assert re.search(r"^vp2_x1_s \(a_x1_s ap1_x1_s\) vsource type=\"pulse\" val0=0 val1=-0\.6", amps, re.M)
 
 
 def test_hostile_names_stay_identifiers():

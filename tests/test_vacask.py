@@ -432,3 +432,15 @@ def test_clocked_design_runs_on_vacask():
     timing = {"pulse": 200, "pause": 800}
     res = simulation.run_clocked_physical(nl, P, [{"rst": 1}], "vacask", timing)
     assert res["valid"] and res["outputs"]["q"] == 0, res["amplitudes"]
+
+
+@needs_vacask
+@pytest.mark.parametrize("step", [1 / 40, 1 / 80])
+def test_settled_gate_meets_the_steady_state_solver(step):
+    """The '10' input settles where the solver says (VACASK's default Newton reference, relref 'local', left it
+    4.6e-4 u_R off at T/40 and 1.6e-3 at T/80; 'pointlocal' is the default here)."""
+    from mech2spice.experiments.characterise import steady_outputs
+    m = nor.single_gate(P, NOMINAL1, NOMINAL0)
+    got = np.abs(vc.run(m, 1500, options=vc.VacaskOptions(max_step_periods=step)).amp[-AVG:, 0, 0]).mean() / U_R
+    want = steady_outputs(P, np.array([NOMINAL1]), np.array([NOMINAL0]))[0][0][0]
+    assert abs(got - want) < 1e-4, (got, want)

@@ -391,7 +391,7 @@ def render(res: dict) -> str:
             rows.append([r["design"], f"{r['oscillators']} osc, {r['cases']} case(s), {r['periods']} T",
                          f"{_f(v['settled_ur'])} / {_f(v['phase_deg'], 2)} / {_f(v['traj_ur'])}",
                          f"{_f(n['settled_ur'])} / {_f(n['phase_deg'], 2)} / {_f(n['traj_ur'])}",
-                         _f(r["vacask_vs_ngspice_ur"], 5), f"{v['wall_s']:.2f} ({v['cpu_s']:.2f})",
+                         f"{r['vacask_vs_ngspice_ur']:.1e}", f"{v['wall_s']:.2f} ({v['cpu_s']:.2f})",
                          f"{n['wall_s']:.2f} ({n['cpu_s']:.2f})", f"{n['wall_s'] / v['wall_s']:.1f}x",
                          f"{n['cpu_s'] / max(v['cpu_s'], 1e-9):.1f}x"])
         L += md_table(["design", "size", "VACASK settled [u_R] / phase [deg] / traj [u_R]", "ngspice (same)",

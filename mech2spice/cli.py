@@ -265,13 +265,14 @@ def _engine_options(args, backend: str | None = None):
     steps, method, max_step = (getattr(args, k, None) for k in ("steps", "method", "max_step"))
     changes = {}
     timeout = getattr(args, "ngspice_timeout", None)
-    if name.startswith("ngspice"):
+    if name.startswith(("ngspice", "vacask")):                 # the circuit simulators' settings
         changes.update({k: v for k, v in (("method", method), ("max_step_periods", max_step), ("timeout_s", timeout))
                         if v is not None})
         if steps:
-            raise Mech2SpiceError("--steps applies to rk4 and envelope; ngspice's step is --max-step")
+            raise Mech2SpiceError(f"--steps applies to rk4 and envelope; {name}'s step is --max-step")
     elif method or max_step or timeout:
-        raise Mech2SpiceError(f"--method, --max-step and --ngspice-timeout apply to the ngspice backends, not {name}")
+        raise Mech2SpiceError(f"--method, --max-step and --ngspice-timeout apply to the circuit simulators "
+                              f"(ngspice, vacask), not {name}")
     elif steps and name == "rk4":
         changes["steps_per_period"] = steps
     elif steps and name == "envelope":
@@ -373,11 +374,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--steps", type=inputs.integer(1, inputs.MAX_STEPS), default=None,
                    help="steps per drive period (rk4 default 80; envelope default: one step per 4 periods, "
                         "fewer where the stability bound is lower)")
-    s.add_argument("--method", choices=["trap", "gear"], help="ngspice integration method (default trap)")
-    s.add_argument("--max-step", type=inputs.number(0), help="ngspice max step in drive periods (default 1/40; "
-                                                            "ngspice-envelope: 2)")
+    s.add_argument("--method", choices=["trap", "gear"],
+                   help="circuit simulator (ngspice, vacask) integration method (default trap)")
+    s.add_argument("--max-step", type=inputs.number(0), help="circuit simulator max step in drive periods (default "
+                                                            "1/40; the envelope netlists: 2)")
     s.add_argument("--ngspice-timeout", type=inputs.number(0), default=None, metavar="SECONDS",
-                   help=f"stop an ngspice run after this long (default {DEFAULT_TIMEOUT_S:g} s)")
+                   help=f"stop an ngspice or VACASK run after this long (default {DEFAULT_TIMEOUT_S:g} s)")
     s.add_argument("--clock", metavar="PORT", help="the clock port (default: the one clocking the flip-flops)")
     s.add_argument("--cycles", type=inputs.integer(1, inputs.MAX_CYCLES),
                    help=f"clock cycles to run with the --set inputs held (at most {inputs.MAX_CYCLES:,} on the "

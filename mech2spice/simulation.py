@@ -56,8 +56,11 @@ def run_logic(netlist: Netlist, values: dict[str, int]) -> dict:
 
 
 def _engine_fields(engine) -> dict:
-    """Result fields naming an engine's settings (the ngspice engines' options, as before)."""
-    return {"ngspice_options": engine.describe()} if engine.name.startswith("ngspice") else {}
+    """Result fields naming a circuit simulator's settings: `ngspice_options` / `vacask_options`."""
+    for simulator in ("ngspice", "vacask"):
+        if engine.name.startswith(simulator):
+            return {f"{simulator}_options": engine.describe()}
+    return {}
 
 
 def _observed(netlist: Netlist, model: MechModel) -> list[str]:

@@ -10,6 +10,7 @@ import functools
 import json
 import re
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -444,3 +445,14 @@ def test_settled_gate_meets_the_steady_state_solver(step):
     got = np.abs(vc.run(m, 1500, options=vc.VacaskOptions(max_step_periods=step)).amp[-AVG:, 0, 0]).mean() / U_R
     want = steady_outputs(P, np.array([NOMINAL1]), np.array([NOMINAL0]))[0][0][0]
     assert abs(got - want) < 1e-4, (got, want)
+
+
+@needs_vacask
+def test_simulate_flags_reach_vacask():
+    """--max-step and --method are the circuit simulators' flags: vacask takes them and reports its settings."""
+    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", "simulate", str(ROOT / "verilog" / "adder2.v"),
+                        "--set", "a=3", "--set", "b=2", "--backend", "vacask", "--max-step", "0.02", "--json"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["outputs"] == {"s": 5} and d["vacask_options"]["max_step_periods"] == 0.02

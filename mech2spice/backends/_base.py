@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..errors import DivergenceError
+from ..errors import DivergenceError, Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 
@@ -91,6 +91,12 @@ class NoOptions:
 
     def validate(self) -> None:
         """Nothing to check."""
+
+
+def require_rest(engine: str, state, start_period: int) -> None:
+    """Refuse a continuation for an engine that always starts from rest (the circuit simulators)."""
+    if state is not None or start_period:
+        raise Mech2SpiceError(f"the {engine} engine starts from rest: it cannot continue from a state")
 
 
 def blowup_bound(model: MechModel) -> float:

@@ -5,16 +5,10 @@ cheap restart, so neither engine continues from a state: a run always starts fro
 """
 from __future__ import annotations
 
-from ..errors import Mech2SpiceError
 from ..spice import runner
 from ..spice.carrier import SpiceOptions
 from ..spice.envelope import EnvelopeSpiceOptions, run_envelope_spice
-from ._base import Capabilities, Engine
-
-
-def _from_rest(state, start_period: int) -> None:
-    if state is not None or start_period:
-        raise Mech2SpiceError("the ngspice engines start from rest: they cannot continue from a state")
+from ._base import Capabilities, Engine, require_rest
 
 
 class NgspiceEngine(Engine):
@@ -26,7 +20,7 @@ class NgspiceEngine(Engine):
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """Every batch member as its own ngspice process; amplitudes demodulated per period."""
-        _from_rest(state, start_period)
+        require_rest(self.name, state, start_period)
         return runner.run_batch(model, periods, stimulus=stimulus, options=self.options)
 
 
@@ -39,5 +33,5 @@ class NgspiceEnvelopeEngine(Engine):
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """Every batch member as its own ngspice process; the envelope at each period's end."""
-        _from_rest(state, start_period)
+        require_rest(self.name, state, start_period)
         return run_envelope_spice(model, periods, stimulus=stimulus, opts=self.options)

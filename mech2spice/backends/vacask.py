@@ -6,8 +6,7 @@ Like ngspice, VACASK is a separate process started per run: neither engine conti
 from __future__ import annotations
 
 from ..spice import vacask
-from ._base import Capabilities, Engine
-from .ngspice import _from_rest
+from ._base import Capabilities, Engine, require_rest
 
 SECONDS_PER_OSCILLATOR_PERIOD = 1.5e-5    # carrier level, T/40, CPU: the adder, 2 x 2900 periods in 9.0 s (docs/vacask.md)
 
@@ -25,7 +24,7 @@ class VacaskEngine(Engine):
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """Every batch member as its own VACASK process; amplitudes demodulated per period."""
-        _from_rest(state, start_period)
+        require_rest(self.name, state, start_period)
         return vacask.run_batch(model, periods, stimulus=stimulus, options=self.options)
 
 
@@ -38,5 +37,5 @@ class VacaskEnvelopeEngine(Engine):
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """Every batch member as its own VACASK process; the envelope at each period's end."""
-        _from_rest(state, start_period)
+        require_rest(self.name, state, start_period)
         return vacask.run_envelope_batch(model, periods, stimulus=stimulus, options=self.options)

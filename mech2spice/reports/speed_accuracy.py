@@ -51,7 +51,7 @@ from ..spice import runner as ngspice
 from ..spice import num
 from ..spice.carrier import SpiceOptions, emit_with_probes
 from ..synthesis import synth
-from . import envelope_spice
+from . import envelope_spice, vacask
 from ._common import SANDBOX, out_dir, pyplot, read_json, save_figure, timed, write_json
 
 MACHINE = SANDBOX
@@ -930,12 +930,13 @@ def markdown(res: dict) -> str:
     return render(res)
 
 
-def write_markdown(path: Path, res: dict | None, envelope_block: str = "") -> str:
-    """Write the .md: this report from `res`, then the envelope-spice section (`envelope_spice.block`) as
-    the last thing in the file; nothing of the old file is kept."""
+def write_markdown(path: Path, res: dict | None, envelope_block: str = "", vacask_block: str = "") -> str:
+    """Write the .md: this report from `res`, then the envelope-spice section (`envelope_spice.block`) and the
+    VACASK section (`vacask.block`, from vacask.json); nothing of the old file is kept."""
     parts = [markdown(res).rstrip("\n")] if res else []
-    if envelope_block:
-        parts.append(envelope_block.rstrip("\n"))
+    for extra in (envelope_block, vacask_block):
+        if extra:
+            parts.append(extra.rstrip("\n"))
     text = "\n\n".join(parts) + "\n"
     Path(path).write_text(text)
     return text
@@ -963,7 +964,7 @@ def write(directory="reports", only=None, design=None, quick: bool = False, rend
     if res is not None:
         res["charts"] = charts(res, out)
         write_json(jpath, res, default=None)
-    write_markdown(mpath, res, envelope_spice.block(out))
+    write_markdown(mpath, res, envelope_spice.block(out), vacask.block(out))
     return mpath
 
 

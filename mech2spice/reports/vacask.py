@@ -1,9 +1,9 @@
 """VACASK (compiled Verilog-A devices) against RK4 and ngspice: accuracy, failure points, harmonic balance
 against the steady-state solver, and scaling of the envelope form against ngspice-envelope.
 
-Not a report of its own: it measures into reports/vacask.json and writes its section of speed_accuracy.md
-between the vacask markers (`python -m mech2spice.reports.vacask [DIR] [--only SECTION,...]`, ~15 min on the
-shared 2-core sandbox).  Every ngspice/VACASK pair runs one process at a time in the same run, so their
+Not a report of its own: it measures into reports/vacask.json (`python -m mech2spice.reports.vacask [DIR]
+[--only SECTION,...]`, ~15 min on the shared 2-core sandbox); speed_accuracy.md, written by
+reports/speed_accuracy.py alone, renders this section from it (`block`).  Every ngspice/VACASK pair runs one process at a time in the same run, so their
 wall-time ratios are measured under the same load.
 """
 from __future__ import annotations
@@ -554,14 +554,10 @@ def measure(directory: Path, only=None) -> dict:
     return res
 
 
-def splice(md: Path, block: str) -> None:
-    """Put `block` between the vacask markers of `md` (appended the first time)."""
-    text = md.read_text() if md.exists() else ""
-    if BEGIN in text and END in text:
-        text = text[:text.index(BEGIN)] + block.rstrip("\n") + text[text.index(END) + len(END):]
-    else:
-        text = text.rstrip("\n") + "\n\n" + block
-    md.write_text(text if text.endswith("\n") else text + "\n")
+def block(directory) -> str:
+    """This section of speed_accuracy.md from DIRECTORY/vacask.json ('' before it was measured)."""
+    res = read_json(Path(directory) / "vacask.json")
+    return render(res) if res else ""
 
 
 def main(argv=None) -> int:
@@ -576,7 +572,9 @@ def main(argv=None) -> int:
     res = read_json(d / "vacask.json") if args.render else measure(d, args.only)
     if args.render:
         res["chart"] = chart(res, d)
-    splice(d / "speed_accuracy.md", render(res))
+        write_json(d / "vacask.json", res)
+    from . import speed_accuracy                  # the one writer of speed_accuracy.md renders this section
+    speed_accuracy.write(d, render=True)
     return 0
 
 

@@ -70,7 +70,28 @@ def num(x: float) -> str:
 # --- the subcircuit library ------------------------------------------------------
 
 
-DEFAULT_TIMEOUT_S = 3600.0      # one ngspice process; the adder takes seconds (`simulate --ngspice-timeout`)
+DEFAULT_TIMEOUT_S = 3600.0      # one simulator process; the adder takes seconds (`simulate --ngspice-timeout`)
+
+
+def check_transient(o, simulator: str) -> None:
+    """The checks every circuit simulator's transient settings share: method, max step, tolerances, time limit."""
+    if o.method not in METHODS:
+        raise Mech2SpiceError(f"{simulator} method '{o.method}' unknown (use {' or '.join(METHODS)})")
+    if not (isinstance(o.max_step_periods, (int, float)) and 0 < o.max_step_periods <= o.MAX_STEP_LIMIT):
+        raise Mech2SpiceError(f"max_step_periods must be in (0, {o.MAX_STEP_LIMIT:g}] drive periods")
+    for name in ("reltol", "abstol", "chgtol", "vntol"):
+        if not getattr(o, name) > 0:
+            raise Mech2SpiceError(f"{type(o).__name__}.{name} must be positive")
+    if o.timeout_s is not None and not (math.isfinite(o.timeout_s) and o.timeout_s > 0):
+        raise Mech2SpiceError(f"the {simulator} timeout must be a positive number of seconds")
+
+
+def prewarp_scale(o) -> float:
+    """Capacitor scale making trapezoidal steps of max_step exact at the drive frequency (1 without prewarp)."""
+    if not (o.prewarp and o.method == "trap"):
+        return 1.0
+    half = math.pi * o.max_step_periods      # omega * h / 2
+    return half / math.tan(half)
 
 
 @dataclass(frozen=True)
@@ -88,17 +109,9 @@ class NgspiceSettings:
 
     def validate(self) -> None:
         """Refuse settings ngspice would reject or misread."""
-        if self.method not in METHODS:
-            raise Mech2SpiceError(f"ngspice method '{self.method}' unknown (use {' or '.join(METHODS)})")
-        if not (isinstance(self.max_step_periods, (int, float)) and 0 < self.max_step_periods <= self.MAX_STEP_LIMIT):
-            raise Mech2SpiceError(f"max_step_periods must be in (0, {self.MAX_STEP_LIMIT:g}] drive periods")
-        for name in ("reltol", "abstol", "chgtol", "vntol"):
-            if not getattr(self, name) > 0:
-                raise Mech2SpiceError(f"{type(self).__name__}.{name} must be positive")
+        check_transient(self, "ngspice")
         if not 1 <= self.maxord <= 6:
             raise Mech2SpiceError("maxord must be 1..6")
-        if self.timeout_s is not None and not (math.isfinite(self.timeout_s) and self.timeout_s > 0):
-            raise Mech2SpiceError("the ngspice timeout must be a positive number of seconds")
 
     @property
     def time_limit(self) -> float:

@@ -14,7 +14,7 @@ from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
-from ._common import NgspiceSettings, Namer, comment_text, drive_schedule, num
+from ._common import NgspiceSettings, Namer, comment_text, drive_schedule, num, prewarp_scale
 
 @dataclass(frozen=True)
 class SpiceOptions(NgspiceSettings):
@@ -48,10 +48,7 @@ class SpiceOptions(NgspiceSettings):
 
     def warp(self, omega: float) -> float:
         """Capacitor scale making trapezoidal steps of max_step exact at omega (1 without prewarp)."""
-        if not self.fixed_step:
-            return 1.0
-        half = math.pi * self.max_step_periods      # omega * h / 2
-        return half / math.tan(half)
+        return prewarp_scale(self)
 
 
 OSC = """\
@@ -166,7 +163,7 @@ def write_subckt_library(directory, p: GateParams = DEFAULT) -> list[Path]:
 
 
 # --- netlist emission ------------------------------------------------------------
-class _Incidence:
+class Incidence:
     """Per-DOF lists of the elements touching it, so planning is linear in the model's size."""
 
     def __init__(self, model: MechModel):
@@ -196,7 +193,7 @@ class _Plan:
     dashpots: set[int]
 
 
-def _nor_quads(model: MechModel, inc: _Incidence, g) -> dict[int, int] | None:
+def nor_quads(model: MechModel, inc: Incidence, g) -> dict[int, int] | None:
     """DOF -> quad index for the five quads an m2s_nor2 holds, or None if the block is not one."""
     if len(g.inputs) != 2:
         return None
@@ -209,7 +206,7 @@ def _nor_quads(model: MechModel, inc: _Incidence, g) -> dict[int, int] | None:
     return found if len(found) == 5 else None
 
 
-def _gate_is_closed(model: MechModel, inc: _Incidence, g, own_quads: set[int]) -> bool:
+def gate_is_closed(model: MechModel, inc: Incidence, g, own_quads: set[int]) -> bool:
     """True if nothing outside the block touches its hidden nodes (insulator x/v, dashpot-gate x)."""
     hidden_x = (g.insulator, g.inputs[0][1], g.inputs[1][1])
     if any(set(inc.quads[i]) - own_quads or inc.springs[i] for i in hidden_x):
@@ -217,12 +214,12 @@ def _gate_is_closed(model: MechModel, inc: _Incidence, g, own_quads: set[int]) -
     return not (inc.dashpots[g.insulator] or inc.drives[g.insulator])
 
 
-def _plan(model: MechModel, inc: _Incidence) -> _Plan:
+def gate_plan(model: MechModel, inc: Incidence) -> _Plan:
     plan = _Plan([], {}, set(), set(), set(), set(), set())
     for g in model.design.gates:
-        q = _nor_quads(model, inc, g)
+        q = nor_quads(model, inc, g)
         dofs = {g.channel, g.insulator, *[d for pair in g.inputs for d in pair]}
-        if q is None or len(dofs) != 6 or dofs & plan.in_gate or not _gate_is_closed(model, inc, g, set(q.values())):
+        if q is None or len(dofs) != 6 or dofs & plan.in_gate or not gate_is_closed(model, inc, g, set(q.values())):
             continue                                       # emitted DOF by DOF instead
         plan.gates.append(g)
         plan.quads |= set(q.values())
@@ -241,8 +238,8 @@ class _Emitter:
         # one namer per prefix: stems are unique within a prefix, prefixes keep kinds apart
         self.namer = {k: Namer() for k in ("dof", "gate", "couple", "drive", "amp")}
         self.stem = [self.namer["dof"](n) for n in model.names]
-        self.inc = _Incidence(model)
-        self.plan = _plan(model, self.inc)
+        self.inc = Incidence(model)
+        self.plan = gate_plan(model, self.inc)
         self.lines: list[str] = []
         self.amp_nodes: dict[tuple, str] = {}
         self.amp_lines: list[str] = []

@@ -130,7 +130,7 @@ def allow_runs() -> None:
     _STOPPED.clear()
 
 
-def _ngspice(argv: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProcess:
+def run_guarded(argv: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProcess:
     """Run ngspice; on a timeout or any exception (an interrupt included) the process is killed first."""
     if _STOPPED.is_set():
         raise Mech2SpiceError("ngspice run cancelled: interrupted")
@@ -166,7 +166,7 @@ def run_netlist(text: str, workdir=None, timeout: float | None = None) -> tuple[
         d = Path(workdir or tmp)
         cir, raw = d / "circuit.cir", d / "out.raw"
         cir.write_text(text, encoding="ascii")
-        proc = _ngspice([exe, "-b", "-n", "-r", str(raw), str(cir)], d, timeout)
+        proc = run_guarded([exe, "-b", "-n", "-r", str(raw), str(cir)], d, timeout)
         if _STOPPED.is_set():
             raise Mech2SpiceError("ngspice run cancelled: interrupted")
         log = proc.stdout + "\n" + proc.stderr

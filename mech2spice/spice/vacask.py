@@ -29,9 +29,9 @@ from ..errors import DivergenceError, Mech2SpiceError, ToolMissingError
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
-from ._common import (DEFAULT_TIMEOUT_S, Namer, check_samples, comment_text, drive_schedule, map_batch, num,
-                      probe_dof_names)
-from .carrier import _Incidence, _plan
+from ._common import (check_samples, check_transient, comment_text, DEFAULT_TIMEOUT_S, drive_schedule,
+                      map_batch, Namer, num, prewarp_scale, probe_dof_names)
+from .carrier import Incidence, gate_plan
 
 METHODS = ("trap", "gear")
 RELREFS = ("pointlocal", "local", "pointglobal", "global")   # Newton's relative reference (VACASK relrefsol/res)
@@ -62,19 +62,11 @@ class VacaskOptions:
 
     def validate(self) -> None:
         """Refuse settings VACASK would reject or misread."""
-        if self.method not in METHODS:
-            raise Mech2SpiceError(f"VACASK method '{self.method}' unknown (use {' or '.join(METHODS)})")
-        if not (isinstance(self.max_step_periods, (int, float)) and 0 < self.max_step_periods <= self.MAX_STEP_LIMIT):
-            raise Mech2SpiceError(f"max_step_periods must be in (0, {self.MAX_STEP_LIMIT:g}] drive periods")
-        for name in ("reltol", "abstol", "vntol", "chgtol"):
-            if not getattr(self, name) > 0:
-                raise Mech2SpiceError(f"{type(self).__name__}.{name} must be positive")
+        check_transient(self, "VACASK")
         if self.relref not in RELREFS:
             raise Mech2SpiceError(f"VACASK relref '{self.relref}' unknown (use {', '.join(RELREFS)})")
         if not self.lteratio > 1:
             raise Mech2SpiceError(f"{type(self).__name__}.lteratio must be > 1")
-        if self.timeout_s is not None and not (math.isfinite(self.timeout_s) and self.timeout_s > 0):
-            raise Mech2SpiceError("the VACASK timeout must be a positive number of seconds")
 
     @property
     def time_limit(self) -> float:
@@ -88,10 +80,7 @@ class VacaskOptions:
 
     def warp(self, omega: float) -> float:
         """Capacitor scale making trapezoidal steps of max_step exact at omega (1 without prewarp)."""
-        if not self.fixed_step:
-            return 1.0
-        half = math.pi * self.max_step_periods
-        return half / math.tan(half)
+        return prewarp_scale(self)
 
 
 @dataclass(frozen=True)
@@ -134,8 +123,8 @@ class _Emitter:
         self.T = 2 * math.pi / model.omega
         self.namer = {k: Namer() for k in ("dof", "amp")}
         self.stem = [self.namer["dof"](n) for n in model.names]
-        self.inc = _Incidence(model)
-        self.plan = _plan(model, self.inc)
+        self.inc = Incidence(model)
+        self.plan = gate_plan(model, self.inc)
         probed = set(model.probes.values())
         self.plan.gates = [g for g in self.plan.gates if g.insulator not in probed]
         self._replan()
@@ -145,10 +134,10 @@ class _Emitter:
 
     def _replan(self) -> None:
         """Recompute what the kept gate blocks cover (after dropping some)."""
-        from .carrier import _nor_quads
+        from .carrier import nor_quads
         self.plan.quads, self.plan.in_gate = set(), set()
         for g in self.plan.gates:
-            self.plan.quads |= set(_nor_quads(self.m, self.inc, g).values())
+            self.plan.quads |= set(nor_quads(self.m, self.inc, g).values())
             self.plan.in_gate |= {g.channel, g.insulator, *[d for pair in g.inputs for d in pair]}
 
     # -- nodes: (displacement, velocity) or (Re A, Im A) per DOF; slow DOFs (sx, sv) in the envelope form
@@ -384,7 +373,7 @@ def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None, w
     """Run a netlist under `vacask` in a temporary directory, the compiled libraries of `forms` beside it;
     returns (vector names, data, log) of the raw file `<analysis>.raw` (complex data as complex arrays)."""
     from . import veriloga as va
-    from .runner import _ngspice       # the process guard: timeout, interrupt and SIGTERM kill the child
+    from .runner import run_guarded       # the process guard: timeout, interrupt and SIGTERM kill the child
     exe, _ = va.tools()
     timeout = timeout or DEFAULT_TIMEOUT_S
     with tempfile.TemporaryDirectory(prefix="m2s_vc_") as tmp:
@@ -395,7 +384,7 @@ def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None, w
             link.unlink(missing_ok=True)
             link.symlink_to(va.compiled(form))
         try:
-            proc = _ngspice([exe, "-qp", "circuit.sim"], d, timeout)
+            proc = run_guarded([exe, "-qp", "circuit.sim"], d, timeout)
         except Mech2SpiceError as e:
             if "did not finish" in str(e):
                 raise Mech2SpiceError(f"VACASK did not finish within {timeout:g} s "

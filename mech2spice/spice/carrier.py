@@ -227,6 +227,51 @@ def gate_plan(model: MechModel, inc: Incidence) -> _Plan:
     return plan
 
 
+def gate_overrides(m: MechModel, p: GateParams, inc: Incidence, g, src, channel_gamma: str) -> list[tuple[str, str]]:
+    """A closed gate's instance parameters that differ from the library defaults (its locals, sampled values).
+
+    `channel_gamma` names the channel-insulator coupling's parameter in the target library."""
+    (s1, d1), (s2, d2) = g.inputs
+    roles = {"c": (g.channel, p.m_c, p.k_c, p.c_c), "i": (g.insulator, p.m_i, p.k_i, p.c_i),
+             "1s": (s1, p.m_g, p.k_g, p.c_g), "1d": (d1, p.m_g, p.k_g, p.c_g),
+             "2s": (s2, p.m_g, p.k_g, p.c_g), "2d": (d2, p.m_g, p.k_g, p.c_g)}
+    out = []
+    for r, (i, m0, k0, c0) in roles.items():
+        for key, val, ref in (("m", m.mass[i], m0), ("k", m.k_local[i], k0), ("c", m.c_local[i], c0)):
+            if not math.isclose(val, ref, rel_tol=1e-13, abs_tol=0.0):
+                out.append((f"{key}{r}", num(val)))
+    gam = {m.quads[q][0]: m.quads[q][2] for q in inc.quads[g.insulator] if m.quads[q][1] == g.insulator}
+    for key, dof, ref in ((channel_gamma, g.channel, -p.gamma_ic), ("g1s", s1, p.gamma_ig), ("g1d", d1, p.gamma_ig),
+                          ("g2s", s2, p.gamma_ig), ("g2d", d2, p.gamma_ig)):
+        if gam[dof] != ref:
+            out.append((key, num(gam[dof])))
+    if src and m.drives[src[0]].phase != 0.0:
+        out.append(("psrc", num(m.drives[src[0]].phase)))
+    return out
+
+
+def coupling_links(m: MechModel, inc: Incidence, plan):
+    """(spring, dashpot, upstream DOF, spring gate, dashpot gate) for every channel -> gate-pair link of the
+    planned gates that one coupling device can carry; the links taken are added to `plan`."""
+    for s, d in (pair for g in plan.gates for pair in g.inputs):
+        ks = [(n, sum(m.springs[n][:2]) - s) for n in inc.springs[s] if n not in plan.springs]
+        cs = [(n, sum(m.dashpots[n][:2]) - d) for n in inc.dashpots[d] if n not in plan.dashpots]
+        match = [(a, b) for a in ks for b in cs if a[1] == b[1]]
+        if not match:
+            continue
+        (nk, up), (nc, _) = match[0]
+        plan.springs.add(nk)
+        plan.dashpots.add(nc)
+        yield nk, nc, up, s, d
+
+
+def coupling_overrides(m: MechModel, p: GateParams, nk: int, nc: int) -> list[tuple[str, str]]:
+    """A coupling device's k and c where they differ from the library's F_R/u_R and its dashpot."""
+    k, c = m.springs[nk][2], m.dashpots[nc][2]
+    return [(n, num(v)) for n, v, ref in (("k", k, p.k_couple), ("c", c, p.c_couple))
+            if not math.isclose(v, ref, rel_tol=1e-13)]
+
+
 class _Emitter:
     def __init__(self, model: MechModel, periods: int, stimulus: Stimulus | None, batch_index: int,
                  options: SpiceOptions):
@@ -293,46 +338,14 @@ class _Emitter:
         ports = [self.x(g.channel), self.v(g.channel), asrc, self.x(s1), self.v(s1), self.v(d1),
                  self.x(s2), self.v(s2), self.v(d2)]
         self.plan.internal.update({g.insulator: f"{inst}.xi", d1: f"{inst}.x1d", d2: f"{inst}.x2d"})
-        over = self._gate_overrides(g, src)
+        over = gate_overrides(self.m, self.p, self.inc, g, src, channel_gamma="gci")
         self.lines.append(f"{inst} {' '.join(ports)} m2s_nor2" + "".join(f" {k}={v}" for k, v in over))
-
-    def _gate_overrides(self, g, src) -> list[tuple[str, str]]:
-        """Instance params that differ from the library defaults (locals, non-default values)."""
-        p, m = self.p, self.m
-        (s1, d1), (s2, d2) = g.inputs
-        roles = {"c": (g.channel, p.m_c, p.k_c, p.c_c), "i": (g.insulator, p.m_i, p.k_i, p.c_i),
-                 "1s": (s1, p.m_g, p.k_g, p.c_g), "1d": (d1, p.m_g, p.k_g, p.c_g),
-                 "2s": (s2, p.m_g, p.k_g, p.c_g), "2d": (d2, p.m_g, p.k_g, p.c_g)}
-        out = []
-        for r, (i, m0, k0, c0) in roles.items():
-            for key, val, ref in (("m", m.mass[i], m0), ("k", m.k_local[i], k0), ("c", m.c_local[i], c0)):
-                if not math.isclose(val, ref, rel_tol=1e-13, abs_tol=0.0):
-                    out.append((f"{key}{r}", num(val)))
-        gam = {m.quads[q][0]: m.quads[q][2] for q in self.inc.quads[g.insulator] if m.quads[q][1] == g.insulator}
-        for key, dof, ref in (("gci", g.channel, -p.gamma_ic), ("g1s", s1, p.gamma_ig),
-                              ("g1d", d1, p.gamma_ig), ("g2s", s2, p.gamma_ig), ("g2d", d2, p.gamma_ig)):
-            if gam[dof] != ref:
-                out.append((key, num(gam[dof])))
-        if src and m.drives[src[0]].phase != 0.0:
-            out.append(("psrc", num(m.drives[src[0]].phase)))
-        return out
 
     def couplings(self) -> None:
         """Channel -> gate-pair spring+dashpot links as m2s_couple; the rest as single elements."""
         m = self.m
-        pairs = [pair for g in self.plan.gates for pair in g.inputs]
-        for s, d in pairs:
-            ks = [(n, sum(m.springs[n][:2]) - s) for n in self.inc.springs[s] if n not in self.plan.springs]
-            cs = [(n, sum(m.dashpots[n][:2]) - d) for n in self.inc.dashpots[d] if n not in self.plan.dashpots]
-            match = [(a, b) for a in ks for b in cs if a[1] == b[1]]
-            if not match:
-                continue
-            (nk, up), (nc, _) = match[0]
-            self.plan.springs.add(nk)
-            self.plan.dashpots.add(nc)
-            k, c = m.springs[nk][2], m.dashpots[nc][2]
-            over = "".join(f" {n}={num(v)}" for n, v, ref in (("k", k, self.p.k_couple), ("c", c, self.p.c_couple))
-                           if not math.isclose(v, ref, rel_tol=1e-13))
+        for nk, nc, up, s, d in coupling_links(m, self.inc, self.plan):
+            over = "".join(f" {n}={v}" for n, v in coupling_overrides(m, self.p, nk, nc))
             self.lines.append(f"Xc_{self.namer['couple'](m.names[s])} {self.x(up)} {self.v(up)} {self.x(s)} "
                               f"{self.v(s)} {self.v(d)} m2s_couple{over}")
         for n, (i, j, k) in enumerate(m.springs):

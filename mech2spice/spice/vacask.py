@@ -31,7 +31,7 @@ from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
 from ._common import (check_samples, check_transient, comment_text, DEFAULT_TIMEOUT_S, drive_schedule,
                       map_batch, Namer, num, prewarp_scale, probe_dof_names)
-from .carrier import Incidence, gate_plan
+from .carrier import Incidence, coupling_links, coupling_overrides, gate_overrides, gate_plan
 
 METHODS = ("trap", "gear")
 RELREFS = ("pointlocal", "local", "pointglobal", "global")   # Newton's relative reference (VACASK relrefsol/res)
@@ -195,45 +195,14 @@ class _Emitter:
         self.plan.drives |= set(src)
         asrc = self.amp_node(src[0]) if src else "0"
         nodes = [*self.nodes(g.channel), asrc] + [n for dof in (s1, d1, s2, d2) for n in self.nodes(dof)]
-        self.inst("xg", g.name, nodes, "nor2", self._gate_overrides(g, src))
-
-    def _gate_overrides(self, g, src) -> list[tuple[str, str]]:
-        """Instance parameters that differ from the Verilog-A defaults (locals, non-default values)."""
-        p, m = self.p, self.m
-        (s1, d1), (s2, d2) = g.inputs
-        roles = {"c": (g.channel, p.m_c, p.k_c, p.c_c), "i": (g.insulator, p.m_i, p.k_i, p.c_i),
-                 "1s": (s1, p.m_g, p.k_g, p.c_g), "1d": (d1, p.m_g, p.k_g, p.c_g),
-                 "2s": (s2, p.m_g, p.k_g, p.c_g), "2d": (d2, p.m_g, p.k_g, p.c_g)}
-        out = []
-        for r, (i, m0, k0, c0) in roles.items():
-            for key, val, ref in (("m", m.mass[i], m0), ("k", m.k_local[i], k0), ("c", m.c_local[i], c0)):
-                if not math.isclose(val, ref, rel_tol=1e-13, abs_tol=0.0):
-                    out.append((f"{key}{r}", num(val)))
-        gam = {m.quads[q][0]: m.quads[q][2] for q in self.inc.quads[g.insulator] if m.quads[q][1] == g.insulator}
-        for key, dof, ref in (("gc", g.channel, -p.gamma_ic), ("g1s", s1, p.gamma_ig), ("g1d", d1, p.gamma_ig),
-                              ("g2s", s2, p.gamma_ig), ("g2d", d2, p.gamma_ig)):
-            if gam[dof] != ref:
-                out.append((key, num(gam[dof])))
-        if src and m.drives[src[0]].phase != 0.0:
-            out.append(("psrc", num(m.drives[src[0]].phase)))
-        return out
+        self.inst("xg", g.name, nodes, "nor2", gate_overrides(self.m, self.p, self.inc, g, src, channel_gamma="gc"))
 
     def couplings(self) -> None:
         """Channel -> gate-pair spring+dashpot links as one couple device; the rest as single elements."""
         m = self.m
-        for s, d in (pair for g in self.plan.gates for pair in g.inputs):
-            ks = [(n, sum(m.springs[n][:2]) - s) for n in self.inc.springs[s] if n not in self.plan.springs]
-            cs = [(n, sum(m.dashpots[n][:2]) - d) for n in self.inc.dashpots[d] if n not in self.plan.dashpots]
-            match = [(a, b) for a in ks for b in cs if a[1] == b[1]]
-            if not match:
-                continue
-            (nk, up), (nc, _) = match[0]
-            self.plan.springs.add(nk)
-            self.plan.dashpots.add(nc)
-            k, c = m.springs[nk][2], m.dashpots[nc][2]
-            over = [(n, num(v)) for n, v, ref in (("k", k, self.p.k_couple), ("c", c, self.p.c_couple))
-                    if not math.isclose(v, ref, rel_tol=1e-13)]
-            self.inst("xc", m.names[s], [*self.nodes(up), *self.nodes(s), *self.nodes(d)], "couple", over)
+        for nk, nc, up, s, d in coupling_links(m, self.inc, self.plan):
+            self.inst("xc", m.names[s], [*self.nodes(up), *self.nodes(s), *self.nodes(d)], "couple",
+                      coupling_overrides(m, self.p, nk, nc))
         for n, (i, j, k) in enumerate(m.springs):
             if n not in self.plan.springs:
                 self.inst("xk", str(n), [*self.nodes(i), *self.nodes(j)], "spring", [("k", num(k))])

@@ -33,6 +33,7 @@ PER_BAND = 15           # input levels per band: the grid of characterise.valid_
 
 @dataclass
 class LoadedGate:
+    """A gate wired as in a network: upstream channel stand-ins on its inputs, a load pair on its output."""
     model: MechModel
     gate: nor.GateBlock
     upstream: tuple[int, int]           # DOFs of the two upstream channels

@@ -37,6 +37,7 @@ class Operator:
 
     @property
     def n_params(self) -> int:
+        """How many parameters t holds: every element, then omega."""
         return len(self.elems) + 1                   # the elements, then omega
 
     def residual(self, y: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -86,15 +87,18 @@ class Operator:
 
     # --- derivatives -----------------------------------------------------------------
     def jac_y(self, y: np.ndarray) -> np.ndarray:
+        """dR/dy at the nominal parameters, by complex step (exact to rounding)."""
         t0 = np.zeros(self.n_params)
         return np.column_stack([self.residual(y + 1j * CS_STEP * e, t0).imag / CS_STEP
                                 for e in np.eye(y.size)])
 
     def jac_t(self, y: np.ndarray) -> np.ndarray:
+        """dR/dt (every element and omega) at y, by complex step."""
         return np.column_stack([self.residual(y.astype(complex), 1j * CS_STEP * e).imag / CS_STEP
                                 for e in np.eye(self.n_params)])
 
     def pack(self, A: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """The real unknowns y = (Re A, Im A, s)."""
         return np.concatenate([A.real, A.imag, np.atleast_1d(s)])
 
     def polish(self, y: np.ndarray) -> np.ndarray:
@@ -105,6 +109,7 @@ class Operator:
         return y
 
     def out_row(self, dof: int) -> int:
+        """The fast-block row of an oscillating DOF."""
         return int(np.flatnonzero(self.fast == dof)[0])
 
     def amplitude_sensitivity(self, y: np.ndarray, out_dof: int) -> np.ndarray:
@@ -133,6 +138,7 @@ CASES = ((0, 0), (1, 0), (0, 1), (1, 1))
 
 
 def element_names(elems: list[Element]) -> list[str]:
+    """The names of the sensitivity table's columns: the elements, then omega."""
     return [e.name for e in elems] + ["omega"]
 
 

@@ -27,6 +27,7 @@ PER_DOF = ("k", "m", "c")
 
 @dataclass(frozen=True)
 class Element:
+    """One physical part that fabrication can get wrong: its kind, its index in the model, a stable name."""
     kind: str        # "k", "m", "c" (per DOF), "spring", "dashpot", "gamma", "drive"
     index: int       # DOF index, or index into springs / dashpots / quads / drives
     name: str        # stable across models built the same way, e.g. "k gate.C", "spring in1.C-gate.G1s"

@@ -48,6 +48,7 @@ class Stack:
 
     @property
     def groups(self) -> int:
+        """How many input groups (forcing columns) the stack holds."""
         return self.f.shape[2]
 
 
@@ -102,6 +103,7 @@ class Roots:
 
     @property
     def stable(self) -> np.ndarray:
+        """Which roots are linearly stable (growth rate below STABLE_TOL)."""
         return self.growth < STABLE_TOL
 
 

@@ -215,6 +215,7 @@ def gate_is_closed(model: MechModel, inc: Incidence, g, own_quads: set[int]) -> 
 
 
 def gate_plan(model: MechModel, inc: Incidence) -> _Plan:
+    """Which gates are closed NOR blocks a library instance can carry, and the DOFs and elements they take."""
     plan = _Plan([], {}, set(), set(), set(), set(), set())
     for g in model.design.gates:
         q = nor_quads(model, inc, g)

@@ -142,12 +142,14 @@ class _Emitter:
 
     # -- nodes: (displacement, velocity) or (Re A, Im A) per DOF; slow DOFs (sx, sv) in the envelope form
     def nodes(self, i: int) -> tuple[str, str]:
+        """The two nodes of DOF i: (x, v) at carrier level, (Re A, Im A) or (s, s') in the envelope form."""
         s = self.stem[i]
         if not self.env:
             return f"x_{s}", f"v_{s}"
         return (f"sx_{s}", f"sv_{s}") if self.m.slow[i] else (f"ar_{s}", f"ai_{s}")
 
     def probe_vectors(self) -> list[str]:
+        """The raw-file vectors holding each probe, in the model's probe order."""
         out = []
         for name, dof in self.m.probes.items():
             if self.env and self.m.slow[dof]:
@@ -158,9 +160,11 @@ class _Emitter:
 
     # -- drive amplitudes
     def schedule(self, d: int):
+        """Drive d's (time, amplitude) changes for this batch member."""
         return drive_schedule(self.m, self.stimulus, self.b, d, self.periods * self.T)
 
     def amp_node(self, d: int, share: int | None = None) -> str:
+        """The node carrying drive d's amplitude schedule (one per distinct schedule)."""
         sched = self.schedule(d)
         key = (d if share is None else share, sched)
         if key not in self.amp_nodes:
@@ -185,11 +189,13 @@ class _Emitter:
 
     # -- instances
     def inst(self, kind: str, name: str, nodes: list[str], model: str, params) -> None:
+        """Add one device instance line."""
         par = "".join(f" {k}={v}" for k, v in params)
         namer = self.namer.setdefault(kind, Namer())      # names are unique per kind; kinds keep prefixes apart
         self.lines.append(f"{kind}_{namer(name)} ({' '.join(nodes)}) {model}{par}")
 
     def gate(self, g) -> None:
+        """A closed NOR block as one nor2 device."""
         (s1, d1), (s2, d2) = g.inputs
         src = self.inc.drives[g.channel][:1]
         self.plan.drives |= set(src)
@@ -211,6 +217,7 @@ class _Emitter:
                 self.inst("xb", str(n), [*self.nodes(i), *self.nodes(j)], "dashpot", [("c", num(c))])
 
     def oscillators(self) -> None:
+        """Every DOF no gate device carries, as its own oscillator device."""
         m = self.m
         for i in range(m.n):
             if i not in self.plan.in_gate:
@@ -259,6 +266,7 @@ class _Emitter:
         return [f'load "{osdi}"', "model vsource vsource"] + [f"model {a} {b} {c}".rstrip() for a, b, c in cards]
 
     def options_line(self) -> str:
+        """The simulator options line from the settings."""
         o = self.opt
         return (f'options tran_method="{o.method}" reltol={num(o.reltol)} abstol={num(o.abstol)} '
                 f"vntol={num(o.vntol)} chgtol={num(o.chgtol)} tran_lteratio={num(o.lteratio)} "
@@ -267,12 +275,14 @@ class _Emitter:
                 "strictoutput=0")
 
     def tran(self) -> list[str]:
+        """The transient analysis line: max step from the settings, starting from rest (uic)."""
         h = self.opt.max_step_periods * self.T
         # carrier: a quarter period past the end keeps the final short steps out of the last period
         tstop = (self.periods + (0 if self.env else 0.25)) * self.T
         return [f"analysis {TRAN} tran stop={num(tstop)} step={num(h)} maxstep={num(h)} icmode=\"uic\""]
 
     def circuit(self) -> None:
+        """Emit gates, couplings and the remaining oscillators."""
         for g in self.plan.gates:
             self.gate(g)
         self.couplings()
@@ -280,6 +290,7 @@ class _Emitter:
         self.drives()
 
     def text(self, title: str, osdi: str, analysis: list[str], extra_head: list[str] = ()) -> str:
+        """The whole netlist: header, models, circuit, analysis and save lines."""
         m, o = self.m, self.opt
         vecs = self.probe_vectors()
         head = [comment_text(title or "mech2spice VACASK netlist"),

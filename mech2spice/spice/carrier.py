@@ -266,6 +266,20 @@ def coupling_links(m: MechModel, inc: Incidence, plan):
         yield nk, nc, up, s, d
 
 
+def drive_split(m: MechModel, inc: Incidence, plan) -> tuple[list[tuple[int, int, int, int]], list[int]]:
+    """The drives a pair-drive device can carry, as (spring gate, dashpot gate, its drive, theirs), and the rest,
+    leaving out the drives the planned gates already take."""
+    used, pairs = set(plan.drives), []
+    for g in plan.gates:
+        for s, d in g.inputs:
+            ds = [k for k in inc.drives[s] if k not in used]
+            dd = [k for k in inc.drives[d] if k not in used]
+            if len(ds) == 1 and len(dd) == 1:
+                pairs.append((s, d, ds[0], dd[0]))
+                used |= {ds[0], dd[0]}
+    return pairs, [k for k in range(len(m.drives)) if k not in used]
+
+
 def coupling_overrides(m: MechModel, p: GateParams, nk: int, nc: int) -> list[tuple[str, str]]:
     """A coupling device's k and c where they differ from the library's F_R/u_R and its dashpot."""
     k, c = m.springs[nk][2], m.dashpots[nc][2]
@@ -373,18 +387,12 @@ class _Emitter:
     def drives(self) -> None:
         """External pair drives as m2s_pairdrive, every other drive as m2s_drive."""
         m = self.m
-        used = set(self.plan.drives)
-        for g in self.plan.gates:
-            for s, d in g.inputs:
-                ds = [k for k in self.inc.drives[s] if k not in used]
-                dd = [k for k in self.inc.drives[d] if k not in used]
-                if len(ds) == 1 and len(dd) == 1:
-                    a, b = ds[0], dd[0]
-                    used |= {a, b}
-                    self.lines.append(
-                        f"Xd_{self.namer['drive'](m.drives[a].name)} {self.v(s)} {self.v(d)} {self.amp_node(a)} "
-                        f"{self.amp_node(b, share=a)} m2s_pairdrive ps={num(m.drives[a].phase)} pd={num(m.drives[b].phase)}")
-        for k in (k for k in range(len(m.drives)) if k not in used):
+        pairs, single = drive_split(m, self.inc, self.plan)
+        for s, d, a, b in pairs:
+            self.lines.append(
+                f"Xd_{self.namer['drive'](m.drives[a].name)} {self.v(s)} {self.v(d)} {self.amp_node(a)} "
+                f"{self.amp_node(b, share=a)} m2s_pairdrive ps={num(m.drives[a].phase)} pd={num(m.drives[b].phase)}")
+        for k in single:
             d = m.drives[k]
             self.lines.append(f"Xd_{self.namer['drive'](d.name)} {self.v(d.dof)} {self.amp_node(k)} "
                               f"m2s_drive ph={num(d.phase)}")

@@ -31,7 +31,8 @@ from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
 from ._common import (check_samples, check_transient, comment_text, DEFAULT_TIMEOUT_S, drive_schedule,
                       map_batch, Namer, num, prewarp_scale, probe_dof_names)
-from .carrier import Incidence, coupling_links, coupling_overrides, gate_overrides, gate_plan
+from .carrier import (Incidence, coupling_links, coupling_overrides, drive_split, gate_overrides,
+                      gate_plan)
 
 METHODS = ("trap", "gear")
 RELREFS = ("pointlocal", "local", "pointglobal", "global")   # Newton's relative reference (VACASK relrefsol/res)
@@ -231,18 +232,12 @@ class _Emitter:
     def drives(self) -> None:
         """External pair drives as pairdrive devices, every other drive as a drive device."""
         m = self.m
-        used = set(self.plan.drives)
-        for g in self.plan.gates:
-            for s, d in g.inputs:
-                ds = [k for k in self.inc.drives[s] if k not in used]
-                dd = [k for k in self.inc.drives[d] if k not in used]
-                if len(ds) == 1 and len(dd) == 1:
-                    a, b = ds[0], dd[0]
-                    used |= {a, b}
-                    self.inst("xd", m.drives[a].name, [*self.nodes(s), *self.nodes(d), self.amp_node(a),
-                                                       self.amp_node(b, share=a)], "pairdrive",
-                              [("ps", num(m.drives[a].phase)), ("pd", num(m.drives[b].phase))])
-        for k in (k for k in range(len(m.drives)) if k not in used):
+        pairs, single = drive_split(m, self.inc, self.plan)
+        for s, d, a, b in pairs:
+            self.inst("xd", m.drives[a].name, [*self.nodes(s), *self.nodes(d), self.amp_node(a),
+                                               self.amp_node(b, share=a)], "pairdrive",
+                      [("ps", num(m.drives[a].phase)), ("pd", num(m.drives[b].phase))])
+        for k in single:
             dr = m.drives[k]
             self.inst("xd", dr.name, [*self.nodes(dr.dof), self.amp_node(k)], "drive", [("ph", num(dr.phase))])
 

@@ -247,7 +247,7 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
     if engine.capabilities.settle and engine.options.settle_tol is None and settle_tol:
         engine = make_engine(backend, replace(engine.options, settle_tol=settle_tol))
     model = network.build(netlist, p)
-    step = engine.step(model) if hasattr(engine, "step") else None
+    step = engine.step(model)
     if step is not None:
         timing = _whole_steps(timing, step)
     segs, reads, total = clocked_schedule(cycles, timing)

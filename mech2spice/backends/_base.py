@@ -84,6 +84,10 @@ class Engine(ABC):
         """The options this engine runs with, for results and reports."""
         return dict(vars(self.options))
 
+    def step(self, model: MechModel) -> float | None:
+        """The step (drive periods) that stimulus changes must fall on, for engines with whole-period steps."""
+        return None
+
 
 @dataclass(frozen=True)
 class NoOptions:

@@ -17,3 +17,18 @@ def gate_run(p):
     levels = np.array([[LEVEL[a], LEVEL[b]] for a, b in PAIRS])
     run, amp = run_from_rest(nor.single_gate(p), p, levels, 2000)
     return run, amp[0]
+
+
+@pytest.fixture
+def generic_model():
+    """Two coupled oscillators and a slow DOF: no NOR block, so emitters fall back to single elements."""
+    from mech2spice.physics.model import MechModel
+    m = MechModel(omega=2.0)
+    a, b = m.add_dof("a", 1.0, 4.0, 0.1), m.add_dof("b", 1.0, 4.0, 0.1)
+    s = m.add_dof("s", 1.0, 1.0, 0.5, slow=True)
+    m.add_spring(a, b, 1.0)
+    m.add_dashpot(a, b, 0.2)
+    m.add_quad(a, s, 0.3)
+    m.add_drive(a, 1.0)
+    m.add_probe("a", a)
+    return m

@@ -130,15 +130,8 @@ def test_emission_is_hierarchical():
     assert P.c_g - P.c_couple < 0
 
 
-def test_generic_model_uses_oscillator_subckts():
-    m = MechModel(omega=2.0)
-    a, b = m.add_dof("a", 1.0, 4.0, 0.1), m.add_dof("b", 1.0, 4.0, 0.1)
-    s = m.add_dof("s", 1.0, 1.0, 0.5, slow=True)
-    m.add_spring(a, b, 1.0)
-    m.add_dashpot(a, b, 0.2)
-    m.add_quad(a, s, 0.3)
-    m.add_drive(a, 1.0)
-    m.add_probe("a", a)
+def test_generic_model_uses_oscillator_subckts(generic_model):
+    m = generic_model
     body = emit(m, 5).split("* --- circuit")[1]
     assert body.count("m2s_osc") == 3 and "w=1" in body          # the slow DOF is not prewarped
     assert re.search(r"^Gk_0 v_a v_b x_a x_b 1\.0$", body, re.M)

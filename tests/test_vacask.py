@@ -148,15 +148,8 @@ def test_emission_is_hierarchical():
     assert f"k1s={P.k_g - P.k_couple!r}" in g1 and f"c1d={P.c_g - P.c_couple!r}" in g1
 
 
-def test_generic_model_uses_single_elements():
-    m = MechModel(omega=2.0)
-    a, b = m.add_dof("a", 1.0, 4.0, 0.1), m.add_dof("b", 1.0, 4.0, 0.1)
-    s = m.add_dof("s", 1.0, 1.0, 0.5, slow=True)
-    m.add_spring(a, b, 1.0)
-    m.add_dashpot(a, b, 0.2)
-    m.add_quad(a, s, 0.3)
-    m.add_drive(a, 1.0)
-    m.add_probe("a", a)
+def test_generic_model_uses_single_elements(generic_model):
+    m = generic_model
     body = vc.emit(m, 5).text.split("// --- circuit")[1]
     assert re.search(r"^xo_s \(x_s v_s\) osc_slow mass=1\.0 k=1\.0 c=0\.5$", body, re.M)
     assert re.search(r"^xk_n0 \(x_a v_a x_b v_b\) spring k=1\.0$", body, re.M)

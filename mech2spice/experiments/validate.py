@@ -15,6 +15,7 @@ from ..backends import envelope, rk4
 from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
+from ..physics.steady import Envelope2w   # the steady-state solver's correction too
 from . import characterise as ch
 from .scenes import MID, Scene
 
@@ -81,25 +82,6 @@ def integrate_free(env: envelope.Envelope, scene: Scene, step: float, blowup: fl
             if not np.all(np.isfinite(mag)) or mag.max() > blowup * p.u_r:
                 break
     return out, step * (np.arange(nsteps) + 1.0)
-
-
-class Envelope2w(envelope.Envelope):
-    """envelope.Envelope plus the omega part of (2-omega insulator motion) x (fast DOF), see docs/physics.md."""
-
-    def __init__(self, model: MechModel):
-        super().__init__(model)
-        w = self.omega
-        dense = [m.toarray() if hasattr(m, "toarray") else np.asarray(m) for m in (self.Ks, self.Cs)]
-        Zs2 = dense[0] - 4 * w * w * np.diag(self.ms) + 2j * w * dense[1]
-        self.Zs2_inv = np.linalg.inv(Zs2) if Zs2.size else Zs2
-
-    def s2(self, A):
-        """Complex 2-omega amplitude S of each slow DOF (n_slow, B)."""
-        return -(self.Zs2_inv @ (self.H @ (A * A))) / 2
-
-    def residual_fast(self, A, s, F):
-        """Envelope.residual_fast minus (G S) conj(A) / 2: the omega part of the 2-omega slow motion."""
-        return super().residual_fast(A, s, F) - 0.5 * (self.G @ self.s2(A)) * np.conj(A)
 
 
 class EnvelopeA2(envelope.Envelope):

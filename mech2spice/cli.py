@@ -320,7 +320,8 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("gate", help="characterise the NOR gate against the paper's six requirements",
                        description="Characterise the mechanical NOR gate: truth table decoded from RK4, "
                                    "steady-state map and margin, cascade, delay, fan-out, requirements.")
-    g.add_argument("--params", default="default", help="'default', 'printed' (Appendix A) or a JSON file")
+    g.add_argument("--params", default="default", help="'default', 'printed' (Appendix A), a shipped block "
+                   "('robust', 'classic') or a JSON file (fields, or a block file: docs/design.md)")
     g.add_argument("--quick", action="store_true", help="shorter runs (about 1 minute)")
     g.add_argument("--report", metavar="DIR", help="also write DIR/gate.md and PNG figures")
     g.add_argument("--json", action="store_true", help="machine-readable output")
@@ -337,7 +338,8 @@ def build_parser() -> argparse.ArgumentParser:
     def design_args(sp):
         sp.add_argument("design", help="Verilog file")
         sp.add_argument("--top", help="top module (default: the only/auto-detected top)")
-        sp.add_argument("--params", default="default", help="gate parameters: default, printed or a JSON file")
+        sp.add_argument("--params", default="default", help="gate parameters: default, printed, robust, classic "
+                        "or a JSON file (fields, or a block file: docs/design.md)")
         sp.add_argument("--max-fanout", type=inputs.integer(2, 10 ** 6), default=MAX_FANOUT,
                         help="insert NOR-pair buffers so no gate drives more loads (default 12, the largest "
                              "fan-out measured to work)")
@@ -412,6 +414,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_cpu_parser(sub)
     from .reports.cli import add_parser as add_report_parser; add_report_parser(sub)  # noqa: E702
     from .experiments.mc_cli import add_parser as add_mc_parser; add_mc_parser(sub)  # noqa: E702
+    from .design.cli import add_parser as add_design_parser; add_design_parser(sub)  # noqa: E702
 
     s = sub.add_parser("subckts", help="regenerate the .subckt library (checked in under subckts/)")
     s.add_argument("-o", "--output", default="subckts", help="directory (default subckts/)")

@@ -44,8 +44,7 @@ class LoadedGate:
     def block_dofs(self) -> list[int]:
         """DOFs whose elements the spread covers: the gate's own and the load pair's (with every link
         touching them); the upstream stand-ins and their sources are the inputs, not spread."""
-        g = self.gate
-        return [g.channel, g.insulator, *(d for pair in g.inputs for d in pair), *self.load_pair]
+        return [*self.gate.dofs, *self.load_pair]
 
     def input_groups(self) -> np.ndarray:
         """Per drive: 0 for constant drives, k for drives scaled by input level k (1, 2)."""
@@ -58,10 +57,12 @@ def build(p: GateParams, load: str = "pair") -> LoadedGate:
     """The loaded gate with both upstream drives set for an input level of 1 (scale them per input)."""
     p.validate()
     m = MechModel(omega=p.omega)
-    z_c = abs(p.k_c - p.m_c * p.omega ** 2 + 1j * p.omega * p.c_c)
+    b = p.structure
+    out = b.dof(b.output)               # the stand-in has the impedance of the block's output DOF
+    z_c = abs(out.k - out.m * p.omega ** 2 + 1j * p.omega * out.c)
     ups, drives = [], []
     for name in INPUTS:
-        ups.append(m.add_dof(f"{name}.C", p.m_c, p.k_c, p.c_c))
+        ups.append(m.add_dof(f"{name}.C", out.m, out.k, out.c))
         drives.append(m.add_drive(ups[-1], z_c * p.u_r, 0.0, f"{name}.src"))
     gate = nor.add_nor(m, p, GATE)
     for u, pair in zip(ups, gate.inputs):
@@ -71,7 +72,7 @@ def build(p: GateParams, load: str = "pair") -> LoadedGate:
         nor.drive_pair(m, p, lg.inputs[1], NOMINAL0, f"{LOAD}.x2")
         pair = lg.inputs[0]
     elif load == "pair":
-        pair = tuple(m.add_dof(f"{LOAD}.G1{kind}", p.m_g, p.k_g, p.c_g) for kind in ("s", "d"))
+        pair = tuple(m.add_dof(f"{LOAD}.{d.name}", d.m, d.k, d.c) for d in (b.dof(a.dof) for a in b.inputs[0]))
     else:
         raise ValueError(f"load must be 'pair' or 'gate', not {load!r}")
     nor.connect(m, p, gate.channel, pair)

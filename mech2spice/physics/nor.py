@@ -22,11 +22,17 @@ DASHPOT_PHASE = math.pi / 2     # a dashpot's force leads the spring's by 90 deg
 
 @dataclass
 class GateBlock:
-    """The DOF indices of one NOR gate: its channel, insulator and (spring, dashpot) gate pair per input."""
+    """The DOF indices of one NOR gate: its output ("channel"), insulator and the DOFs each input links to.
+
+    For the classic block inputs[pin] = (spring gate, dashpot gate); for others, the DOFs of that input's
+    links in the structure's order (`links` gives their kinds and scales)."""
     name: str
     channel: int
     insulator: int
-    inputs: list[tuple[int, int]] = field(default_factory=list)   # (spring gate, dashpot gate) per input
+    inputs: list[tuple[int, ...]] = field(default_factory=list)
+    structure: str = "classic"
+    dofs: tuple[int, ...] = ()                 # every DOF of the block, in structure order
+    source: int = -1                           # the source-driven DOF (the channel in the classic block)
 
 
 def new_model(p: GateParams) -> MechModel:
@@ -36,35 +42,55 @@ def new_model(p: GateParams) -> MechModel:
 
 
 def add_nor(model: MechModel, p: GateParams, name: str) -> GateBlock:
-    """Add one free-standing NOR block; its channel is driven by the source."""
-    ch = model.add_dof(f"{name}.C", p.m_c, p.k_c, p.c_c)
-    ins = model.add_dof(f"{name}.I", p.m_i, p.k_i, p.c_i, slow=True)
-    model.add_quad(ch, ins, -p.gamma_ic)
-    model.add_drive(ch, p.f_c, 0.0, f"{name}.src")
-    block = GateBlock(name, ch, ins)
-    for pin in (1, 2):
-        pair = []
-        for kind in ("s", "d"):                      # spring-coupled, dashpot-coupled
-            g = model.add_dof(f"{name}.G{pin}{kind}", p.m_g, p.k_g, p.c_g)
-            model.add_quad(g, ins, p.gamma_ig)
-            pair.append(g)
-        block.inputs.append(tuple(pair))
-    model.add_probe(name, ch)
+    """Add one free-standing NOR block built from p's structure; its source DOF is driven by the source."""
+    b = p.structure
+    idx = {d.name: model.add_dof(f"{name}.{d.name}", d.m, d.k, d.c, slow=d.slow) for d in b.dofs}
+    for a, c, k in b.springs:
+        model.add_spring(idx[a], idx[c], k)
+    for a, c, v in b.dashpots:
+        model.add_dashpot(idx[a], idx[c], v)
+    for f, s, g in b.quads:
+        model.add_quad(idx[f], idx[s], g)
+    model.add_drive(idx[b.source], b.source_force, 0.0, f"{name}.src")
+    block = GateBlock(name, idx[b.output], idx[b.slow_dofs[0]],
+                      [tuple(idx[a.dof] for a in pin) for pin in b.inputs], b.name,
+                      tuple(idx.values()), idx[b.source])
+    model.add_probe(name, block.channel)
     return block
 
 
-def connect(model: MechModel, p: GateParams, channel: int, pair: tuple[int, int]) -> None:
-    """Wire an upstream channel to a downstream gate pair: one spring + one dashpot."""
-    model.add_spring(channel, pair[0], p.k_couple)
-    model.add_dashpot(channel, pair[1], p.c_couple)
+def _links(p: GateParams):
+    """(link kind, scale) of each DOF an input attaches to, in the order of GateBlock.inputs[pin]
+    (the same for both inputs: BlockSpec.validate asks for symmetric inputs)."""
+    return [(a.link, a.scale) for a in p.structure.inputs[0]]
 
 
-def drive_pair(model: MechModel, p: GateParams, pair: tuple[int, int], level: float,
-               name: str) -> tuple[int, int]:
-    """Drive an input pair externally at `level` (fraction of F_R); returns the two drive indices."""
+def connect(model: MechModel, p: GateParams, channel: int, pair: tuple[int, ...]) -> None:
+    """Wire an upstream output to a downstream input's DOFs by the structure's links (classic: one
+    spring k = F_R/u_R + one dashpot k/omega).  Springs first, then dashpots, as the classic block did."""
+    links = list(zip(pair, _links(p)))
+    for dof, (kind, scale) in links:
+        if kind == "spring":
+            model.add_spring(channel, dof, scale * p.k_couple)
+    for dof, (kind, scale) in links:
+        if kind == "dashpot":
+            model.add_dashpot(channel, dof, scale * p.c_couple)
+
+
+def drive_pair(model: MechModel, p: GateParams, pair: tuple[int, ...], level: float,
+               name: str) -> tuple[int, ...]:
+    """Drive an input's DOFs externally at `level` (fraction of F_R): what an upstream output at level
+    x u_R would exert through each link; returns the drive indices (classic: spring, dashpot)."""
     a = p.force(level)
-    return (model.add_drive(pair[0], a, SPRING_PHASE, f"{name}.s"),
-            model.add_drive(pair[1], a, DASHPOT_PHASE, f"{name}.d"))
+    tags = {"spring": (SPRING_PHASE, "s"), "dashpot": (DASHPOT_PHASE, "d")}
+    links = _links(p)
+    unique = len({kind for kind, _ in links}) == len(links)      # classic: ".s", ".d"
+    out = []
+    for k, (dof, (kind, scale)) in enumerate(zip(pair, links)):
+        phase, tag = tags[kind]
+        suffix = tag if unique else f"{tag}{k}"
+        out.append(model.add_drive(dof, scale * a, phase, f"{name}.{suffix}"))
+    return tuple(out)
 
 
 # --- small circuits used by characterisation, tests and benchmarks ----------

@@ -14,10 +14,11 @@ Two sets ship with the package:
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
+from .blocks import BlockSpec
 
 # Logic bands, as fractions of F_R (inputs) or u_R (outputs).
 BAND0 = (0.365, 0.67)
@@ -45,6 +46,8 @@ class GateParams:
     f_c: float = 1.326
     omega: float = 48.754145
     name: str = "default"
+    # the block structure (physics/blocks.py); None: the classic block built from the fields above
+    block: BlockSpec | None = field(default=None, repr=False)
 
     # --- derived quantities -------------------------------------------------
     @property
@@ -89,15 +92,26 @@ class GateParams:
         """Raise Mech2SpiceError unless every field is finite and masses, Qs, stiffnesses, omega, F_R, u_R > 0."""
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name != "name" and not (isinstance(v, (int, float)) and math.isfinite(v)):
+            if f.name not in ("name", "block") and not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise Mech2SpiceError(f"gate parameter {f.name} = {v!r} is not a finite number")
         for name in ("m_g", "m_i", "m_c", "q_g", "q_i", "q_c", "k_g", "k_i", "k_c", "omega", "f_r", "u_r"):
             if getattr(self, name) <= 0:
                 raise Mech2SpiceError(f"gate parameter {name} = {getattr(self, name)} must be positive")
+        if self.block is not None:
+            self.block.validate()
+
+    @property
+    def structure(self) -> BlockSpec:
+        """The block structure add_nor builds: the file's, or the classic one from these fields."""
+        from .blocks import classic
+        return self.block if self.block is not None else classic(self)
 
     def to_dict(self) -> dict:
-        """The fields as a plain dict."""
-        return asdict(self)
+        """The fields as a plain dict (with the block structure only when there is one)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "block"}
+        if self.block is not None:
+            out["block"] = self.block.to_dict()
+        return out
 
 
 PRINTED = GateParams(
@@ -108,18 +122,30 @@ PRINTED = GateParams(
 DEFAULT = GateParams()
 
 PRESETS = {"default": DEFAULT, "printed": PRINTED}
+BLOCK_PRESETS = ("robust", "classic")        # block files shipped under mech2spice/data/blocks/
+GATE_FIELDS = ("f_r", "u_r", "omega", "name")   # what a block file may set beside its "block"
+EXTRA_KEYS = ("search", "measured", "note")   # a block file's record of how it was found (not read)
 
 
 def load_params(spec: str | None) -> GateParams:
-    """'default', 'printed', or a JSON file with any subset of the fields (rest from default)."""
+    """'default', 'printed', a shipped block ('robust', 'classic'), a JSON file with any subset of the
+    fields (rest from default), or a block file (a "block" structure: physics/blocks.py)."""
     from ..inputs import is_number, read_json, type_name
     if spec is None or spec in PRESETS:
         return PRESETS[spec or "default"]
+    if spec in BLOCK_PRESETS:
+        from .. import data as pkg_data
+        path = pkg_data.path("blocks", f"{spec}.json")
+        if not path.is_file():
+            raise Mech2SpiceError(f"the '{spec}' block is not installed ({path}): run `mech2spice design` first")
+        return load_params(str(path))
     data = read_json(spec, "parameter file")
     if not isinstance(data, dict):
         raise Mech2SpiceError(f"parameter file {spec} must hold a JSON object of fields "
                               f"(e.g. {{\"q_c\": 150}}), not {type_name(data)}")
-    known = {f.name for f in fields(GateParams)}
+    if "block" in data:
+        return block_params(data, spec)
+    known = {f.name for f in fields(GateParams)} - {"block"}
     unknown = set(data) - known
     if unknown:
         raise Mech2SpiceError(f"parameter file {spec}: unknown field(s) {', '.join(sorted(unknown))} "
@@ -130,6 +156,36 @@ def load_params(spec: str | None) -> GateParams:
             raise Mech2SpiceError(f"parameter file {spec}: {name} must be "
                                   f"{'a string' if name == 'name' else 'a finite number'}, not {type_name(value)}")
     p = replace(DEFAULT, **{"name": Path(spec).stem, **data})
+    p.validate()
+    return p
+
+
+def block_params(data: dict, where: str = "block file") -> GateParams:
+    """GateParams for a block file {"block": {...}, f_r, u_r, omega[, name, search...]}.  The classic
+    fields (m_c, k_c, ...) are taken from the block's DOFs C, I, G1s and quads where it has them, so
+    the library defaults of the SPICE emitters match a classic-shaped block."""
+    from ..inputs import is_number
+    unknown = set(data) - {"block", *GATE_FIELDS, *EXTRA_KEYS}
+    if unknown:
+        raise Mech2SpiceError(f"block file {where}: unknown key(s) {', '.join(sorted(unknown))} "
+                              f"(known: block, {', '.join(GATE_FIELDS + EXTRA_KEYS)})")
+    for key in GATE_FIELDS[:3]:
+        if key in data and not is_number(data[key]):
+            raise Mech2SpiceError(f"block file {where}: {key} must be a finite number")
+    spec = BlockSpec.from_dict(data["block"], f"block file {where}")
+    roles = {}
+    for dof, suffix in (("C", "c"), ("I", "i"), ("G1s", "g")):
+        if dof in {d.name for d in spec.dofs}:
+            d = spec.dof(dof)
+            roles.update({f"m_{suffix}": d.m, f"k_{suffix}": d.k, f"q_{suffix}": d.q})
+    gam = {(f, s): g for f, s, g in spec.quads}
+    if ("C", "I") in gam:
+        roles["gamma_ic"] = -gam[("C", "I")]
+    if ("G1s", "I") in gam:
+        roles["gamma_ig"] = gam[("G1s", "I")]
+    name = data.get("name", Path(str(where)).stem)
+    p = replace(DEFAULT, **roles, **{k: float(data[k]) for k in GATE_FIELDS[:3] if k in data},
+                f_c=spec.source_force, name=str(name), block=spec)
     p.validate()
     return p
 

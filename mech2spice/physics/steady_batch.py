@@ -123,7 +123,7 @@ def roots(st: Stack, b: int, levels: np.ndarray, n_grid: int = N_GRID) -> Roots:
 def root_range(st: Stack, b: int, amax: np.ndarray) -> tuple[float, float]:
     """Interval of s that can hold a root for any input point with |a_g| <= amax (coarse scan)."""
     L = _wide_bound(st, b, amax)
-    s = np.linspace(-L, L, int(min(2 * L / WIDE_STEP, 40000)) | 1)
+    s = np.linspace(-L, L, max(int(min(2 * L / WIDE_STEP, 40000)), 3) | 1)
     W = w_matrix(st, b, responses(st, b, s))
     bound = 0.5 * BOUND_SAFETY * np.einsum("sgh,g,h->s", np.abs(W), amax, amax)
     ok = np.flatnonzero(abs(st.ks[b]) * np.abs(s) <= bound)

@@ -27,6 +27,8 @@ class SpiceOptions(NgspiceSettings):
     vntol: float = 1e-9               # displacements are ~1e-2 (u_R = 0.0182)
     prewarp: bool = True              # trap only: exact phasor response at omega (see module doc)
     trtol: float | None = None        # None: 1e4 when prewarped (pins the step, below), else ngspice's 7
+    noise_temperature: float = 0.0    # k_B T (model units): a trnoise source per dashpot (physics/noise.py)
+    noise_seed: int = 0               # ngspice's seed is derived from it and the batch member
     MAX_STEP_LIMIT = 0.25             # a quarter period: coarser steps cannot resolve the carrier
 
     def validate(self) -> None:
@@ -34,6 +36,8 @@ class SpiceOptions(NgspiceSettings):
         super().validate()
         if self.trtol is not None and not self.trtol > 0:
             raise Mech2SpiceError("SpiceOptions.trtol must be positive")
+        from ..physics.noise import check_temperature
+        check_temperature(self.noise_temperature)
 
     @property
     def fixed_step(self) -> bool:
@@ -218,6 +222,8 @@ def gate_plan(model: MechModel, inc: Incidence) -> _Plan:
     """Which gates are closed NOR blocks a library instance can carry, and the DOFs and elements they take."""
     plan = _Plan([], {}, set(), set(), set(), set(), set())
     for g in model.design.gates:
+        if getattr(g, "structure", "classic") != "classic":
+            continue                                       # another block structure: DOF by DOF
         q = nor_quads(model, inc, g)
         dofs = {g.channel, g.insulator, *[d for pair in g.inputs for d in pair]}
         if q is None or len(dofs) != 6 or dofs & plan.in_gate or not gate_is_closed(model, inc, g, set(q.values())):
@@ -287,6 +293,11 @@ def coupling_overrides(m: MechModel, p: GateParams, nk: int, nc: int) -> list[tu
             if not math.isclose(v, ref, rel_tol=1e-13)]
 
 
+NOISE_NT_PERIODS = 1 / 10     # trnoise's sample interval: sinc^4(f0 NT) = 0.968 at the drive frequency, corrected
+NOISE_MAX_STEP = 1 / 400      # periods: a noisy netlist runs unwarped; trap's detuning (w h)^2 / 12 = 2e-5 is 1 % of a
+                              # Q = 200 linewidth (the default T/40 would detune by 0.8 linewidths)
+
+
 class _Emitter:
     def __init__(self, model: MechModel, periods: int, stimulus: Stimulus | None, batch_index: int,
                  options: SpiceOptions):
@@ -294,12 +305,17 @@ class _Emitter:
         self.p: GateParams = model.params or DEFAULT
         self.T = model.period
         self.h = options.max_step_periods * self.T
-        self.warp = options.warp(model.omega)
+        # trnoise sets a breakpoint every NT, after which ngspice shortens the step: the prewarp, exact only
+        # for steps of max_step, would mistune every oscillator, so a noisy netlist runs unwarped
+        self.warp = 1.0 if options.noise_temperature else options.warp(model.omega)
         # one namer per prefix: stems are unique within a prefix, prefixes keep kinds apart
         self.namer = {k: Namer() for k in ("dof", "gate", "couple", "drive", "amp")}
         self.stem = [self.namer["dof"](n) for n in model.names]
         self.inc = Incidence(model)
-        self.plan = gate_plan(model, self.inc)
+        # with noise every DOF is emitted on its own: a gate block's insulator nodes are internal to its
+        # .subckt, where a top-level noise source cannot reach them
+        self.plan = _Plan([], {}, set(), set(), set(), set(), set()) if options.noise_temperature \
+            else gate_plan(model, self.inc)
         self.lines: list[str] = []
         self.amp_nodes: dict[tuple, str] = {}
         self.amp_lines: list[str] = []
@@ -397,6 +413,27 @@ class _Emitter:
             self.lines.append(f"Xd_{self.namer['drive'](d.name)} {self.v(d.dof)} {self.amp_node(k)} "
                               f"m2s_drive ph={num(d.phase)}")
 
+    def noise(self) -> None:
+        """One trnoise current source per fluctuating dashpot (physics/noise.py), when noise is on.
+
+        trnoise(NA NT) draws a Gaussian of rms NA every NT and interpolates linearly: one-sided density
+        2 NA^2 NT at low frequency, shaped by sinc^4(f NT).  NA = sqrt(2 T c / NT) / sinc^2(f0 NT) gives
+        the fluctuation-dissipation density 4 T c exactly at the drive frequency f0."""
+        T = self.opt.noise_temperature
+        if not T:
+            return
+        from ..physics.noise import noisy_elements
+        nt = NOISE_NT_PERIODS * self.T
+        x = nt * self.m.omega / (2 * math.pi)
+        sinc2 = (math.sin(math.pi * x) / (math.pi * x)) ** 2
+        for e, (i, j, c) in enumerate(noisy_elements(self.m)):
+            na = math.sqrt(2 * T * c / nt) / sinc2
+            self.lines.append(f"Inz_{e} {self.v(j) if j >= 0 else 0} {self.v(i)} DC 0 trnoise({num(na)} {num(nt)} 0 0)")
+
+    def noise_seed(self) -> int:
+        """ngspice's seed for this batch member (each member its own noise)."""
+        return (self.opt.noise_seed * 100003 + self.b) % (2 ** 31 - 2) + 1
+
     def analysis(self) -> list[str]:
         """The .options, .tran, .four and .save lines."""
         o = self.opt
@@ -404,6 +441,8 @@ class _Emitter:
                f"chgtol={num(o.chgtol)} vntol={num(o.vntol)} trtol={num(o.trtol_value())}"
         if o.method == "gear":
             opts += f" maxord={o.maxord}"
+        if o.noise_temperature:
+            opts += f" seed={self.noise_seed()}"
         # a quarter period past the end keeps ngspice's final short steps out of the last period
         tstop = (self.periods + 0.25) * self.T
         out = [opts, f".tran {num(self.h)} {num(tstop)} 0 {num(self.h)} uic"]
@@ -425,6 +464,7 @@ class _Emitter:
         self.couplings()
         self.oscillators()
         self.drives()
+        self.noise()
         head = [f"* {comment_text(title or 'mech2spice netlist')}",
                 f"* mech2spice: {m.n} DOFs, {len(self.plan.gates)} NOR blocks, {self.periods} periods of "
                 f"T = {num(self.T)}; method={o.method}, max step {num(o.max_step_periods)} T, prewarp w = "

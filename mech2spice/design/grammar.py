@@ -1,0 +1,99 @@
+"""The block grammar of `mech2spice design`: structures, each a function of named parameters.
+
+Every structure keeps one slow DOF (the insulator I), so the batched all-roots steady-state scan applies.
+Parameters are dimensionless and bounded (detunings relative to m omega^2, log10 of Qs, gammas,
+stiffnesses and forces); masses, omega, F_R and u_R stay the classic block's.  docs/design.md.
+
+  classic      the paper's block: channel C (source + output), insulator I, per input a spring- and a
+               dashpot-linked gate oscillator (6 DOFs)
+  buffer       classic + a low-Q buffer oscillator B spring-coupled to C; B is the output (7 DOFs)
+  two_stage    the channel split in two: C1 (source) spring-coupled to C2 (output), both detuned by I (7)
+  spring_only  one spring-linked gate oscillator per input, no dashpot (waveguide-like coupling) (4)
+  sym_pair     classic + a reference channel R, spring-coupled to C (driven through it: one source per
+               block) and detuned by I with the opposite sign: a common-mode shift of C and R partly
+               cancels at the output (7)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..physics.blocks import Attach, BlockSpec, Dof
+from ..physics.params import DEFAULT, GateParams, block_params
+
+P0 = DEFAULT
+W2 = P0.omega ** 2
+
+# name -> (low, high); d* detuning (k = m w^2 (1 + d)), l* log10
+CORE = {"d_c": (-0.03, 0.03), "lq_c": (0.7, 2.6), "d_g": (-0.08, 0.08), "lq_g": (0.7, 2.6),
+        "lk_i": (-1.0, 1.0), "lq_i": (-0.5, 1.0), "lgam_ig": (0.0, 2.5), "lgam_ic": (1.0, 3.6),
+        "lf_c": (-1.0, 1.0)}
+EXTRA = {
+    "classic": {},
+    "buffer": {"d_b": (-0.3, 0.3), "lq_b": (0.0, 1.5), "lk_cb": (1.0, 3.5)},
+    "two_stage": {"d_c2": (-0.03, 0.03), "lq_c2": (0.7, 2.6), "lk_12": (1.0, 3.5), "lgam_ic2": (1.0, 3.6)},
+    "spring_only": {},
+    "sym_pair": {"d_r": (-0.03, 0.03), "lgam_ir": (1.0, 3.6), "lk_cr": (1.0, 3.5)},
+}
+STRUCTURES = tuple(EXTRA)
+
+
+@dataclass(frozen=True)
+class Structure:
+    """One grammar entry: its name, parameter names and bounds."""
+    name: str
+
+    @property
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        """Parameter name -> (low, high)."""
+        return {**CORE, **EXTRA[self.name]}
+
+    def params(self, x) -> GateParams:
+        """The GateParams (with its block) for parameter vector x (in `bounds` order)."""
+        v = dict(zip(self.bounds, np.asarray(x, float)))
+        return block_params({"block": build(self.name, v).to_dict(), "name": self.name}, self.name)
+
+
+def _k(m: float, d: float) -> float:
+    return m * W2 * (1 + d)
+
+
+def build(name: str, v: dict) -> BlockSpec:
+    """The BlockSpec of structure `name` at parameter values v (see CORE, EXTRA)."""
+    e = 10.0 ** np.array([v[k] for k in ("lq_c", "lq_g", "lk_i", "lq_i", "lgam_ig", "lgam_ic", "lf_c")])
+    q_c, q_g, k_i, q_i, g_ig, g_ic, f_c = map(float, e)
+    C = Dof("C", P0.m_c, _k(P0.m_c, v["d_c"]), q_c)
+    I = Dof("I", P0.m_i, k_i, q_i, slow=True)
+    kinds = ("s",) if name == "spring_only" else ("s", "d")
+    gates = [Dof(f"G{pin}{kind}", P0.m_g, _k(P0.m_g, v["d_g"]), q_g) for pin in (1, 2) for kind in kinds]
+    links = {"s": "spring", "d": "dashpot"}
+    inputs = tuple(tuple(Attach(f"G{pin}{k}", links[k]) for k in kinds) for pin in (1, 2))
+    dofs, springs = [C, I, *gates], []
+    quads = [("C", "I", -g_ic), *((g.name, "I", g_ig) for g in gates)]
+    output = "C"
+    if name == "buffer":
+        dofs.append(Dof("B", 1.0, _k(1.0, v["d_b"]), 10.0 ** v["lq_b"]))
+        springs.append(("C", "B", 10.0 ** v["lk_cb"]))
+        output = "B"
+    elif name == "two_stage":
+        dofs.append(Dof("C2", P0.m_c, _k(P0.m_c, v["d_c2"]), 10.0 ** v["lq_c2"]))
+        springs.append(("C", "C2", 10.0 ** v["lk_12"]))
+        quads.append(("C2", "I", -10.0 ** v["lgam_ic2"]))
+        output = "C2"
+    elif name == "sym_pair":
+        dofs.append(Dof("R", P0.m_c, _k(P0.m_c, v["d_r"]), q_c))
+        springs.append(("C", "R", 10.0 ** v["lk_cr"]))
+        quads.append(("R", "I", 10.0 ** v["lgam_ir"]))
+    return BlockSpec(name, tuple(dofs), tuple(springs), (), tuple(quads), "C", f_c, output, inputs)
+
+
+def x_default(name: str) -> np.ndarray | None:
+    """The default gate's parameters in this grammar (classic only), to seed the search."""
+    if name != "classic":
+        return None
+    v = {"d_c": P0.k_c / (P0.m_c * W2) - 1, "lq_c": math.log10(P0.q_c), "d_g": P0.k_g / (P0.m_g * W2) - 1,
+         "lq_g": math.log10(P0.q_g), "lk_i": math.log10(P0.k_i), "lq_i": math.log10(P0.q_i),
+         "lgam_ig": math.log10(P0.gamma_ig), "lgam_ic": math.log10(P0.gamma_ic), "lf_c": math.log10(P0.f_c)}
+    return np.array([v[k] for k in CORE])

@@ -1,0 +1,186 @@
+"""`mech2spice design`: search block structures for the most fabrication-tolerant NOR gate.
+
+Per structure of the grammar (design/grammar.py), scipy's differential evolution maximises a
+tolerance-aware score of the loaded gate (physics/loaded.py):
+
+  * nominal gate fails (worst margin over the valid input region <= 0, which covers the truth table,
+    the output bands, a missing stable state and the stability of every steady state):
+        score = -6 + max(margin, -5)                                            in [-11, -6]
+  * nominal gate passes: score = max(q1, -5), q1 = 1st percentile over N samples of the worst margin
+    under relative spread sigma on every element (the same standard normal draws for every candidate:
+    common random numbers), in [-5, 1].
+
+The search runs on a coarse input grid and s grid (SEARCH_GRID); the best point is then re-measured on
+the full grid: nominal margin, yield and 1st-percentile margin at sigma, and its tolerance (largest sigma
+with >= 99 % yield, experiments/tolerance.py's bisection).  Each finished structure is written to the
+checkpoint (tmp + os.replace), so an interrupted run resumes with the next structure.  docs/design.md.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import Mech2SpiceError
+from ..experiments import tolerance as tol
+from . import grammar
+
+SEARCH_GRID = {"per_band": 6, "n_grid": 1000}     # coarse: 144 input points, 1000 s points
+FAIL_OFFSET, FLOOR = -6.0, -5.0
+
+
+class Objective:
+    """The search score of one structure (see the module docstring), with common random numbers."""
+
+    def __init__(self, structure: grammar.Structure, sigma: float, samples: int, seed: int):
+        self.structure, self.sigma = structure, sigma
+        self.samples, self.seed = samples, seed
+        self.evaluations = self.errors = 0
+
+    def sampler(self, p, samples: int | None = None, **grid) -> tol.Sampler:
+        """A Sampler of p's loaded gate whose draws are this objective's (same seed, same elements)."""
+        return tol.Sampler(p, samples or self.samples, self.seed, **(grid or SEARCH_GRID))
+
+    def score(self, x) -> float:
+        """Score of parameter vector x (higher is better)."""
+        self.evaluations += 1
+        try:
+            return self._score(x)
+        except (Mech2SpiceError, np.linalg.LinAlgError, ValueError, IndexError):
+            self.errors += 1                   # a candidate the model or the scan rejects: scored as failing
+            return FAIL_OFFSET + FLOOR
+
+    def _score(self, x) -> float:
+        p = self.structure.params(x)
+        s = self.sampler(p)
+        m0 = float(s.margins(s.model(0.0, None)).min())
+        if not m0 > 0:
+            return FAIL_OFFSET + max(m0, FLOOR)
+        worst = [float(s.margins(s.model(self.sigma, i)).min()) for i in range(self.samples)]
+        return max(float(np.percentile(worst, 1)), FLOOR)
+
+    def __call__(self, x) -> float:
+        return -self.score(x)
+
+
+def search_structure(name: str, sigma: float, samples: int, seed: int, maxiter: int, popsize: int,
+                     budget_s: float, log=lambda msg: None, progress: bool = False) -> dict:
+    """Differential evolution on one structure; returns the search record and the best parameters."""
+    from scipy.optimize import differential_evolution
+    from ..backends._base import progress_bar
+    st = grammar.Structure(name)
+    obj = Objective(st, sigma, samples, seed)
+    bounds = list(st.bounds.values())
+    x0 = grammar.x_default(name)
+    t0 = time.time()
+    best = {"score": -math.inf}
+    bar = progress_bar(maxiter, progress, unit="generation")
+
+    def callback(xk, convergence=None):
+        bar.update(1)
+        return time.time() - t0 > budget_s            # True stops the search: the budget is spent
+
+    res = differential_evolution(obj, bounds, seed=seed, maxiter=maxiter, popsize=popsize, tol=1e-6,
+                                 polish=False, init="latinhypercube", x0=x0, workers=1, updating="immediate",
+                                 callback=callback)
+    bar.close()
+    best = {"x": [float(v) for v in res.x], "score": -float(res.fun)}
+    wall = time.time() - t0
+    log(f"{name}: score {best['score']:+.4f} after {obj.evaluations} evaluations, {wall:.0f} s")
+    return {"structure": name, "parameters": dict(zip(st.bounds, best["x"])), "score": best["score"],
+            "search": {"optimizer": "scipy.optimize.differential_evolution", "seed": seed, "maxiter": maxiter,
+                       "popsize": popsize, "budget_s": budget_s, "evaluations": obj.evaluations,
+                       "rejected_candidates": obj.errors,
+                       "generations": int(res.nit), "wall_s": wall, "stopped": res.message,
+                       "objective": {"sigma": sigma, "samples": samples, "quantile": "1%", **SEARCH_GRID},
+                       "seeded_with_default": x0 is not None}}
+
+
+def measure(p, sigma: float, samples: int, tol_samples: int, seed: int, log=lambda msg: None) -> dict:
+    """Full-grid figures of one block: nominal margin, yield / quantiles at sigma, tolerance (bisection)."""
+    t0 = time.time()
+    s = tol.Sampler(p, samples, seed)
+    nominal = float(s.margins(s.model(0.0, None)).min())
+    y = tol.yield_at(s, sigma)
+    t = tol.tolerance(tol.Sampler(p, tol_samples, seed), log=log)
+    return {"nominal_margin": nominal, "sigma": sigma, "samples": samples, "yield": y["yield"],
+            "yield_ci95": y["yield_ci95"], "margin_quantiles": y["margin_quantiles"],
+            "tolerance": t["sigma"], "tolerance_bracket": t["bracket"], "tolerance_samples": tol_samples,
+            "dofs_per_gate": p.structure.n_dofs, "elements_spread": len(s.elements), "wall_s": time.time() - t0}
+
+
+def block_file(p, record: dict) -> dict:
+    """The block file (--params FILE) of a found block, with how it was found and what was measured."""
+    return {"name": p.name, "block": p.structure.to_dict(), "f_r": p.f_r, "u_r": p.u_r, "omega": p.omega,
+            "search": record["search"], "measured": record["measured"]}
+
+
+def write_atomic(path: Path, data) -> None:
+    """Write JSON to path through a temporary file and os.replace (an interrupted write leaves the old file)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1) + "\n")
+    os.replace(tmp, path)
+
+
+def settings_key(settings: dict) -> dict:
+    """The settings a finished structure must share to be reused on resume."""
+    return {k: settings[k] for k in ("sigma", "samples", "seed", "maxiter", "popsize", "budget_s", "tol_samples")}
+
+
+def run(structures: list[str], out: Path, settings: dict, log=lambda msg: None, progress: bool = False) -> dict:
+    """Search every structure not yet in the checkpoint `out` (same settings); returns the whole record."""
+    unknown = [s for s in structures if s not in grammar.STRUCTURES]
+    if unknown:
+        raise Mech2SpiceError(f"unknown structure(s) {', '.join(unknown)} (known: {', '.join(grammar.STRUCTURES)})")
+    state = {"settings": settings, "structures": {}}
+    if out.exists():
+        try:
+            old = json.loads(out.read_text())
+        except json.JSONDecodeError as e:
+            raise Mech2SpiceError(f"checkpoint {out} is not valid JSON ({e}); delete it to start afresh")
+        same = set(settings_key(settings)) <= set(old.get("settings", {})) and \
+            settings_key(old["settings"]) == settings_key(settings)
+        if same:
+            state["structures"] = old.get("structures", {})
+        else:
+            log(f"{out}: other settings, searching afresh")
+    for name in structures:
+        if name in state["structures"]:
+            log(f"{name}: finished in the checkpoint, skipped")
+            continue
+        rec = search_structure(name, settings["sigma"], settings["samples"], settings["seed"], settings["maxiter"],
+                               settings["popsize"], settings["budget_s"], log, progress)
+        p = grammar.Structure(name).params(list(rec["parameters"].values()))
+        log(f"{name}: measuring the best point on the full grid")
+        rec["measured"] = measure(p, settings["sigma"], settings["samples"], settings["tol_samples"],
+                                  settings["seed"], log)
+        rec["block_file"] = block_file(p, rec)
+        state["structures"][name] = rec
+        write_atomic(out, state)
+    return state
+
+
+def best(state: dict) -> dict | None:
+    """The structure with the largest tolerance (then the best score)."""
+    recs = [r for r in state["structures"].values() if r["measured"]["nominal_margin"] > 0]
+    if not recs:
+        return None
+    return max(recs, key=lambda r: (r["measured"]["tolerance"] or 0.0, r["score"]))
+
+
+def summary(state: dict) -> dict:
+    """The --json output: per structure its best parameters, tolerance, margin and DOFs per gate."""
+    b = best(state)
+    return {"settings": state["settings"], "best": b["structure"] if b else None,
+            "structures": {n: {"parameters": r["parameters"], "score": r["score"],
+                               "tolerance": r["measured"]["tolerance"],
+                               "tolerance_bracket": r["measured"]["tolerance_bracket"],
+                               "nominal_margin": r["measured"]["nominal_margin"],
+                               "yield": r["measured"]["yield"], "margin_quantiles": r["measured"]["margin_quantiles"],
+                               "dofs_per_gate": r["measured"]["dofs_per_gate"], "search": r["search"]}
+                           for n, r in state["structures"].items()}}

@@ -65,8 +65,9 @@ class Scene:
 def input_amps(drives_of_inputs, levels: np.ndarray, p: GateParams) -> dict[int, np.ndarray]:
     """{drive index: (B,) amplitudes} for input pairs given levels (B, n_inputs) in units of F_R."""
     out = {}
-    for k, (ds, dd) in enumerate(drives_of_inputs):
-        out[ds] = out[dd] = levels[:, k] * p.f_r
+    for k, drives in enumerate(drives_of_inputs):        # (spring, dashpot), or one per link of a block
+        for d in drives:
+            out[d] = levels[:, k] * p.f_r
     return out
 
 

@@ -2,10 +2,10 @@
 
 A `BlockSpec` names the block-internal DOFs (mass, total stiffness, Q, slow flag), the springs,
 dashpots and signed quadratic gammas between them, which DOF the source drives (and at what force),
-which DOF is the output, and how each logical input attaches: a list of (DOF, link, scale) per input,
-link "spring" (k = scale F_R/u_R) or "dashpot" (c = scale F_R/(u_R omega)).  An upstream output
-joins the input by those links; an external input drives each attached DOF with what such a link
-would carry, scale x level x F_R at phase 0 (spring) or pi/2 (dashpot).
+which DOF is the output, and how each logical input attaches: a list of (DOF, link) per input, link
+"spring" (k = F_R/u_R) or "dashpot" (c = F_R/(u_R omega)).  An upstream output joins the input by
+those links; an external input drives each attached DOF with what such a link would carry, level x F_R
+at phase 0 (spring) or pi/2 (dashpot).
 
 `classic(p)` is the paper's block (physics/nor.py builds every block from a spec; for the classic one
 the model is identical to the hand-written builder's).  A block file (JSON, `--params FILE`) holds
@@ -38,10 +38,9 @@ class Dof:
 
 @dataclass(frozen=True)
 class Attach:
-    """One link of a logical input: the block DOF it reaches, spring or dashpot, and its strength scale."""
+    """One link of a logical input: the block DOF it reaches, by a spring or a dashpot."""
     dof: str
     link: str = "spring"
-    scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -112,12 +111,12 @@ class BlockSpec:
         for pin, links in enumerate(self.inputs, 1):
             for a in links:
                 known(a.dof, f"input {pin}")
-                if a.link not in LINKS or slow[a.dof] or not (math.isfinite(a.scale) and a.scale > 0):
+                if a.link not in LINKS or slow[a.dof]:
                     raise Mech2SpiceError(f"block '{self.name}': input {pin} link to {a.dof}: link must be one of "
-                                          f"{'/'.join(LINKS)} on an oscillating DOF with a positive scale")
-        if [(a.link, a.scale) for a in self.inputs[0]] != [(a.link, a.scale) for a in self.inputs[1]]:
-            raise Mech2SpiceError(f"block '{self.name}': both inputs must have the same links (kinds and scales, "
-                                  "in the same order): NOR is symmetric and wiring does not say which pin")
+                                          f"{'/'.join(LINKS)} on an oscillating DOF")
+        if [a.link for a in self.inputs[0]] != [a.link for a in self.inputs[1]]:
+            raise Mech2SpiceError(f"block '{self.name}': both inputs must have the same links (kinds, in the same "
+                                  "order): NOR is symmetric and wiring does not say which pin")
         if not self.slow_dofs:
             raise Mech2SpiceError(f"block '{self.name}': no slow (insulator) DOF: nothing makes the block nonlinear")
 
@@ -130,7 +129,7 @@ class BlockSpec:
                 "springs": [list(s) for s in self.springs], "dashpots": [list(s) for s in self.dashpots],
                 "quads": [list(q) for q in self.quads],
                 "source": {"dof": self.source, "force": self.source_force}, "output": self.output,
-                "inputs": [[{"dof": a.dof, "link": a.link, "scale": a.scale} for a in pin] for pin in self.inputs]}
+                "inputs": [[{"dof": a.dof, "link": a.link} for a in pin] for pin in self.inputs]}
 
     @classmethod
     def from_dict(cls, data, where: str = "block") -> "BlockSpec":
@@ -173,14 +172,14 @@ class BlockSpec:
         if not (isinstance(ins, list) and all(isinstance(p, list) and all(isinstance(a, dict) and isinstance(a.get("dof"), str)
                                                                            for a in p) for p in ins)):
             raise Mech2SpiceError(f"{where}: 'inputs' must be a list (one per input) of lists of "
-                                  "{\"dof\": NAME, \"link\": spring|dashpot, \"scale\": NUMBER}")
+                                  "{\"dof\": NAME, \"link\": spring|dashpot}")
         inputs = []
         for p in ins:
             links = []
             for a in p:
-                if set(a) - {"dof", "link", "scale"} or ("scale" in a and not is_number(a["scale"])):
-                    raise Mech2SpiceError(f"{where}: input link {a} must have dof, link, scale (a number)")
-                links.append(Attach(a["dof"], a.get("link", "spring"), float(a.get("scale", 1.0))))
+                if set(a) - {"dof", "link"}:
+                    raise Mech2SpiceError(f"{where}: input link {a} may only have dof and link")
+                links.append(Attach(a["dof"], a.get("link", "spring")))
             inputs.append(tuple(links))
         spec = cls(str(data.get("name", "block")), tuple(dofs), triples("springs"), triples("dashpots"),
                    triples("quads"), src["dof"], float(src["force"]), data["output"], tuple(inputs))

@@ -25,7 +25,7 @@ class GateBlock:
     """The DOF indices of one NOR gate: its output ("channel"), insulator and the DOFs each input links to.
 
     For the classic block inputs[pin] = (spring gate, dashpot gate); for others, the DOFs of that input's
-    links in the structure's order (`links` gives their kinds and scales)."""
+    links in the structure's order (the structure's inputs give their link kinds)."""
     name: str
     channel: int
     insulator: int
@@ -59,22 +59,22 @@ def add_nor(model: MechModel, p: GateParams, name: str) -> GateBlock:
     return block
 
 
-def _links(p: GateParams):
-    """(link kind, scale) of each DOF an input attaches to, in the order of GateBlock.inputs[pin]
+def _links(p: GateParams) -> list[str]:
+    """The link kind of each DOF an input attaches to, in the order of GateBlock.inputs[pin]
     (the same for both inputs: BlockSpec.validate asks for symmetric inputs)."""
-    return [(a.link, a.scale) for a in p.structure.inputs[0]]
+    return [a.link for a in p.structure.inputs[0]]
 
 
 def connect(model: MechModel, p: GateParams, channel: int, pair: tuple[int, ...]) -> None:
     """Wire an upstream output to a downstream input's DOFs by the structure's links (classic: one
     spring k = F_R/u_R + one dashpot k/omega).  Springs first, then dashpots, as the classic block did."""
     links = list(zip(pair, _links(p)))
-    for dof, (kind, scale) in links:
+    for dof, kind in links:
         if kind == "spring":
-            model.add_spring(channel, dof, scale * p.k_couple)
-    for dof, (kind, scale) in links:
+            model.add_spring(channel, dof, p.k_couple)
+    for dof, kind in links:
         if kind == "dashpot":
-            model.add_dashpot(channel, dof, scale * p.c_couple)
+            model.add_dashpot(channel, dof, p.c_couple)
 
 
 def drive_pair(model: MechModel, p: GateParams, pair: tuple[int, ...], level: float,
@@ -84,12 +84,11 @@ def drive_pair(model: MechModel, p: GateParams, pair: tuple[int, ...], level: fl
     a = p.force(level)
     tags = {"spring": (SPRING_PHASE, "s"), "dashpot": (DASHPOT_PHASE, "d")}
     links = _links(p)
-    unique = len({kind for kind, _ in links}) == len(links)      # classic: ".s", ".d"
+    unique = len(set(links)) == len(links)      # classic: ".s", ".d"
     out = []
-    for k, (dof, (kind, scale)) in enumerate(zip(pair, links)):
+    for k, (dof, kind) in enumerate(zip(pair, links)):
         phase, tag = tags[kind]
-        suffix = tag if unique else f"{tag}{k}"
-        out.append(model.add_drive(dof, scale * a, phase, f"{name}.{suffix}"))
+        out.append(model.add_drive(dof, a, phase, f"{name}.{tag if unique else f'{tag}{k}'}"))
     return tuple(out)
 
 

@@ -1,6 +1,9 @@
 """Compiled RK4 inner loop (numba): the same scheme as rk4.py's numpy path, without per-step
 Python overhead.  Runs whole drive periods at constant drive amplitudes; rk4.integrate falls back
 to numpy for periods in which the stimulus changes, and when numba is missing.
+
+With thermal noise (`noisy`), each step ends with the additive-noise kick of rk4.py's stochastic scheme
+(`noise_kick`); without it the loop runs exactly the deterministic arithmetic (bit-identical results).
 """
 from __future__ import annotations
 
@@ -42,10 +45,27 @@ def _accel(x, v, out, Kp, Ki, Kd, Cp, Ci, Cd, inv_m, qf, qs, qg, ddof, damp, dsi
 
 
 @njit(cache=True, fastmath=False)
+def noise_kick(x, v, fw, fz, tmp, Cp, Ci, Cd, inv_m):
+    """x += dZ/m, v += dW/m - M^-1 C dZ/m: the noise increments of one step (fw = dW, fz = dZ forces)."""
+    n, B = x.shape
+    for i in range(n):
+        for b in range(B):
+            tmp[i, b] = fz[i, b] * inv_m[i]
+            x[i, b] += tmp[i, b]
+    for i in range(n):
+        for b in range(B):
+            acc = 0.0
+            for k in range(Cp[i], Cp[i + 1]):
+                acc += Cd[k] * tmp[Ci[k], b]
+            v[i, b] += (fw[i, b] - acc) * inv_m[i]
+
+
+@njit(cache=True, fastmath=False)
 def run_periods(x, v, nper, N, h, Kp, Ki, Kd, Cp, Ci, Cd, inv_m, qf, qs, qg, ddof, damp,
-                sin_full, sin_half, dre, dim, pidx, bound, amp_re, amp_im, mean):
+                sin_full, sin_half, dre, dim, pidx, bound, amp_re, amp_im, mean, noisy, fw, fz):
     """Advance nper periods of N steps; fill per-period demodulation; return the index of the first
-    period after which |x| exceeded `bound` (or was NaN), else -1."""
+    period after which |x| exceeded `bound` (or was NaN), else -1.  With `noisy`, step s of period p
+    adds the force increments fw[p * N + s], fz[p * N + s] (noise_kick)."""
     n, B = x.shape
     k1 = np.empty_like(x)
     k2 = np.empty_like(x)
@@ -79,6 +99,8 @@ def run_periods(x, v, nper, N, h, Kp, Ki, Kd, Cp, Ci, Cd, inv_m, qf, qs, qg, ddo
                 for b in range(B):
                     x[i, b] += (h / 6.0) * (v[i, b] + 2.0 * v2[i, b] + 2.0 * v3[i, b] + v4[i, b])
                     v[i, b] += (h / 6.0) * (k1[i, b] + 2.0 * k2[i, b] + 2.0 * k3[i, b] + k4[i, b])
+            if noisy:
+                noise_kick(x, v, fw[p * N + s], fz[p * N + s], xs, Cp, Ci, Cd, inv_m)
             for j in range(np_):
                 for b in range(B):
                     u = x[pidx[j], b]
@@ -93,6 +115,9 @@ def run_periods(x, v, nper, N, h, Kp, Ki, Kd, Cp, Ci, Cd, inv_m, qf, qs, qg, ddo
                     return p
                 worst = max(worst, a)
     return -1
+
+
+_NO_NOISE = np.zeros((1, 1, 1))
 
 
 class Kernel:
@@ -112,13 +137,17 @@ class Kernel:
         self.pidx = pidx.astype(np.int64)
         self.N, self.h, self.bound = N, h, bound
 
-    def run(self, x, v, amps, nper):
-        """Advance x, v in place by nper periods; return (per-period probe amplitudes, means, first bad period or -1)."""
+    def run(self, x, v, amps, nper, noise=None):
+        """Advance x, v in place by nper periods; return (per-period probe amplitudes, means, first bad period or -1).
+
+        noise: (dW, dZ) force increments, each (nper * N, n, B), or None (deterministic)."""
         B = x.shape[1]
+        fw, fz = noise if noise is not None else (_NO_NOISE, _NO_NOISE)
         amp_re = np.zeros((nper, self.pidx.size, B))
         amp_im = np.zeros_like(amp_re)
         mean = np.zeros_like(amp_re)
         bad = run_periods(x, v, nper, self.N, self.h, *self.K, *self.C, self.inv_m, *self.q, self.ddof,
                           np.ascontiguousarray(amps, dtype=np.float64), self.sin_full, self.sin_half,
-                          self.dre, self.dim, self.pidx, self.bound, amp_re, amp_im, mean)
+                          self.dre, self.dim, self.pidx, self.bound, amp_re, amp_im, mean,
+                          noise is not None, fw, fz)
         return (amp_re + 1j * amp_im) * (2.0 / self.N), mean / self.N, bad

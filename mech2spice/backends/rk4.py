@@ -5,6 +5,19 @@ quadratic couplings and drives are one sparse mat-vec per stage.  The step is
 a whole fraction of the drive period so every period holds the same samples;
 each probe is demodulated on the fly (amplitude and phase at omega, and its
 mean) over every whole period.
+
+Thermal noise (`noise_temperature` T > 0, physics/noise.py): the SDE  dx = v dt,
+M dv = F(x, v, t) dt + sqrt(2 T) G dW  has additive noise, and each step is
+
+    (x, v) <- RK4(x, v) + (M^-1 dZ,  M^-1 dW - M^-1 C M^-1 dZ)
+
+with dW = sqrt(2T) G Delta W, dZ = sqrt(2T) G Delta Z (Delta Z = int int dW ds, drawn jointly with
+Delta W).  This is the order-1.5 strong Taylor scheme for additive noise (Kloeden & Platen, Numerical
+Solution of SDEs, 1992, Sec. 10.4) with its deterministic part replaced by classical RK4 (which agrees
+with it through h^2): L^1 f = (M^-1 G, -M^-1 C M^-1 G) is constant because only the dashpots depend on
+v, so the terms the scheme drops are O(h^2.5) and the strong order is 1.5.  Each period's increments
+come from a generator seeded with (noise_seed, period index), so chunked and whole runs agree; T = 0 runs
+the deterministic arithmetic unchanged (bit-identical, tests/test_noise.py).
 """
 from __future__ import annotations
 
@@ -14,6 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import Mech2SpiceError
+from ..physics import noise as thermal
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from ._base import Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar
@@ -51,11 +65,13 @@ class _Rhs:
 def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT_STEPS_PER_PERIOD,
               stimulus: Stimulus | None = None, state: tuple[np.ndarray, np.ndarray] | None = None,
               start_period: int = 0, probes: list[str] | None = None, trace_every: int = 0,
-              blowup: float | None = None, progress: bool = False, compiled: bool = True) -> Run:
+              blowup: float | None = None, progress: bool = False, compiled: bool = True,
+              noise_temperature: float = 0.0, noise_seed: int = 0) -> Run:
     """Integrate `periods` drive periods from `start_period` (state at rest unless given).
 
     compiled=True uses the numba kernel (rk4_kernel.py) for whole periods at constant drive
-    amplitudes; the numpy path (compiled=False) is the same scheme and the fallback."""
+    amplitudes; the numpy path (compiled=False) is the same scheme and the fallback.
+    noise_temperature > 0 adds the Langevin forces of every dashpot (module doc)."""
     model.check()
     stimulus = stimulus or Stimulus.constant(model)
     B, N = stimulus.batch, int(steps_per_period)
@@ -82,6 +98,7 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     mean = np.zeros((periods, len(names), B))
     traces, trace_t = [], []
     kern = _kernel(model, N, h, sin_full, sin_half, demod, pidx, blowup, compiled and not trace_every, B)
+    noise = _Noise(model, noise_temperature, noise_seed, N, h, B)
     bar = progress_bar(periods, progress)
     k = 0
     while k < periods:
@@ -89,15 +106,15 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
         amps = stimulus.at(t + 1e-9 * h)
         whole = int(min(np.floor((stimulus.next_change(t + 1e-9 * h) - t) / T + 1e-9), periods))  # at these amps
         if kern is not None and whole >= 1:
-            n = min(whole, periods - k, KERNEL_CHUNK)
+            n = min(whole, periods - k, KERNEL_CHUNK if noise.off else 1)
             x, v = np.ascontiguousarray(x), np.ascontiguousarray(v)
-            amp[k:k + n], mean[k:k + n], bad = kern.run(x, v, amps, n)
+            amp[k:k + n], mean[k:k + n], bad = kern.run(x, v, amps, n, noise.period(start_period + k))
             if bad >= 0:
                 check_divergence(model, x, (start_period + k + bad + 1) * T, bound=blowup)
         else:
             n = 1
             x, v = _numpy_period(rhs, x, v, stimulus, start_period + k, N, h, T, sin_full, sin_half, demod,
-                                 pidx, amp[k], mean[k], trace_every, traces, trace_t)
+                                 pidx, amp[k], mean[k], trace_every, traces, trace_t, noise)
             check_divergence(model, x, (start_period + k + 1) * T, bound=blowup)
         k += n
         bar.update(n)
@@ -121,9 +138,34 @@ def _kernel(model, N, h, sin_full, sin_half, demod, pidx, bound, wanted: bool, b
     return rk4_kernel.Kernel(model, N, h, sin_full, sin_half, demod, pidx, bound)
 
 
+class _Noise:
+    """The Langevin force increments of each period (None for every period when T = 0)."""
+
+    def __init__(self, model: MechModel, T: float, seed: int, N: int, h: float, batch: int):
+        self.T = thermal.check_temperature(T)
+        self.off = self.T == 0
+        self.G = None if self.off else thermal.noise_matrix(model)
+        self.C = model.C
+        self.inv_m = (1.0 / model.arrays["mass"])[:, None]
+        self.seed, self.N, self.h, self.B = int(seed), N, h, batch
+
+    def period(self, index: int):
+        """(dW, dZ) forces of every step of period `index`, each (N, n, B); None without noise."""
+        if self.off:
+            return None
+        return thermal.carrier_increments(self.G, self.T, self.h, self.N, self.B,
+                                          thermal.period_rng(self.seed, index))
+
+    def kick(self, x, v, fw, fz):
+        """The step's noise increments added to x, v (the kernel's noise_kick in numpy)."""
+        dz = fz * self.inv_m
+        return x + dz, v + (fw - self.C @ dz) * self.inv_m
+
+
 def _numpy_period(rhs, x, v, stimulus, period_index, N, h, T, sin_full, sin_half, demod, pidx, amp_out,
-                  mean_out, trace_every, traces, trace_t):
+                  mean_out, trace_every, traces, trace_t, noise: _Noise | None = None):
     """One drive period with the numpy RK4 (stimulus may change at any step)."""
+    inc = noise.period(period_index) if noise is not None else None
     acc = np.zeros(amp_out.shape, complex)
     acc0 = np.zeros(mean_out.shape)
     t_next = -np.inf
@@ -141,6 +183,8 @@ def _numpy_period(rhs, x, v, stimulus, period_index, N, h, T, sin_full, sin_half
         k4v = rhs(x4, v4, d1)
         x = x + (h / 6) * (v + 2 * v2 + 2 * v3 + v4)
         v = v + (h / 6) * (k1v + 2 * k2v + 2 * k3v + k4v)
+        if inc is not None:
+            x, v = noise.kick(x, v, inc[0][s], inc[1][s])
         xp = x[pidx]
         acc += xp * demod[s]
         acc0 += xp
@@ -157,11 +201,16 @@ class RK4Options:
     """Settings of the carrier-level RK4 engine."""
     steps_per_period: int = DEFAULT_STEPS_PER_PERIOD
     compiled: bool = True
+    noise_temperature: float = 0.0       # k_B T in model energy units (physics/noise.py); 0: deterministic
+    noise_seed: int = 0                  # the Langevin forces' seed (with the period index)
 
     def validate(self) -> None:
-        """Refuse steps the scheme cannot take."""
+        """Refuse steps the scheme cannot take and temperatures that are not numbers >= 0."""
         if int(self.steps_per_period) != self.steps_per_period or self.steps_per_period < 4:
             raise Mech2SpiceError("RK4 needs a whole number of at least 4 steps per drive period")
+        thermal.check_temperature(self.noise_temperature)
+        if isinstance(self.noise_seed, bool) or not isinstance(self.noise_seed, (int, np.integer)) or self.noise_seed < 0:
+            raise Mech2SpiceError(f"RK4 noise seed {self.noise_seed!r}: must be an integer >= 0")
 
 
 OSCILLATOR_STEPS_PER_S = 1.5e7   # compiled loop on this 2-core machine (reports/performance.md: 1.4-2e7)
@@ -182,4 +231,5 @@ class RK4Engine(Engine):
         """RK4 over `periods` drive periods (see `integrate`)."""
         return integrate(model, periods, steps_per_period=self.options.steps_per_period, stimulus=stimulus,
                          state=state, start_period=start_period, probes=probes, progress=progress,
-                         compiled=self.options.compiled)
+                         compiled=self.options.compiled, noise_temperature=self.options.noise_temperature,
+                         noise_seed=self.options.noise_seed)

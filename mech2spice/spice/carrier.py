@@ -294,6 +294,13 @@ def coupling_overrides(m: MechModel, p: GateParams, nk: int, nc: int) -> list[tu
 
 
 NOISE_NT_PERIODS = 1 / 10     # trnoise's sample interval: sinc^4(f0 NT) = 0.968 at the drive frequency, corrected
+def noisy_options(options: SpiceOptions, T: float, seed: int) -> SpiceOptions:
+    """`options` with thermal noise at T (model units): unwarped, at most NOISE_MAX_STEP periods a step."""
+    from dataclasses import replace
+    return replace(options, noise_temperature=T, noise_seed=seed, prewarp=False,
+                   max_step_periods=min(options.max_step_periods, NOISE_MAX_STEP))
+
+
 NOISE_MAX_STEP = 1 / 400      # periods: a noisy netlist runs unwarped; trap's detuning (w h)^2 / 12 = 2e-5 is 1 % of a
                               # Q = 200 linewidth (the default T/40 would detune by 0.8 linewidths)
 

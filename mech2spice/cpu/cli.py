@@ -51,6 +51,8 @@ def add_parser(subparsers) -> None:
     r.add_argument("--settle", type=number(0, lo_open=False), default=None, metavar="TOL",
                    help=f"envelope: end each pause once every channel stays within TOL u_R for two 200-period "
                         f"windows (default {SETTLE_TOL}; 0 = full fixed-length pauses)")
+    r.add_argument("--params", default=None, help="gate parameters of envelope / rk4 runs: default, printed, "
+                   "robust, classic or a JSON file (fields, or a block file: docs/design.md)")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
     r.add_argument("--json", action="store_true", help="machine-readable output")
     r.set_defaults(func=cmd_run)
@@ -78,6 +80,11 @@ def cmd_run(args) -> int:
         physical["settle"] = args.settle or None
     if physical and args.backend != "envelope":
         raise Mech2SpiceError("--step and --settle apply to the envelope backend only")
+    if args.params is not None:
+        if args.backend not in ("envelope", "rk4"):
+            raise Mech2SpiceError("--params applies to the envelope and rk4 backends only")
+        from ..physics.params import load_params
+        physical["p"] = load_params(args.params)
     if args.checkpoint_every and not args.checkpoint:
         raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,

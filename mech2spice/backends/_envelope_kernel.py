@@ -13,7 +13,13 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from . import _envelope_latency
 from ._rk4_kernel import AVAILABLE, njit
+
+try:
+    from numba import prange
+except ImportError:            # pragma: no cover - without numba
+    prange = range
 
 DONE, SETTLED, DIVERGED = 0, 1, 2
 FAST = {"contract", "reassoc", "nsz", "arcp"}     # not nnan/ninf: the divergence check must see NaN
@@ -58,6 +64,43 @@ def _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Ad, sdd, wo
             sdd[j, b] = acc * inv_ms[j]
 
 
+@njit(cache=True, fastmath=FAST, parallel=True)
+def _rhs_parallel(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Ad, sdd, work, work2, Binv):
+    """_rhs on all cores (the block-inverse path only: rows are independent within each pass)."""
+    Zp, Zi, Zd = Z
+    Gp, Gi, Gd = G
+    Hp, Hi, Hd = H
+    Kp, Ki, Kd = Ks
+    Cp, Ci, Cd = Cs
+    Bp, Bi, Bd = Binv
+    nf, B = A.shape
+    ns = s.shape[0]
+    for b in range(B):
+        for f in prange(nf):
+            r = F[f, b]
+            for k in range(Zp[f], Zp[f + 1]):
+                r -= Zd[k] * A[Zi[k], b]
+            gs = 0.0
+            for k in range(Gp[f], Gp[f + 1]):
+                gs += Gd[k] * s[Gi[k], b]
+            work[f] = r - gs * A[f, b]
+        for f in prange(nf):
+            acc = 0j
+            for k in range(Bp[f], Bp[f + 1]):
+                acc += Bd[k] * work[Bi[k]]
+            Ad[f, b] = acc
+        for j in prange(ns):
+            acc = 0.0
+            for k in range(Hp[j], Hp[j + 1]):
+                a = A[Hi[k], b]
+                acc -= 0.5 * Hd[k] * (a.real * a.real + a.imag * a.imag)
+            for k in range(Kp[j], Kp[j + 1]):
+                acc -= Kd[k] * s[Ki[k], b]
+            for k in range(Cp[j], Cp[j + 1]):
+                acc -= Cd[k] * sd[Ci[k], b]
+            sdd[j, b] = acc * inv_ms[j]
+
+
 @njit(cache=True, fastmath=FAST)
 def _lu_solve(L, U, perm_c, work, work2, Ad, b):
     """Pr Bop Pc = L U: forward then backward sweep (diagonals last / first in sorted rows)."""
@@ -82,11 +125,11 @@ def _lu_solve(L, U, perm_c, work, work2, Ad, b):
 
 @njit(cache=True, fastmath=FAST)
 def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Binv, prow,
-              amp, bound, settle_tol, watch, check_every, settle_from):
+              amp, bound, settle_tol, watch, check_every, settle_from, rhs):
     """Advance up to nsteps RK4 steps of h (sub steps span `per` periods), writing A[prow] for each
     period into amp.  Returns (steps done, DONE | SETTLED | DIVERGED).  With settle_tol > 0 the loop
     stops, from step settle_from on, once two windows of check_every steps in a row each saw every
-    watched amplitude (the channels) stay within a range of settle_tol."""
+    watched amplitude (the channels) stay within a range of settle_tol.  `rhs`: _rhs or _rhs_parallel."""
     nf, B = A.shape
     ns = s.shape[0]
     a1 = np.empty_like(A)
@@ -109,7 +152,7 @@ def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, p
     hi = np.zeros((watch.size, B))
     quiet = 0
     for n in range(nsteps):
-        _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a1, c1, work, work2, Binv)
+        rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a1, c1, work, work2, Binv)
         if settle_tol > 0.0 and n % check_every == 0:
             if n >= settle_from + check_every:         # a whole window since the last reset
                 worst = 0.0
@@ -129,7 +172,7 @@ def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, p
             for b in range(B):
                 st[j, b] = s[j, b] + 0.5 * h * sd[j, b]
                 v2[j, b] = sd[j, b] + 0.5 * h * c1[j, b]
-        _rhs(At, st, v2, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a2, c2, work, work2, Binv)
+        rhs(At, st, v2, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a2, c2, work, work2, Binv)
         for f in range(nf):
             for b in range(B):
                 At[f, b] = A[f, b] + 0.5 * h * a2[f, b]
@@ -137,7 +180,7 @@ def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, p
             for b in range(B):
                 st[j, b] = s[j, b] + 0.5 * h * v2[j, b]
                 v3[j, b] = sd[j, b] + 0.5 * h * c2[j, b]
-        _rhs(At, st, v3, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a3, c3, work, work2, Binv)
+        rhs(At, st, v3, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a3, c3, work, work2, Binv)
         for f in range(nf):
             for b in range(B):
                 At[f, b] = A[f, b] + h * a3[f, b]
@@ -145,7 +188,7 @@ def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, p
             for b in range(B):
                 st[j, b] = s[j, b] + h * v3[j, b]
                 v4[j, b] = sd[j, b] + h * c3[j, b]
-        _rhs(At, st, v4, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a4, c4, work, work2, Binv)
+        rhs(At, st, v4, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a4, c4, work, work2, Binv)
         for f in range(nf):
             for b in range(B):
                 A[f, b] += (h / 6.0) * (a1[f, b] + 2.0 * a2[f, b] + 2.0 * a3[f, b] + a4[f, b])
@@ -197,15 +240,32 @@ class Kernel:
         self.Ks, self.Cs = _csr(env.Ks, float), _csr(env.Cs, float)
         self.inv_ms = 1.0 / env.ms if env.slow.size else np.zeros(0)
         self.watch = env.watch.astype(np.int64)
+        self.blocks = _envelope_latency.Blocks(env, Binv) if Binv is not None and env.model.design.gates else None
 
-    def run(self, A, s, sd, nchunks, sub, per, h, F, prow, bound, settle_tol=0.0, check_every=1, settle_from=0):
-        """nchunks chunks of `sub` steps spanning `per` periods; returns (amp, steps done, status)."""
+    def run(self, A, s, sd, nchunks, sub, per, h, F, prow, bound, settle_tol=0.0, check_every=1, settle_from=0,
+            parallel=False):
+        """nchunks chunks of `sub` steps spanning `per` periods; returns (amp, steps done, status).
+        parallel: the rates on all cores (with the block inverse; else serial)."""
+        rhs = _rhs_parallel if parallel and self.Binv[0].size > 1 else _rhs
         amp = np.zeros((nchunks * per, prow.size, A.shape[1]), complex)
         done, status = run_steps(A, s, sd, nchunks * sub, sub, per, h, np.ascontiguousarray(F, complex), self.Z, self.G,
                                  self.H, self.Ks, self.Cs, self.inv_ms, self.L, self.U, self.perm_r,
                                  self.perm_c, self.Binv, prow.astype(np.int64), amp, bound, settle_tol,
-                                 self.watch, check_every, settle_from)
+                                 self.watch, check_every, settle_from, rhs)
         return amp, int(done), int(status)
+
+    def run_latent(self, A, s, sd, lat, nchunks, sub, per, h, F, prow, bound, settle_tol, check_every, settle_from,
+                   tol, hold, lat_check, need):
+        """`run` with per-block latency (_envelope_latency); `lat` (the blocks' latency state) is updated
+        in place.  Returns (amp, steps done, status, block-steps integrated)."""
+        amp = np.zeros((nchunks * per, prow.size, A.shape[1]), complex)
+        active, quiet, snap_f, snap_s, snap_F = lat
+        done, status, work = _envelope_latency.run_latent(
+            A, s, sd, nchunks * sub, sub, per, h, np.ascontiguousarray(F, complex), self.Z, self.G, self.H,
+            self.Ks, self.Cs, self.inv_ms, self.Binv, prow.astype(np.int64), amp, bound, settle_tol, self.watch,
+            check_every, settle_from, self.blocks.arrays(), active, quiet, snap_f, snap_s, snap_F, tol, hold,
+            lat_check, need, self.blocks.always)
+        return amp, int(done), int(status), int(work)
 
 
 __all__ = ["AVAILABLE", "Kernel", "DONE", "SETTLED", "DIVERGED"]

@@ -71,7 +71,8 @@ CHUNK_PERIODS = 2000         # periods per compiled call: bounds the progress-ba
 
 def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stimulus=None, state=None,
               start_period: int = 0, probes: list[str] | None = None, progress: bool = False,
-              settle_tol: float | None = None, compiled: bool = True) -> Run:
+              settle_tol: float | None = None, compiled: bool = True, latency: float | None = None,
+              parallel: bool = False) -> Run:
     """RK4 on the envelope equations with a step of `step_periods` drive periods (must divide 1 or be whole).
 
     Returns a Run whose per-period amplitudes are the envelope itself.  A step beyond the measured
@@ -79,7 +80,10 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     channel's amplitude stayed within a range of `settle_tol` for two SETTLE_WINDOWs in a row: the rest of
     the stretch is the settled state, held (idle-time skipping; the slow small ringing this ignores and
     its error are measured in reports/fidelity.md).  compiled=True uses the numba loop
-    (envelope_kernel.py) where numba exists."""
+    (envelope_kernel.py) where numba exists.  With `latency` (u_R) and the compiled loop, settled gate
+    blocks are frozen until their inputs move by more than `latency` (_envelope_latency.py); the state
+    then carries the blocks' latency record too.  parallel: the compiled loop's rates on all cores
+    (without latency: its active rows are too few to share out)."""
     env = Envelope.of(model)
     T = model.period
     _check_step(model, step_periods)
@@ -96,6 +100,11 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     tol = settle_tol * model.amplitude_unit if settle_tol else 0.0
     check = sub * max(1, int(round(SETTLE_WINDOW / per)))
     kern = kernel(model) if compiled else None
+    lat = _latency_state(kern, state, B) if latency else None
+    lat_tol, hold = (latency or 0.0) * model.amplitude_unit, LATENCY_HOLD * T
+    lat_check = max(1, int(round(LATENCY_WINDOW / per))) * sub
+    need = -(-LATENCY_HOLD // (lat_check // sub * per)) + 1     # quiet checks spanning HOLD periods
+    block_steps = 0
     bound = blowup_bound(model)
     settled_periods = 0
     bar = progress_bar(periods, progress)
@@ -110,8 +119,13 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
         span = min(stimulus.next_change(t + 1e-9 * h) - t, periods * T)
         to_change = min(-(-(periods - k) // per), max(1, int(np.ceil(span / (per * T) - 1e-9))))
         nchunks = min(to_change, max(1, CHUNK_PERIODS // per))
-        if kern is not None:
-            seg, done, status = kern.run(A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from)
+        if lat is not None:
+            seg, done, status, work = kern.run_latent(A, s, sd, lat, nchunks, sub, per, h, F, prow, bound, tol,
+                                                      check, settle_from, lat_tol, hold, lat_check, need)
+            block_steps += work
+        elif kern is not None:
+            seg, done, status = kern.run(A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from,
+                                         parallel)
         else:
             seg, done, status = _numpy_chunks(env, A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check,
                                               settle_from)
@@ -129,8 +143,25 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
         bar.update(n)
     bar.close()
     t_end = (start_period + 1 + np.arange(periods)) * T
+    extra = {"block_steps": block_steps, "blocks": kern.blocks.n} if lat is not None else {}
     return Run(names, T, t_end, amp, np.zeros(amp.shape), None, None, (start_period + periods) * T,
-               state=(A, s, sd), settled_periods=settled_periods)
+               state=(A, s, sd, *lat) if lat is not None else (A, s, sd), settled_periods=settled_periods,
+               extra=extra)
+
+
+LATENCY_WINDOW = 32          # periods between freeze checks
+LATENCY_HOLD = 200           # periods, about one gate delay (173 mean, reports/gate.md): a block freezes once
+                             # it and its inputs stayed quiet this long and its rates predict < the
+                             # threshold over this
+
+
+def _latency_state(kern, state, B: int):
+    """The blocks' latency record to continue from (copied), fresh (all active) at the start."""
+    if kern is None or kern.blocks is None:
+        return None
+    if state is not None and len(state) == 8 and state[3].size == kern.blocks.n:
+        return tuple(np.array(x) for x in state[3:])
+    return kern.blocks.fresh_state(B)
 
 
 def _check_step(model: MechModel, step_periods: float) -> None:
@@ -200,6 +231,8 @@ class EnvelopeOptions:
     step_periods: float | None = None    # None: default_step(model)
     settle_tol: float | None = None      # u_R; None: integrate every period (no idle skipping)
     compiled: bool = True
+    latency: float | None = None         # u_R; None: integrate every gate at every step
+    parallel: bool = False               # the compiled loop's rates on all cores (without latency)
 
     def validate(self) -> None:
         """Refuse steps and tolerances that are not positive numbers."""
@@ -209,6 +242,9 @@ class EnvelopeOptions:
             _step_layout(self.step_periods)
         if self.settle_tol is not None and not (np.isfinite(self.settle_tol) and self.settle_tol > 0):
             raise Mech2SpiceError(f"settle tolerance {self.settle_tol!r} u_R: must be a positive number")
+        if self.latency is not None and not (np.isfinite(self.latency) and 0 < self.latency < 1):
+            raise Mech2SpiceError(f"latency threshold {self.latency!r} u_R: must be a number between 0 and 1 "
+                                  "(or off)")
 
 
 SECONDS_PER_OSCILLATOR_STEP = 1.6e-7   # compiled loop: 0.48 ms per period at 12000 oscillators, step 4 T
@@ -234,4 +270,5 @@ class EnvelopeEngine(Engine):
         """The envelope equations over `periods` drive periods (see `integrate`)."""
         return integrate(model, periods, step_periods=self.step(model), stimulus=stimulus, state=state,
                          start_period=start_period, probes=probes, progress=progress,
-                         settle_tol=self.options.settle_tol, compiled=self.options.compiled)
+                         settle_tol=self.options.settle_tol, compiled=self.options.compiled,
+                         latency=self.options.latency, parallel=self.options.parallel)

@@ -19,10 +19,11 @@ Writes reports/fidelity.json and reports/fidelity.md (~20 min on the 2-core mach
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from .. import data, simulation
-from ..backends.envelope import EnvelopeOptions
+from ..backends.envelope import EnvelopeEngine, EnvelopeOptions
 from ..cpu import run as R
 from ..cpu.iss import ISS
 from ..cpu.physical import PhysicalCPU
@@ -34,22 +35,26 @@ from ..experiments.scenes import COUNTER_STEPS, FSM_STEPS, sqrt_steps
 
 SECTIONS = ("cpu", "clocked", "cone")
 
-# (label, envelope step in periods, settle tolerance in u_R or None)
-SETTINGS = [("reference: step 2, full pauses", 2.0, None),
-            ("step 4, full pauses", 4.0, None),
-            ("step 4, settle 0.05", 4.0, 0.05),
-            ("step 4, settle 0.1", 4.0, 0.1),
-            ("step 4, settle 0.2", 4.0, 0.2),
-            ("step 8, full pauses", 8.0, None),
-            ("step 8, settle 0.1", 8.0, 0.1),
-            ("step 12, settle 0.1", 12.0, 0.1)]
+# (label, envelope step in periods, settle tolerance in u_R or None, latency threshold in u_R or None,
+#  rates on both cores)
+SETTINGS = [("reference: step 2, full pauses", 2.0, None, None, False),
+            ("step 4, full pauses", 4.0, None, None, False),
+            ("step 8, full pauses", 8.0, None, None, False),
+            ("step 8, settle 0.1", 8.0, 0.1, None, False),
+            ("step 8, settle 0.1, both cores", 8.0, 0.1, None, True),
+            ("step 8, settle 0.1, latency 0.03", 8.0, 0.1, 0.03, False),
+            ("step 8, settle 0.1, latency 0.1", 8.0, 0.1, 0.1, False),
+            ("step 8, settle 0.1, latency 0.2", 8.0, 0.1, 0.2, False),
+            ("step 12, settle 0.1", 12.0, 0.1, None, False),
+            ("step 12, settle 0.1, latency 0.1", 12.0, 0.1, 0.1, False)]
 
 
-def run_setting(prog, cycles: int, step: float, settle) -> dict:
+def run_setting(prog, cycles: int, step: float, settle, latency=None, parallel=False) -> dict:
     """`cycles` cycles of `prog` on the envelope processor beside the ISS; stops at the first disagreement."""
     iss = ISS(R.make_memory(prog))
     t0 = time.perf_counter()
-    cpu = PhysicalCPU(R.make_memory(prog), "envelope", step=step, settle=settle)
+    cpu = PhysicalCPU(R.make_memory(prog), "envelope", step=step, settle=settle, latency=latency,
+                      parallel=parallel)
     reset_s = time.perf_counter() - t0
     rows = []
     for _ in range(cycles):
@@ -67,18 +72,19 @@ def run_setting(prog, cycles: int, step: float, settle) -> dict:
         if not same:
             break
     return {"reset_s": reset_s, "rows": rows, "periods": cpu.period, "simulated": cpu.simulated,
-            "wall_s": time.perf_counter() - t0}
+            "block_steps": cpu.block_steps, "wall_s": time.perf_counter() - t0}
 
 
 def compare(res: dict) -> list[dict]:
     """Per setting: agreement with the ISS, max amplitude difference to the reference, margin, cost."""
     ref = res[SETTINGS[0][0]]["rows"]
     out = []
-    for label, step, settle in SETTINGS:
+    for label, step, settle, latency, parallel in SETTINGS:
         r = res[label]
         rows = r["rows"]
         diffs = [max(abs(row["amps"][k] - rr["amps"][k]) for k in rr["amps"]) for row, rr in zip(rows, ref)]
-        out.append({"setting": label, "step": step, "settle": settle, "cycles": len(rows),
+        out.append({"setting": label, "step": step, "settle": settle, "latency": latency, "parallel": parallel,
+                    "block_steps": r.get("block_steps", 0), "cycles": len(rows),
                     "all_same_as_iss": all(row["same"] for row in rows),
                     "max_amp_diff": float(max(diffs)), "min_margin": min(row["min_margin"] for row in rows),
                     "periods": r["periods"], "simulated": r["simulated"],
@@ -88,8 +94,28 @@ def compare(res: dict) -> list[dict]:
 
 
 # --- clocked designs through simulation.run_clocked_physical -------------------------------------------
-CLOCKED_SETTINGS = [("reference: step 1, full pauses", 1, None), ("step 4, full pauses", 4, None),
-                    ("step 4, settle 0.05", 4, 0.05), ("step 4, settle 0.1", 4, 0.1)]
+# (label, step (None: the engine's default), settle, latency)
+CLOCKED_SETTINGS = [("reference: step 1, full pauses", 1, None, None), ("step 2, full pauses", 2, None, None),
+                    ("step 4, settle 0.1", None, 0.1, None), ("step 4, settle 0.1, latency 0.1", None, 0.1, 0.1),
+                    ("step 8, settle 0.1", 8, 0.1, None), ("step 8, settle 0.1, latency 0.1", 8, 0.1, 0.1),
+                    ("step 12, settle 0.1, latency 0.1", 12, 0.1, 0.1)]
+
+
+@contextmanager
+def _timed_engine(record: list):
+    """Time each EnvelopeEngine.run (the integration alone: the model is built before it)."""
+    original = EnvelopeEngine.run
+
+    def run(self, *args, **kwargs):
+        t = time.perf_counter()
+        out = original(self, *args, **kwargs)
+        record.append(time.perf_counter() - t)
+        return out
+    EnvelopeEngine.run = run
+    try:
+        yield
+    finally:
+        EnvelopeEngine.run = original
 
 
 def clocked_designs() -> dict:
@@ -109,18 +135,20 @@ def clocked() -> list[dict]:
         timing = simulation.clock_timing(nl)
         want = [e["outputs"] for e in simulation.run_clocked_logic(nl, cycles)["trace"]]
         ref = None
-        for label, step, settle in CLOCKED_SETTINGS:
-            t = time.perf_counter()
+        for label, step, settle, latency in CLOCKED_SETTINGS:
+            t, runs = time.perf_counter(), []
             # step None: envelope.default_step(model), 4 periods where the stability bound allows
-            r = simulation.run_clocked_physical(nl, DEFAULT, cycles, "envelope", timing,
-                                              options=EnvelopeOptions(step_periods=1.0 if step == 1 else None),
-                                              settle_tol=settle)
+            with _timed_engine(runs):
+                r = simulation.run_clocked_physical(nl, DEFAULT, cycles, "envelope", timing,
+                                                    options=EnvelopeOptions(step_periods=step, latency=latency),
+                                                    settle_tol=settle)
             wall = time.perf_counter() - t
             ref = ref or r
             got = [e["outputs"] for e in r["trace"]]
             diff = max(abs(e["amplitudes"][k] - f["amplitudes"][k]) for e, f in zip(r["trace"], ref["trace"])
                        for k in e["amplitudes"])
             rows.append({"design": name, "setting": label, "step": r["envelope_step"], "settle": settle,
+                         "latency": latency, "engine_s": sum(runs),
                          "cycles": len(cycles), "trace_equals_logic": got == want, "max_amp_diff": diff,
                          "min_margin": r["min_margin"], "periods": r["periods"],
                          "simulated": r["simulated_periods"], "wall_s": wall})
@@ -242,8 +270,8 @@ def write(directory="reports", only=None, cycles: int = 30, render: bool = False
     if "cpu" in sections:
         prog = R.load_program(data.program("sieve.asm"))
         res = {}
-        for label, step, settle in SETTINGS:
-            res[label] = run_setting(prog, cycles, step, settle)
+        for label, step, settle, latency, parallel in SETTINGS:
+            res[label] = run_setting(prog, cycles, step, settle, latency, parallel)
             print(label, f"{res[label]['wall_s']:.0f} s", flush=True)
         d["cpu"], d["cycles"] = compare(res), cycles
     if "clocked" in sections:

@@ -1,0 +1,408 @@
+"""Per-gate latency for the compiled envelope loop: a gate block that has settled is frozen (its
+amplitudes held, not integrated) until something it reads moves beyond a threshold.
+
+A block is one GateBlock's DOFs (channel, insulator, gate oscillators).  Its rates read, through the
+residual and the block-diagonal Bop^-1, amplitudes and insulator displacements of a few other blocks
+(its drivers' channels, its loads' dashpot gates): its *inputs*.  A block freezes when, at two checks in
+a row, its own DOFs moved less than `tol` over the last window and its rates predict less than `tol`
+over HOLD periods; at the freeze it records its inputs (and the forcing on its residual rows).  After
+every step each active block's frozen *dependents* compare their inputs with that record and wake up
+beyond `tol`: wake-ups travel along the coupling graph.  When no block is active the state is constant
+and the loop stops (status SETTLED): the caller holds it until the stimulus changes.
+
+Insulator displacements count in amplitude-equivalent units: s x |G| u_R / |Z0_ff| (the relative
+detuning they cause on the oscillators they couple to, times a logic-1 amplitude).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ._rk4_kernel import njit
+
+FAST = {"contract", "reassoc", "nsz", "arcp"}
+SETTLED, DIVERGED, DONE = 1, 2, 0
+CHANNELS_ONLY = True
+
+
+def _csr_pattern(M) -> tuple[np.ndarray, np.ndarray]:
+    M = sp.csr_matrix(M)
+    M.sum_duplicates()
+    M.sort_indices()
+    return M.indptr.astype(np.int64), M.indices.astype(np.int64)
+
+
+class Blocks:
+    """The gate blocks of one Envelope in index arrays (CSR: ptr, idx) for the compiled loop."""
+
+    def __init__(self, env, Binv):
+        model = env.model
+        nf, ns = env.fast.size, env.slow.size
+        pos_f = -np.ones(model.n, np.int64)
+        pos_f[env.fast] = np.arange(nf)
+        pos_s = -np.ones(model.n, np.int64)
+        pos_s[env.slow] = np.arange(ns)
+        owner = -np.ones(model.n, np.int64)
+        for k, g in enumerate(model.design.gates):
+            owner[[g.channel, g.insulator, *[d for pair in g.inputs for d in pair]]] = k
+        rest = owner < 0                                   # DOFs outside gates: one block, never frozen
+        nblk = len(model.design.gates) + int(rest.any())
+        owner[rest] = nblk - 1
+        self.n = nblk
+        self.always = nblk - 1 if rest.any() else -1
+        of_f, of_s = owner[env.fast], owner[env.slow]
+        Rf = sp.csr_matrix((np.ones(nf), (of_f, np.arange(nf))), shape=(nblk, nf))
+        Rs = sp.csr_matrix((np.ones(ns), (of_s, np.arange(ns))), shape=(nblk, ns))
+        pat = lambda M: (abs(sp.csr_matrix(M)) > 0).astype(float)
+        Pb, Pz, Pg, Ph = pat(Binv), pat(env.Z0) + sp.identity(nf), pat(env.G), pat(env.H)
+        res = pat(Rf @ Pb)                                 # residual rows each block's rates read
+        ext_f = pat(res @ Pz + Rs @ Ph).tolil()
+        ext_s = pat(res @ Pg).tolil()
+        ext_f = self._drop_own(ext_f, of_f)
+        ext_s = self._drop_own(ext_s, of_s)
+        if CHANNELS_ONLY:
+            ch = np.zeros(nf, bool)
+            ch[env.watch] = True
+            ext_f = sp.csr_matrix(ext_f.multiply(ch[None, :].astype(float)))
+            ext_s = sp.csr_matrix(ext_s.shape)
+            Rk = sp.csr_matrix((np.ones(ch.sum()), (of_f[ch], np.flatnonzero(ch))), shape=(nblk, nf))
+            self.key = _csr_pattern(Rk)
+            self.key_s = _csr_pattern(sp.csr_matrix((nblk, ns)))
+        else:
+            self.key, self.key_s = _csr_pattern(Rf), _csr_pattern(Rs)
+        self.fast = _csr_pattern(Rf)
+        self.slow = _csr_pattern(Rs)
+        self.res = _csr_pattern(res)
+        self.ext_f = _csr_pattern(ext_f)
+        self.ext_s = _csr_pattern(ext_s)
+        dep = pat(ext_f @ Rf.T + ext_s @ Rs.T).T          # (a, d): d reads a's DOFs
+        self.dep = _csr_pattern(dep)
+        # amplitude-equivalent scale of an insulator displacement (module docstring)
+        z = np.abs(env.Z0.diagonal())
+        Gc = abs(env.G).tocsc()
+        self.s_scale = np.zeros(ns)
+        for j in range(ns):
+            rows = Gc.indices[Gc.indptr[j]:Gc.indptr[j + 1]]
+            if rows.size:
+                self.s_scale[j] = np.max(Gc.data[Gc.indptr[j]:Gc.indptr[j + 1]] / z[rows]) * model.amplitude_unit
+
+    @staticmethod
+    def _drop_own(M, owner_of_col):
+        M = M.tocoo()
+        keep = owner_of_col[M.col] != M.row
+        return sp.csr_matrix((M.data[keep], (M.row[keep], M.col[keep])), shape=M.shape)
+
+    def arrays(self):
+        """The tuple the compiled loop takes."""
+        return (self.fast[0], self.fast[1], self.slow[0], self.slow[1], self.res[0], self.res[1],
+                self.ext_f[0], self.ext_f[1], self.ext_s[0], self.ext_s[1], self.dep[0], self.dep[1],
+                self.s_scale, self.key[0], self.key[1], self.key_s[0], self.key_s[1])
+
+    def fresh_state(self, B: int):
+        """Every block active, nothing recorded: (active, quiet, snap_f, snap_s, snap_F)."""
+        return (np.ones(self.n, np.int8), np.zeros(self.n, np.int64),
+                np.zeros((self.ext_f[1].size, B), complex), np.zeros((self.ext_s[1].size, B)),
+                np.zeros((self.res[1].size, B), complex))
+
+
+@njit(cache=True, fastmath=FAST)
+def _lists(active, blk, mark, frows, srows, rrows, ablk):
+    """Rows of the active blocks: (n fast, n slow, n residual, n active blocks); residual rows deduplicated."""
+    fp, fi, sp_, si, rp, ri = blk[0], blk[1], blk[2], blk[3], blk[4], blk[5]
+    nf = ns = nr = na = 0
+    mark[:] = 0
+    for b in range(active.size):
+        if active[b] == 0:
+            continue
+        ablk[na] = b
+        na += 1
+        for k in range(fp[b], fp[b + 1]):
+            frows[nf] = fi[k]
+            nf += 1
+        for k in range(sp_[b], sp_[b + 1]):
+            srows[ns] = si[k]
+            ns += 1
+        for k in range(rp[b], rp[b + 1]):
+            r = ri[k]
+            if mark[r] == 0:
+                mark[r] = 1
+                rrows[nr] = r
+                nr += 1
+    return nf, ns, nr, na
+
+
+@njit(cache=True, fastmath=FAST)
+def _append(b, blk, mark, frows, srows, rrows, ablk, nf, ns, nr, na):
+    """_lists after block b woke: its rows appended (residual rows not yet listed)."""
+    fp, fi, sp_, si, rp, ri = blk[0], blk[1], blk[2], blk[3], blk[4], blk[5]
+    ablk[na] = b
+    na += 1
+    for k in range(fp[b], fp[b + 1]):
+        frows[nf] = fi[k]
+        nf += 1
+    for k in range(sp_[b], sp_[b + 1]):
+        srows[ns] = si[k]
+        ns += 1
+    for k in range(rp[b], rp[b + 1]):
+        r = ri[k]
+        if mark[r] == 0:
+            mark[r] = 1
+            rrows[nr] = r
+            nr += 1
+    return nf, ns, nr, na
+
+
+@njit(cache=True, fastmath=FAST)
+def _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nf, srows, ns, Ad, sdd, work):
+    """The envelope rates on the listed rows only (residuals on rrows, which Bop^-1 of frows reads)."""
+    Zp, Zi, Zd = Z
+    Gp, Gi, Gd = G
+    Hp, Hi, Hd = H
+    Kp, Ki, Kd = Ks
+    Cp, Ci, Cd = Cs
+    Bp, Bi, Bd = Binv
+    for b in range(A.shape[1]):
+        for q in range(nr):
+            f = rrows[q]
+            r = F[f, b]
+            for k in range(Zp[f], Zp[f + 1]):
+                r -= Zd[k] * A[Zi[k], b]
+            gs = 0.0
+            for k in range(Gp[f], Gp[f + 1]):
+                gs += Gd[k] * s[Gi[k], b]
+            work[f] = r - gs * A[f, b]
+        for q in range(nf):
+            f = frows[q]
+            acc = 0j
+            for k in range(Bp[f], Bp[f + 1]):
+                acc += Bd[k] * work[Bi[k]]
+            Ad[f, b] = acc
+        for q in range(ns):
+            j = srows[q]
+            acc = 0.0
+            for k in range(Hp[j], Hp[j + 1]):
+                a = A[Hi[k], b]
+                acc -= 0.5 * Hd[k] * (a.real * a.real + a.imag * a.imag)
+            for k in range(Kp[j], Kp[j + 1]):
+                acc -= Kd[k] * s[Ki[k], b]
+            for k in range(Cp[j], Cp[j + 1]):
+                acc -= Cd[k] * sd[Ci[k], b]
+            sdd[j, b] = acc * inv_ms[j]
+
+
+@njit(cache=True, fastmath=FAST)
+def _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol):
+    """Whether frozen block b's inputs (or the forcing on its residual rows) left their record by > tol."""
+    xp, xi, yp, yi, rp, ri, scale = blk[6], blk[7], blk[8], blk[9], blk[4], blk[5], blk[12]
+    for bb in range(A.shape[1]):
+        for k in range(xp[b], xp[b + 1]):
+            if abs(A[xi[k], bb] - snap_f[k, bb]) > tol:
+                return True
+        for k in range(yp[b], yp[b + 1]):
+            if abs(s[yi[k], bb] - snap_s[k, bb]) * scale[yi[k]] > tol:
+                return True
+        for k in range(rp[b], rp[b + 1]):
+            if F[ri[k], bb] != snap_F[k, bb]:
+                return True
+    return False
+
+
+@njit(cache=True, fastmath=FAST)
+def _record(A, s, F, blk, b, snap_f, snap_s, snap_F):
+    """Record block b's inputs (and the forcing on its residual rows)."""
+    xp, xi, yp, yi, rp, ri = blk[6], blk[7], blk[8], blk[9], blk[4], blk[5]
+    for bb in range(A.shape[1]):
+        for k in range(xp[b], xp[b + 1]):
+            snap_f[k, bb] = A[xi[k], bb]
+        for k in range(yp[b], yp[b + 1]):
+            snap_s[k, bb] = s[yi[k], bb]
+        for k in range(rp[b], rp[b + 1]):
+            snap_F[k, bb] = F[ri[k], bb]
+
+
+@njit(cache=True, fastmath=FAST)
+def _freeze(A, s, blk, b, At, st, sd, v2, v3, v4):
+    """Park block b's stage values on its state (frozen rows read as held)."""
+    fp, fi, sp_, si = blk[0], blk[1], blk[2], blk[3]
+    for bb in range(A.shape[1]):
+        for k in range(fp[b], fp[b + 1]):
+            At[fi[k], bb] = A[fi[k], bb]
+        for k in range(sp_[b], sp_[b + 1]):
+            j = si[k]
+            st[j, bb] = s[j, bb]
+            v2[j, bb] = v3[j, bb] = v4[j, bb] = sd[j, bb]
+
+
+@njit(cache=True, fastmath=FAST)
+def _quiet(A, s, sd, a1, Aref, sref, blk, b, tol, hold):
+    """Block b moved < tol since the last check and its rates predict < tol over `hold` seconds."""
+    fp, fi, sp_, si, scale = blk[13], blk[14], blk[15], blk[16], blk[12]
+    for bb in range(A.shape[1]):
+        for k in range(fp[b], fp[b + 1]):
+            f = fi[k]
+            if abs(A[f, bb] - Aref[f, bb]) > tol or abs(a1[f, bb]) * hold > tol:
+                return False
+        for k in range(sp_[b], sp_[b + 1]):
+            j = si[k]
+            if (abs(s[j, bb] - sref[j, bb]) * scale[j] > tol or abs(sd[j, bb]) * hold * scale[j] > tol):
+                return False
+    return True
+
+
+@njit(cache=True, fastmath=FAST)
+def _mark_ref(A, s, Aref, sref, blk, b):
+    fp, fi, sp_, si = blk[0], blk[1], blk[2], blk[3]
+    for bb in range(A.shape[1]):
+        for k in range(fp[b], fp[b + 1]):
+            Aref[fi[k], bb] = A[fi[k], bb]
+        for k in range(sp_[b], sp_[b + 1]):
+            sref[si[k], bb] = s[si[k], bb]
+
+
+@njit(cache=True, fastmath=FAST)
+def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, prow, amp, bound,
+               settle_tol, watch, check_every, settle_from, blk, active, quiet, snap_f, snap_s, snap_F,
+               tol, hold, lat_check, need, always):
+    """run_steps (_envelope_kernel) with per-block latency: only active blocks' rows are integrated.
+    A block freezes after `need` quiet checks in a row (lat_check steps apart): its channel moved < tol,
+    its rates predict < tol over `hold`, its inputs moved < tol since the last check.
+    Returns (steps done, DONE | SETTLED | DIVERGED, block-steps integrated)."""
+    nf, B = A.shape
+    ns = s.shape[0]
+    nblk = active.size
+    a1 = np.zeros_like(A)
+    a2 = np.zeros_like(A)
+    a3 = np.zeros_like(A)
+    a4 = np.zeros_like(A)
+    At = A.copy()
+    st = s.copy()
+    c1 = np.zeros_like(s)
+    c2 = np.zeros_like(s)
+    c3 = np.zeros_like(s)
+    c4 = np.zeros_like(s)
+    v2 = sd.copy()
+    v3 = sd.copy()
+    v4 = sd.copy()
+    Aref = A.copy()
+    sref = s.copy()
+    work = np.zeros(nf, A.dtype)
+    mark = np.zeros(nf, np.int8)
+    frows = np.empty(nf, np.int64)
+    srows = np.empty(ns, np.int64)
+    rrows = np.empty(nf, np.int64)
+    ablk = np.empty(nblk, np.int64)
+    lo = np.zeros((watch.size, B))
+    hi = np.zeros((watch.size, B))
+    settle_quiet = 0
+    work_done = 0
+    if always >= 0:
+        active[always] = 1
+    for b in range(nblk):                          # a changed forcing wakes the blocks it reaches
+        if active[b] == 0 and _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol):
+            active[b] = 1
+            quiet[b] = 0
+    nfr, nsr, nr, na = _lists(active, blk, mark, frows, srows, rrows, ablk)
+    for n in range(nsteps):
+        if na == 0:
+            return n, SETTLED, work_done
+        work_done += na
+        _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a1, c1, work)
+        if settle_tol > 0.0 and n % check_every == 0:
+            if n >= settle_from + check_every:
+                worst = 0.0
+                for q in range(watch.size):
+                    for b in range(B):
+                        worst = max(worst, hi[q, b] - lo[q, b])
+                settle_quiet = settle_quiet + 1 if worst < settle_tol else 0
+                if settle_quiet >= 2:
+                    return n, SETTLED, work_done
+            for q in range(watch.size):
+                for b in range(B):
+                    lo[q, b] = hi[q, b] = abs(A[watch[q], b])
+        if n % lat_check == 0:                     # freeze the blocks quiet at two checks in a row
+            froze = False
+            for q in range(na):
+                b = ablk[q]
+                if b == always:
+                    continue
+                calm = (_quiet(A, s, sd, a1, Aref, sref, blk, b, tol, hold)
+                        and not _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol))
+                _record(A, s, F, blk, b, snap_f, snap_s, snap_F)
+                quiet[b] = quiet[b] + 1 if calm else 0
+                if quiet[b] >= need:
+                    active[b] = 0
+                    froze = True
+                    _freeze(A, s, blk, b, At, st, sd, v2, v3, v4)
+                _mark_ref(A, s, Aref, sref, blk, b)
+            if froze:
+                nfr, nsr, nr, na = _lists(active, blk, mark, frows, srows, rrows, ablk)
+                if na == 0:
+                    return n, SETTLED, work_done
+        for q in range(nfr):
+            f = frows[q]
+            for b in range(B):
+                At[f, b] = A[f, b] + 0.5 * h * a1[f, b]
+        for q in range(nsr):
+            j = srows[q]
+            for b in range(B):
+                st[j, b] = s[j, b] + 0.5 * h * sd[j, b]
+                v2[j, b] = sd[j, b] + 0.5 * h * c1[j, b]
+        _rhs(At, st, v2, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a2, c2, work)
+        for q in range(nfr):
+            f = frows[q]
+            for b in range(B):
+                At[f, b] = A[f, b] + 0.5 * h * a2[f, b]
+        for q in range(nsr):
+            j = srows[q]
+            for b in range(B):
+                st[j, b] = s[j, b] + 0.5 * h * v2[j, b]
+                v3[j, b] = sd[j, b] + 0.5 * h * c2[j, b]
+        _rhs(At, st, v3, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a3, c3, work)
+        for q in range(nfr):
+            f = frows[q]
+            for b in range(B):
+                At[f, b] = A[f, b] + h * a3[f, b]
+        for q in range(nsr):
+            j = srows[q]
+            for b in range(B):
+                st[j, b] = s[j, b] + h * v3[j, b]
+                v4[j, b] = sd[j, b] + h * c3[j, b]
+        _rhs(At, st, v4, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a4, c4, work)
+        for q in range(nfr):
+            f = frows[q]
+            for b in range(B):
+                A[f, b] += (h / 6.0) * (a1[f, b] + 2.0 * a2[f, b] + 2.0 * a3[f, b] + a4[f, b])
+                At[f, b] = A[f, b]
+                if not abs(A[f, b]) < bound:     # catches NaN too
+                    return n, DIVERGED, work_done
+        for q in range(nsr):
+            j = srows[q]
+            for b in range(B):
+                s[j, b] += (h / 6.0) * (sd[j, b] + 2.0 * v2[j, b] + 2.0 * v3[j, b] + v4[j, b])
+                sd[j, b] += (h / 6.0) * (c1[j, b] + 2.0 * c2[j, b] + 2.0 * c3[j, b] + c4[j, b])
+                st[j, b] = s[j, b]
+                v2[j, b] = v3[j, b] = v4[j, b] = sd[j, b]
+        if settle_tol > 0.0:
+            for q in range(watch.size):
+                for b in range(B):
+                    m = abs(A[watch[q], b])
+                    lo[q, b] = min(lo[q, b], m)
+                    hi[q, b] = max(hi[q, b], m)
+        dp, di = blk[10], blk[11]                  # wake-ups travel to the frozen dependents of active blocks
+        n_active = na
+        for q in range(n_active):
+            for k in range(dp[ablk[q]], dp[ablk[q] + 1]):
+                d = di[k]
+                if active[d] == 0 and _moved(A, s, F, blk, d, snap_f, snap_s, snap_F, tol):
+                    active[d] = 1
+                    quiet[d] = 0
+                    _mark_ref(A, s, Aref, sref, blk, d)
+                    _record(A, s, F, blk, d, snap_f, snap_s, snap_F)
+                    nfr, nsr, nr, na = _append(d, blk, mark, frows, srows, rrows, ablk, nfr, nsr, nr, na)
+        if (n + 1) % sub == 0:
+            c = (n + 1) // sub - 1
+            for p in range(per):
+                for q in range(prow.size):
+                    for b in range(B):
+                        amp[c * per + p, q, b] = A[prow[q], b]
+    return nsteps, DONE, work_done

@@ -16,22 +16,23 @@ def add_parser(subparsers) -> None:
     s = subparsers.add_parser(
         "design", help="search block structures for a NOR gate that tolerates element spread",
         description="For each block structure of the grammar (docs/design.md), optimise its parameters with "
-                    "differential evolution on the 1st-percentile worst margin of the loaded gate under "
-                    "relative spread SIGMA (nominal truth table, bands and stable steady states as "
-                    "constraints), then measure the best point's tolerance (largest sigma with >= 99 % yield). "
+                    "differential evolution on its tolerance: the largest spread at which the 1st-percentile "
+                    "worst margin of the loaded gate stays > 0 (nominal truth table, bands and stable steady "
+                    "states as constraints), then measure the best point's yield at SIGMA and its tolerance "
+                    "(largest sigma with >= 99 %% yield) on more samples. "
                     "Each finished structure is checkpointed to --out; a rerun with the same settings resumes.")
     s.add_argument("--structures", default=",".join(STRUCTURES), metavar="A,B,...",
                    help=f"structures to search (default all: {','.join(STRUCTURES)})")
-    s.add_argument("--sigma", type=inputs.number(0), default=0.01, help="relative spread of the objective (0.01)")
+    s.add_argument("--sigma", type=inputs.number(0), default=0.01, help="relative spread at which each best block's yield is reported (0.01)")
     s.add_argument("--samples", type=inputs.integer(2, 10_000), default=16,
                    help="spread samples per objective evaluation (16; common random numbers)")
     s.add_argument("--tol-samples", type=inputs.integer(100, 100_000), default=100,
                    help="samples of the tolerance bisection of each best point (100)")
     s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0)
-    s.add_argument("--maxiter", type=inputs.integer(1, 10_000), default=60, help="generations at most (60)")
+    s.add_argument("--maxiter", type=inputs.integer(1, 10_000), default=200, help="generations at most (200)")
     s.add_argument("--popsize", type=inputs.integer(2, 100), default=6, help="population per parameter (6)")
-    s.add_argument("--budget-s", type=inputs.number(0), default=240.0,
-                   help="wall-clock budget of each structure's search in seconds (240)")
+    s.add_argument("--budget-s", type=inputs.number(0), default=300.0,
+                   help="wall-clock budget of each structure's search in seconds (300)")
     s.add_argument("--out", default=DEFAULT_OUT, help=f"checkpoint / result file (default {DEFAULT_OUT})")
     s.add_argument("--install-robust", action="store_true",
                    help="write the best block to the package's blocks/robust.json (--params robust)")

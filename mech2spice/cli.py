@@ -257,6 +257,15 @@ def cmd_emit(args) -> int:
     return 0
 
 
+def _envelope_speed_options(args, name: str) -> dict:
+    """--latency TOL|off, --exponential on|off, --parallel on|off: the envelope engine's speed-ups."""
+    given = {k: getattr(args, k, None) for k in ("latency", "exponential", "parallel")}
+    given = {k: v for k, v in given.items() if v is not None}
+    if given and name != "envelope":
+        raise Mech2SpiceError(f"{', '.join('--' + k for k in given)}: envelope backend options, not {name}'s")
+    return {k: (v or None) if k == "latency" else v == "on" for k, v in given.items()}
+
+
 def _engine_options(args, backend: str | None = None):
     """The engine's options from the flags: --steps (steps per drive period), --method / --max-step (ngspice)."""
     from dataclasses import replace
@@ -277,6 +286,7 @@ def _engine_options(args, backend: str | None = None):
         changes["steps_per_period"] = steps
     elif steps and name == "envelope":
         changes["step_periods"] = 1.0 / steps
+    changes.update(_envelope_speed_options(args, name))
     options = replace(engine_class(name).Options(), **changes)
     options.validate()
     return options
@@ -376,6 +386,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--steps", type=inputs.integer(1, inputs.MAX_STEPS), default=None,
                    help="steps per drive period (rk4 default 80; envelope default: one step per 4 periods, "
                         "fewer where the stability bound is lower)")
+    inputs.envelope_speed_args(s)
     s.add_argument("--method", choices=["trap", "gear"],
                    help="circuit simulator (ngspice, vacask) integration method (default trap)")
     s.add_argument("--max-step", type=inputs.number(0), help="circuit simulator max step in drive periods (default "

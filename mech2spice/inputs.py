@@ -56,6 +56,33 @@ def number(lo: float, hi: float = math.inf, *, lo_open: bool = True):
     return parse
 
 
+def number_or_off(lo: float, hi: float):
+    """An argparse type: 'off' (0.0) or a finite float in (lo, hi)."""
+    def parse(text: str) -> float:
+        if text.strip().lower() == "off":
+            return 0.0
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number or 'off', got {text!r}") from None
+        if not (math.isfinite(value) and lo < value < hi):
+            raise argparse.ArgumentTypeError(f"must be 'off' or a number above {lo:g} and below {hi:g}, got {text!r}")
+        return value
+    parse.__name__ = "number_or_off"
+    return parse
+
+
+def envelope_speed_args(parser) -> None:
+    """The envelope speed-up flags (docs/latency.md), on `simulate` and `cpu run`."""
+    parser.add_argument("--latency", type=number_or_off(0, 1), default=None, metavar="TOL|off",
+                        help="envelope: freeze settled gates until an input moves by TOL u_R (off: integrate "
+                             "every gate; docs/latency.md)")
+    parser.add_argument("--exponential", choices=["on", "off"], default=None,
+                        help="envelope: step the insulators exactly, which lifts the stability bound on the step")
+    parser.add_argument("--parallel", choices=["on", "off"], default=None,
+                        help="envelope: the rates on all cores (without latency; slower on a busy machine)")
+
+
 def parse_sets(items: list[str] | None) -> dict[str, int]:
     """--set PORT=INT ... -> {port: value}; ranges are checked against the design (ports.pack_inputs)."""
     values = {}

@@ -105,6 +105,22 @@ class Blocks:
                 np.zeros((self.res[1].size, B), complex))
 
 
+def propagators(env, h: float):
+    """exp(M h/2) and exp(M h) of each insulator's [s, s']' = M [s, s'] (M = [[0, 1], [-k/m, -c/m]]) as
+    (ns, 4) rows [e00, e01, e10, e11]; None when the insulators are coupled to each other."""
+    from scipy.linalg import expm
+    ns = env.slow.size
+    if env.Ks.nnz > ns or env.Cs.nnz > ns:
+        return None
+    kinds, which = np.unique(np.stack([env.Ks.diagonal() / env.ms, env.Cs.diagonal() / env.ms], 1), axis=0,
+                             return_inverse=True)
+    out = []
+    for tau in (h / 2, h):
+        E = np.array([expm(np.array([[0.0, 1.0], [-k, -c]]) * tau).ravel() for k, c in kinds]).reshape(-1, 4)
+        out.append(np.ascontiguousarray(E[np.asarray(which).ravel()]))
+    return out
+
+
 @njit(cache=True, fastmath=FAST)
 def _lists(active, blk, mark, frows, srows, rrows, ablk):
     """Rows of the active blocks: (n fast, n slow, n residual, n active blocks); residual rows deduplicated."""
@@ -153,8 +169,9 @@ def _append(b, blk, mark, frows, srows, rrows, ablk, nf, ns, nr, na):
 
 
 @njit(cache=True, fastmath=FAST)
-def _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nf, srows, ns, Ad, sdd, work):
-    """The envelope rates on the listed rows only (residuals on rrows, which Bop^-1 of frows reads)."""
+def _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nf, srows, ns, Ad, sdd, work, linear):
+    """The envelope rates on the listed rows only (residuals on rrows, which Bop^-1 of frows reads);
+    linear=False: the insulators' acceleration without their own spring and damper (exponential step)."""
     Zp, Zi, Zd = Z
     Gp, Gi, Gd = G
     Hp, Hi, Hd = H
@@ -183,10 +200,11 @@ def _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nf, srows
             for k in range(Hp[j], Hp[j + 1]):
                 a = A[Hi[k], b]
                 acc -= 0.5 * Hd[k] * (a.real * a.real + a.imag * a.imag)
-            for k in range(Kp[j], Kp[j + 1]):
-                acc -= Kd[k] * s[Ki[k], b]
-            for k in range(Cp[j], Cp[j + 1]):
-                acc -= Cd[k] * sd[Ci[k], b]
+            if linear:
+                for k in range(Kp[j], Kp[j + 1]):
+                    acc -= Kd[k] * s[Ki[k], b]
+                for k in range(Cp[j], Cp[j + 1]):
+                    acc -= Cd[k] * sd[Ci[k], b]
             sdd[j, b] = acc * inv_ms[j]
 
 
@@ -262,10 +280,13 @@ def _mark_ref(A, s, Aref, sref, blk, b):
 @njit(cache=True, fastmath=FAST)
 def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, prow, amp, bound,
                settle_tol, watch, check_every, settle_from, blk, active, quiet, snap_f, snap_s, snap_F,
-               tol, hold, lat_check, need, always):
+               tol, hold, lat_check, need, always, expo, Eh, Ef):
     """run_steps (_envelope_kernel) with per-block latency: only active blocks' rows are integrated.
     A block freezes after `need` quiet checks in a row (lat_check steps apart): its channel moved < tol,
-    its rates predict < tol over `hold`, its inputs moved < tol since the last check.
+    its rates predict < tol over `hold`, its inputs moved < tol since the last check.  tol = 0: only blocks
+    standing exactly still freeze.  expo: the insulators' linear oscillator (s, s') is stepped exactly (Lawson RK4 with its
+    propagators over h/2 and h, Eh and Ef as (ns, 4) rows [e00, e01, e10, e11]); RK4 then no longer
+    resolves their ringing, the stiffest mode at rest.
     Returns (steps done, DONE | SETTLED | DIVERGED, block-steps integrated)."""
     nf, B = A.shape
     ns = s.shape[0]
@@ -306,7 +327,7 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         if na == 0:
             return n, SETTLED, work_done
         work_done += na
-        _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a1, c1, work)
+        _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a1, c1, work, not expo)
         if settle_tol > 0.0 and n % check_every == 0:
             if n >= settle_from + check_every:
                 worst = 0.0
@@ -345,9 +366,14 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         for q in range(nsr):
             j = srows[q]
             for b in range(B):
-                st[j, b] = s[j, b] + 0.5 * h * sd[j, b]
-                v2[j, b] = sd[j, b] + 0.5 * h * c1[j, b]
-        _rhs(At, st, v2, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a2, c2, work)
+                if expo:                           # E(h/2) (y + h/2 k1)
+                    w = sd[j, b] + 0.5 * h * c1[j, b]
+                    st[j, b] = Eh[j, 0] * s[j, b] + Eh[j, 1] * w
+                    v2[j, b] = Eh[j, 2] * s[j, b] + Eh[j, 3] * w
+                else:
+                    st[j, b] = s[j, b] + 0.5 * h * sd[j, b]
+                    v2[j, b] = sd[j, b] + 0.5 * h * c1[j, b]
+        _rhs(At, st, v2, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a2, c2, work, not expo)
         for q in range(nfr):
             f = frows[q]
             for b in range(B):
@@ -355,9 +381,13 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         for q in range(nsr):
             j = srows[q]
             for b in range(B):
-                st[j, b] = s[j, b] + 0.5 * h * v2[j, b]
-                v3[j, b] = sd[j, b] + 0.5 * h * c2[j, b]
-        _rhs(At, st, v3, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a3, c3, work)
+                if expo:                           # E(h/2) y + h/2 k2
+                    st[j, b] = Eh[j, 0] * s[j, b] + Eh[j, 1] * sd[j, b]
+                    v3[j, b] = Eh[j, 2] * s[j, b] + Eh[j, 3] * sd[j, b] + 0.5 * h * c2[j, b]
+                else:
+                    st[j, b] = s[j, b] + 0.5 * h * v2[j, b]
+                    v3[j, b] = sd[j, b] + 0.5 * h * c2[j, b]
+        _rhs(At, st, v3, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a3, c3, work, not expo)
         for q in range(nfr):
             f = frows[q]
             for b in range(B):
@@ -365,9 +395,13 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         for q in range(nsr):
             j = srows[q]
             for b in range(B):
-                st[j, b] = s[j, b] + h * v3[j, b]
-                v4[j, b] = sd[j, b] + h * c3[j, b]
-        _rhs(At, st, v4, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a4, c4, work)
+                if expo:                           # E(h) y + h E(h/2) k3
+                    st[j, b] = Ef[j, 0] * s[j, b] + Ef[j, 1] * sd[j, b] + h * Eh[j, 1] * c3[j, b]
+                    v4[j, b] = Ef[j, 2] * s[j, b] + Ef[j, 3] * sd[j, b] + h * Eh[j, 3] * c3[j, b]
+                else:
+                    st[j, b] = s[j, b] + h * v3[j, b]
+                    v4[j, b] = sd[j, b] + h * c3[j, b]
+        _rhs(At, st, v4, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a4, c4, work, not expo)
         for q in range(nfr):
             f = frows[q]
             for b in range(B):
@@ -378,8 +412,15 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         for q in range(nsr):
             j = srows[q]
             for b in range(B):
-                s[j, b] += (h / 6.0) * (sd[j, b] + 2.0 * v2[j, b] + 2.0 * v3[j, b] + v4[j, b])
-                sd[j, b] += (h / 6.0) * (c1[j, b] + 2.0 * c2[j, b] + 2.0 * c3[j, b] + c4[j, b])
+                if expo:                           # E(h) (y + h/6 k1) + h/3 E(h/2) (k2 + k3) + h/6 k4
+                    w = sd[j, b] + (h / 6.0) * c1[j, b]
+                    k23 = (h / 3.0) * (c2[j, b] + c3[j, b])
+                    s_new = Ef[j, 0] * s[j, b] + Ef[j, 1] * w + Eh[j, 1] * k23
+                    sd[j, b] = Ef[j, 2] * s[j, b] + Ef[j, 3] * w + Eh[j, 3] * k23 + (h / 6.0) * c4[j, b]
+                    s[j, b] = s_new
+                else:
+                    s[j, b] += (h / 6.0) * (sd[j, b] + 2.0 * v2[j, b] + 2.0 * v3[j, b] + v4[j, b])
+                    sd[j, b] += (h / 6.0) * (c1[j, b] + 2.0 * c2[j, b] + 2.0 * c3[j, b] + c4[j, b])
                 st[j, b] = s[j, b]
                 v2[j, b] = v3[j, b] = v4[j, b] = sd[j, b]
         if settle_tol > 0.0:

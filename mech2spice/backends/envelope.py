@@ -26,20 +26,22 @@ RATE_SAFETY = 1.5            # x the largest |eigenvalue| at rest: along switchi
 DEFAULT_STEP = 4.0           # periods, at most: no accuracy cost on the adder (reports/envelope.md; bound 15.1)
 
 
-def rate_bound(model: MechModel) -> float:
+def rate_bound(model: MechModel, exponential: bool = False) -> float:
     """The envelope rate the step limit uses: RATE_SAFETY x the spectral rate (Gershgorin where that
-    cannot be computed).  Cached with the model."""
-    rate = model.derived.get("envelope_rate")
+    cannot be computed); `exponential`: without the insulators' own modes, which that step treats exactly.
+    Cached with the model."""
+    key = "envelope_rate_fast" if exponential else "envelope_rate"
+    rate = model.derived.get(key)
     if rate is None:
         env = Envelope.of(model)
-        rho = spectral_rate(env)
-        rate = model.derived["envelope_rate"] = RATE_SAFETY * rho if rho is not None else gershgorin_rate(env)
+        rho = spectral_rate(env, slow_modes=not exponential)
+        rate = model.derived[key] = RATE_SAFETY * rho if rho is not None else gershgorin_rate(env)
     return rate
 
 
-def max_step_periods(model: MechModel) -> float:
+def max_step_periods(model: MechModel, exponential: bool = False) -> float:
     """The longest stable RK4 step on this model's envelope equations, in drive periods."""
-    return RK4_STABILITY / rate_bound(model) / model.period
+    return RK4_STABILITY / rate_bound(model, exponential) / model.period
 
 
 def default_step(model: MechModel, cap: float = DEFAULT_STEP) -> float:
@@ -72,7 +74,7 @@ CHUNK_PERIODS = 2000         # periods per compiled call: bounds the progress-ba
 def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stimulus=None, state=None,
               start_period: int = 0, probes: list[str] | None = None, progress: bool = False,
               settle_tol: float | None = None, compiled: bool = True, latency: float | None = None,
-              parallel: bool = False) -> Run:
+              parallel: bool = False, exponential: bool = False) -> Run:
     """RK4 on the envelope equations with a step of `step_periods` drive periods (must divide 1 or be whole).
 
     Returns a Run whose per-period amplitudes are the envelope itself.  A step beyond the measured
@@ -83,10 +85,11 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     (envelope_kernel.py) where numba exists.  With `latency` (u_R) and the compiled loop, settled gate
     blocks are frozen until their inputs move by more than `latency` (_envelope_latency.py); the state
     then carries the blocks' latency record too.  parallel: the compiled loop's rates on all cores
-    (without latency: its active rows are too few to share out)."""
+    (without latency: its active rows are too few to share out).  exponential: the insulators' linear
+    oscillators are stepped exactly (Lawson RK4), which lifts the stability bound they set."""
     env = Envelope.of(model)
     T = model.period
-    _check_step(model, step_periods)
+    _check_step(model, step_periods, exponential)
     sub, per = _step_layout(step_periods)
     h = T * per / sub
     stimulus = stimulus or Stimulus.constant(model)
@@ -100,7 +103,8 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     tol = settle_tol * model.amplitude_unit if settle_tol else 0.0
     check = sub * max(1, int(round(SETTLE_WINDOW / per)))
     kern = kernel(model) if compiled else None
-    lat = _latency_state(kern, state, B) if latency else None
+    props = _propagators(kern, env, exponential, T * per / sub)
+    lat = _latency_state(kern, state, B) if latency or exponential else None
     lat_tol, hold = (latency or 0.0) * model.amplitude_unit, LATENCY_HOLD * T
     lat_check = max(1, int(round(LATENCY_WINDOW / per))) * sub
     need = -(-LATENCY_HOLD // (lat_check // sub * per)) + 1     # quiet checks spanning HOLD periods
@@ -121,7 +125,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
         nchunks = min(to_change, max(1, CHUNK_PERIODS // per))
         if lat is not None:
             seg, done, status, work = kern.run_latent(A, s, sd, lat, nchunks, sub, per, h, F, prow, bound, tol,
-                                                      check, settle_from, lat_tol, hold, lat_check, need)
+                                                      check, settle_from, lat_tol, hold, lat_check, need, props)
             block_steps += work
         elif kern is not None:
             seg, done, status = kern.run(A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from,
@@ -155,6 +159,17 @@ LATENCY_HOLD = 200           # periods, about one gate delay (173 mean, reports/
                              # threshold over this
 
 
+def _propagators(kern, env, exponential: bool, h: float):
+    """The insulators' propagators for the exponential step (None without it)."""
+    if not exponential:
+        return None
+    props = kern.propagators(env, h) if kern is not None and kern.blocks is not None else None
+    if props is None:
+        raise Mech2SpiceError("the exponential envelope step needs the compiled loop (numba), small Bop "
+                              "blocks and uncoupled insulators")
+    return props
+
+
 def _latency_state(kern, state, B: int):
     """The blocks' latency record to continue from (copied), fresh (all active) at the start."""
     if kern is None or kern.blocks is None:
@@ -164,14 +179,14 @@ def _latency_state(kern, state, B: int):
     return kern.blocks.fresh_state(B)
 
 
-def _check_step(model: MechModel, step_periods: float) -> None:
-    limit = max_step_periods(model)
+def _check_step(model: MechModel, step_periods: float, exponential: bool = False) -> None:
+    limit = max_step_periods(model, exponential)
     if not step_periods > 0:
         raise Mech2SpiceError(f"envelope step {step_periods:g} periods: must be positive")
     if step_periods > limit:
         raise Mech2SpiceError(f"envelope step {step_periods:g} periods exceeds the stability limit "
                               f"{limit:.3g} periods for this network (fastest envelope rate "
-                              f"{rate_bound(model):.3g} 1/s)")
+                              f"{rate_bound(model, exponential):.3g} 1/s)")
 
 
 def _probe_rows(env: Envelope, dofs: np.ndarray) -> np.ndarray:
@@ -233,6 +248,7 @@ class EnvelopeOptions:
     compiled: bool = True
     latency: float | None = None         # u_R; None: integrate every gate at every step
     parallel: bool = False               # the compiled loop's rates on all cores (without latency)
+    exponential: bool = False            # the insulators stepped exactly: lifts the stability bound
 
     def validate(self) -> None:
         """Refuse steps and tolerances that are not positive numbers."""
@@ -271,4 +287,5 @@ class EnvelopeEngine(Engine):
         return integrate(model, periods, step_periods=self.step(model), stimulus=stimulus, state=state,
                          start_period=start_period, probes=probes, progress=progress,
                          settle_tol=self.options.settle_tol, compiled=self.options.compiled,
-                         latency=self.options.latency, parallel=self.options.parallel)
+                         latency=self.options.latency, parallel=self.options.parallel,
+                         exponential=self.options.exponential)

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import MAX_CPU_CYCLES, check_output_file, integer, number, write_bytes
+from ..inputs import MAX_CPU_CYCLES, check_output_file, envelope_speed_args, integer, number, write_bytes
 from .physical import PROCESSOR_STEP, SETTLE_TOL
 from .machines import BACKENDS
 from .run import load_program, run_program
@@ -53,6 +53,7 @@ def add_parser(subparsers) -> None:
                         f"windows (default {SETTLE_TOL}; 0 = full fixed-length pauses)")
     r.add_argument("--params", default=None, help="gate parameters of envelope / rk4 runs: default, printed, "
                    "robust, classic or a JSON file (fields, or a block file: docs/design.md)")
+    envelope_speed_args(r)
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
     r.add_argument("--json", action="store_true", help="machine-readable output")
     r.set_defaults(func=cmd_run)
@@ -78,8 +79,12 @@ def cmd_run(args) -> int:
         physical["step"] = args.step
     if args.settle is not None:
         physical["settle"] = args.settle or None
+    if args.latency is not None:
+        physical["latency"] = args.latency or None
+    physical.update({k: getattr(args, k) == "on" for k in ("exponential", "parallel") if getattr(args, k)})
     if physical and args.backend != "envelope":
-        raise Mech2SpiceError("--step and --settle apply to the envelope backend only")
+        raise Mech2SpiceError("--step, --settle, --latency, --exponential and --parallel apply to the envelope "
+                              "backend only")
     if args.params is not None:
         if args.backend not in ("envelope", "rk4"):
             raise Mech2SpiceError("--params applies to the envelope and rk4 backends only")

@@ -34,14 +34,15 @@ PHYSICAL = ("envelope", "rk4")   # engines that continue from a state, so a cycl
 PROCESSOR_STEP = 8.0    # envelope periods: within tolerance with SETTLE_TOL (reports/fidelity.md), 1.9x below the bound
 SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fidelity.md)
 LATENCY = None          # u_R: per-gate latency threshold (None: off); chosen in reports/fidelity.md
+EXPONENTIAL = False     # insulators stepped exactly (lifts the step's stability bound); reports/fidelity.md
 
 
 class PhysicalCPU:
     """The processor as oscillators (an engine that continues from a state) against the behavioural memory."""
 
     def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float = PROCESSOR_STEP,
-                 settle: float | None = SETTLE_TOL, latency: float | None = LATENCY, parallel: bool = False,
-                 power_up: bool = True):
+                 settle: float | None = SETTLE_TOL, latency: float | None = LATENCY,
+                 exponential: bool = EXPONENTIAL, parallel: bool = False, power_up: bool = True):
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
         self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
@@ -50,7 +51,7 @@ class PhysicalCPU:
         for q, block in self.model.design.latch_outputs.items():
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
-        self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, parallel)
+        self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, exponential, parallel)
         t = simulation.clock_timing(self.netlist)
         whole = max(1, int(round(step))) if backend == "envelope" else 1   # changes fall on step boundaries
         self.pulse, self.pause = -(-t["pulse"] // whole) * whole, -(-t["pause"] // whole) * whole
@@ -64,13 +65,14 @@ class PhysicalCPU:
 
     # --- integration -----------------------------------------------------------------------
     @staticmethod
-    def _engines(backend: str, step: float, settle: float | None, latency: float | None, parallel: bool):
+    def _engines(backend: str, step: float, settle: float | None, latency: float | None, exponential: bool,
+                 parallel: bool):
         """(pulse engine, pause engine): only pauses may end early once settled; pulses always run in full."""
         if backend != "envelope":
             engine = make_engine(backend)
             return engine, engine
         pulse = make_engine(backend, make_engine(backend).Options(step_periods=step, latency=latency or None,
-                                                                  parallel=parallel))
+                                                                  exponential=exponential, parallel=parallel))
         return pulse, make_engine(backend, replace(pulse.options, settle_tol=settle or None))
 
     def _run(self, periods: int, values: dict, clock: int) -> dict[str, float]:

@@ -169,12 +169,13 @@ def _slow_rate_bound(env: Envelope) -> float:
     return float(np.max(np.sqrt(np.abs(env.Ks.diagonal()) / env.ms) + np.abs(env.Cs.diagonal()) / env.ms))
 
 
-def spectral_rate(env: Envelope) -> float | None:
+def spectral_rate(env: Envelope, slow_modes: bool = True) -> float | None:
     """The largest |eigenvalue| of the linear part at rest: ARPACK on A' = -Bop^-1 Z0 A for the amplitudes,
-    exact roots for the insulators (each its own damped oscillator when Ks, Cs are diagonal).  None if
-    ARPACK does not converge or the slow block is coupled."""
+    exact roots for the insulators (each its own damped oscillator when Ks, Cs are diagonal; left out with
+    slow_modes=False, for a step that treats them exactly).  None if ARPACK does not converge or the slow
+    block is coupled."""
     slow = 0.0
-    if env.slow.size:
+    if env.slow.size and slow_modes:
         if env.Ks.nnz > env.slow.size or env.Cs.nnz > env.slow.size:
             return None
         k, c, m = env.Ks.diagonal(), env.Cs.diagonal(), env.ms

@@ -167,7 +167,8 @@ def cmd_simulate_clocked(args, nl) -> int:
         timing = simulation.clock_timing(nl, args.pulse, args.pause)
         res = simulation.run_clocked_physical(nl, load_params(args.params), cycles, args.backend, timing,
                                             progress=not args.json and sys.stderr.isatty(),
-                                            options=_engine_options(args), log=_log(args))
+                                            options=_engine_options(args), log=_log(args),
+                                            noise=(args.noise, args.noise_seed))
     if args.json:
         _print_json(res)
     else:
@@ -195,7 +196,7 @@ def cmd_simulate(args) -> int:
     values = _parse_sets(args.set)
     res = simulation.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
                                 progress=not args.json and sys.stderr.isatty(), options=_engine_options(args),
-                                log=_log(args))[0]
+                                log=_log(args), noise=(args.noise, args.noise_seed))[0]
     res["inputs"] = values
     if args.json:
         _print_json(res)
@@ -402,6 +403,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="enable pulse length in drive periods (default 800, measured)")
     s.add_argument("--pause", type=inputs.integer(1, inputs.MAX_PERIODS),
                    help="settle time between pulses in drive periods (default: from logic depth)")
+    s.add_argument("--noise", type=inputs.number(0, lo_open=False), default=0.0, metavar="T",
+                   help="thermal noise on rk4, envelope, ngspice: k_B T in model energy units (docs/robustness.md)")
+    s.add_argument("--noise-seed", type=inputs.integer(0, 2 ** 31 - 1), default=0, metavar="S",
+                   help="the thermal noise's seed (default 0)")
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("emit", help="write a self-contained ngspice or VACASK netlist of a design, or the Verilog-A library",

@@ -80,13 +80,22 @@ def _announce(engine, model, periods: int, batch: int, log) -> None:
         log(f"{engine.name}: {model.n} oscillators x {batch} x {periods} periods, estimated {secs / 60:.1f} min")
 
 
+def _engine(backend: str, options, noise: tuple[float, int] | None):
+    """The engine, with thermal noise (T, seed) when T > 0 (backends/_noise_envelope.noisy_engine)."""
+    if noise and noise[0]:
+        from .backends._noise_envelope import noisy_engine
+        return noisy_engine(backend, options, *noise)
+    return make_engine(backend, options)
+
+
 def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], backend: str = "rk4",
-                 periods: int | None = None, progress: bool = False, options=None, log=None) -> list[dict]:
-    """Simulate one batch of input assignments from rest; one result dict per member."""
+                 periods: int | None = None, progress: bool = False, options=None, log=None,
+                 noise: tuple[float, int] | None = None) -> list[dict]:
+    """Simulate one batch of input assignments from rest; one result dict per member (`noise`: (k_B T, seed))."""
     t0 = time.time()
     for v in values:
         pack_inputs(netlist, v)                  # validates ports and widths up front
-    engine = make_engine(backend, options)
+    engine = _engine(backend, options, noise)
     if not engine.capabilities.physical:
         return [run_logic(netlist, v) for v in values]
     model = network.build(netlist, p)
@@ -234,14 +243,15 @@ def _check_trace_memory(total: int, probes: int, batch: int = 1) -> None:
 
 def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str, int]], backend: str,
                          timing: dict, progress: bool = False, options=None,
-                         settle_tol: float | None = CLOCKED_SETTLE_TOL, waveform: bool = False, log=None) -> dict:
+                         settle_tol: float | None = CLOCKED_SETTLE_TOL, waveform: bool = False, log=None,
+                         noise: tuple[float, int] | None = None) -> dict:
     """Trace entry k: outputs after clock edge k.  On engines that skip idle time, `settle_tol` (u_R) ends
     a stretch of constant inputs once every channel is steady (unless the options set their own);
     `waveform=True` adds the per-period amplitudes (a Waveform) under "waveform"."""
     t0 = time.time()
     for v in cycles:
         pack_inputs(netlist, v)
-    engine = make_engine(backend, options)
+    engine = _engine(backend, options, noise)
     if not engine.capabilities.physical:
         return run_clocked_logic(netlist, cycles)
     if engine.capabilities.settle and engine.options.settle_tol is None and settle_tol:

@@ -29,6 +29,9 @@ def add_parser(subparsers) -> None:
                    help='relative sigma on every element, or {"local": SIGMA|{KIND: SIGMA}, "wafer": '
                         'SIGMA|{KIND: SIGMA}, "wafer_rho": RHO} (inline or a file); kinds k m c spring '
                         'dashpot gamma drive, "*" for all')
+    s.add_argument("--noise", type=inputs.number(0, lo_open=False), default=0.0, metavar="T",
+                   help="thermal noise: k_B T in model energy units (docs/robustness.md gives kelvin for a "
+                        "1 MHz silicon scaling); a Langevin force on every dashpot; default 0 (none)")
     s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, metavar="S")
     s.add_argument("--backend", default="envelope", choices=BACKENDS)
     s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
@@ -72,9 +75,12 @@ def job_of(args) -> dict:
     if nl.clock:
         raise Mech2SpiceError(f"{nl.top} is clocked: montecarlo runs combinational designs (the processor: "
                               "not yet)")
-    return {"design": str(path), "params": args.params, "vectors": vectors_of(args, nl), "backend": args.backend,
-            "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "periods": args.periods,
-            "union": args.batch}
+    job = {"design": str(path), "params": args.params, "vectors": vectors_of(args, nl), "backend": args.backend,
+           "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "periods": args.periods,
+           "union": args.batch}
+    if args.noise:                   # only then: results files of noiseless sweeps keep their keys
+        job["noise"] = args.noise
+    return job
 
 
 def cmd_montecarlo(args) -> int:
@@ -90,7 +96,8 @@ def cmd_montecarlo(args) -> int:
             inputs.check_output_file(out, [args.design], "results file")
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=not args.json and sys.stderr.isatty(), log=log)
-    res.update({"design": job["design"], "backend": job["backend"], "spread": job["spread"], "seed": job["seed"]})
+    res.update({"design": job["design"], "backend": job["backend"], "spread": job["spread"], "seed": job["seed"],
+                "noise": job.get("noise", 0.0)})
     if not args.out:
         res.pop("out")
     if args.json:

@@ -40,7 +40,7 @@ def design_for(job: dict) -> mc.DesignMC:
         _DESIGNS.clear()                 # one design per worker at a time bounds its memory
         _DESIGNS[key] = mc.DesignMC(nl, load_params(job["params"]), job["vectors"], job["backend"],
                                     mc.spec_of(job["spread"]), job["seed"], job.get("periods"),
-                                    union=job.get("union"))
+                                    union=job.get("union"), noise=job.get("noise", 0.0))
     return _DESIGNS[key]
 
 

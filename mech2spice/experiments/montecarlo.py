@@ -17,6 +17,11 @@ failure rate is root failures / (samples x gates), which is what a gate count ex
 
 Engines that batch (envelope, rk4) run many samples as one model: the block-diagonal union of the
 sampled copies (experiments/tolerance.union), with the stimulus batch holding the input vectors.
+
+Thermal noise (`noise` T > 0, physics/noise.py): every sample also gets its own Langevin forces, seeded
+by (seed, i); such samples run one per engine run (the batch holds the input vectors) so that a sample's
+noise does not depend on which others share its run.  The outputs are read at the last period of the
+run, so a failure is a bit read wrong (or outside both bands) at that moment: the bit-error rate.
 """
 from __future__ import annotations
 
@@ -34,6 +39,7 @@ from ..backends import logic, make_engine
 from ..backends._base import DivergenceError
 from ..errors import Mech2SpiceError
 from ..physics import network, spread
+from ..physics.noise import check_temperature
 from ..physics.params import GateParams, band_of, margin
 from ..physics.stimulus import Stimulus
 from ..synthesis.ports import output_bits
@@ -133,10 +139,12 @@ class DesignMC:
     """A combinational design's nominal model, stimulus and logic expectations; evaluates samples."""
 
     def __init__(self, netlist: Netlist, p: GateParams, vectors: list[dict[str, int]], backend: str,
-                 spec: SpreadSpec, seed: int, periods: int | None = None, options=None, union: int | None = None):
+                 spec: SpreadSpec, seed: int, periods: int | None = None, options=None, union: int | None = None,
+                 noise: float = 0.0):
         if netlist.clock:
             raise Mech2SpiceError(f"{netlist.top} is clocked: montecarlo runs combinational designs")
         self.netlist, self.p, self.vectors, self.spec, self.seed = netlist, p, vectors, spec, seed
+        self.backend, self.options, self.noise = backend, options, check_temperature(noise)
         self.engine = make_engine(backend, options)
         if not self.engine.capabilities.physical:
             raise Mech2SpiceError(f"montecarlo needs a physical backend, not '{backend}'")
@@ -153,7 +161,14 @@ class DesignMC:
         bits = [logic.evaluate_bits(netlist, v) for v in vectors]
         self.want_out = np.array([[b[o] for b in bits] for o in self.outs], int)        # (outs, B)
         self.want_gate = np.array([[b[g] for b in bits] for g in self.gates], int)      # (gates, B)
-        self.union = union or (1 if backend.startswith(("ngspice", "vacask")) else 8)
+        self.union = 1 if self.noise else union or (1 if backend.startswith(("ngspice", "vacask")) else 8)
+
+    def engine_for(self, i: int):
+        """The engine sample i runs on: with noise, the backend with sample i's own noise seed."""
+        if not self.noise:
+            return self.engine
+        from ..backends._noise_envelope import noisy_engine
+        return noisy_engine(self.backend, self.options, self.noise, noise_seed(self.seed, i))
 
     def sample(self, i: int):
         """Sample i's model and stimulus (the nominal ones when the spec spreads nothing)."""
@@ -177,7 +192,7 @@ class DesignMC:
     def amplitudes(self, idx: list[int]) -> tuple[np.ndarray, int]:
         """Final amplitudes (u_R) of samples idx run as one model: (samples, outputs + gates, vectors), periods."""
         model, stim, probes = self._joined([self.sample(i) for i in idx])
-        amps, used = self._integrate(model, stim, probes)
+        amps, used = self._integrate(model, stim, probes, self.engine_for(idx[0]))
         return amps.reshape(len(idx), len(self.outs) + len(self.gates), -1), used
 
     def _run_group(self, idx: list[int]) -> list[dict]:
@@ -207,18 +222,18 @@ class DesignMC:
         amps = np.concatenate([s.amps for _, s in pairs], axis=1)
         return big, Stimulus(self.stim.times, amps), probes
 
-    def _integrate(self, model, stim, probes):
+    def _integrate(self, model, stim, probes, engine):
         """Amplitudes of every probe at the end; engines with a state stop once the outputs have settled
         (simulation's settle rule on the output probes only, so a nominal sample matches `simulate`)."""
-        if not self.engine.capabilities.state:
-            run = self.engine.run(model, self.budget, stim, probes=probes)
+        if not engine.capabilities.state:
+            run = engine.run(model, self.budget, stim, probes=probes)
             return run.final_amplitudes(probes, model.amplitude_unit), self.budget
         n_o, n_g = len(self.outs), len(self.gates)
         rows = [k for k in range(len(probes)) if k % (n_o + n_g) < n_o]
         state, done, history = None, 0, []
         while done < self.budget:
             n = min(simulation.CHUNK, self.budget - done)
-            run = self.engine.run(model, n, stim, state=state, start_period=done, probes=probes)
+            run = engine.run(model, n, stim, state=state, start_period=done, probes=probes)
             state, done = run.state, done + n
             history.append(run.final_amplitudes(probes, model.amplitude_unit))
             if not self.fixed and simulation._settled([h[rows] for h in history]):
@@ -243,6 +258,11 @@ class DesignMC:
                 "failing_bits": {o: c for o, c in wrong.items() if c}, "failing_gates": sorted(roots),
                 "worst_gate": self.gates[int(np.argmin(m_g.min(axis=1)))] if m_g.size else None,
                 "periods": int(used)}
+
+
+def noise_seed(seed: int, i: int) -> int:
+    """Sample i's noise seed: a function of (seed, i) only, apart from its spread draws."""
+    return int(np.random.default_rng([seed, i, 0x6e6f]).integers(2 ** 31))
 
 
 def _with_probes(model, channels, gates, prefix):

@@ -43,7 +43,8 @@ REPORTS: dict[str, Report] = {
                              "~40 min", ("speed_accuracy.md",), ("only", "design", "quick", "render")),
     "robustness": Report("yield of the gate, a 3-gate chain and the adder under per-element spread (Monte-Carlo "
                          "on Dask), per-gate failure rate, the processor extrapolated", "~30 min",
-                         ("robustness.md", "robustness.json", "robustness_yield.png"), ("quick",)),
+                         ("robustness.md", "robustness.json", "robustness_yield.png", "robustness_noise.png"),
+                         ("quick",)),
 }
 
 

@@ -1,0 +1,100 @@
+"""The envelope's speed-ups (issue 18, docs/latency.md): per-gate latency and the exponential step agree
+with the plain envelope within their stated tolerances and decode the same bits; bad settings are one-line
+errors.  Measured numbers per option on the processor and the clocked designs: reports/fidelity.md."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mech2spice import simulation
+from mech2spice.backends import envelope
+from mech2spice.backends.envelope import EnvelopeOptions, integrate
+from mech2spice.errors import Mech2SpiceError
+from mech2spice.experiments import scenes as S
+from mech2spice.physics.params import DEFAULT, band_of
+from mech2spice.synthesis.synth import synthesize
+from mech2spice import data
+
+LATENCY = 0.1          # u_R: the threshold tested (the processor's default, reports/fidelity.md)
+LATENCY_TOL = 0.01     # u_R: settled adder amplitudes, latency on vs off (measured 0.0007)
+EXPO_TOL = 0.01        # u_R: settled chain amplitudes, exponential step 16 vs RK4 step 2 (measured 0.0052)
+
+
+def settled(scene, run):
+    """|A| / u_R averaged over the last 10 periods of each input setting: (settings, probes, batch)."""
+    return np.stack([np.abs(run.amp[w - 10:w]).mean(0) for w in scene.windows]) / scene.model.amplitude_unit
+
+
+@pytest.fixture(scope="module")
+def adder():
+    return S.adder_scene()
+
+
+def test_latency_adder_agrees_and_skips_work(adder):
+    """All 16 adder inputs in one batch: latency on vs off within LATENCY_TOL, the same bands, and
+    frozen gates really skipped (fewer gate-block steps than the full envelope's)."""
+    full = integrate(adder.model, adder.periods, step_periods=4, stimulus=adder.stimulus)
+    lat = integrate(adder.model, adder.periods, step_periods=4, stimulus=adder.stimulus, latency=LATENCY)
+    a, b = settled(adder, full), settled(adder, lat)
+    assert np.abs(a - b).max() <= LATENCY_TOL
+    assert [band_of(x) for x in a.ravel()] == [band_of(x) for x in b.ravel()]
+    every_step = lat.extra["blocks"] * adder.periods // 4
+    assert lat.extra["block_steps"] < 0.7 * every_step, lat.extra
+
+
+def test_latency_state_continues(adder):
+    """A run split in two (the latency record travels in the state) equals one run within LATENCY_TOL."""
+    one = integrate(adder.model, adder.periods, step_periods=4, stimulus=adder.stimulus, latency=LATENCY)
+    half = adder.periods // 2
+    first = integrate(adder.model, half, step_periods=4, stimulus=adder.stimulus, latency=LATENCY)
+    assert len(first.state) == 8
+    second = integrate(adder.model, adder.periods - half, step_periods=4, stimulus=adder.stimulus,
+                       latency=LATENCY, state=first.state, start_period=half)
+    assert np.abs(np.abs(second.amp[-1]) - np.abs(one.amp[-1])).max() / adder.model.amplitude_unit <= LATENCY_TOL
+
+
+def test_latency_counter_trace_equals_full():
+    """The clocked counter: latency on vs off decode the same trace, amplitudes within 0.02 u_R at reads."""
+    nl = synthesize(data.verilog("counter4.v"))
+    cycles = simulation.expand_steps(S.COUNTER_STEPS)
+    timing = simulation.clock_timing(nl)
+    runs = [simulation.run_clocked_physical(nl, DEFAULT, cycles, "envelope", timing,
+                                            options=EnvelopeOptions(latency=lat)) for lat in (None, LATENCY)]
+    full, lat = ([e["outputs"] for e in r["trace"]] for r in runs)
+    assert full == lat
+    diff = max(abs(e["amplitudes"][k] - f["amplitudes"][k]) for e, f in zip(runs[0]["trace"], runs[1]["trace"])
+               for k in e["amplitudes"])
+    assert diff <= 0.02
+
+
+def test_exponential_step_on_chain():
+    """The 3-gate chain (switching both ways, band-edge members): the exponential step at 16 periods,
+    beyond RK4's stability bound, stays within EXPO_TOL of RK4 at 2 periods at every settled point."""
+    sc = S.chain_scene()
+    assert envelope.max_step_periods(sc.model) < 16 < envelope.max_step_periods(sc.model, exponential=True)
+    with pytest.raises(Mech2SpiceError, match="stability limit"):
+        integrate(sc.model, sc.periods, step_periods=16, stimulus=sc.stimulus)
+    ref = settled(sc, integrate(sc.model, sc.periods, step_periods=2, stimulus=sc.stimulus))
+    got = settled(sc, integrate(sc.model, sc.periods, step_periods=16, stimulus=sc.stimulus, exponential=True))
+    assert np.abs(got - ref).max() <= EXPO_TOL
+    assert [band_of(x) for x in got.ravel()] == [band_of(x) for x in ref.ravel()]
+
+
+@pytest.mark.parametrize("opts, msg", [(dict(latency=1.5), "latency threshold"),
+                                       (dict(latency=-0.1), "latency threshold"),
+                                       (dict(latency=float("nan")), "latency threshold")])
+def test_bad_options(opts, msg):
+    with pytest.raises(Mech2SpiceError, match=msg):
+        EnvelopeOptions(**opts).validate()
+
+
+@pytest.mark.parametrize("args, msg", [
+    (["simulate", "verilog/adder2.v", "--backend", "rk4", "--latency", "0.1"], "envelope backend options"),
+    (["simulate", "verilog/adder2.v", "--backend", "envelope", "--latency", "2"], "--latency"),
+    (["cpu", "run", "programs/sieve.asm", "--backend", "iss", "--exponential", "on"], "envelope backend only"),
+])
+def test_cli_refuses(args, msg):
+    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *args], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr

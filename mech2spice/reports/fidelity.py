@@ -36,25 +36,26 @@ from ..experiments.scenes import COUNTER_STEPS, FSM_STEPS, sqrt_steps
 SECTIONS = ("cpu", "clocked", "cone")
 
 # (label, envelope step in periods, settle tolerance in u_R or None, latency threshold in u_R or None,
-#  rates on both cores)
-SETTINGS = [("reference: step 2, full pauses", 2.0, None, None, False),
-            ("step 4, full pauses", 4.0, None, None, False),
-            ("step 8, full pauses", 8.0, None, None, False),
-            ("step 8, settle 0.1", 8.0, 0.1, None, False),
-            ("step 8, settle 0.1, both cores", 8.0, 0.1, None, True),
-            ("step 8, settle 0.1, latency 0.03", 8.0, 0.1, 0.03, False),
-            ("step 8, settle 0.1, latency 0.1", 8.0, 0.1, 0.1, False),
-            ("step 8, settle 0.1, latency 0.2", 8.0, 0.1, 0.2, False),
-            ("step 12, settle 0.1", 12.0, 0.1, None, False),
-            ("step 12, settle 0.1, latency 0.1", 12.0, 0.1, 0.1, False)]
+#  exponential step, rates on both cores).  "Alone" means on top of step 8, settle 0.1 (the default before
+#  issue 18); the last rows combine them.
+SETTINGS = [("reference: step 2, full pauses", 2.0, None, None, False, False),
+            ("step 8, settle 0.1", 8.0, 0.1, None, False, False),
+            ("step 8, settle 0.1, both cores", 8.0, 0.1, None, False, True),
+            ("step 8, settle 0.1, latency 0.05", 8.0, 0.1, 0.05, False, False),
+            ("step 8, settle 0.1, latency 0.1", 8.0, 0.1, 0.1, False, False),
+            ("step 8, settle 0.1, latency 0.2", 8.0, 0.1, 0.2, False, False),
+            ("step 12, settle 0.1", 12.0, 0.1, None, False, False),
+            ("step 16, settle 0.1, exponential", 16.0, 0.1, None, True, False),
+            ("step 16, settle 0.1, exponential, latency 0.1", 16.0, 0.1, 0.1, True, False),
+            ("step 16, settle 0.1, exponential, latency 0.2", 16.0, 0.1, 0.2, True, False)]
 
 
-def run_setting(prog, cycles: int, step: float, settle, latency=None, parallel=False) -> dict:
+def run_setting(prog, cycles: int, step: float, settle, latency=None, exponential=False, parallel=False) -> dict:
     """`cycles` cycles of `prog` on the envelope processor beside the ISS; stops at the first disagreement."""
     iss = ISS(R.make_memory(prog))
     t0 = time.perf_counter()
     cpu = PhysicalCPU(R.make_memory(prog), "envelope", step=step, settle=settle, latency=latency,
-                      parallel=parallel)
+                      exponential=exponential, parallel=parallel)
     reset_s = time.perf_counter() - t0
     rows = []
     for _ in range(cycles):
@@ -79,11 +80,12 @@ def compare(res: dict) -> list[dict]:
     """Per setting: agreement with the ISS, max amplitude difference to the reference, margin, cost."""
     ref = res[SETTINGS[0][0]]["rows"]
     out = []
-    for label, step, settle, latency, parallel in SETTINGS:
+    for label, step, settle, latency, exponential, parallel in SETTINGS:
         r = res[label]
         rows = r["rows"]
         diffs = [max(abs(row["amps"][k] - rr["amps"][k]) for k in rr["amps"]) for row, rr in zip(rows, ref)]
         out.append({"setting": label, "step": step, "settle": settle, "latency": latency, "parallel": parallel,
+                    "exponential": exponential,
                     "block_steps": r.get("block_steps", 0), "cycles": len(rows),
                     "all_same_as_iss": all(row["same"] for row in rows),
                     "max_amp_diff": float(max(diffs)), "min_margin": min(row["min_margin"] for row in rows),
@@ -94,11 +96,14 @@ def compare(res: dict) -> list[dict]:
 
 
 # --- clocked designs through simulation.run_clocked_physical -------------------------------------------
-# (label, step (None: the engine's default), settle, latency)
-CLOCKED_SETTINGS = [("reference: step 1, full pauses", 1, None, None), ("step 2, full pauses", 2, None, None),
-                    ("step 4, settle 0.1", None, 0.1, None), ("step 4, settle 0.1, latency 0.1", None, 0.1, 0.1),
-                    ("step 8, settle 0.1", 8, 0.1, None), ("step 8, settle 0.1, latency 0.1", 8, 0.1, 0.1),
-                    ("step 12, settle 0.1, latency 0.1", 12, 0.1, 0.1)]
+# (label, step (None: the engine's default), settle, latency, exponential)
+CLOCKED_SETTINGS = [("reference: step 1, full pauses", 1, None, None, False),
+                    ("step 2, full pauses", 2, None, None, False),
+                    ("step 4, settle 0.1", None, 0.1, None, False),
+                    ("step 4, settle 0.1, latency 0.1", None, 0.1, 0.1, False),
+                    ("step 8, settle 0.1", 8, 0.1, None, False),
+                    ("step 16, settle 0.1, exponential", 16, 0.1, None, True),
+                    ("step 16, settle 0.1, exponential, latency 0.1", 16, 0.1, 0.1, True)]
 
 
 @contextmanager
@@ -135,12 +140,13 @@ def clocked() -> list[dict]:
         timing = simulation.clock_timing(nl)
         want = [e["outputs"] for e in simulation.run_clocked_logic(nl, cycles)["trace"]]
         ref = None
-        for label, step, settle, latency in CLOCKED_SETTINGS:
+        for label, step, settle, latency, exponential in CLOCKED_SETTINGS:
             t, runs = time.perf_counter(), []
             # step None: envelope.default_step(model), 4 periods where the stability bound allows
             with _timed_engine(runs):
                 r = simulation.run_clocked_physical(nl, DEFAULT, cycles, "envelope", timing,
-                                                    options=EnvelopeOptions(step_periods=step, latency=latency),
+                                                    options=EnvelopeOptions(step_periods=step, latency=latency,
+                                                                            exponential=exponential),
                                                     settle_tol=settle)
             wall = time.perf_counter() - t
             ref = ref or r
@@ -148,7 +154,7 @@ def clocked() -> list[dict]:
             diff = max(abs(e["amplitudes"][k] - f["amplitudes"][k]) for e, f in zip(r["trace"], ref["trace"])
                        for k in e["amplitudes"])
             rows.append({"design": name, "setting": label, "step": r["envelope_step"], "settle": settle,
-                         "latency": latency, "engine_s": sum(runs),
+                         "latency": latency, "exponential": exponential, "engine_s": sum(runs),
                          "cycles": len(cycles), "trace_equals_logic": got == want, "max_amp_diff": diff,
                          "min_margin": r["min_margin"], "periods": r["periods"],
                          "simulated": r["simulated_periods"], "wall_s": wall})
@@ -182,6 +188,38 @@ def cone() -> list[dict]:
 
 
 TOL = 0.02     # u_R: issue 6's agreement tolerance for reduced models
+BASE = "step 8, settle 0.1"     # the processor's setting before issue 18: what "alone" adds to
+
+
+def figure(d: dict, path: Path) -> None:
+    """Cost (s per cycle / engine s) against the worst amplitude difference, one marker per setting."""
+    from ._common import pyplot, save_figure
+    plt = pyplot()
+    panels = [("processor, first %d sieve cycles" % d.get("cycles", 0), d.get("cpu", []), "s_per_cycle",
+               "s per cycle")]
+    for design in dict.fromkeys(r["design"] for r in d.get("clocked", [])):
+        panels.append((design, [r for r in d["clocked"] if r["design"] == design], "engine_s", "engine run (s)"))
+    panels = [p for p in panels if p[1] and all(p[2] in r for r in p[1])]
+    if not panels:
+        return
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8), squeeze=False)
+    for ax, (title, rows, key, unit) in zip(axes[0], panels):
+        for k, r in enumerate(rows):
+            ax.scatter(r[key], max(r["max_amp_diff"], 1e-5), s=30, color=f"C{k % 10}", label=r["setting"],
+                       marker="o" if r.get("all_same_as_iss", r.get("trace_equals_logic")) else "x")
+        ax.axhline(TOL, color="0.5", ls="--", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.xaxis.set_minor_formatter(plt.NullFormatter())
+        ax.xaxis.set_major_formatter(plt.FormatStrFormatter("%g"))
+        ax.set_xlabel(unit)
+        ax.set_ylabel("worst amplitude difference (u_R)")
+        ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=5.5, loc="upper right")
+    fig.suptitle(f"envelope options: cost against fidelity (envelope backend, {d['machine']}, {d.get('load', '')})\n"
+                 "reference: step 2 full pauses (processor), step 1 full pauses (clocked); dashed: 0.02 u_R; "
+                 "x: a decoded value differed", fontsize=8)
+    save_figure(fig, path, dpi=120)
 
 
 def defaults_md(d: dict) -> list[str]:
@@ -189,15 +227,19 @@ def defaults_md(d: dict) -> list[str]:
     from ..cpu import physical
     rows = [(r.get("design", "processor"), r) for r in d.get("cpu", []) + d.get("clocked", [])]
     L = ["## Defaults", ""]
-    for what, step, settle in (("`cpu run --backend envelope`", physical.PROCESSOR_STEP, physical.SETTLE_TOL),
-                               ("clocked `simulate --backend envelope`", None, simulation.CLOCKED_SETTLE_TOL)):
+    for what, step, settle, latency, expo in (
+            ("`cpu run --backend envelope`", physical.PROCESSOR_STEP, physical.SETTLE_TOL, physical.LATENCY,
+             physical.EXPONENTIAL),
+            ("clocked `simulate --backend envelope`", None, simulation.CLOCKED_SETTLE_TOL, None, False)):
         hit = [(n, r) for n, r in rows if r["settle"] == settle and (step is None or r["step"] == step)
-               and (n == "processor") == (step is not None)]
+               and (n == "processor") == (step is not None) and r.get("latency") == latency
+               and bool(r.get("exponential")) == expo and not r.get("parallel")]
         if not hit:
             continue
         worst = max(r["max_amp_diff"] for _, r in hit)
         ok = worst <= TOL and all(r.get("all_same_as_iss", r.get("trace_equals_logic")) for _, r in hit)
         L.append(f"- {what}: settle {settle}" + (f", step {step:g}" if step else "") +
+                 (f", latency {latency}" if latency else "") + (", exponential" if expo else "") +
                  f": worst amplitude difference {worst:.4f} u_R over {', '.join(sorted({n for n, _ in hit}))}, "
                  f"{'within' if ok else 'NOT within'} the {TOL} u_R tolerance, every decoded value identical.")
     over = [r for _, r in rows if r["max_amp_diff"] > TOL]
@@ -213,9 +255,17 @@ def markdown(d: dict) -> str:
     L = ["# What each envelope speed-up costs", "",
          f"Generated by `mech2spice report fidelity` on the {d['machine']}; every setting of a table ran in "
          "the same process, one after another (wall times compare within a table; the machine was shared).",
-         "", "Two options trade accuracy for speed at envelope fidelity:", "",
+         "", "These options trade accuracy for speed at envelope fidelity (docs/latency.md):", "",
          "- **step**: RK4 on the envelope equations with steps of whole drive periods (refused above the "
          "stability bound, reports/envelope.md);",
+         "- **exponential**: the insulators' linear oscillators stepped exactly (Lawson RK4): their mode is "
+         "the stiffest at rest, so the bound rises (15.1 -> 27.5 periods on the processor) and steps of 16 "
+         "periods become possible;",
+         "- **latency** TOL: a gate block (channel, insulator, gate oscillators) whose channel, inputs and "
+         "rates stayed within TOL u_R for ~200 periods is frozen (held, not integrated) until an input "
+         "channel or its forcing moves by more than TOL; *gate-block steps* counts the blocks integrated "
+         "per step, summed;",
+         "- **both cores**: the rates of every step on two threads (numba prange; without latency);",
          "- **settle** (idle-time skipping): a stretch of constant inputs ends once every channel's amplitude "
          "has stayed within `settle` u_R for two 200-period windows (at least 400 periods after the change); "
          "the rest of the stretch is the settled state, held. It watches channels only: gate oscillators "
@@ -228,21 +278,29 @@ def markdown(d: dict) -> str:
               "43 latch outputs) at the end of each cycle against the reference setting; *margin*: the "
               "smallest distance of any of them to its band edge, in band widths.", "",
               "| setting | cycles = ISS | max amplitude difference (u_R) | min margin | integrated / simulated "
-              "periods | s per cycle |", "|---|---|---|---|---|---|"]
+              "periods | gate-block steps | s per cycle | speed-up |", "|---|---|---|---|---|---|---|---|"]
+        base = next((r for r in d["cpu"] if r["setting"] == BASE), d["cpu"][0])
         for r in d["cpu"]:
+            blocks = f"{r['block_steps']:,}" if r.get("block_steps") else "all"
             L.append(f"| {r['setting']} | {r['cycles'] if r['all_same_as_iss'] else 'NO'} | {r['max_amp_diff']:.4f} "
-                     f"| {r['min_margin']:+.3f} | {r['simulated']:,} / {r['periods']:,} | {r['s_per_cycle']:.2f} |")
-        L.append("")
+                     f"| {r['min_margin']:+.3f} | {r['simulated']:,} / {r['periods']:,} | {blocks} | "
+                     f"{r['s_per_cycle']:.3f} | {base['s_per_cycle'] / r['s_per_cycle']:.1f}x |")
+        L += ["", f"*speed-up*: s per cycle of `{BASE}` over this row's, in the same run. "
+              f"Machine load while it ran (`uptime`): {d.get('load', 'not recorded')}.", "",
+              "![cost against fidelity per option](fidelity_options.png)", ""]
     if "clocked" in d:
         L += ["## Clocked designs (`simulation.run_clocked_physical`)", "",
               "Against the envelope at step 1 with full pauses, which reports/sequential.md and "
               "reports/envelope.md validate against RK4. *trace = logic*: every cycle's decoded outputs equal "
               "the logic backend's.", "",
               "| design | setting | trace = logic | max amplitude difference at reads (u_R) | min margin | "
-              "integrated / simulated periods | wall (s) |", "|---|---|---|---|---|---|---|"]
+              "integrated / simulated periods | engine run (s) | wall (s) |", "|---|---|---|---|---|---|---|---|"]
         for r in d["clocked"]:
+            eng = f"{r['engine_s']:.2f}" if "engine_s" in r else "-"
             L.append(f"| {r['design']} | {r['setting']} (step {r['step']:g}) | {r['trace_equals_logic']} | {r['max_amp_diff']:.4f} | "
-                     f"{r['min_margin']:+.3f} | {r['simulated']:,} / {r['periods']:,} | {r['wall_s']:.1f} |")
+                     f"{r['min_margin']:+.3f} | {r['simulated']:,} / {r['periods']:,} | {eng} | {r['wall_s']:.1f} |")
+        L += ["", "*engine run*: the integration alone (`EnvelopeEngine.run`; the model is built before it); "
+              "*wall*: synthesis-free `run_clocked_physical`, model build included.", ""]
         L.append("")
     L += defaults_md(d)
     if "cone" in d:
@@ -267,11 +325,13 @@ def write(directory="reports", only=None, cycles: int = 30, render: bool = False
     path = out / "fidelity.json"
     d = read_json(path, {})
     d["machine"] = f"{SANDBOX} (shared)"
+    if sections:
+        d["load"] = _uptime_load()
     if "cpu" in sections:
         prog = R.load_program(data.program("sieve.asm"))
         res = {}
-        for label, step, settle, latency, parallel in SETTINGS:
-            res[label] = run_setting(prog, cycles, step, settle, latency, parallel)
+        for label, step, settle, latency, exponential, parallel in SETTINGS:
+            res[label] = run_setting(prog, cycles, step, settle, latency, exponential, parallel)
             print(label, f"{res[label]['wall_s']:.0f} s", flush=True)
         d["cpu"], d["cycles"] = compare(res), cycles
     if "clocked" in sections:
@@ -279,8 +339,15 @@ def write(directory="reports", only=None, cycles: int = 30, render: bool = False
     if "cone" in sections:
         d["cone"] = cone()
     write_json(path, d, default=None)
+    figure(d, out / "fidelity_options.png")
     (out / "fidelity.md").write_text(markdown(d))
     return out / "fidelity.md"
+
+
+def _uptime_load() -> str:
+    """The 1/5/15-minute load averages at the start of the measurement (2 cores, shared)."""
+    import os
+    return "load average %.2f, %.2f, %.2f" % os.getloadavg()
 
 
 def _sections(only) -> list[str]:

@@ -33,9 +33,10 @@ def test_classic_block_file_builds_the_default_model_exactly(adder_netlist):
 
 
 def buffer_block():
-    """The classic core at the default point plus a low-Q buffer oscillator as the output (non-classic)."""
-    x = grammar.x_default("classic")
-    return grammar.Structure("buffer").params([*x, 0.0, 0.3, 2.0])
+    """The classic core at the default point plus a light low-Q buffer oscillator as the output."""
+    st = grammar.Structure("buffer")
+    v = dict(zip(st.bounds, grammar.x_default("buffer")), d_b=0.0, lq_b=0.3, lk_cb=2.0, lm_b=0.0)
+    return st.params([v[k] for k in st.bounds])
 
 
 def test_non_classic_block_steady_state_matches_settled_rk4():

@@ -3,12 +3,12 @@ classic and a non-classic block; switching events dissipate a positive energy fa
 import numpy as np
 import pytest
 
-from mech2spice.design import grammar
 from mech2spice.physics import energy, nor
 from mech2spice.physics.params import DEFAULT
+from test_blocks import buffer_block
 
 
-@pytest.mark.parametrize("p", [DEFAULT, grammar.Structure("buffer").params([*grammar.x_default("classic"), 0, 0.3, 2])],
+@pytest.mark.parametrize("p", [DEFAULT, buffer_block()],
                          ids=["classic", "buffer"])
 @pytest.mark.parametrize("x1", [0.5, 0.97])
 def test_steady_dissipation_equals_source_power(p, x1):

@@ -6,8 +6,9 @@ stiffnesses and forces); masses, omega, F_R and u_R stay the classic block's.  d
 
   classic      the paper's block: channel C (source + output), insulator I, per input a spring- and a
                dashpot-linked gate oscillator (6 DOFs)
-  buffer       classic + a low-Q buffer oscillator B spring-coupled to C; B is the output (7 DOFs)
-  two_stage    the channel split in two: C1 (source) spring-coupled to C2 (output), both detuned by I (7)
+  buffer       classic + a light low-Q buffer oscillator B spring-coupled to C; B is the output (7 DOFs)
+  two_stage    a second channel stage C2 (output, its own mass) spring-coupled to C (source), both detuned
+               by I (7)
   spring_only  one spring-linked gate oscillator per input, no dashpot (waveguide-like coupling) (4)
   sym_pair     classic + a reference channel R, spring-coupled to C (driven through it: one source per
                block) and detuned by I with the opposite sign: a common-mode shift of C and R partly
@@ -32,10 +33,22 @@ CORE = {"d_c": (-0.15, 0.15), "lq_c": (0.7, 2.6), "d_g": (-0.3, 0.3), "lq_g": (0
         "lf_c": (-1.0, 2.0)}
 EXTRA = {
     "classic": {},
-    "spring_only": {},
-    "buffer": {"d_b": (-0.3, 0.3), "lq_b": (0.0, 1.5), "lk_cb": (1.0, 3.5)},
-    "two_stage": {"d_c2": (-0.15, 0.15), "lq_c2": (0.7, 2.6), "lk_12": (1.0, 3.5), "lgam_ic2": (1.0, 4.5)},
-    "sym_pair": {"d_r": (-0.15, 0.15), "lgam_ir": (1.0, 4.5), "lk_cr": (1.0, 3.5)},
+    "spring_only": {"lm_g": (-1.7, 0.0)},
+    "buffer": {"d_b": (-0.3, 0.3), "lq_b": (0.0, 1.5), "lk_cb": (-1.0, 3.5), "lm_b": (-3.0, 0.0)},
+    "two_stage": {"d_c2": (-0.15, 0.15), "lq_c2": (0.0, 2.6), "lk_12": (-1.0, 3.5), "lgam_ic2": (-1.0, 4.5),
+                  "lm_c2": (-3.0, 1.0)},
+    "sym_pair": {"d_r": (-0.15, 0.15), "lgam_ir": (-1.0, 4.5), "lk_cr": (-2.0, 3.5)},
+}
+# Where each structure's search starts: the default gate embedded in it (a light follower as the buffer or
+# second stage, k = |Z| so its amplitude equals the channel's; a barely coupled reference channel).
+SEED_EXTRA = {
+    # one gate per input with half the mass, stiffness and damping and half gamma: twice the amplitude, the
+    # same pull on the insulator and the same relative detuning as the classic pair
+    "classic": {}, "spring_only": {"lm_g": math.log10(P0.m_g / 2), "lgam_ig": math.log10(P0.gamma_ig / 2)},
+    "buffer": {"d_b": 0.0, "lq_b": 0.3, "lm_b": -3.0, "lk_cb": math.log10(1e-3 * W2 / 10 ** 0.3)},
+    "two_stage": {"d_c2": 0.0, "lq_c2": 0.3, "lm_c2": -3.0, "lk_12": math.log10(1e-3 * W2 / 10 ** 0.3),
+                  "lgam_ic2": -1.0},
+    "sym_pair": {"d_r": 0.0, "lgam_ir": -1.0, "lk_cr": -2.0},
 }
 STRUCTURES = tuple(EXTRA)
 
@@ -67,18 +80,21 @@ def build(name: str, v: dict) -> BlockSpec:
     C = Dof("C", P0.m_c, _k(P0.m_c, v["d_c"]), q_c)
     I = Dof("I", P0.m_i, k_i, q_i, slow=True)
     kinds = ("s",) if name == "spring_only" else ("s", "d")
-    gates = [Dof(f"G{pin}{kind}", P0.m_g, _k(P0.m_g, v["d_g"]), q_g) for pin in (1, 2) for kind in kinds]
+    m_g = 10.0 ** v["lm_g"] if "lm_g" in v else P0.m_g
+    gates = [Dof(f"G{pin}{kind}", m_g, _k(m_g, v["d_g"]), q_g) for pin in (1, 2) for kind in kinds]
     links = {"s": "spring", "d": "dashpot"}
     inputs = tuple(tuple(Attach(f"G{pin}{k}", links[k]) for k in kinds) for pin in (1, 2))
     dofs, springs = [C, I, *gates], []
     quads = [("C", "I", -g_ic), *((g.name, "I", g_ig) for g in gates)]
     output = "C"
     if name == "buffer":
-        dofs.append(Dof("B", 1.0, _k(1.0, v["d_b"]), 10.0 ** v["lq_b"]))
+        m_b = 10.0 ** v["lm_b"]
+        dofs.append(Dof("B", m_b, _k(m_b, v["d_b"]), 10.0 ** v["lq_b"]))
         springs.append(("C", "B", 10.0 ** v["lk_cb"]))
         output = "B"
     elif name == "two_stage":
-        dofs.append(Dof("C2", P0.m_c, _k(P0.m_c, v["d_c2"]), 10.0 ** v["lq_c2"]))
+        m_2 = 10.0 ** v["lm_c2"]
+        dofs.append(Dof("C2", m_2, _k(m_2, v["d_c2"]), 10.0 ** v["lq_c2"]))
         springs.append(("C", "C2", 10.0 ** v["lk_12"]))
         quads.append(("C2", "I", -10.0 ** v["lgam_ic2"]))
         output = "C2"
@@ -89,11 +105,10 @@ def build(name: str, v: dict) -> BlockSpec:
     return BlockSpec(name, tuple(dofs), tuple(springs), (), tuple(quads), "C", f_c, output, inputs)
 
 
-def x_default(name: str) -> np.ndarray | None:
-    """The default gate's parameters in this grammar (classic only), to seed the search."""
-    if name != "classic":
-        return None
+def x_default(name: str) -> np.ndarray:
+    """The search's starting point: the default gate's parameters, embedded in structure `name`."""
     v = {"d_c": P0.k_c / (P0.m_c * W2) - 1, "lq_c": math.log10(P0.q_c), "d_g": P0.k_g / (P0.m_g * W2) - 1,
          "lq_g": math.log10(P0.q_g), "lk_i": math.log10(P0.k_i), "lq_i": math.log10(P0.q_i),
-         "lgam_ig": math.log10(P0.gamma_ig), "lgam_ic": math.log10(P0.gamma_ic), "lf_c": math.log10(P0.f_c)}
-    return np.array([v[k] for k in CORE])
+         "lgam_ig": math.log10(P0.gamma_ig), "lgam_ic": math.log10(P0.gamma_ic), "lf_c": math.log10(P0.f_c),
+         **SEED_EXTRA[name]}
+    return np.array([v[k] for k in Structure(name).bounds])

@@ -28,8 +28,9 @@ OPTIONS = [
                                                             "halt; fidelity: the first N sieve cycles, default 30)")),
     ("--sqrt-rk4", "sqrt_rk4", dict(action="store_true", help="also run sqrt(2809) on RK4 (~20 min)")),
     ("--sqrt-rk4-full", "sqrt_rk4_full", dict(action="store_true", help="also the whole sqrt schedule on RK4")),
-    ("--skip-slow", "skip_slow", dict(action="store_true", help="leave out the logic-level run of Minsky's "
-                                                                "machine (~2.5 min)")),
+    ("--skip-slow", "skip_slow", dict(action="store_true", help="leave out the slowest runs (cpu: the "
+                                                                "logic-level Minsky machine, ~2.5 min; design: the "
+                                                                "sieve on the envelope)")),
     ("--cache", "cache", dict(metavar="DIR", help="keep the RK4 runs in DIR between invocations")),
     ("--program", "program", dict(metavar="FILE", help="program to run (default programs/sieve.asm)")),
     ("--backend", "backend", dict(choices=["envelope", "rk4"], help="oscillator-level backend (default envelope)")),

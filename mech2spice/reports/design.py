@@ -1,0 +1,268 @@
+"""reports/design.md: automated design of the NOR block (issue #13).
+
+Reads the search record of `mech2spice design` (reports/design_search.json), adds per block (each
+structure's best, today's default, the paper's printed set) its energy per operation and switching delay
+(physics/energy.py), what limits its tolerance (physics/sensitivity.py: the limiting input point and the
+elements its margin is most sensitive to), and the command-line checks of the best block (`--params
+robust`): yield at 1 % spread, the six requirements, the adder, sqrt(2809) and the sieve.  Slow results are
+cached in reports/design.json (a rerun only adds what is missing).  The grammar and objective: docs/design.md.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import Mech2SpiceError
+from ._common import MACHINE, md_table, out_dir, pyplot, read_json, save_figure, write_json
+
+SEARCH = Path("reports/design_search.json")
+CACHE_NAME = "design.json"
+TOL_SAMPLES = 100
+SIGMA = 0.01
+CHECKS = {     # name -> argv after `mech2spice` (the issue's commands, on the robust preset and the default)
+    "robust_spread": ["gate", "--params", "robust", "--spread", "0.01", "--samples", "1000", "--json"],
+    "default_spread": ["gate", "--spread", "0.01", "--samples", "1000", "--json"],
+    "robust_gate": ["gate", "--params", "robust", "--json"],
+    "robust_sqrt": ["simulate", "verilog/sqrt.v", "--stimulus", "verilog/sqrt_2809.json", "--backend", "envelope",
+                    "--params", "robust", "--json"],
+    "robust_sieve": ["cpu", "run", "programs/sieve.asm", "--backend", "envelope", "--params", "robust", "--json"],
+}
+SLOW = ("robust_sieve",)
+
+
+def blocks(search: dict) -> dict:
+    """name -> GateParams: the best block of every searched structure, the default and the printed set."""
+    from ..physics.params import DEFAULT, PRINTED, block_params
+    out = {"default": DEFAULT, "printed": PRINTED}
+    for name, rec in search["structures"].items():
+        out[name] = block_params(rec["block_file"], name)
+    return out
+
+
+def block_figures(name: str, p, rec: dict | None, log) -> dict:
+    """Tolerance, margin, energy, delay and the limiting elements of one block."""
+    from ..design.search import measure
+    from ..physics import energy, sensitivity
+    t0 = time.time()
+    m = rec["measured"] if rec else measure(p, SIGMA, 200, TOL_SAMPLES, 0, log)
+    e = energy.gate_energy(p)
+    out = {"dofs_per_gate": p.structure.n_dofs, "nominal_margin": m["nominal_margin"], "tolerance": m["tolerance"],
+           "tolerance_bracket": m["tolerance_bracket"], "yield_1pct": m["yield"],
+           "q1_1pct": m["margin_quantiles"]["1%"], "energy": e}
+    sw = [v for v in e["switching"].values()]
+    out["delay_periods"] = max(v["delay_periods"] for v in sw) if all(v["delay_periods"] for v in sw) else None
+    out["energy_per_period"] = e["steady"]["00"]["per_period_model"] if e["steady"]["00"] else None
+    out["energy_per_switch"] = max(v["energy_model"] for v in sw) if out["delay_periods"] else None
+    if m["nominal_margin"] > 0:
+        s = sensitivity.gate_sensitivity(p, per_band=8)
+        lim = s["limiting"]
+        top = np.argsort(-np.abs(lim["gradient"]))[:3]
+        out["limiting"] = {"inputs": lim["inputs"], "margin": lim["margin"], "sigma_1": lim["sigma_1"],
+                           "elements": [(s["elements"][k], float(lim["gradient"][k])) for k in top]}
+    out["wall_s"] = time.time() - t0
+    return out
+
+
+def run_check(argv: list[str]) -> dict:
+    """One command line run through `python -m mech2spice.cli`; its JSON, exit code and wall time."""
+    t0 = time.time()
+    root = Path(__file__).resolve().parents[2]
+    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *argv], capture_output=True, text=True, cwd=root,
+                       env={**os.environ, "PYTHONPATH": str(root)})
+    try:
+        data = json.loads(r.stdout)
+    except json.JSONDecodeError:
+        data = {"stdout": r.stdout[-2000:], "stderr": r.stderr[-2000:]}
+    return {"argv": argv, "rc": r.returncode, "wall_s": time.time() - t0, "json": data}
+
+
+def adder_check(p, backend: str) -> dict:
+    """The 2-bit adder's 16 sums in one batch from rest on `backend`, decoded against the logic oracle."""
+    from .. import data, simulation
+    from ..backends import logic
+    from ..experiments.scenes import ADDER_INPUTS
+    from ..synthesis import synth
+    nl = synth.synthesize(data.verilog("adder2.v"))
+    t0 = time.time()
+    res = simulation.run_physical(nl, p, list(ADDER_INPUTS), backend)
+    rows = [{"inputs": v, "s": r["outputs"].get("s"), "expected": logic.evaluate(nl, v)["s"],
+             "min_margin": r.get("min_margin")} for v, r in zip(ADDER_INPUTS, res)]
+    return {"backend": backend, "correct": sum(r["s"] == r["expected"] for r in rows), "of": len(rows),
+            "min_margin": min((r["min_margin"] for r in rows if r["min_margin"] is not None), default=None),
+            "rows": rows, "wall_s": time.time() - t0}
+
+
+def plot_pareto(figs: dict, path: Path, machine: str) -> None:
+    """Tolerance against margin, delay, energy per period and DOFs per gate, one point per block."""
+    plt = pyplot()
+    fig, axs = plt.subplots(1, 4, figsize=(15, 4), sharey=True)
+    keys = (("nominal_margin", "nominal worst margin (band widths)"), ("delay_periods", "switching delay (periods)"),
+            ("energy_per_period", "energy per drive period, '00' (model units)"), ("dofs_per_gate", "DOFs per gate"))
+    for ax, (key, label) in zip(axs, keys):
+        for name, f in figs.items():
+            tol, x = f["tolerance"], f.get(key)
+            if x is None:
+                continue
+            y = tol if tol else 1e-8
+            mk = {"default": "s", "printed": "X"}.get(name, "o")
+            ax.scatter([x], [y], marker=mk, s=60 if name in ("default", "printed") else 40,
+                       label=name if ax is axs[0] else None)
+            ax.annotate(name, (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        ax.set_yscale("log")
+        ax.set_xlabel(label)
+        ax.grid(alpha=0.3)
+    axs[0].set_ylabel("tolerance: largest sigma with >= 99 % yield\n(1e-8: none, nominal fails)")
+    axs[0].axhline(0.01, color="k", lw=0.5, ls="--")
+    fig.suptitle(f"Blocks searched by `mech2spice design`: loaded gate, steady-state scan, {TOL_SAMPLES}-sample "
+                 f"bisection; delay/energy from RK4 (40 steps/period) on a free-standing gate; {machine}", fontsize=9)
+    axs[0].legend(fontsize=7)
+    save_figure(fig, path)
+
+
+def write(directory="reports", skip_slow: bool = False, search: str | None = None) -> Path:
+    """Write design.md and design_pareto.png from the search record; cache slow results in design.json."""
+    d = out_dir(directory)
+    log = lambda msg: print(f"[design] {msg}", file=sys.stderr, flush=True)   # noqa: E731
+    rec = read_json(Path(search) if search else SEARCH)
+    if rec is None:
+        raise Mech2SpiceError(f"no search record at {search or SEARCH}: run `mech2spice design` first")
+    cache_path = d / CACHE_NAME
+    cache = read_json(cache_path, {})
+    figs = cache.setdefault("blocks", {})
+    for name, p in blocks(rec).items():
+        if name not in figs:
+            log(f"block {name}")
+            figs[name] = block_figures(name, p, rec["structures"].get(name), log)
+            write_json(cache_path, cache)
+    checks = cache.setdefault("checks", {})
+    for name, argv in CHECKS.items():
+        if name not in checks and not (skip_slow and name in SLOW):
+            log(f"check {name}: mech2spice {' '.join(argv)}")
+            checks[name] = run_check(argv)
+            write_json(cache_path, cache)
+    from ..physics.params import load_params
+    for backend in ("rk4", "envelope"):
+        key = f"robust_adder_{backend}"
+        if key not in checks:
+            log(f"check {key}")
+            checks[key] = adder_check(load_params("robust"), backend)
+            write_json(cache_path, cache)
+    cache["machine"] = cache.get("machine", MACHINE)
+    write_json(cache_path, cache)
+    plot_pareto(figs, d / "design_pareto.png", cache["machine"])
+    md = d / "design.md"
+    md.write_text(render(rec, figs, checks, cache["machine"]))
+    return md
+
+
+def _fmt(x, f="{:.3g}"):
+    return "-" if x is None else f.format(x)
+
+
+def render(rec: dict, figs: dict, checks: dict, machine: str) -> str:
+    """The markdown of design.md."""
+    from ..physics.energy import Scaling
+    s = rec["settings"]
+    best = max((n for n in rec["structures"] if figs[n]["nominal_margin"] > 0),
+               key=lambda n: figs[n]["tolerance"] or 0, default=None)
+    lines = ["# Automated design of the NOR block", "",
+             "Generated by `mech2spice report design` from `mech2spice design` "
+             f"(settings: {json.dumps(s)}), machine: {machine}. Grammar, objective and how to read this: "
+             "docs/design.md.", "",
+             "![Pareto](design_pareto.png)", "",
+             "## Blocks", "",
+             "Tolerance: largest relative sigma with >= 99 % yield of the loaded gate (every element of the block "
+             f"spread, {TOL_SAMPLES} samples, bisection to a factor 1.1); yield and 1st-percentile margin at sigma "
+             f"{SIGMA:g} on {s['samples'] if False else 'the'} samples of the search's measurement; delay: periods from "
+             "the input step until the output stays in its new band (00->10 and 10->00, the larger); energy: "
+             "dissipated per drive period at inputs 00, and during the slower switching event "
+             "(physics/energy.py).", ""]
+    rows = []
+    for name, f in figs.items():
+        search = rec["structures"].get(name, {}).get("search")
+        rows.append([name, f["dofs_per_gate"], _fmt(f["nominal_margin"], "{:+.4f}"),
+                     _fmt(f["tolerance"]) + (f" ({_fmt(f['tolerance_bracket'][0])} .. "
+                                              f"{_fmt(f['tolerance_bracket'][1])})" if f["tolerance"] else ""),
+                     _fmt(f["yield_1pct"], "{:.3f}"), _fmt(f["q1_1pct"], "{:+.2f}"), _fmt(f["delay_periods"], "{}"),
+                     _fmt(f["energy_per_period"]), _fmt(f["energy_per_switch"]),
+                     f"{search['evaluations']} ev., {search['generations']} gen., {search['wall_s']:.0f} s"
+                     if search else "(not searched)"])
+    lines += md_table(["block", "DOFs", "nominal margin", "tolerance (bracket)", "yield at 1 %", "q1 at 1 %",
+                       "delay", "E/period", "E/switch", "search"], rows)
+    lines += ["", "## What limits each block", "",
+              "The limiting input point is the one with the smallest margin / |gradient| (physics/sensitivity.py, "
+              "implicit-function derivatives of the steady state); sigma_1 = margin / |gradient| is the spread at "
+              "which a one-sigma draw along the gradient closes that margin.  The three largest derivatives "
+              "(band widths per relative change) name the elements that limit it.", ""]
+    rows = []
+    for name, f in figs.items():
+        lim = f.get("limiting")
+        if not lim:
+            rows.append([name, "nominal gate fails: no margin to limit", "", ""])
+            continue
+        rows.append([name, f"({lim['inputs'][0]:.3f}, {lim['inputs'][1]:.3f}), margin {lim['margin']:+.4f}",
+                     f"{lim['sigma_1']:.2e}", "; ".join(f"{e} {g:+.3g}" for e, g in lim["elements"])])
+    lines += md_table(["block", "limiting inputs", "sigma_1", "largest derivatives"], rows)
+    e0 = figs["default"]["energy"]
+    lines += ["", "## Energy per operation", "",
+              f"Scaling: {Scaling().describe()} ({e0['joule_per_model_unit']:.3g} J per model energy unit for the "
+              f"classic block); kT ln 2 = {e0['kT_ln2_J']['300K']:.3g} J at 300 K, {e0['kT_ln2_J']['4K']:.3g} J "
+              "at 4 K.", ""]
+    rows = []
+    for name, f in figs.items():
+        e = f["energy"]
+        st, sw = e["steady"]["00"], e["switching"]
+        kt = e["kT_ln2_J"]["300K"]
+        rows.append([name, _fmt(st and st["power_model"]), _fmt(st and st["per_period_J"]),
+                     _fmt(st and st["per_period_J"] / kt, "{:.2e}")]
+                    + [_fmt(v["energy_J"]) + f" ({_fmt(v['delay_periods'], '{}')} periods)" for v in sw.values()])
+    lines += md_table(["block", "P at 00 (model)", "E/period at 00 (J)", "E/period / kT ln 2 (300 K)",
+                       "E 00->10 (J, delay)", "E 10->00 (J, delay)"], rows)
+    lines += ["", "## The best block as `--params robust`", ""]
+    lines += [f"Best structure by tolerance: **{best}**." if best else "No structure has a positive nominal margin.", ""]
+    lines += render_checks(checks)
+    return "\n".join(lines) + "\n"
+
+
+def render_checks(checks: dict) -> list[str]:
+    """The command-line checks of the robust block, as found."""
+    out = []
+    for name in ("robust_spread", "default_spread"):
+        c = checks.get(name)
+        if not c:
+            continue
+        j = c["json"]
+        t = j.get("tolerance", {})
+        out.append(f"- `mech2spice {' '.join(c['argv'])}`: yield {j.get('yield')} (95 % {j.get('yield_ci95')}), "
+                   f"margin quantiles {json.dumps({k: round(v, 4) for k, v in j.get('margin_quantiles', {}).items()})}, "
+                   f"tolerance {t.get('sigma')} (bracket {t.get('bracket')}), nominal margin "
+                   f"{j.get('nominal_margin')}; {c['wall_s']:.0f} s")
+    c = checks.get("robust_gate")
+    if c:
+        req = c["json"].get("requirements", {})
+        out.append(f"- `mech2spice {' '.join(c['argv'])}` (RK4 at nominal): switches {c['json'].get('switches')}; "
+                   + "; ".join(f"{k}: {'pass' if v['pass'] else 'FAIL'}" for k, v in req.items())
+                   + f"; {c['wall_s']:.0f} s")
+    for backend in ("rk4", "envelope"):
+        c = checks.get(f"robust_adder_{backend}")
+        if c:
+            out.append(f"- adder, 16 sums on {backend}: {c['correct']}/{c['of']} correct; {c['wall_s']:.0f} s")
+    c = checks.get("robust_sqrt")
+    if c:
+        j = c["json"]
+        out.append(f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, outputs {j.get('outputs')}, valid "
+                   f"{j.get('valid')}, min margin {j.get('min_margin')}; {c['wall_s']:.0f} s")
+    c = checks.get("robust_sieve")
+    if c:
+        j = c["json"]
+        out.append(f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, halted {j.get('halted')} after "
+                   f"{j.get('cycles')} cycles; {c['wall_s']:.0f} s")
+    else:
+        out.append("- the sieve on the envelope with `--params robust`: not run (skip_slow)")
+    return out

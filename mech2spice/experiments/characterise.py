@@ -208,9 +208,9 @@ def phase_insensitivity(p: GateParams, periods: int = 2500) -> dict:
     worst = 0.0
     for th1, th2 in [(2.1, 0.7), (4.0, 5.5)]:
         m = nor.single_gate(p)
-        for (ds, dd), th in zip(m.design.input_drives, (th1, th2)):
-            m.drives[ds].phase += th
-            m.drives[dd].phase += th
+        for drives, th in zip(m.design.input_drives, (th1, th2)):     # every link of the input
+            for d in drives:
+                m.drives[d].phase += th
         m.invalidate()
         worst = max(worst, float(np.abs(run_from_rest(m, p, levels, periods)[1][0] - base).max()))
     return {"max_output_change": worst, "phases_tested": [[2.1, 0.7], [4.0, 5.5]]}

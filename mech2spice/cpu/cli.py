@@ -16,6 +16,8 @@ from .physical import PROCESSOR_STEP, SETTLE_TOL
 from .machines import BACKENDS
 from .run import load_program, run_program
 
+MAX_CIRCUIT_CYCLES = 2000    # one VACASK process; the sieve needs 457
+
 
 def add_parser(subparsers) -> None:
     """Register the `cpu` command and its `asm` and `run` subcommands."""
@@ -32,13 +34,28 @@ def add_parser(subparsers) -> None:
     a.add_argument("--listing", action="store_true", help="print the listing (address, bytes, source)")
     a.set_defaults(func=cmd_asm)
 
+    e = sub.add_parser("emit", help="write the processor and PROG as one self-contained VACASK netlist",
+                       description="Write the whole processor (envelope-level devices), its 256-byte memory "
+                                   "holding PROG (Verilog-A byte cells) and the clock schedule of --cycles "
+                                   "cycles as one VACASK netlist with its Verilog-A embedded: `vacask FILE` runs "
+                                   "the program (docs/cpu_circuit.md).")
+    e.add_argument("program", help="assembly source (.asm) or binary image")
+    e.add_argument("-o", "--output", required=True, help="netlist to write (.sim)")
+    e.add_argument("--cycles", type=integer(1, MAX_CPU_CYCLES), default=30,
+                   help=f"clock cycles after the reset (default 30, at most {MAX_CIRCUIT_CYCLES})")
+    circuit_args(e)
+    e.add_argument("--json", action="store_true", help="machine-readable output")
+    e.set_defaults(func=cmd_emit)
+
     r = sub.add_parser("run", help="run a program until it halts (a jump to itself)",
                        description="Run PROG (.asm, or a binary image) until it halts or --max-cycles. "
                                    "Exit code 0 when it halted, 1 when it ran out of cycles.")
     r.add_argument("program", help="assembly source (.asm) or binary image")
     r.add_argument("--backend", default="iss", choices=BACKENDS,
                    help="iss (instruction-set simulator), logic (the NOR netlist), envelope or rk4 (the "
-                        "netlist as 6486 oscillators; envelope ~0.5 s per cycle, the sieve in ~4 min: reports/cpu_physical.md)")
+                        "netlist as 6486 oscillators; envelope ~0.5 s per cycle, the sieve in ~4 min: reports/cpu_physical.md), "
+                        "vacask-envelope (the whole processor and its memory as one VACASK netlist, run for "
+                        "--max-cycles cycles in one process: reports/cpu_circuit.md)")
     r.add_argument("--max-cycles", type=integer(0, MAX_CPU_CYCLES), default=100_000,
                    help="stop after this many cycles in total (default 100000)")
     r.add_argument("--checkpoint", metavar="FILE", help="write the machine state to FILE (JSON) as it runs")
@@ -55,8 +72,55 @@ def add_parser(subparsers) -> None:
                    "robust, classic or a JSON file (fields, or a block file: docs/design.md)")
     envelope_speed_args(r)
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
+    circuit_args(r)
     r.add_argument("--json", action="store_true", help="machine-readable output")
     r.set_defaults(func=cmd_run)
+
+    from ..experiments.mc_cli import add_cpu_parser
+    add_cpu_parser(sub)                     # `cpu montecarlo`
+
+
+def circuit_args(parser) -> None:
+    """Options of the circuit netlist (`cpu emit`, `cpu run --backend vacask-envelope`)."""
+    from .circuit import MAX_STEP
+    parser.add_argument("--max-step", type=number(0), default=None, metavar="PERIODS",
+                        help=f"vacask-envelope: VACASK's largest time step in drive periods (default {MAX_STEP:g})")
+    parser.add_argument("--reltol", type=number(0), default=None, metavar="TOL",
+                        help="vacask-envelope: VACASK's relative tolerance (default 1e-4; it sets the time step)")
+    parser.add_argument("--settle-periods", type=integer(1, 10**6), default=None, metavar="N",
+                        help="vacask-envelope: periods each cycle settles before its clock pulse (default two "
+                             "of the clock's pauses, as the envelope run's full cycle)")
+
+
+def _circuit_options(args) -> dict:
+    out = {}
+    if args.max_step is not None:
+        out["max_step"] = args.max_step
+    if args.settle_periods is not None:
+        out["settle"] = args.settle_periods
+    if args.reltol is not None:
+        out["reltol"] = args.reltol
+    return out
+
+
+def cmd_emit(args) -> int:
+    """`cpu emit`: write the processor with PROG in its memory as one VACASK netlist; returns 0."""
+    from .circuit import emit_cpu
+    if args.cycles > MAX_CIRCUIT_CYCLES:
+        raise Mech2SpiceError(f"--cycles {args.cycles}: at most {MAX_CIRCUIT_CYCLES} cycles in one netlist")
+    check_output_file(args.output, [args.program], "netlist")
+    prog = load_program(args.program)
+    if prog.tape is not None:
+        raise Mech2SpiceError(f"{args.program} maps a tape: the circuit's memory is the 256-byte array only")
+    opts = _circuit_options(args)
+    net = emit_cpu(prog.image, args.cycles, standalone=True, **opts)
+    Path(args.output).write_text(net.text, encoding="ascii")
+    info = {"netlist": args.output, "cycles": args.cycles, "periods": net.schedule.stop,
+            "schedule": vars(net.schedule), **net.stats, "bytes": len(net.text)}
+    print(json.dumps(info, indent=2) if args.json else
+          f"wrote {args.output}: {net.stats['dofs']} DOFs, memory of 256 bytes, {args.cycles} cycles "
+          f"({net.schedule.stop} drive periods); run it with: vacask {args.output}")
+    return 0
 
 
 def cmd_asm(args) -> int:
@@ -90,6 +154,17 @@ def cmd_run(args) -> int:
             raise Mech2SpiceError("--params applies to the envelope and rk4 backends only")
         from ..physics.params import load_params
         physical["p"] = load_params(args.params)
+    physical.update(_circuit_options(args))
+    if args.backend == "vacask-envelope":
+        if args.max_cycles > MAX_CIRCUIT_CYCLES:
+            raise Mech2SpiceError(f"--backend vacask-envelope simulates --max-cycles cycles in one VACASK process: "
+                                  f"give --max-cycles N <= {MAX_CIRCUIT_CYCLES} (the sieve halts after 457)")
+        if len(physical) != len(_circuit_options(args)):
+            raise Mech2SpiceError("--step, --settle, --latency and --params do not apply to vacask-envelope "
+                                  "(use --max-step, --settle-periods)")
+        physical["cycles"] = args.max_cycles
+    elif _circuit_options(args):
+        raise Mech2SpiceError("--max-step and --settle-periods apply to the vacask-envelope backend only")
     if args.checkpoint_every and not args.checkpoint:
         raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,

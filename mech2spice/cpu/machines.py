@@ -14,7 +14,8 @@ from .memory import Memory
 from .netlist import cpu_netlist, latches_from_registers, register_map, registers_from_latches
 from .physical import PHYSICAL, PhysicalCPU
 
-BACKENDS = ("iss", "logic", *PHYSICAL)
+CIRCUIT = ("vacask-envelope",)   # the whole processor, memory included, in a circuit simulator (cpu/circuit.py)
+BACKENDS = ("iss", "logic", *PHYSICAL, *CIRCUIT)
 
 
 class Machine(Protocol):
@@ -79,11 +80,15 @@ class LogicCPU:
 
 
 def make_cpu(backend: str, memory: Memory, power_up: bool = True, **physical) -> Machine:
-    """The machine for a backend; `physical`: step / settle for the oscillator-level ones (PhysicalCPU)."""
+    """The machine for a backend; `physical`: step / settle for the oscillator-level ones (PhysicalCPU),
+    cycles / max_step / settle for the circuit (CircuitCPU)."""
     if backend == "iss":
         return ISS(memory)
     if backend == "logic":
         return LogicCPU(memory)
     if backend in PHYSICAL:
         return PhysicalCPU(memory, backend, power_up=power_up, **physical)
+    if backend in CIRCUIT:
+        from .circuit import CircuitCPU
+        return CircuitCPU(memory, power_up=power_up, **physical)
     raise Mech2SpiceError(f"unknown backend '{backend}' (choose from {', '.join(BACKENDS)})")

@@ -281,6 +281,8 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     if backend in PHYSICAL:
         result.update(periods=cpu.period, simulated_periods=cpu.simulated, step=cpu.step_periods,
                       settle=cpu.settle)
+    if hasattr(cpu, "extra"):                      # the circuit backend: simulator cost, the circuit's memory
+        result.update(cpu.extra())
     for addr, dev in cpu.mem.devices.items():
         result.setdefault("devices", {})[str(addr)] = dev.state()
     return result

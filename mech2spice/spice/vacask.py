@@ -344,9 +344,10 @@ def _message(log: str) -> str | None:
 
 
 def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None, workdir=None,
-                forms: tuple[str, ...] = ()) -> tuple[list[str], np.ndarray, str]:
-    """Run a netlist under `vacask` in a temporary directory, the compiled libraries of `forms` beside it;
-    returns (vector names, data, log) of the raw file `<analysis>.raw` (complex data as complex arrays)."""
+                forms: tuple[str, ...] = (), extra_files: dict | None = None) -> tuple[list[str], np.ndarray, str]:
+    """Run a netlist under `vacask` in a temporary directory, the compiled libraries of `forms` (and
+    `extra_files`: name -> path) beside it; returns (vector names, data, log) of the raw file
+    `<analysis>.raw` (complex data as complex arrays)."""
     from . import veriloga as va
     from .runner import run_guarded       # the process guard: timeout, interrupt and SIGTERM kill the child
     exe, _ = va.tools()
@@ -354,10 +355,11 @@ def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None, w
     with tempfile.TemporaryDirectory(prefix="m2s_vc_") as tmp:
         d = Path(workdir or tmp)
         (d / "circuit.sim").write_text(text, encoding="ascii")
-        for form in forms:
-            link = d / OSDI[form]
+        beside = {OSDI[form]: va.compiled(form) for form in forms} | dict(extra_files or {})
+        for name, target in beside.items():
+            link = d / name
             link.unlink(missing_ok=True)
-            link.symlink_to(va.compiled(form))
+            link.symlink_to(target)
         try:
             proc = run_guarded([exe, "-qp", "circuit.sim"], d, timeout)
         except Mech2SpiceError as e:

@@ -1,0 +1,330 @@
+"""The whole processor in a circuit simulator: the envelope-level VACASK netlist with the memory inside it.
+
+`emit_cpu` writes one netlist: the 6486-oscillator processor as m2s_env_* devices (spice/vacask.py's
+envelope emitter), the 256-byte memory as m2s_mem_* devices (spice/memory.py) holding the program, bus
+decoders on the raddr / waddr / wdata / we amplitude nodes, the memory's read stage driving the rdata
+pair drives, and the whole clock schedule (reset, then N cycles) as periodic pulse sources.  Nothing
+outside the simulator takes part: `vacask cpu.sim` runs the program.
+
+Schedule (drive periods): reset = `pause` with rst = 1, a clock pulse with rst = 1; then cycle k is a
+settle of `settle` periods (default one pause) (the latch outputs, raddr, the memory's rdata and the datapath settle) and a
+clock pulse, during which the memory writes (window `wclk`, the read stage holding).  Cycle k is sampled
+just before its pulse: registers (latch outputs), raddr, rdata, we, waddr, wdata.
+
+`CircuitCPU` (the machine `vacask-envelope`) runs that netlist once for the cycles asked and replays the
+decoded cycles through the Machine interface (cpu/machines.py); the final memory is the circuit's own
+(the byte cells print their bits at the simulator's final step) and is checked against the writes decoded
+cycle by cycle.  VACASK cannot continue from a saved state, so a run is one simulator process: no resume.
+"""
+from __future__ import annotations
+
+import re
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import simulation
+from ..errors import Mech2SpiceError
+from ..physics import network
+from ..physics.params import DEFAULT, NOMINAL0, NOMINAL1, band_of
+from ..spice import memory as vmem
+from ..spice._common import num
+from ..spice.vacask import ENVELOPE, OSDI, VacaskEnvelopeOptions, _Emitter, run_netlist
+from .isa import MEM_SIZE, mnemonic
+from .iss import FETCH, Cycle
+from .memory import Memory
+from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
+
+NAME = "vacask-envelope"
+BUSES = ("raddr", "waddr", "wdata", "we")
+BUS_NODE = {"raddr": "mr", "waddr": "mw", "wdata": "md", "we": "mwe"}
+SAMPLE_BEFORE = 2.0          # periods before a pulse's ramp at which a cycle is sampled
+WINDOW = 0.1                 # the write window leaves this fraction of the pulse at each end
+MAX_STEP = 2.0               # periods: the envelope netlist's default (docs/vacask.md)
+RELTOL = 1e-4                # VACASK reltol: the envelope netlist's default
+_DUMP = re.compile(r"m2s_mem\s+(\S+)((?:\s+\S+){8})")
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The netlist's clock schedule in drive periods."""
+    pulse: int
+    pause: int            # the reset's first pause
+    settle: int           # each cycle's settle before its pulse
+    cycles: int
+
+    @property
+    def length(self) -> int:
+        """Periods per cycle (settle + pulse)."""
+        return self.settle + self.pulse
+
+    def start(self, k: int) -> int:
+        """Period at which cycle k begins (after the reset pulse)."""
+        return self.pause + self.pulse + k * self.length
+
+    def pulse_at(self, k: int) -> int:
+        """Period at which cycle k's clock pulse begins."""
+        return self.start(k) + self.settle
+
+    @property
+    def stop(self) -> int:
+        """The run ends one settle after the last pulse (so the state after it is sampled)."""
+        return self.start(self.cycles) + self.settle
+
+    def samples(self) -> np.ndarray:
+        """Sample periods: one before each cycle's pulse, and one after the last (cycles + 1)."""
+        return np.array([self.pulse_at(k) - SAMPLE_BEFORE for k in range(self.cycles + 1)], float)
+
+
+def default_schedule(netlist, cycles: int, settle: int | None = None) -> Schedule:
+    """simulation.clock_timing's pulse and pause; each cycle settles one pause (derived for the longest NOR
+    path, 44 gates: the path latch -> raddr -> memory -> rdata -> latch is 5 + 30, `memory_path`, and the
+    memory adds ~5 periods, its read stage's time constants, to a pause of 11575)."""
+    t = simulation.clock_timing(netlist)
+    return Schedule(t["pulse"], t["pause"], settle or t["pause"], cycles)
+
+
+def memory_path(netlist) -> dict:
+    """NOR depths of the paths through the memory: latches -> raddr, rdata -> any gate; and the longest path."""
+    import networkx as nx
+    from ..synthesis.synth import combinational_view
+    g, gates = combinational_view(netlist.graph), set(netlist.gates())
+
+    def depths(sources: set) -> dict:
+        d = dict.fromkeys(sources, 0)
+        for node in nx.topological_sort(g):
+            pre = [d[q] for q in g.predecessors(node) if q in d]
+            if pre and node in gates:
+                d[node] = 1 + max(pre)
+        return d
+    attrs = netlist.graph.nodes
+    rdata = {x for x in attrs if attrs[x].get("kind") == "input" and attrs[x].get("port") == "rdata"}
+    raddr = [x for x in attrs if attrs[x].get("kind") == "output" and attrs[x].get("port") == "raddr"]
+    d = depths(set(netlist.latches()))
+    to_raddr = max(max((d.get(q, 0) for q in g.predecessors(r)), default=0) for r in raddr)
+    return {"latch_to_raddr": to_raddr, "rdata_to_any": max(depths(rdata).values()),
+            "longest": network.logic_depth(netlist)}
+
+
+# --- the netlist -------------------------------------------------------------------------------------------
+@dataclass
+class CpuNetlist:
+    """An emitted processor netlist and what decoding its raw file needs."""
+    text: str
+    schedule: Schedule
+    probes: list[str]                   # model probe names, in order
+    vectors: list[str]                  # raw vectors: (ar, ai) per probe, then rdata's amplitude nodes
+    rdata: list[str]
+    period: float
+    stats: dict = field(default_factory=dict)
+
+
+class _CpuEmitter(_Emitter):
+    """The envelope emitter with the input drives taken over: rdata from the memory, rst and clk scheduled."""
+
+    def __init__(self, model, netlist, p, sched: Schedule, options):
+        super().__init__(model, sched.stop, None, 0, options, ENVELOPE)
+        self.p_gate, self.sched = p, sched
+        self.taken: dict[int, str] = {}
+        for b in range(netlist.inputs["rdata"]):
+            for d in model.design.bit_drives[f"rdata[{b}]"]:
+                self.taken[d] = f"amp_rdata{b}"
+        for d in model.design.bit_drives["rst[0]"]:
+            self.taken[d] = "amp_rst"
+        for d in model.design.clock_drives:
+            self.taken[d] = "amp_clk"
+
+    def amp_node(self, d: int, share: int | None = None) -> str:
+        """Memory and schedule nodes for the taken drives; the emitter's own sources for the rest."""
+        return self.taken.get(d) or super().amp_node(d, share)
+
+    def sources(self) -> list[str]:
+        """rst (1 through the reset pulse), the clock and the write window as pulse sources."""
+        p, s, T = self.p_gate, self.sched, self.T
+        f0, f1 = p.force(NOMINAL0), p.force(NOMINAL1)
+        ramp = self.opt.RAMP_PERIODS * T
+        t_rst = s.start(0) * T
+        w0, w1 = s.pulse * WINDOW, s.pulse * (1 - WINDOW)
+        return [
+            f"vrst (amp_rst 0) vsource type=\"pulse\" val0={num(f1)} val1={num(f0)} delay={num(t_rst - ramp / 2)} "
+            f"rise={num(ramp)} fall={num(ramp)} width={num(10 * s.stop * T)}",
+            f"vclk (amp_clk 0) vsource type=\"pulse\" val0={num(f0)} val1={num(f1)} delay={num(s.pause * T - ramp / 2)} "
+            f"rise={num(ramp)} fall={num(ramp)} width={num(s.pulse * T - ramp)} period={num(s.length * T)}",
+            f"vwclk (mwclk 0) vsource type=\"pulse\" val0=0 val1=1 delay={num((s.pulse_at(0) + w0) * T)} "
+            f"rise={num(ramp)} fall={num(ramp)} width={num((w1 - w0) * T - ramp)} period={num(s.length * T)}"]
+
+    def memory(self, image: list[int], netlist) -> list[str]:
+        """Bus decoders, 256 byte cells with the program, the read stage (spice/memory.py)."""
+        out = []
+        for port in BUSES:
+            for b in range(netlist.outputs[port]):
+                node = BUS_NODE[port] + ("" if port == "we" else str(b))
+                ar, ai = self.nodes(self.m.probes[f"{port}[{b}]"])
+                out.append(f"xmb_{node} ({ar} {ai} {node}) mem_bit")
+        out += [vmem.byte_line(a, image[a]) for a in range(MEM_SIZE)]
+        out += [f"xmr{b} (mo{b} mwclk amp_rdata{b}) mem_read" for b in range(vmem.BITS)]
+        return out
+
+
+def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_step: float = MAX_STEP,
+             reltol: float = RELTOL, standalone: bool = False, title: str = "") -> CpuNetlist:
+    """The processor with `image` in its memory, clocked `cycles` times, as one VACASK netlist.  Standalone:
+    the Verilog-A is embedded (VACASK compiles it on load); else the compiled .osdi are expected beside it."""
+    image = list(image) + [0] * (MEM_SIZE - len(image))
+    if not 1 <= cycles:
+        raise Mech2SpiceError("the processor netlist needs at least one cycle")
+    net = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
+    model = network.build(net, p)
+    for q, block in model.design.latch_outputs.items():
+        model.add_probe(f"latch.{q}", block.channel)
+    sched = default_schedule(net, cycles, settle)
+    e = _CpuEmitter(model, net, p, sched, VacaskEnvelopeOptions(max_step_periods=max_step, reltol=reltol))
+    e.circuit()
+    e.amp_lines += e.sources()
+    e.lines += ["// --- the memory (spice/memory.py)", *e.memory(image, net)]
+    rdata = [f"amp_rdata{b}" for b in range(vmem.BITS)]
+    osdi = OSDI[ENVELOPE].replace(".osdi", ".va") if standalone else OSDI[ENVELOPE]
+    mem_ref = vmem.FILE if standalone else vmem.FILE.replace(".va", ".osdi")
+    tran = [f"analysis tran1 tran stop={num(sched.stop * e.T)} step={num(max_step * e.T)} "
+            f"maxstep={num(max_step * e.T)} icmode=\"uic\""]
+    head = [f'load "{mem_ref}"', "model mem_bit m2s_mem_bit", "model mem_byte m2s_mem_byte",
+            "model mem_read m2s_mem_read"]
+    text = e.text(title or f"mech2spice processor, {cycles} cycles", osdi, tran)
+    text = text.replace("\nground 0\n", "\nground 0\n" + "\n".join(head) + "\n", 1)
+    text = text.replace("\n  analysis tran1", f"\n  save {' '.join(f'v({v})' for v in rdata)}\n  analysis tran1", 1)
+    text = text.replace("\nendc\n", "\n  print stats\nendc\n", 1)     # the cost profile, read by run_cpu_netlist
+    if standalone:
+        from ..spice import veriloga as va
+        text += f'\nembed "{va.FILES[ENVELOPE]}" <<<FILE\n{va.library(DEFAULT)[va.FILES[ENVELOPE]]}>>>FILE\n'
+        text += f'\nembed "{vmem.FILE}" <<<FILE\n{vmem.library(p)}>>>FILE\n'
+    vectors = e.probe_vectors() + rdata
+    return CpuNetlist(text, sched, list(model.probes), vectors, rdata, 2 * np.pi / model.omega,
+                      {"dofs": model.n, "nor_blocks": len(e.plan.gates)})
+
+
+# --- running and decoding ---------------------------------------------------------------------------------
+def run_cpu_netlist(cpu: CpuNetlist, timeout: float | None = None, keep_dir=None) -> dict:
+    """Run the netlist under VACASK; the probes' amplitudes (u_R) and rdata levels at every sample, the
+    circuit's final memory, the simulator's time points and wall time."""
+    t0 = time.perf_counter()
+    try:
+        names, data, log = run_netlist(cpu.text, timeout=timeout, workdir=keep_dir, forms=(ENVELOPE,),
+                                       extra_files={vmem.FILE.replace(".va", ".osdi"): vmem.compiled()})
+    except Mech2SpiceError as err:
+        data = getattr(err, "data", None)
+        raise Mech2SpiceError(f"{err} (after {0 if data is None else len(data)} time points)") from None
+    wall = time.perf_counter() - t0
+    t = data[:, 0].real / cpu.period
+    at = cpu.schedule.samples()
+    col = {n: data[:, names.index(n)].real for n in cpu.vectors}
+    interp = lambda v: np.interp(at, t, col[v])
+    amps = np.stack([np.hypot(interp(a), interp(b)) for a, b in zip(cpu.vectors[0::2], cpu.vectors[1::2])
+                     if a not in cpu.rdata], axis=1)
+    levels = np.stack([interp(v) for v in cpu.rdata], axis=1)
+    return {"amps": amps, "rdata_levels": levels, "memory": final_memory(log), "points": int(t.size),
+            "wall_s": wall, "t_periods": t, "stats": simulator_stats(log)}
+
+
+_STATS = {"unknowns": "Number of unknowns", "nonzeros": "Initial number of nonzeros",
+          "accepted": "Accepted timepoints", "rejected": "Rejected timepoints",
+          "newton_iterations": "NR solver iterations", "newton_s": "NR solver time",
+          "eval_s": "Eval and load time", "refactor_s": "Real refactorization time", "solve_s": "Real solve time"}
+
+
+def simulator_stats(log: str) -> dict:
+    """VACASK's `print stats` counters (the cost profile): time points, Newton iterations, where time went."""
+    out = {}
+    for key, label in _STATS.items():
+        m = re.search(rf"^\s*{label}:\s+(\S+)", log, re.M)
+        if m:
+            out[key] = float(m.group(1))
+    return out
+
+
+def final_memory(log: str) -> list[int] | None:
+    """The byte cells' bits printed at the final step (the last print per address); None if missing."""
+    cells: dict[int, int] = {}
+    for m in _DUMP.finditer(log):
+        bits = [float(x) for x in m.group(2).split()]
+        cells[int(round(float(m.group(1))))] = sum(int(round(v)) << b for b, v in enumerate(bits))
+    return [cells.get(a, -1) for a in range(MEM_SIZE)] if len(cells) == MEM_SIZE else None
+
+
+class CircuitCPU:
+    """The processor in VACASK (envelope level, memory inside the circuit), replayed cycle by cycle."""
+
+    def __init__(self, memory: Memory, p=DEFAULT, *, cycles: int = 30, settle: int | None = None,
+                 max_step: float = MAX_STEP, reltol: float = RELTOL, timeout: float | None = None,
+                 power_up: bool = True, keep_dir=None):
+        if not power_up:
+            raise Mech2SpiceError(f"the {NAME} backend runs in one simulator process and cannot resume "
+                                  "from a checkpoint: run it again without --resume")
+        if memory.devices:
+            raise Mech2SpiceError(f"the {NAME} backend has no memory-mapped devices (tapes): the memory "
+                                  "inside the circuit is the 256-byte array only")
+        self.mem, self.p = memory, p
+        self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
+        self.regmap = register_map(self.netlist)
+        self.net = emit_cpu(memory.snapshot(), cycles, p, settle=settle, max_step=max_step, reltol=reltol)
+        self.result = run_cpu_netlist(self.net, timeout, keep_dir)
+        self.amps = [dict(zip(self.net.probes, row)) for row in self.result["amps"]]
+        self.cycle, self.halted = 0, False
+        self.period = self.net.schedule.stop
+        self.cycles_run = cycles
+
+    def _port(self, k: int, port: str, what: str) -> int:
+        bits = [band_of(self.amps[k][f"{port}[{i}]"]) for i in range(self.netlist.outputs[port])]
+        return Memory.decode_address(bits, k, what)
+
+    def _rdata(self, k: int) -> int:
+        f0, f1 = self.p.force(NOMINAL0), self.p.force(NOMINAL1)
+        x = (self.result["rdata_levels"][k] - f0) / (f1 - f0)
+        if np.any(np.abs(x - np.round(x)) > 0.1):
+            raise Mech2SpiceError(f"cycle {k}: the memory's rdata levels {np.round(x, 3).tolist()} are not bits")
+        return int(sum(int(round(v)) << b for b, v in enumerate(x)))
+
+    def registers(self, k: int | None = None) -> dict:
+        """The registers decoded from the latch outputs at sample k (default: now)."""
+        k = self.cycle if k is None else k
+        amps = self.amps[k]
+
+        def bit(q: str) -> int:
+            b = band_of(amps[f"latch.{q}"])
+            if b is None:
+                reg, i = self.regmap[q]
+                raise Mech2SpiceError(f"cycle {k}: register {reg} bit {i} (latch {q}) is invalid "
+                                      f"(amplitude {amps[f'latch.{q}']:.3f} u_R)")
+            return b
+        return registers_from_latches(self.regmap, bit)
+
+    def set_registers(self, regs: dict) -> None:
+        """A circuit run cannot be resumed (one simulator process)."""
+        raise Mech2SpiceError(f"the {NAME} backend cannot resume from a checkpoint")
+
+    def step(self) -> Cycle:
+        """The next simulated cycle, decoded; its write is committed to `mem` (checked at the end against the
+        circuit's own memory)."""
+        k = self.cycle
+        if k >= self.cycles_run:
+            raise Mech2SpiceError(f"the circuit was simulated for {self.cycles_run} cycles only")
+        regs = self.registers(k)
+        raddr, rdata = self._port(k, "raddr", "read address"), self._rdata(k)
+        we, waddr, wdata = (self._port(k, "we", "write enable"), self._port(k, "waddr", "write address"),
+                            self._port(k, "wdata", "write data"))
+        self.mem.commit(waddr, wdata, we)
+        self.cycle += 1
+        self.halted = self.registers(k + 1) == regs
+        mem = self.result["memory"]
+        if (self.halted or self.cycle == self.cycles_run) and mem is not None and mem != self.mem.snapshot():
+            raise Mech2SpiceError("the circuit's final memory differs from the writes decoded cycle by cycle")
+        return Cycle(k, regs["pc"], regs["phase"], mnemonic(rdata) if regs["phase"] == FETCH else None,
+                     raddr, rdata, we, waddr, wdata)
+
+    def extra(self) -> dict:
+        """What the run cost and how it ended, for the result JSON."""
+        r = self.result
+        return {"simulator": "vacask", "periods": self.period, "time_points": r["points"],
+                "simulator_wall_s": r["wall_s"], "cycles_simulated": self.cycles_run,
+                "circuit_memory": r["memory"], "schedule": vars(self.net.schedule)}

@@ -247,7 +247,7 @@ class Kernel:
         """nchunks chunks of `sub` steps spanning `per` periods; returns (amp, steps done, status).
         parallel: the rates on all cores (with the block inverse; else serial)."""
         rhs = _rhs_parallel if parallel and self.Binv[0].size > 1 else _rhs
-        amp = np.zeros((nchunks * per, prow.size, A.shape[1]), complex)
+        amp = np.empty((nchunks * per, prow.size, A.shape[1]), complex)
         done, status = run_steps(A, s, sd, nchunks * sub, sub, per, h, np.ascontiguousarray(F, complex), self.Z, self.G,
                                  self.H, self.Ks, self.Cs, self.inv_ms, self.L, self.U, self.perm_r,
                                  self.perm_c, self.Binv, prow.astype(np.int64), amp, bound, settle_tol,
@@ -266,7 +266,7 @@ class Kernel:
         """`run` with per-block latency (_envelope_latency); `lat` (the blocks' latency state) is updated
         in place; props: the insulators' propagators (exponential step) or None.  Returns (amp, steps done,
         status, block-steps integrated)."""
-        amp = np.zeros((nchunks * per, prow.size, A.shape[1]), complex)
+        amp = np.empty((nchunks * per, prow.size, A.shape[1]), complex)
         expo = props is not None
         Eh, Ef = props if expo else (np.zeros((1, 4)), np.zeros((1, 4)))
         active, quiet, snap_f, snap_s, snap_F = lat

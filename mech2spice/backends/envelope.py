@@ -99,7 +99,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
         (state[0].copy(), state[1].copy(), state[2].copy())
     names = list(probes or model.probes)
     prow = _probe_rows(env, probe_dofs(model, names))
-    amp = np.zeros((periods, len(names), B), complex)
+    amp = np.empty((periods, len(names), B), complex)     # every period is written: integrated or held
     tol = settle_tol * model.amplitude_unit if settle_tol else 0.0
     check = sub * max(1, int(round(SETTLE_WINDOW / per)))
     kern = kernel(model) if compiled else None
@@ -191,8 +191,14 @@ def _check_step(model: MechModel, step_periods: float, exponential: bool = False
 
 def _probe_rows(env: Envelope, dofs: np.ndarray) -> np.ndarray:
     """Rows of the fast block holding these DOFs."""
-    pos = {d: k for k, d in enumerate(env.fast)}
-    return np.array([pos[d] for d in dofs], int)
+    pos = env.__dict__.get("_fast_row")
+    if pos is None:                              # built once: a processor cycle asks three times
+        pos = env._fast_row = -np.ones(env.model.n, int)
+        pos[env.fast] = np.arange(env.fast.size)
+    rows = pos[np.asarray(dofs, int)]
+    if np.any(rows < 0):
+        raise KeyError("a probe is not an oscillating DOF")
+    return rows
 
 
 def _numpy_chunks(env, A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from):

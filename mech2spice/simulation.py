@@ -17,6 +17,7 @@ from .errors import Mech2SpiceError
 from .physics import network
 from .physics.model import MechModel
 from .physics.params import GateParams, band_of, margin
+from .physics.stimulus import Stimulus
 from .synthesis.ports import output_bits, pack_inputs, port_values
 from .synthesis.synth import Netlist
 
@@ -244,10 +245,11 @@ def _check_trace_memory(total: int, probes: int, batch: int = 1) -> None:
 def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str, int]], backend: str,
                          timing: dict, progress: bool = False, options=None,
                          settle_tol: float | None = CLOCKED_SETTLE_TOL, waveform: bool = False, log=None,
-                         noise: tuple[float, int] | None = None) -> dict:
+                         noise: tuple[float, int] | None = None, sample=None) -> dict:
     """Trace entry k: outputs after clock edge k.  On engines that skip idle time, `settle_tol` (u_R) ends
     a stretch of constant inputs once every channel is steady (unless the options set their own);
-    `waveform=True` adds the per-period amplitudes (a Waveform) under "waveform"."""
+    `waveform=True` adds the per-period amplitudes (a Waveform) under "waveform".  `sample`: (model, drive
+    factors or None), a Monte-Carlo sample of the design's model to run instead of the nominal one."""
     t0 = time.time()
     for v in cycles:
         pack_inputs(netlist, v)
@@ -256,7 +258,9 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
         return run_clocked_logic(netlist, cycles)
     if engine.capabilities.settle and engine.options.settle_tol is None and settle_tol:
         engine = make_engine(backend, replace(engine.options, settle_tol=settle_tol))
-    model = network.build(netlist, p)
+    model = nominal = network.build(netlist, p)
+    if sample is not None:
+        model = sample[0]
     step = engine.step(model)
     if step is not None:
         timing = _whole_steps(timing, step)
@@ -264,7 +268,9 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
     outs = _observed(netlist, model)
     _check_trace_memory(total, len(outs))
     _announce(engine, model, total, 1, log)
-    stim = network.stimulus(model, netlist, p, [(t, [v]) for t, v, _ in segs], clock=[[c] for *_, c in segs])
+    stim = network.stimulus(nominal, netlist, p, [(t, [v]) for t, v, _ in segs], clock=[[c] for *_, c in segs])
+    if sample is not None and sample[1] is not None:
+        stim = Stimulus(stim.times, stim.amps * sample[1][None, :, None])
     run = engine.run(model, total, stim, probes=outs, progress=progress)
     amp = np.abs(run.amp[:, [run.probe(n) for n in outs], 0]) / p.u_r
     trace = []

@@ -19,11 +19,13 @@ def add_parser(subparsers) -> None:
                     "vector of each sample, compare every output with the logic oracle. Results stream to a "
                     "JSON-lines file (--out) that a rerun of the same command resumes. Exit 0 when every "
                     "sample passed, 1 otherwise.")
-    s.add_argument("design", help="Verilog file (combinational)")
+    s.add_argument("design", help="Verilog file (combinational, or clocked with --stimulus)")
     s.add_argument("--params", default="default", help="gate parameters: default, printed or a JSON file")
     s.add_argument("--set", action="append", metavar="PORT=INT",
                    help="one input vector (repeatable ports; default: every input combination, up to 256)")
-    s.add_argument("--stimulus", metavar="FILE.json", help="input vectors: a list of {\"set\": {PORT: INT}} steps")
+    s.add_argument("--stimulus", metavar="FILE.json",
+                   help="input vectors: a list of {\"set\": {PORT: INT}} steps; for a clocked design its clock "
+                        "cycles, [{\"set\": ..., \"cycles\": N}, ...], compared with the logic oracle every cycle")
     s.add_argument("--samples", type=inputs.integer(1, 10_000_000), required=True, metavar="N")
     s.add_argument("--spread", required=True, metavar="SIGMA|JSON",
                    help='relative sigma on every element, or {"local": SIGMA|{KIND: SIGMA}, "wafer": '
@@ -73,12 +75,30 @@ def job_of(args) -> dict:
     path = mc.design_path(args.design).resolve()
     nl = synthesize(path, max_fanout=network.MAX_FANOUT)
     if nl.clock:
-        raise Mech2SpiceError(f"{nl.top} is clocked: montecarlo runs combinational designs (the processor: "
-                              "not yet)")
+        return _clocked_job(args, nl, path)
     job = {"design": str(path), "params": args.params, "vectors": vectors_of(args, nl), "backend": args.backend,
            "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "periods": args.periods,
            "union": args.batch}
     if args.noise:                   # only then: results files of noiseless sweeps keep their keys
+        job["noise"] = args.noise
+    return job
+
+
+def _clocked_job(args, nl, path) -> dict:
+    """A clocked design's job: its stimulus of clock cycles (--stimulus), run one sample per task."""
+    from . import montecarlo as mc
+    from .mc_clocked import CLOCKED_BACKENDS
+    if not args.stimulus:
+        raise Mech2SpiceError(f"{nl.top} is clocked: give its cycles with --stimulus FILE.json "
+                              "([{\"set\": {PORT: INT}, \"cycles\": N}, ...])")
+    if args.set or args.periods:
+        raise Mech2SpiceError("--set and --periods apply to combinational designs (a clocked one takes --stimulus)")
+    if args.backend not in CLOCKED_BACKENDS:
+        raise Mech2SpiceError(f"clocked montecarlo runs on {', '.join(CLOCKED_BACKENDS)}, not '{args.backend}'")
+    job = {"design": str(path), "params": args.params, "steps": inputs.stimulus_steps(args.stimulus, {}, args.backend),
+           "backend": args.backend, "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed,
+           "union": 1}
+    if args.noise:
         job["noise"] = args.noise
     return job
 
@@ -114,6 +134,67 @@ def _print(res: dict) -> None:
         print("margin quantiles (band widths): " + ", ".join(f"{q} {v:+.3f}" for q, v in res["margin_quantiles"].items()))
     if res["failing_bits"]:
         print("failing bits (samples): " + ", ".join(f"{b} {n}" for b, n in res["failing_bits"].items()))
-    print(f"gate failure rate {res['gate_failure_rate']:.3g} per gate and sample ({res['gates']} gates)")
+    if res["gate_failure_rate"] is not None:
+        print(f"gate failure rate {res['gate_failure_rate']:.3g} per gate and sample ({res['gates']} gates)")
     print(f"{res['ran']} run here ({res['resumed']} resumed), {res['samples_per_s']:.2f} samples/s on "
           f"{res['workers']} worker(s), {res['wall_s']:.1f} s")
+
+
+# --- `mech2spice cpu montecarlo PROG.asm`: the processor's yield ---------------------------------------
+def add_cpu_parser(sub) -> None:
+    """Register `cpu montecarlo` under the `cpu` command's subparsers."""
+    c = sub.add_parser(
+        "montecarlo", help="yield of the processor under per-element spread, compared with the ISS every cycle",
+        description="Sample the processor's oscillator model with a relative Gaussian spread on every element, "
+                    "run PROG for --cycles cycles on each sample and compare every cycle (pc, phase, read "
+                    "address and data, write enable, address and data) with the instruction-set simulator. "
+                    "Results stream to --out (resumable). An envelope sample costs about 1 s of CPU per "
+                    "cycle. Exit 0 when every sample passed, 1 otherwise.")
+    c.add_argument("program", help="assembly source (.asm) or binary image")
+    c.add_argument("--cycles", type=inputs.integer(1, 100_000), default=30, help="clock cycles per sample (default 30)")
+    c.add_argument("--samples", type=inputs.integer(1, 1_000_000), required=True, metavar="N")
+    c.add_argument("--spread", required=True, metavar="SIGMA|JSON", help="as for `mech2spice montecarlo`")
+    c.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, metavar="S")
+    c.add_argument("--backend", default="envelope", choices=("envelope", "rk4"))
+    c.add_argument("--params", default="default", help="gate parameters: default, printed or a JSON file")
+    c.add_argument("--scheduler", default="local", metavar="local|inline|ADDRESS",
+                   help="local: a LocalCluster, one worker per core (default); inline: no Dask; or an address")
+    c.add_argument("--workers", type=inputs.integer(1, 4096), default=None, help="LocalCluster workers")
+    c.add_argument("--out", metavar="RESULTS.jsonl", help="results file, appended and resumed")
+    c.add_argument("--json", action="store_true", help="machine-readable output")
+    c.set_defaults(func=cmd_cpu_montecarlo)
+
+
+def cpu_job_of(args) -> dict:
+    """The processor job a results file is keyed by (the program by path and content hash)."""
+    import hashlib
+    from . import montecarlo as mc
+    path = Path(args.program)
+    if not path.exists():
+        raise Mech2SpiceError(f"no such program: {args.program}")
+    return {"program": str(path.resolve()), "program_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+            "cycles": args.cycles, "params": args.params, "backend": args.backend,
+            "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "union": 1}
+
+
+def cmd_cpu_montecarlo(args) -> int:
+    """Run the processor sweep; print the summary; 0 if every sample passed, else 1."""
+    import tempfile
+    from ..cli import _log, _print_json
+    from . import mc_run
+    job = cpu_job_of(args)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(args.out) if args.out else Path(tmp) / "results.jsonl"
+        if args.out:
+            inputs.check_output_file(out, [args.program], "results file")
+        res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
+                         progress=not args.json and sys.stderr.isatty(), log=_log(args))
+    res.update({"program": job["program"], "cycles": job["cycles"], "backend": job["backend"],
+                "spread": job["spread"], "seed": job["seed"]})
+    if not args.out:
+        res.pop("out")
+    if args.json:
+        _print_json(res)
+    else:
+        _print(res)
+    return 0 if res["failures"] == 0 else 1

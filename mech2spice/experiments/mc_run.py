@@ -36,11 +36,19 @@ def design_for(job: dict) -> mc.DesignMC:
         from ..physics import network
         from ..physics.params import load_params
         from ..synthesis.synth import synthesize
-        nl = synthesize(job["design"], max_fanout=network.MAX_FANOUT)
         _DESIGNS.clear()                 # one design per worker at a time bounds its memory
-        _DESIGNS[key] = mc.DesignMC(nl, load_params(job["params"]), job["vectors"], job["backend"],
-                                    mc.spec_of(job["spread"]), job["seed"], job.get("periods"),
-                                    union=job.get("union"), noise=job.get("noise", 0.0))
+        spec, p, noise = mc.spec_of(job["spread"]), load_params(job["params"]), job.get("noise", 0.0)
+        if "program" in job:             # the processor (cpu montecarlo)
+            from .mc_clocked import CpuMC
+            _DESIGNS[key] = CpuMC(job["program"], job["cycles"], p, job["backend"], spec, job["seed"], noise)
+            return _DESIGNS[key]
+        nl = synthesize(job["design"], max_fanout=network.MAX_FANOUT)
+        if "steps" in job:               # a clocked design under a stimulus of cycles
+            from .mc_clocked import ClockedMC
+            _DESIGNS[key] = ClockedMC(nl, p, job["steps"], job["backend"], spec, job["seed"], noise=noise)
+        else:
+            _DESIGNS[key] = mc.DesignMC(nl, p, job["vectors"], job["backend"], spec, job["seed"],
+                                        job.get("periods"), union=job.get("union"), noise=noise)
     return _DESIGNS[key]
 
 

@@ -297,7 +297,8 @@ def summary(records: list[dict], n_gates: int) -> dict:
             "yield_ci95": list(wilson(passed, n)),
             "margin_quantiles": {f"{q}%": float(np.percentile(finite, q)) for q in QUANTILES} if finite.size else {},
             "failing_bits": dict(sorted(bits.items(), key=lambda kv: -kv[1])),
-            "gate_failure_rate": rate, "gate_failure_rate_ci95": [lo, hi], "gates": n_gates,
+            "gate_failure_rate": rate if n_gates else None,          # None: gates not checked (clocked runs)
+            "gate_failure_rate_ci95": [lo, hi], "gates": n_gates,
             "failing_gates": dict(sorted(gates.items(), key=lambda kv: -kv[1])[:20]),
             "reasons": _reasons(records)}
 

@@ -1,0 +1,144 @@
+"""Monte-Carlo of clocked designs and of the processor: one sampled model per run, compared cycle by cycle.
+
+* `ClockedMC`: a clocked design (sqrt.v, counters ...) under a stimulus of clock cycles, run through
+  simulation.run_clocked_physical on the sample's model; it passes when every cycle's outputs equal the
+  clocked logic oracle's.  Every element is spread as in experiments/montecarlo.py, drives included.
+* `CpuMC`: the processor (cpu/physical.PhysicalCPU on the sample's model) running a program for N cycles;
+  it passes when every cycle's record (pc, phase, address, data, write) equals the instruction-set
+  simulator's.  The oscillator network's elements are spread (the gates' source drives included); the
+  memory's data forces and the clock/reset drives are external and stay nominal.
+
+Neither checks gate channels one by one (a clocked run keeps only its outputs), so no per-gate failure
+rate is measured: `gates` is empty and the summary's rate is None.  Samples run one per engine run.
+"""
+from __future__ import annotations
+
+import math
+
+from .. import simulation
+from ..backends._base import DivergenceError
+from ..errors import Mech2SpiceError
+from ..physics import network, spread
+from ..physics.noise import check_temperature
+from ..physics.stimulus import Stimulus
+from ..synthesis.ports import output_bits
+from .montecarlo import SpreadSpec, noise_seed
+
+CLOCKED_BACKENDS = ("envelope", "rk4")
+
+
+def sampled(model, elems, spec: SpreadSpec, seed: int, i: int):
+    """Sample i of `model`: (its model, the factor of every drive); (model, None) when nothing is spread."""
+    import numpy as np
+    if spec.zero:
+        return model, None
+    f = spec.factors(elems, seed, i)
+    fd = np.ones(len(model.drives))
+    for e, x in zip(elems, f):
+        if e.kind == "drive":
+            fd[e.index] = x
+    return spread.scaled(model, elems, f), fd
+
+
+def _failed(i: int, e: Exception) -> dict:
+    return {"i": i, "pass": False, "margin": -math.inf, "failing_bits": {}, "failing_gates": [],
+            "reason": str(e).splitlines()[0]}
+
+
+class ClockedMC:
+    """A clocked design under a stimulus of cycles; evaluates samples against the clocked logic oracle."""
+
+    def __init__(self, netlist, p, steps: list[dict], backend: str, spec: SpreadSpec, seed: int,
+                 options=None, noise: float = 0.0):
+        if not netlist.clock:
+            raise Mech2SpiceError(f"{netlist.top} is not clocked")
+        if backend not in CLOCKED_BACKENDS:
+            raise Mech2SpiceError(f"clocked montecarlo runs on {', '.join(CLOCKED_BACKENDS)}, not '{backend}'")
+        self.netlist, self.p, self.backend, self.spec, self.seed = netlist, p, backend, spec, seed
+        self.options, self.noise = options, check_temperature(noise)
+        self.cycles = simulation.expand_steps(steps)
+        self.timing = simulation.clock_timing(netlist)
+        self.want = simulation.run_clocked_logic(netlist, self.cycles)["trace"]
+        self.model = network.build(netlist, p)
+        self.elems = spread.elements(self.model)
+        self.outs = output_bits(netlist)
+        self.gates, self.union = [], 1
+
+    def evaluate(self, indices: list[int]) -> list[dict]:
+        """One record per sample index."""
+        return [self._one(i) for i in indices]
+
+    def _one(self, i: int) -> dict:
+        model, fd = sampled(self.model, self.elems, self.spec, self.seed, i)
+        try:
+            res = simulation.run_clocked_physical(self.netlist, self.p, self.cycles, self.backend, self.timing,
+                                                  options=self.options, sample=(model, fd),
+                                                  noise=(self.noise, noise_seed(self.seed, i)))
+        except (DivergenceError, Mech2SpiceError) as e:
+            return _failed(i, e)
+        wrong, first = {}, None
+        for got, want in zip(res["trace"], self.want):
+            bad = [b for b in self.outs if got["bits"].get(b) != want["bits"][b]]
+            for b in bad:
+                wrong[b] = wrong.get(b, 0) + 1
+            if bad and first is None:
+                first = got["cycle"]
+        return {"i": i, "pass": not wrong, "margin": res["min_margin"], "failing_bits": wrong, "failing_gates": [],
+                "first_bad_cycle": first, "periods": res["periods"]}
+
+
+class CpuMC:
+    """The processor running a program for `cycles` cycles; evaluates samples against the ISS cycle by cycle."""
+
+    def __init__(self, program: str, cycles: int, p, backend: str, spec: SpreadSpec, seed: int, noise: float = 0.0):
+        from ..cpu.physical import PHYSICAL
+        if backend not in PHYSICAL:
+            raise Mech2SpiceError(f"cpu montecarlo runs on {', '.join(PHYSICAL)}, not '{backend}'")
+        if check_temperature(noise):
+            raise Mech2SpiceError("cpu montecarlo: thermal noise is not wired into the processor yet (--noise 0)")
+        self.program, self.cycles, self.p, self.backend = program, cycles, p, backend
+        self.spec, self.seed = spec, seed
+        self.want = self._iss()
+        self.gates, self.union, self.outs = [], 1, ["pc", "phase", "raddr", "rdata", "we", "waddr", "wdata"]
+
+    def _iss(self) -> list:
+        from ..cpu.iss import ISS
+        from ..cpu.run import load_program, make_memory
+        iss = ISS(make_memory(load_program(self.program)))
+        out = []
+        while len(out) < self.cycles:
+            out.append(iss.step())
+        return out
+
+    def evaluate(self, indices: list[int]) -> list[dict]:
+        """One record per sample index."""
+        return [self._one(i) for i in indices]
+
+    def _machine(self, i: int):
+        """The processor on sample i's model, powered up."""
+        from ..cpu.physical import PhysicalCPU
+        from ..cpu.run import load_program, make_memory
+        cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False)
+        nominal = cpu.model
+        model, _ = sampled(nominal, spread.elements(nominal), self.spec, self.seed, i)
+        cpu.model = model               # the probes (latch outputs) are copied with the model
+        cpu.amps = cpu._reset()
+        return cpu
+
+    def _one(self, i: int) -> dict:
+        wrong, first, n = {}, None, 0
+        try:
+            cpu = self._machine(i)
+            for want in self.want:
+                got = cpu.step()
+                n += 1
+                bad = [f for f in self.outs if getattr(got, f) != getattr(want, f)]
+                for f in bad:
+                    wrong[f] = wrong.get(f, 0) + 1
+                if bad:
+                    first = got.cycle if first is None else first
+                    break                     # the programs diverge: later cycles compare nothing
+        except (DivergenceError, Mech2SpiceError) as e:
+            return {**_failed(i, e), "cycles_run": n}
+        return {"i": i, "pass": not wrong, "margin": None, "failing_bits": wrong, "failing_gates": [],
+                "first_bad_cycle": first, "cycles_run": n}

@@ -36,7 +36,8 @@ from . import grammar
 
 SEARCH_GRID = {"per_band": 6, "n_grid": 1000}     # coarse: 144 input points, 1000 s points
 FAIL_OFFSET = -20.0
-INIT_SPREAD = 0.05          # the initial population: the seed + normal steps of this fraction of each range
+INIT_SPREAD = 1e-4        # the initial population: the seed + normal steps of this fraction of each range (working
+                          # gates are a thin set: +0.1 % of k_C alone takes the default margin to -3)
 LADDER = 10.0 ** (-7 + 0.5 * np.arange(13))        # 1e-7 ... 1e-1
 
 

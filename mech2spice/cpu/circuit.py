@@ -206,8 +206,7 @@ def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_st
 
 # --- running and decoding ---------------------------------------------------------------------------------
 def run_cpu_netlist(cpu: CpuNetlist, timeout: float | None = None, keep_dir=None) -> dict:
-    """Run the netlist under VACASK; the probes' amplitudes (u_R) and rdata levels at every sample, the
-    circuit's final memory, the simulator's time points and wall time."""
+    """Run the netlist under VACASK and decode it (`decode`); adds the simulator's wall time."""
     t0 = time.perf_counter()
     try:
         names, data, log = run_netlist(cpu.text, timeout=timeout, workdir=keep_dir, forms=(ENVELOPE,),
@@ -215,16 +214,23 @@ def run_cpu_netlist(cpu: CpuNetlist, timeout: float | None = None, keep_dir=None
     except Mech2SpiceError as err:
         data = getattr(err, "data", None)
         raise Mech2SpiceError(f"{err} (after {0 if data is None else len(data)} time points)") from None
-    wall = time.perf_counter() - t0
+    return {**decode(cpu, names, data, log), "wall_s": time.perf_counter() - t0}
+
+
+def decode(cpu: CpuNetlist, names: list[str], data: np.ndarray, log: str) -> dict:
+    """From a run's raw file and output: the probes' amplitudes (u_R) and rdata levels at every sample, the
+    circuit's final memory, the time points (periods) and VACASK's cost counters."""
     t = data[:, 0].real / cpu.period
     at = cpu.schedule.samples()
+    if t[-1] < at[-1]:
+        raise Mech2SpiceError(f"the run stopped at period {t[-1]:.0f}, before the last sample ({at[-1]:.0f})")
     col = {n: data[:, names.index(n)].real for n in cpu.vectors}
     interp = lambda v: np.interp(at, t, col[v])
     amps = np.stack([np.hypot(interp(a), interp(b)) for a, b in zip(cpu.vectors[0::2], cpu.vectors[1::2])
                      if a not in cpu.rdata], axis=1)
     levels = np.stack([interp(v) for v in cpu.rdata], axis=1)
     return {"amps": amps, "rdata_levels": levels, "memory": final_memory(log), "points": int(t.size),
-            "wall_s": wall, "t_periods": t, "stats": simulator_stats(log)}
+            "t_periods": t, "stats": simulator_stats(log)}
 
 
 _STATS = {"unknowns": "Number of unknowns", "nonzeros": "Initial number of nonzeros",
@@ -264,14 +270,18 @@ class CircuitCPU:
         if memory.devices:
             raise Mech2SpiceError(f"the {NAME} backend has no memory-mapped devices (tapes): the memory "
                                   "inside the circuit is the 256-byte array only")
-        self.mem, self.p = memory, p
+        net = emit_cpu(memory.snapshot(), cycles, p, settle=settle, max_step=max_step, reltol=reltol)
+        self.result = run_cpu_netlist(net, timeout, keep_dir)
+        self._setup(memory, p, net, cycles)
+
+    def _setup(self, memory: Memory, p, net: CpuNetlist, cycles: int) -> None:
+        """Replay state over a decoded run (`self.result`): also for a netlist run standalone."""
+        self.mem, self.p, self.net = memory, p, net
         self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
         self.regmap = register_map(self.netlist)
-        self.net = emit_cpu(memory.snapshot(), cycles, p, settle=settle, max_step=max_step, reltol=reltol)
-        self.result = run_cpu_netlist(self.net, timeout, keep_dir)
-        self.amps = [dict(zip(self.net.probes, row)) for row in self.result["amps"]]
+        self.amps = [dict(zip(net.probes, row)) for row in self.result["amps"]]
         self.cycle, self.halted = 0, False
-        self.period = self.net.schedule.stop
+        self.period = net.schedule.stop
         self.cycles_run = cycles
 
     def _port(self, k: int, port: str, what: str) -> int:
@@ -326,5 +336,5 @@ class CircuitCPU:
         """What the run cost and how it ended, for the result JSON."""
         r = self.result
         return {"simulator": "vacask", "periods": self.period, "time_points": r["points"],
-                "simulator_wall_s": r["wall_s"], "cycles_simulated": self.cycles_run,
+                "simulator_wall_s": r.get("wall_s"), "cycles_simulated": self.cycles_run,
                 "circuit_memory": r["memory"], "schedule": vars(self.net.schedule)}

@@ -33,6 +33,10 @@ REPORTS: dict[str, Report] = {
     "cpu_physical": Report("the processor as 6486 oscillators against the ISS, cycle by cycle, to the halt",
                            "~5 min", ("cpu_physical.md",),
                            ("cycles", "program", "backend", "step", "settle", "checkpoint", "resume", "name")),
+    "cpu_circuit": Report("the whole processor and its memory in VACASK (envelope level): cycles against the ISS, "
+                          "amplitudes against the envelope engine, the simulator's cost", "~30 min",
+                          ("cpu_circuit.md", "cpu_circuit.json", "cpu_circuit.png"),
+                          ("cycles", "only", "render")),
     "cpu": Report("the 8-bit processor: ISA, gate counts, the sieve, Turing machines", "~2 min", ("cpu.md",),
                   ("skip_slow",)),
     "envelope": Report("where the envelope model agrees with RK4, why it differs, the step bound", "~10 min",

@@ -20,7 +20,6 @@ from ..backends._base import DivergenceError
 from ..errors import Mech2SpiceError
 from ..physics import network, spread
 from ..physics.noise import check_temperature
-from ..physics.stimulus import Stimulus
 from ..synthesis.ports import output_bits
 from .montecarlo import SpreadSpec, noise_seed
 

@@ -114,6 +114,7 @@ def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: i
     bar = _bar(samples, len(done), progress)
     t_run = time.time()
     stats = {"workers": 0, "worker_peak_rss_mb": None}
+    _ARRIVALS.clear()
     try:
         with open(out, "a", encoding="utf-8") as fh:
             if scheduler == "inline":
@@ -129,11 +130,24 @@ def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: i
     recs = [done[i] for i in range(samples) if i in done]
     res = mc.summary(recs, len(design_for(job).gates))
     return {**res, "ran": ran, "resumed": samples - ran, "samples_per_s": ran / max(time.time() - t_run, 1e-9),
+            "steady_samples_per_s": steady_rate(_ARRIVALS),
             "wall_s": wall, "driver_peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             **stats, "out": str(out)}
 
 
+_ARRIVALS: list = []           # (time, records) per task streamed in this run: the steady throughput
+
+
+def steady_rate(arrivals: list) -> float | None:
+    """Samples per second from the first task's arrival to the last: the throughput without the cluster's
+    start (worker processes, synthesis, compiled-kernel loading); None with fewer than two tasks."""
+    if len(arrivals) < 2:
+        return None
+    return sum(n for _, n in arrivals[1:]) / max(arrivals[-1][0] - arrivals[0][0], 1e-9)
+
+
 def _stream(fh, records, done, bar, n, stop_after) -> None:
+    _ARRIVALS.append((time.time(), len(records)))
     _append(fh, records)
     for r in records:
         done.setdefault(r["i"], r)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mech2spice.backends import _noise_envelope as noisy_env
-from mech2spice.backends import envelope, rk4
+from mech2spice.backends import rk4
 from mech2spice.backends.envelope import EnvelopeEngine
 from mech2spice.errors import Mech2SpiceError
 from mech2spice.experiments import noise_agreement as na
@@ -118,3 +118,11 @@ def test_gate_channel_variance_three_ways_slow():
     assert na.rk4_variance(g, T_GATE, batch=480, periods=400, seed=11) == pytest.approx(pred, rel=0.2)
     assert na.envelope_variance(g, T_GATE, batch=8000, periods=400, seed=11) == pytest.approx(pred, rel=0.05)
     assert na.ngspice_variance(g, T_GATE, periods=6000, settle=1500, seed=11) == pytest.approx(pred, rel=0.4)
+
+
+def test_stochastic_rk4_strong_order():
+    """Same Brownian paths at 8..64 steps per period against 512: the RMS end-point error falls at least
+    as h^1.4 (the scheme's guarantee is 1.5; measured 2.0 on this linear oscillator, 2.1 on the gate)."""
+    errors = na.strong_errors(steps=(8, 16, 32, 64), fine=512, periods=4, batch=100)
+    assert na.observed_order(errors) > 1.4
+    assert all(errors[a] > errors[b] for a, b in ((8, 16), (16, 32), (32, 64)))

@@ -54,7 +54,7 @@ def block_figures(name: str, p, rec: dict | None, log) -> dict:
     e = energy.gate_energy(p)
     out = {"dofs_per_gate": p.structure.n_dofs, "nominal_margin": m["nominal_margin"], "tolerance": m["tolerance"],
            "tolerance_bracket": m["tolerance_bracket"], "yield_1pct": m["yield"],
-           "q1_1pct": m["margin_quantiles"]["1%"], "energy": e}
+           "q1_1pct": m["margin_quantiles"]["1%"], "yield_samples": m["samples"], "energy": e}
     sw = [v for v in e["switching"].values()]
     out["delay_periods"] = max(v["delay_periods"] for v in sw) if all(v["delay_periods"] for v in sw) else None
     out["energy_per_period"] = e["steady"]["00"]["per_period_model"] if e["steady"]["00"] else None
@@ -179,7 +179,8 @@ def render(rec: dict, figs: dict, checks: dict, machine: str) -> str:
              "## Blocks", "",
              "Tolerance: largest relative sigma with >= 99 % yield of the loaded gate (every element of the block "
              f"spread, {TOL_SAMPLES} samples, bisection to a factor 1.1); yield and 1st-percentile margin at sigma "
-             f"{SIGMA:g} on {s['samples'] if False else 'the'} samples of the search's measurement; delay: periods from "
+             f"{SIGMA:g} on the samples given in brackets (the robust block's 1000-sample figure is below); delay: "
+             "periods from "
              "the input step until the output stays in its new band (00->10 and 10->00, the larger); energy: "
              "dissipated per drive period at inputs 00, and during the slower switching event "
              "(physics/energy.py).", ""]
@@ -189,7 +190,7 @@ def render(rec: dict, figs: dict, checks: dict, machine: str) -> str:
         rows.append([name, f["dofs_per_gate"], _fmt(f["nominal_margin"], "{:+.4f}"),
                      _fmt(f["tolerance"]) + (f" ({_fmt(f['tolerance_bracket'][0])} .. "
                                               f"{_fmt(f['tolerance_bracket'][1])})" if f["tolerance"] else ""),
-                     _fmt(f["yield_1pct"], "{:.3f}"), _fmt(f["q1_1pct"], "{:+.2f}"), _fmt(f["delay_periods"], "{}"),
+                     _fmt(f["yield_1pct"], "{:.3f}") + f" ({f.get('yield_samples')})", _fmt(f["q1_1pct"], "{:+.2f}"), _fmt(f["delay_periods"], "{}"),
                      _fmt(f["energy_per_period"]), _fmt(f["energy_per_switch"]),
                      f"{search['evaluations']} ev., {search['generations']} gen., {search['wall_s']:.0f} s"
                      if search else "(not searched)"])

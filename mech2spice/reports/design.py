@@ -59,6 +59,7 @@ def block_figures(name: str, p, rec: dict | None, log) -> dict:
     out["delay_periods"] = max(v["delay_periods"] for v in sw) if all(v["delay_periods"] for v in sw) else None
     out["energy_per_period"] = e["steady"]["00"]["per_period_model"] if e["steady"]["00"] else None
     out["energy_per_switch"] = max(v["energy_model"] for v in sw) if out["delay_periods"] else None
+    out["threshold_gap"] = threshold_gap(p)
     if m["nominal_margin"] > 0:
         s = sensitivity.gate_sensitivity(p, per_band=8)
         lim = s["limiting"]
@@ -66,6 +67,25 @@ def block_figures(name: str, p, rec: dict | None, log) -> dict:
         out["limiting"] = {"inputs": lim["inputs"], "margin": lim["margin"], "sigma_1": lim["sigma_1"],
                            "elements": [(s["elements"][k], float(lim["gradient"][k])) for k in top]}
     out["wall_s"] = time.time() - t0
+    return out
+
+
+def threshold_gap(p) -> dict:
+    """The insulator position at the hardest '1' input point (both inputs at the top of band 0) and at the
+    hardest '0' one (one input at the bottom of band 1, the other at the bottom of band 0): the relative
+    change of the insulator's pull that has to separate the two output bands.  With equal input weights the
+    pull goes as P = x1^2 + x2^2: 0.898 against 0.980, a 9 % window."""
+    from ..physics import loaded, steady_batch
+    from ..physics.params import BAND0, BAND1
+    lg = loaded.build(p)
+    pts = np.array([[1.0, BAND0[1], BAND0[1]], [1.0, BAND1[0], BAND0[0]]])
+    st = steady_batch.stack([lg.model], lg.input_groups(), lg.gate.channel)
+    r = steady_batch.roots(st, 0, pts)
+    s = [r.s[(r.point == k) & r.stable] for k in range(2)]
+    P = [float(x1 ** 2 + x2 ** 2) for _, x1, x2 in pts]
+    out = {"P": P, "P_gap": P[1] / P[0] - 1}
+    if all(v.size == 1 for v in s):
+        out["s"] = [float(s[0][0]), float(s[1][0])]
     return out
 
 
@@ -210,6 +230,17 @@ def render(rec: dict, figs: dict, checks: dict, machine: str) -> str:
         rows.append([name, f"({lim['inputs'][0]:.3f}, {lim['inputs'][1]:.3f}), margin {lim['margin']:+.4f}",
                      f"{lim['sigma_1']:.2e}", "; ".join(f"{e} {g:+.3g}" for e, g in lim["elements"])])
     lines += md_table(["block", "limiting inputs", "sigma_1", "largest derivatives"], rows)
+    g = figs["default"]["threshold_gap"]
+    lines += ["", f"The structural window: every block of the grammar sums its inputs in one insulator, whose pull "
+              f"goes as P = x1^2 + x2^2 for equal input weights.  The hardest '1' input (both inputs at the top "
+              f"of band 0) has P = {g['P'][0]:.3f}, the hardest '0' input (one at the bottom of band 1, the other "
+              f"at the bottom of band 0) P = {g['P'][1]:.3f}: the threshold must sit inside a {100 * g['P_gap']:.1f} % "
+              "window, so the spread of everything that sets it (gammas, gate responses, insulator stiffness, "
+              "source) must stay well inside about half of that at the 1 % tail.  The insulator's steady position "
+              "at those two points, per block (a sign change: the insulator snaps between them):", ""]
+    rows = [[n, *(f"{v:+.4g}" for v in f["threshold_gap"]["s"])]
+            for n, f in figs.items() if "s" in f.get("threshold_gap", {})]
+    lines += md_table(["block", "s at (0.67, 0.67)", "s at (0.92, 0.365)"], rows)
     e0 = figs["default"]["energy"]
     lines += ["", "## Energy per operation", "",
               f"Scaling: {Scaling().describe()} ({e0['joule_per_model_unit']:.3g} J per model energy unit for the "

@@ -32,6 +32,7 @@ from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latc
 
 PHYSICAL = ("envelope", "rk4")   # engines that continue from a state, so a cycle can follow the last
 PROCESSOR_STEP = 8.0    # envelope periods: within tolerance with SETTLE_TOL (reports/fidelity.md), 1.9x below the bound
+RK4_PROCESSOR_STEP = 8.0   # the step without the exponential step (RK4's bound: 15.1 periods)
 SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fidelity.md)
 LATENCY = None          # u_R: per-gate latency threshold (None: off); chosen in reports/fidelity.md
 EXPONENTIAL = False     # insulators stepped exactly (lifts the step's stability bound); reports/fidelity.md
@@ -40,7 +41,7 @@ EXPONENTIAL = False     # insulators stepped exactly (lifts the step's stability
 class PhysicalCPU:
     """The processor as oscillators (an engine that continues from a state) against the behavioural memory."""
 
-    def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float = PROCESSOR_STEP,
+    def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float | None = None,
                  settle: float | None = SETTLE_TOL, latency: float | None = LATENCY,
                  exponential: bool = EXPONENTIAL, parallel: bool = False, power_up: bool = True):
         if backend not in PHYSICAL:
@@ -51,6 +52,7 @@ class PhysicalCPU:
         for q, block in self.model.design.latch_outputs.items():
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
+        step = step or (PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP)
         self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, exponential, parallel)
         t = simulation.clock_timing(self.netlist)
         whole = max(1, int(round(step))) if backend == "envelope" else 1   # changes fall on step boundaries

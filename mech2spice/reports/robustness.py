@@ -73,7 +73,7 @@ def curve(name: str, samples: int, scheduler: str, log) -> list[dict]:
     return rows
 
 
-CLOCKED_SIGMAS = {"sqrt": (3e-5, 1e-4, 2e-4), "processor": (3e-5, 1e-4)}
+CLOCKED_SIGMAS = {"sqrt": (3e-5, 1e-4, 2e-4), "processor": (3e-5, 6e-5, 1e-4)}
 CLOCKED_SAMPLES = {"sqrt": 12, "processor": 3}
 QUICK_CLOCKED_SAMPLES = {"sqrt": 2, "processor": 1}
 CPU_PROGRAM, CPU_CYCLES = "sieve.asm", 30

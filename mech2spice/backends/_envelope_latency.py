@@ -316,6 +316,9 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
     hi = np.zeros((watch.size, B))
     settle_quiet = 0
     work_done = 0
+    wpos = -np.ones(nf, np.int64)                 # fast row -> its index in watch (-1: not watched)
+    for q in range(watch.size):
+        wpos[watch[q]] = q
     if always >= 0:
         active[always] = 1
     for b in range(nblk):                          # a changed forcing wakes the blocks it reaches
@@ -406,7 +409,6 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
             f = frows[q]
             for b in range(B):
                 A[f, b] += (h / 6.0) * (a1[f, b] + 2.0 * a2[f, b] + 2.0 * a3[f, b] + a4[f, b])
-                At[f, b] = A[f, b]
                 if not abs(A[f, b]) < bound:     # catches NaN too
                     return n, DIVERGED, work_done
         for q in range(nsr):
@@ -421,14 +423,14 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
                 else:
                     s[j, b] += (h / 6.0) * (sd[j, b] + 2.0 * v2[j, b] + 2.0 * v3[j, b] + v4[j, b])
                     sd[j, b] += (h / 6.0) * (c1[j, b] + 2.0 * c2[j, b] + 2.0 * c3[j, b] + c4[j, b])
-                st[j, b] = s[j, b]
-                v2[j, b] = v3[j, b] = v4[j, b] = sd[j, b]
-        if settle_tol > 0.0:
-            for q in range(watch.size):
-                for b in range(B):
-                    m = abs(A[watch[q], b])
-                    lo[q, b] = min(lo[q, b], m)
-                    hi[q, b] = max(hi[q, b], m)
+        if settle_tol > 0.0:                      # frozen channels hold: only active rows can widen a range
+            for r in range(nfr):
+                q = wpos[frows[r]]
+                if q >= 0:
+                    for b in range(B):
+                        m = abs(A[frows[r], b])
+                        lo[q, b] = min(lo[q, b], m)
+                        hi[q, b] = max(hi[q, b], m)
         dp, di = blk[10], blk[11]                  # wake-ups travel to the frozen dependents of active blocks
         n_active = na
         for q in range(n_active):

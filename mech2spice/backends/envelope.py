@@ -24,6 +24,7 @@ RATE_SAFETY = 1.5            # x the largest |eigenvalue| at rest: along switchi
 
 
 DEFAULT_STEP = 4.0           # periods, at most: no accuracy cost on the adder (reports/envelope.md; bound 15.1)
+EXPONENTIAL_STEP = 16.0      # periods, at most, with the exponential step: 0.005 u_R on the chain (docs/latency.md)
 
 
 def rate_bound(model: MechModel, exponential: bool = False) -> float:
@@ -44,11 +45,13 @@ def max_step_periods(model: MechModel, exponential: bool = False) -> float:
     return RK4_STABILITY / rate_bound(model, exponential) / model.period
 
 
-def default_step(model: MechModel, cap: float = DEFAULT_STEP) -> float:
-    """The longest of 8, 4, 2, 1 periods within `cap` and the model's stability bound (else half a period):
-    whole steps keep stimulus changes, which fall on whole periods, on step boundaries."""
-    bound = max_step_periods(model)
-    for step in (8, 4, 2, 1):
+def default_step(model: MechModel, cap: float | None = None, exponential: bool = False) -> float:
+    """The longest of 16, 8, 4, 2, 1 periods within `cap` (DEFAULT_STEP, EXPONENTIAL_STEP with the
+    exponential step) and the model's stability bound (else half a period): whole steps keep stimulus
+    changes, which fall on whole periods, on step boundaries."""
+    cap = cap or (EXPONENTIAL_STEP if exponential else DEFAULT_STEP)
+    bound = max_step_periods(model, exponential)
+    for step in (16, 8, 4, 2, 1):
         if step <= min(cap, bound):
             return float(step)
     return 0.5
@@ -286,7 +289,7 @@ class EnvelopeEngine(Engine):
 
     def step(self, model: MechModel) -> float:
         """The step this engine takes on `model`, in drive periods."""
-        return self.options.step_periods or default_step(model)
+        return self.options.step_periods or default_step(model, exponential=self.options.exponential)
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """The envelope equations over `periods` drive periods (see `integrate`)."""

@@ -169,9 +169,10 @@ class _CpuEmitter(_Emitter):
 
 
 def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_step: float = MAX_STEP,
-             reltol: float = RELTOL, standalone: bool = False, title: str = "") -> CpuNetlist:
+             reltol: float = RELTOL, standalone: bool = False, title: str = "", memory: bool = True) -> CpuNetlist:
     """The processor with `image` in its memory, clocked `cycles` times, as one VACASK netlist.  Standalone:
-    the Verilog-A is embedded (VACASK compiles it on load); else the compiled .osdi are expected beside it."""
+    the Verilog-A is embedded (VACASK compiles it on load); else the compiled .osdi are expected beside it.
+    memory=False (a cost profile only): no memory devices, rdata held at 0 by sources."""
     image = list(image) + [0] * (MEM_SIZE - len(image))
     if not 1 <= cycles:
         raise Mech2SpiceError("the processor netlist needs at least one cycle")
@@ -183,8 +184,11 @@ def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_st
     e = _CpuEmitter(model, net, p, sched, VacaskEnvelopeOptions(max_step_periods=max_step, reltol=reltol))
     e.circuit()
     e.amp_lines += e.sources()
-    e.lines += ["// --- the memory (spice/memory.py)", *e.memory(image, net)]
     rdata = [f"amp_rdata{b}" for b in range(vmem.BITS)]
+    if memory:
+        e.lines += ["// --- the memory (spice/memory.py)", *e.memory(image, net)]
+    else:
+        e.amp_lines += [f"vrd{b} ({node} 0) vsource dc={num(p.force(NOMINAL0))}" for b, node in enumerate(rdata)]
     osdi = OSDI[ENVELOPE].replace(".osdi", ".va") if standalone else OSDI[ENVELOPE]
     mem_ref = vmem.FILE if standalone else vmem.FILE.replace(".va", ".osdi")
     tran = [f"analysis tran1 tran stop={num(sched.stop * e.T)} step={num(max_step * e.T)} "

@@ -8,7 +8,11 @@ Measures, in this order (each part cached in cpu_circuit.json, `--only` re-measu
   memory, VACASK's cost counters (time points, Newton iterations, where the time went);
 * envelope: the same cycles on the envelope engine (PhysicalCPU, step 2, full pauses: the fidelity reference),
   the probes (output bits, 43 latch outputs) sampled before each clock pulse as in the circuit; the per-cycle
-  worst amplitude difference between the two.
+  worst amplitude difference between the two;
+* setting: another VACASK setting (--max_step, --reltol) on --cycles cycles, kept beside the others (a row of
+  the settings table; the main run is one too);
+* profile: the reset and one cycle with and without the memory devices (rdata held at 0): the memory's
+  share of VACASK's cost.
 """
 from __future__ import annotations
 
@@ -26,6 +30,7 @@ from ._common import HOST, out_dir, pyplot, read_json, save_figure, write_json
 PROGRAM = "programs/sieve.asm"
 TARGET = 0.02            # u_R: the issue's per-cycle bound against the envelope model
 ENVELOPE_STEP = 2.0      # the fidelity report's reference setting (full pauses)
+SIEVE_CYCLES = 458       # the sieve halts after 457 cycles; the halt is seen one cycle later
 
 
 def _machine() -> str:
@@ -62,6 +67,17 @@ def measure_circuit(cycles: int, max_step: float, reltol: float, settle: int | N
             "rows": rows, "stopped": stopped, "halted": cpu.halted,
             "circuit_memory": cpu.result["memory"], "iss_memory": R.run_program(PROGRAM, "iss")["memory"],
             "probes": cpu.net.probes, "amps": cpu.result["amps"].tolist(), "machine": _machine()}
+
+
+def measure_profile(max_step: float, reltol: float) -> dict:
+    """VACASK's counters for the reset and one cycle, with and without the memory devices."""
+    from ..cpu.circuit import emit_cpu, run_cpu_netlist
+    image = R.load_program(PROGRAM).image
+    out = {"max_step": max_step, "reltol": reltol, "machine": _machine()}
+    for key, mem in (("without_memory", False), ("with_memory", True)):
+        r = run_cpu_netlist(emit_cpu(image, 1, max_step=max_step, reltol=reltol, memory=mem))
+        out[key] = {"points": r["points"], "wall_s": r["wall_s"], **r["stats"]}
+    return out
 
 
 # --- the envelope reference --------------------------------------------------------------------------------
@@ -105,10 +121,16 @@ def write(directory="reports", cycles: int = 30, max_step: float = 8.0, reltol: 
     path = out / "cpu_circuit.json"
     data = read_json(path, {}) or {}
     only = ",".join(only) if isinstance(only, (list, tuple)) else (only or "")
-    parts = set(filter(None, only.split(","))) or {"circuit", "envelope"}
+    parts = set(filter(None, only.split(","))) or {"circuit", "envelope", "profile"}
     if not render:
         if "circuit" in parts:
             data["circuit"] = measure_circuit(cycles, max_step, reltol)
+            write_json(path, data)
+        if "setting" in parts:
+            data.setdefault("settings", {})[f"{max_step:g}/{reltol:g}"] = measure_circuit(cycles, max_step, reltol)
+            write_json(path, data)
+        if "profile" in parts:
+            data["profile"] = measure_profile(max_step, reltol)
             write_json(path, data)
         if "envelope" in parts:
             n = min(data.get("circuit", {}).get("cycles", cycles), max(cycles, 1))
@@ -187,6 +209,7 @@ def _markdown(data: dict, diffs: list[float]) -> str:
         lines.append(f"- against the envelope engine (step 2, full pauses, {data['envelope']['wall_s']:.0f} s): "
                      f"worst amplitude difference per cycle {min(diffs):.4f}..{worst:.4f} u_R over "
                      f"{len(diffs)} samples ({'within' if worst <= TARGET else 'ABOVE'} the {TARGET} u_R target).")
+    lines += _settings_md(data) + _profile_md(data)
     lines += ["\n![time step and amplitude difference per cycle](cpu_circuit.png)\n", "## Every cycle\n",
               "| cycle | pc | instruction | raddr | rdata | we | waddr | wdata | = ISS | time points | "
               "max amp diff (u_R) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -196,6 +219,57 @@ def _markdown(data: dict, diffs: list[float]) -> str:
         lines.append(f"| {r['cycle']} | {r['pc']} | {r['instr']} | {r['raddr']} | {r['rdata']} | {r['we']} | "
                      f"{r['waddr']} | {r['wdata']} | {'yes' if r['same'] else 'NO'} | {p} | {d} |")
     return "\n".join(lines) + "\n"
+
+
+def summary(c: dict, env: dict | None) -> dict:
+    """One settings-table row: agreement, step, cost per cycle and the sieve extrapolated."""
+    st, s = c["stats"], c["schedule"]
+    points = np.array(c["points_per_cycle"], float)
+    diffs = amplitude_differences(c, env) if env else []
+    per_cycle = c["simulator_wall_s"] / c["cycles"]        # the reset is charged to the cycles (conservative)
+    return {"setting": f"max step {c['max_step']:g} T, reltol {c['reltol']:g}, settle {s['settle']}",
+            "cycles": c["cycles"], "same": sum(r["same"] for r in c["rows"]), "rows": len(c["rows"]),
+            "max_diff": max(diffs) if diffs else None, "mean_step": (s["settle"] + s["pulse"]) / points.mean(),
+            "points_per_cycle": points.mean(), "newton_per_point": st["newton_iterations"] / st["accepted"],
+            "ms_per_point": 1e3 * c["simulator_wall_s"] / c["time_points"],
+            "eval_share": st["eval_s"] / st["newton_s"], "s_per_cycle": per_cycle,
+            "sieve_h": per_cycle * SIEVE_CYCLES / 3600}
+
+
+def _settings_md(data: dict) -> list[str]:
+    runs = [data["circuit"], *data.get("settings", {}).values()]
+    env = data.get("envelope")
+    lines = ["\n## Settings: accuracy against cost\n",
+             f"Each row one VACASK run of the sieve's first cycles ({runs[0]['machine']}; wall times are of a "
+             "machine shared with other jobs, so the per-cycle costs compare only roughly). *max amp diff*: the "
+             "worst amplitude difference of any probe at any sample against the envelope engine; *sieve*: the "
+             f"wall time per cycle (reset included) times the sieve's {SIEVE_CYCLES} cycles.\n",
+             "| setting | cycles = ISS | max amp diff (u_R) | mean step (T) | points / cycle | Newton it. / point "
+             "| ms / point | device eval share | s / cycle | sieve (h) |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for c in runs:
+        r = summary(c, env)
+        diff = f"{r['max_diff']:.4f}" if r["max_diff"] is not None else "-"
+        lines.append(f"| {r['setting']} | {r['same']} / {r['rows']} | {diff} | {r['mean_step']:.2f} | "
+                     f"{r['points_per_cycle']:.0f} | {r['newton_per_point']:.2f} | {r['ms_per_point']:.1f} | "
+                     f"{r['eval_share']:.0%} | {r['s_per_cycle']:.1f} | {r['sieve_h']:.1f} |")
+    return lines
+
+
+def _profile_md(data: dict) -> list[str]:
+    pr = data.get("profile")
+    if not pr:
+        return []
+    lines = ["\n## Profile: the memory's share\n",
+             f"The reset and one cycle (max step {pr['max_step']:g} T, reltol {pr['reltol']:g}), one run each "
+             f"({pr['machine']}):\n", "| netlist | unknowns | nonzeros | time points | Newton iterations | "
+             "Newton time (s) | device eval (s) | refactorisation (s) | solves (s) | wall (s) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for key in ("without_memory", "with_memory"):
+        r = pr[key]
+        lines.append(f"| {key.replace('_', ' ')} | {r['unknowns']:.0f} | {r['nonzeros']:.0f} | {r['accepted']:.0f} | "
+                     f"{r['newton_iterations']:.0f} | {r['newton_s']:.1f} | {r['eval_s']:.1f} | "
+                     f"{r['refactor_s']:.1f} | {r['solve_s']:.1f} | {r['wall_s']:.1f} |")
+    return lines
 
 
 def _iss_memory_after(cycles: int) -> list[int]:

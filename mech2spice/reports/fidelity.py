@@ -225,7 +225,7 @@ def figure(d: dict, path: Path) -> None:
     panels = [p for p in panels if p[1] and all(p[2] in r for r in p[1])]
     if not panels:
         return
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8), squeeze=False)
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 5.6), squeeze=False)
     for ax, (title, rows, key, unit) in zip(axes[0], panels):
         for k, r in enumerate(rows):
             ax.scatter(r[key], max(r["max_amp_diff"], 1e-5), s=30, color=f"C{k % 10}", label=r["setting"],
@@ -236,9 +236,9 @@ def figure(d: dict, path: Path) -> None:
         ax.xaxis.set_minor_formatter(plt.NullFormatter())
         ax.xaxis.set_major_formatter(plt.FormatStrFormatter("%g"))
         ax.set_xlabel(unit)
-        ax.set_ylabel("worst amplitude difference (u_R)")
+        ax.set_ylabel("worst amplitude difference (u_R; 0 drawn at 1e-5)")
         ax.set_title(title, fontsize=9)
-        ax.legend(fontsize=5.5, loc="upper right")
+        ax.legend(fontsize=6, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     fig.suptitle(f"envelope options: cost against fidelity (envelope backend, {d['machine']}, {d.get('load', '')})\n"
                  "reference: step 2 full pauses (processor), step 1 full pauses (clocked); dashed: 0.02 u_R; "
                  "x: a decoded value differed", fontsize=8)
@@ -250,12 +250,14 @@ def defaults_md(d: dict) -> list[str]:
     from ..cpu import physical
     rows = [(r.get("design", "processor"), r) for r in d.get("cpu", []) + d.get("clocked", [])]
     L = ["## Defaults", ""]
-    for what, step, settle, latency, expo in (
-            ("`cpu run --backend envelope`", physical.PROCESSOR_STEP, physical.SETTLE_TOL, physical.LATENCY,
+    from ..backends.envelope import DEFAULT_STEP
+    for what, cpu, step, settle, latency, expo in (
+            ("`cpu run --backend envelope`", True, physical.PROCESSOR_STEP, physical.SETTLE_TOL, physical.LATENCY,
              physical.EXPONENTIAL),
-            ("clocked `simulate --backend envelope`", None, simulation.CLOCKED_SETTLE_TOL, None, False)):
-        hit = [(n, r) for n, r in rows if r["settle"] == settle and (step is None or r["step"] == step)
-               and (n == "processor") == (step is not None) and r.get("latency") == latency
+            ("clocked `simulate --backend envelope`", False, DEFAULT_STEP, simulation.CLOCKED_SETTLE_TOL, None,
+             False)):
+        hit = [(n, r) for n, r in rows if r["settle"] == settle and r["step"] == step
+               and (n == "processor") == cpu and r.get("latency") == latency
                and bool(r.get("exponential")) == expo and not r.get("parallel")]
         if not hit:
             continue

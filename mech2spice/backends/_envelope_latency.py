@@ -209,19 +209,22 @@ def _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nf, srows
 
 
 @njit(cache=True, fastmath=FAST)
-def _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol):
-    """Whether frozen block b's inputs (or the forcing on its residual rows) left their record by > tol."""
+def _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol, forcing=True):
+    """Whether frozen block b's inputs (or, with `forcing`, the forcing on its residual rows) left their
+    record by > tol.  Within one compiled call the forcing is constant: the wake-ups after each step skip it."""
     xp, xi, yp, yi, rp, ri, scale = blk[6], blk[7], blk[8], blk[9], blk[4], blk[5], blk[12]
     for bb in range(A.shape[1]):
         for k in range(xp[b], xp[b + 1]):
-            if abs(A[xi[k], bb] - snap_f[k, bb]) > tol:
+            d = A[xi[k], bb] - snap_f[k, bb]
+            if d.real * d.real + d.imag * d.imag > tol * tol:
                 return True
         for k in range(yp[b], yp[b + 1]):
             if abs(s[yi[k], bb] - snap_s[k, bb]) * scale[yi[k]] > tol:
                 return True
-        for k in range(rp[b], rp[b + 1]):
-            if F[ri[k], bb] != snap_F[k, bb]:
-                return True
+        if forcing:
+            for k in range(rp[b], rp[b + 1]):
+                if F[ri[k], bb] != snap_F[k, bb]:
+                    return True
     return False
 
 
@@ -436,7 +439,7 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         for q in range(n_active):
             for k in range(dp[ablk[q]], dp[ablk[q] + 1]):
                 d = di[k]
-                if active[d] == 0 and _moved(A, s, F, blk, d, snap_f, snap_s, snap_F, tol):
+                if active[d] == 0 and _moved(A, s, F, blk, d, snap_f, snap_s, snap_F, tol, False):
                     active[d] = 1
                     quiet[d] = 0
                     _mark_ref(A, s, Aref, sref, blk, d)

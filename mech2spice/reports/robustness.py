@@ -371,7 +371,7 @@ def noise_section(d: dict) -> list[str]:
             "they leave their bands at temperatures where no output bit is wrong yet.", "",
             "RK4 against the envelope on the gate: the same rise of the BER with T within the intervals from "
             "1.5e-4 up; RK4 sees its first errors at a higher T because its nominal margin is larger (median "
-            "+0.10 vs +0.09 band widths at the lowest T: the envelope model's known offset, reports/fidelity.md).",
+            "+0.10 vs +0.09 band widths at the lowest T, the two models' difference on this gate; reports/envelope.md compares them).",
             ""]
     out += agreement_section(d["noise_agreement"])
     return out

@@ -53,7 +53,7 @@ def add_parser(subparsers) -> None:
     r.add_argument("program", help="assembly source (.asm) or binary image")
     r.add_argument("--backend", default="iss", choices=BACKENDS,
                    help="iss (instruction-set simulator), logic (the NOR netlist), envelope or rk4 (the "
-                        "netlist as 6486 oscillators; envelope ~0.5 s per cycle, the sieve in ~4 min: reports/cpu_physical.md), "
+                        "netlist as 6486 oscillators; envelope ~0.05 CPU-s per cycle, the sieve in ~25 CPU-s: reports/cpu_physical.md), "
                         "vacask-envelope (the whole processor and its memory as one VACASK netlist, run for "
                         "--max-cycles cycles in one process: reports/cpu_circuit.md)")
     r.add_argument("--max-cycles", type=integer(0, MAX_CPU_CYCLES), default=100_000,

@@ -117,9 +117,10 @@ def write(directory="reports", cycles: int = 0, program: str = "programs/sieve.a
     tracker = Tracker(R.load_program(a.path))
     if a.resume:
         tracker.fast_forward(read_json(a.checkpoint)["cycle"])
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res = _run(a, tracker, out)
-    wall = time.perf_counter() - t0
+    wall, cpu_s = time.perf_counter() - t0, time.process_time() - c0
+    load = "load average %.2f, %.2f, %.2f" % __import__("os").getloadavg()
     golden = R.run_program(a.path, "iss")
     final_same = res["memory"] == golden["memory"] and res["cycles"] == golden["cycles"]
     moments = sieve_moments(tracker.frames) if res["halted"] and a.sieve else []
@@ -132,9 +133,9 @@ def write(directory="reports", cycles: int = 0, program: str = "programs/sieve.a
     primes = [n for n in range(2, 32) if res["memory"][128 + n] == 0] if a.sieve else None
     cmd = _command(a)
     (out / f"{a.name}.md").write_text(_markdown(a, res, tracker, cmd, wall, per_cycle, primes, final_same,
-                                                moments, out))
+                                                moments, out, cpu_s, load))
     summary = {**res, "agree_every_cycle": tracker.agree, "final_memory_equals_iss": final_same,
-               "wall_s": wall, "s_per_cycle": per_cycle, "primes": primes, "command": cmd,
+               "wall_s": wall, "cpu_s": cpu_s, "load": load, "s_per_cycle": per_cycle, "primes": primes, "command": cmd,
                "resumed": a.resume, "machine": f"{HOST}, 2 cores (shared)"}
     write_json(out / f"{a.name}.json", summary, default=None)
     print(out / f"{a.name}.md", f"{wall:.0f} s")
@@ -197,7 +198,8 @@ def _speedups_txt(a: Options) -> str:
     return "; " + ", ".join(parts) + " (docs/latency.md)" if parts else ""
 
 
-def _markdown(a: Options, res, tracker, cmd, wall, per_cycle, primes, final_same, moments, out) -> str:
+def _markdown(a: Options, res, tracker, cmd, wall, per_cycle, primes, final_same, moments, out, cpu_s=None,
+              load="") -> str:
     sieve, rows = a.sieve, tracker.rows
     paper_wall = f" (the paper's sieve run: {PAPER_WALL})" if sieve else ""
     settle_txt = (f"each pause ends once every channel has stayed within {a.settle} u_R for two 200-period "
@@ -219,7 +221,8 @@ commits writes at the clock edge (`mech2spice/cpu/physical.py`). Every cycle is 
 - **{'halted' if res['halted'] else 'did not halt'} after {res['cycles']} cycles**{f" (the paper's sieve: {PAPER_CYCLES} cycles)" if sieve else ""}; {'every cycle identical to the ISS' if tracker.agree else 'DISAGREED with the ISS'};
   final memory {'equal to' if final_same else 'DIFFERENT from'} the golden (ISS) memory.
 {f"- primes left unmarked in 128..159: {primes}" if sieve else ""}
-- **wall time {wall:.0f} s ({wall / 60:.1f} min)**, {per_cycle:.2f} s per cycle on average{paper_wall};
+- **wall time {wall:.0f} s ({wall / 60:.1f} min)**, {per_cycle:.2f} s per cycle on average{paper_wall}
+  (CPU time of the process {cpu_s or 0:.1f} s, ISS comparison included; {load} at the end: the machine was shared);
   {res.get('periods', 0):,} drive periods of processor time, of which
   {res.get('simulated_periods', 0):,} were integrated.
 

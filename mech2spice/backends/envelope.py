@@ -287,6 +287,15 @@ class EnvelopeEngine(Engine):
         """Wall time from the measured rate, without idle skipping (an upper bound for settling runs)."""
         return model.n * batch * periods / self.step(model) * SECONDS_PER_OSCILLATOR_STEP
 
+    def prepare(self, model: MechModel) -> None:
+        """Build what the model caches for this engine (the envelope operator, the compiled loop's arrays,
+        the stability bound, the insulators' propagators): after it, run() only integrates."""
+        step = self.step(model)
+        _check_step(model, step, self.options.exponential)
+        kern = kernel(model) if self.options.compiled else None
+        sub, per = _step_layout(step)
+        _propagators(kern, Envelope.of(model), self.options.exponential, model.period * per / sub)
+
     def step(self, model: MechModel) -> float:
         """The step this engine takes on `model`, in drive periods."""
         return self.options.step_periods or default_step(model, exponential=self.options.exponential)

@@ -4,6 +4,10 @@ The step is held below RK4's stability limit for the fastest envelope rate (`max
 clocked run may skip idle time: a stretch of constant stimulus ends once every channel has settled
 (`settle_tol`).  The compiled loop (_envelope_kernel.py, numba) and the numpy path compute the same
 equations; what each speed-up costs in accuracy is measured in reports/fidelity.md.
+
+Three more options (docs/latency.md): `latency` freezes settled gate blocks until an input moves
+(_envelope_latency.py), `exponential` steps the insulators' linear oscillators exactly (Lawson RK4), which
+lifts the stability bound they set, `parallel` computes the rates on all cores.
 """
 from __future__ import annotations
 

@@ -36,7 +36,7 @@ def _memory_bench(we: int) -> tuple[list[int], dict[int, int]]:
     from mech2spice.spice import memory
     from mech2spice.spice.vacask import run_netlist
     lines = ["memory bench", 'load "m2s_memory.osdi"', "model vsource vsource", "model mem_bit m2s_mem_bit",
-             "model mem_byte m2s_mem_byte", "model mem_read m2s_mem_read", "ground 0"]
+             "model mem_byte m2s_mem_byte tend=5.9", "model mem_read m2s_mem_read", "ground 0"]
     lines += _bus("r", 5, 8) + _bus("w", 5, 8) + _bus("d", 0xA5, 8)
     lines += [f"vwe (wea 0) vsource dc={0.97 if we else 0.5}", "xwe (wea 0 mwe) mem_bit",
               'vwclk (mwclk 0) vsource type="pulse" val0=0 val1=1 delay=1 rise=0.1 fall=0.1 width=2',

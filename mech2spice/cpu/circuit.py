@@ -13,7 +13,7 @@ just before its pulse: registers (latch outputs), raddr, rdata, we, waddr, wdata
 
 `CircuitCPU` (the machine `vacask-envelope`) runs that netlist once for the cycles asked and replays the
 decoded cycles through the Machine interface (cpu/machines.py); the final memory is the circuit's own
-(the byte cells print their bits at the simulator's final step) and is checked against the writes decoded
+(the byte cells print their bits over the run's last half period) and is checked against the writes decoded
 cycle by cycle.  VACASK cannot continue from a saved state, so a run is one simulator process: no resume.
 """
 from __future__ import annotations
@@ -193,7 +193,8 @@ def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_st
     mem_ref = vmem.FILE if standalone else vmem.FILE.replace(".va", ".osdi")
     tran = [f"analysis tran1 tran stop={num(sched.stop * e.T)} step={num(max_step * e.T)} "
             f"maxstep={num(max_step * e.T)} icmode=\"uic\""]
-    head = [f'load "{mem_ref}"', "model mem_bit m2s_mem_bit", "model mem_byte m2s_mem_byte",
+    tend = (sched.stop - 0.5) * e.T          # the cells print the memory over the last half period
+    head = [f'load "{mem_ref}"', "model mem_bit m2s_mem_bit", f"model mem_byte m2s_mem_byte tend={num(tend)}",
             "model mem_read m2s_mem_read"]
     text = e.text(title or f"mech2spice processor, {cycles} cycles", osdi, tran)
     text = text.replace("\nground 0\n", "\nground 0\n" + "\n".join(head) + "\n", 1)
@@ -254,7 +255,7 @@ def simulator_stats(log: str) -> dict:
 
 
 def final_memory(log: str) -> list[int] | None:
-    """The byte cells' bits printed at the final step (the last print per address); None if missing."""
+    """The byte cells' bits printed at the end of the run (the last print per address); None if missing."""
     cells: dict[int, int] = {}
     for m in _DUMP.finditer(log):
         bits = [float(x) for x in m.group(2).split()]

@@ -52,14 +52,15 @@ def modules(p: GateParams = DEFAULT) -> list[str]:
                  f"I(o{b}) <+ -selr*(i{b} + V(s{b}));"]
     addr = " + ".join(f"{1 << b}*a{b}" for b in range(BITS))
     stored = ", ".join(f"i{b} + V(s{b})" for b in range(BITS))
-    # the final memory, read by cpu/circuit.py from the simulator's output (no variable outlives a step)
-    body.append(f'@(final_step) $strobe("m2s_mem %g{" %g" * BITS}", {addr}, {stored});')
-    params = [("tau", p.period, False)] + [(f"a{b}", 0.0, True) for b in range(BITS)] \
+    # the final memory, read by cpu/circuit.py from the simulator's output (no variable outlives a step).
+    # Not @(final_step): VACASK raises that flag at every time point (256 cells x every step: ~1 GB of log)
+    body.append(f'if ($abstime >= tend) $strobe("m2s_mem %g{" %g" * BITS}", {addr}, {stored});')
+    params = [("tau", p.period, False), ("tend", 1e30, False)] + [(f"a{b}", 0.0, True) for b in range(BITS)] \
         + [(f"i{b}", 0.0, True) for b in range(BITS)]
     byte = _module("m2s_mem_byte", [*r, *w, *d, "we", "wclk", *o], s, params, body,
                    "m2s_mem_byte: one memory address: bits i_b + V(s_b), written while V(wclk) V(we) and the\n"
                    "write address select it, read into the sum nodes o_b while the read address selects it;\n"
-                   "prints 'm2s_mem ADDR BITS' at the final step.")
+                   "prints 'm2s_mem ADDR BITS' at the time points from tend on (a model parameter: the run's end).")
     byte = byte.replace("  analog begin", "  real selr, g;\n  analog begin", 1)
     read = _module("m2s_mem_read", ["o", "wclk", "amp"], ["h"],
                    [("tau", p.period, False), ("f0", p.force(NOMINAL0), False), ("f1", p.force(NOMINAL1), False)],

@@ -148,6 +148,34 @@ def _lists(active, blk, mark, frows, srows, rrows, ablk):
 
 
 @njit(cache=True, fastmath=FAST)
+def _relist(active, blk, mark, frows, srows, rrows, ablk, nr_old, na_old):
+    """_lists after some blocks froze, from the previous lists only (O(active), not O(network))."""
+    fp, fi, sp_, si, rp, ri = blk[0], blk[1], blk[2], blk[3], blk[4], blk[5]
+    for q in range(nr_old):
+        mark[rrows[q]] = 0
+    nf = ns = nr = na = 0
+    for q in range(na_old):
+        b = ablk[q]
+        if active[b] == 0:
+            continue
+        ablk[na] = b                      # na <= q: compacts in place
+        na += 1
+        for k in range(fp[b], fp[b + 1]):
+            frows[nf] = fi[k]
+            nf += 1
+        for k in range(sp_[b], sp_[b + 1]):
+            srows[ns] = si[k]
+            ns += 1
+        for k in range(rp[b], rp[b + 1]):
+            r = ri[k]
+            if mark[r] == 0:
+                mark[r] = 1
+                rrows[nr] = r
+                nr += 1
+    return nf, ns, nr, na
+
+
+@njit(cache=True, fastmath=FAST)
 def _append(b, blk, mark, frows, srows, rrows, ablk, nf, ns, nr, na):
     """_lists after block b woke: its rows appended (residual rows not yet listed)."""
     fp, fi, sp_, si, rp, ri = blk[0], blk[1], blk[2], blk[3], blk[4], blk[5]
@@ -362,7 +390,7 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
                     _freeze(A, s, blk, b, At, st, sd, v2, v3, v4)
                 _mark_ref(A, s, Aref, sref, blk, b)
             if froze:
-                nfr, nsr, nr, na = _lists(active, blk, mark, frows, srows, rrows, ablk)
+                nfr, nsr, nr, na = _relist(active, blk, mark, frows, srows, rrows, ablk, nr, na)
                 if na == 0:
                     return n, SETTLED, work_done
         for q in range(nfr):

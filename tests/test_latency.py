@@ -98,3 +98,25 @@ def test_cli_refuses(args, msg):
     r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *args], capture_output=True, text=True)
     assert r.returncode == 2
     assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_exponential_default_step_and_prepare():
+    """With the exponential step the engine's default step rises to 16 periods where its bound allows;
+    prepare() builds the cached operators, after which the run needs no new ones."""
+    from mech2spice.backends import make_engine
+    sc = S.chain_scene()
+    rk4, expo = make_engine("envelope"), make_engine("envelope", EnvelopeOptions(exponential=True))
+    assert rk4.step(sc.model) == envelope.DEFAULT_STEP and expo.step(sc.model) == 16.0
+    expo.prepare(sc.model)
+    cached = set(sc.model.derived)
+    assert {"envelope", "envelope_kernel", "envelope_rate_fast"} <= cached
+    expo.run(sc.model, 100, sc.stimulus)
+    assert set(sc.model.derived) == cached
+
+
+def test_latency_off_parses_to_none():
+    from mech2spice import inputs
+    parse = inputs.number_or_off(0, 1)
+    assert parse("off") == 0.0 and parse("0.1") == 0.1
+    with pytest.raises(Exception, match="'off' or a number"):
+        parse("1")

@@ -130,7 +130,7 @@ def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: i
     recs = [done[i] for i in range(samples) if i in done]
     res = mc.summary(recs, len(design_for(job).gates))
     return {**res, "ran": ran, "resumed": samples - ran, "samples_per_s": ran / max(time.time() - t_run, 1e-9),
-            "steady_samples_per_s": steady_rate(_ARRIVALS),
+            "steady_samples_per_s": steady_rate(_ARRIVALS, stats["workers"]),
             "wall_s": wall, "driver_peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             **stats, "out": str(out)}
 
@@ -138,12 +138,14 @@ def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: i
 _ARRIVALS: list = []           # (time, records) per task streamed in this run: the steady throughput
 
 
-def steady_rate(arrivals: list) -> float | None:
-    """Samples per second from the first task's arrival to the last: the throughput without the cluster's
-    start (worker processes, synthesis, compiled-kernel loading); None with fewer than two tasks."""
-    if len(arrivals) < 2:
+def steady_rate(arrivals: list, workers: int = 1) -> float | None:
+    """Samples per second after every worker's first task (from the workers-th arrival to the last): the
+    throughput without the cluster's start (worker processes, synthesis, compiled-kernel loading); None
+    with too few tasks."""
+    w = max(int(workers), 1)
+    if len(arrivals) <= w:
         return None
-    return sum(n for _, n in arrivals[1:]) / max(arrivals[-1][0] - arrivals[0][0], 1e-9)
+    return sum(n for _, n in arrivals[w:]) / max(arrivals[-1][0] - arrivals[w - 1][0], 1e-9)
 
 
 def _stream(fh, records, done, bar, n, stop_after) -> None:

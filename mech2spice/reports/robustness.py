@@ -36,7 +36,7 @@ VERILOG = {
 NOISE_TS = (1e-5, 3e-5, 6e-5, 1e-4, 1.5e-4, 2e-4, 3e-4, 5e-4, 1e-3)   # k_B T, model energy units
 NOISE_SAMPLES = {"gate": 200, "adder": 48}
 QUICK_NOISE_SAMPLES = {"gate": 8, "adder": 4}
-RK4_NOISE = ("gate", NOISE_TS, 40)       # the gate's BER on RK4 too: design, temperatures, samples
+RK4_NOISE = ("gate", NOISE_TS, 100)      # the gate's BER on RK4 too: design, temperatures, samples
 
 
 def design_file(name: str) -> Path:

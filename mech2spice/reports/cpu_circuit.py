@@ -204,12 +204,14 @@ def _markdown(data: dict, diffs: list[float]) -> str:
         f"(device evaluation {st.get('eval_s', 0):.0f} s, refactorisation {st.get('refactor_s', 0):.0f} s, "
         f"solves {st.get('solve_s', 0):.0f} s of {st.get('newton_s', 0):.0f} s).",
     ]
+    if c.get("note"):
+        lines.append(f"- note: {c['note']}.")
     if diffs:
         worst = max(diffs)
         lines.append(f"- against the envelope engine (step 2, full pauses, {data['envelope']['wall_s']:.0f} s): "
                      f"worst amplitude difference per cycle {min(diffs):.4f}..{worst:.4f} u_R over "
                      f"{len(diffs)} samples ({'within' if worst <= TARGET else 'ABOVE'} the {TARGET} u_R target).")
-    lines += _settings_md(data) + _profile_md(data)
+    lines += _settings_md(data) + _profile_md(data) + _gap_md(data)
     lines += ["\n![time step and amplitude difference per cycle](cpu_circuit.png)\n", "## Every cycle\n",
               "| cycle | pc | instruction | raddr | rdata | we | waddr | wdata | = ISS | time points | "
               "max amp diff (u_R) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -227,7 +229,8 @@ def summary(c: dict, env: dict | None) -> dict:
     points = np.array(c["points_per_cycle"], float)
     diffs = amplitude_differences(c, env) if env else []
     per_cycle = c["simulator_wall_s"] / c["cycles"]        # the reset is charged to the cycles (conservative)
-    return {"setting": f"max step {c['max_step']:g} T, reltol {c['reltol']:g}, settle {s['settle']}",
+    flag = " (print overhead: see the note)" if c.get("note") else ""
+    return {"setting": f"max step {c['max_step']:g} T, reltol {c['reltol']:g}, settle {s['settle']}{flag}",
             "cycles": c["cycles"], "same": sum(r["same"] for r in c["rows"]), "rows": len(c["rows"]),
             "max_diff": max(diffs) if diffs else None, "mean_step": (s["settle"] + s["pulse"]) / points.mean(),
             "points_per_cycle": points.mean(), "newton_per_point": st["newton_iterations"] / st["accepted"],
@@ -270,6 +273,22 @@ def _profile_md(data: dict) -> list[str]:
                      f"{r['newton_iterations']:.0f} | {r['newton_s']:.1f} | {r['eval_s']:.1f} | "
                      f"{r['refactor_s']:.1f} | {r['solve_s']:.1f} | {r['wall_s']:.1f} |")
     return lines
+
+
+def _gap_md(data: dict) -> list[str]:
+    """The sieve in an hour: what the fastest measured setting that kept every cycle lacks."""
+    runs = [summary(c, data.get("envelope")) for c in [data["circuit"], *data.get("settings", {}).values()]
+            if not c.get("note")]
+    good = [r for r in runs if r["same"] == r["rows"] == r["cycles"]]
+    if not good:
+        return []
+    best = min(good, key=lambda r: r["s_per_cycle"])
+    need = 3600 / SIEVE_CYCLES
+    return ["\n## The sieve to its halt\n",
+            f"Not run: the fastest setting that kept every cycle equal to the ISS ({best['setting']}) costs "
+            f"{best['s_per_cycle']:.1f} s per cycle here, {best['sieve_h']:.1f} h for the sieve's {SIEVE_CYCLES} "
+            f"cycles; an hour allows {need:.1f} s per cycle, {best['s_per_cycle'] / need:.1f}x less. What would "
+            "close the gap: docs/cpu_circuit.md."]
 
 
 def _iss_memory_after(cycles: int) -> list[int]:

@@ -229,11 +229,13 @@ def library(p: GateParams = DEFAULT) -> dict[str, str]:
 
 
 def write_library(directory, p: GateParams = DEFAULT) -> list[Path]:
-    """Write the .va files into `directory` (created); returns their paths, sorted."""
+    """Write the .va files (both libraries and the processor's memory) into `directory` (created); returns
+    their paths, sorted."""
+    from . import memory                  # the processor's memory (spice/memory.py), checked in beside them
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     out = []
-    for name, text in sorted(library(p).items()):
+    for name, text in sorted({**library(p), memory.FILE: memory.library(p)}.items()):
         path = d / name
         path.write_text(text, encoding="ascii", newline="\n")
         out.append(path)

@@ -287,7 +287,8 @@ def noise_figure(noise: dict, path: Path) -> None:
     ax.set_ylabel("bit-error rate (output bits read wrong)")
     top = ax.secondary_xaxis("top", functions=(lambda t: t * SCALE.kelvin(1.0, _default()), lambda k: k / SCALE.kelvin(1.0, _default())))
     top.set_xlabel(f"kelvin ({SCALE.describe()})")
-    ax.set_title(f"spread 0, seed {SEED}, envelope (and rk4) engine; v: no error, 95 % upper bound", fontsize=8)
+    ax.set_title(f"spread 0, seed {SEED}; envelope (1-period steps) and rk4 (80 steps/period); {MACHINE}\n"
+                 "v: no error seen, the 95 % upper bound", fontsize=7, pad=30)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     save_figure(fig, path)
@@ -405,8 +406,8 @@ def clocked_section(d: dict) -> list[str]:
     out = ["## Clocked designs: sqrt(2809) and the processor", "",
            "`mech2spice montecarlo verilog/sqrt.v --stimulus verilog/sqrt_2809.json --spread S` (7 clock cycles, every "
            "cycle's outputs against the clocked logic oracle) and `mech2spice cpu montecarlo programs/sieve.asm "
-           f"--cycles {CPU_CYCLES} --spread S` (every cycle's pc, phase, addresses, data and write enable against the "
-           "instruction-set simulator; the memory's data forces and the clock/reset drives stay nominal, every "
+           f"--cycles {CPU_CYCLES} --spread S` (every cycle's pc, phase, read address and data, write enable, and write "
+           "address and data where it writes, against the instruction-set simulator; the memory's data forces and the clock/reset drives stay nominal, every "
            "element of the oscillator network is spread). Envelope engine at the defaults (sqrt: 4-period steps; "
            "the processor: 8-period steps, settle 0.1 u_R). **Small samples**: each processor sample costs ~30-60 s "
            "here, so the intervals are wide; no per-gate rate is measured on clocked runs (only outputs are kept).", ""]
@@ -468,8 +469,10 @@ def throughput(d: dict) -> list[str]:
                 f"{s['steady_samples_per_s'] or float('nan'):.2f} | {s['worker_peak_rss_mb']:.0f} |" for s in am]
         steady = (b["steady_samples_per_s"] or float("nan")) / (a["steady_samples_per_s"] or float("nan"))
         out += ["", f"Speed-up 1 -> 2 workers: {b['samples_per_s'] / a['samples_per_s']:.2f}x overall, "
-                f"{steady:.2f}x after the first task. A second worker can only add what the second core has free: "
-                "with a load average near 2 or above on 2 cores there is none to add.", ""]
+                f"{steady:.2f}x after every worker's first task. The difference is the cluster's start (worker "
+                "processes, each synthesising the adder and loading the compiled kernels, slow under this load); "
+                "after it a second worker process added its share of a machine whose cores the OS divides among "
+                "every runnable process of every session.", ""]
     big = d["big"]
     if big:
         lo, hi = big["yield_ci95"]

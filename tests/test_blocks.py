@@ -112,3 +112,13 @@ def test_non_classic_block_emits_dof_by_dof_and_ngspice_matches_rk4(x1):
     a, b = ref.amp[-20:].mean(axis=0), got.amp[-20:].mean(axis=0)
     assert np.abs(np.abs(a) - np.abs(b)).max() < 0.01 * p.u_r
     assert np.abs(np.degrees(np.angle(b / a))).max() < 2.0
+
+
+def test_coupled_block_steady_outputs_agree_with_the_scan_on_the_classic_gate():
+    from mech2spice.experiments import characterise
+    x1, x2 = np.array([0.5, 0.97, 0.5, 0.97]), np.array([0.5, 0.5, 0.97, 0.97])
+    ref = characterise.steady_outputs(DEFAULT, x1, x2)
+    got = characterise._coupled_steady_outputs(DEFAULT, x1, x2)
+    for a, b in zip(ref, got):
+        assert len(a) == len(b) and all(abs(u - v) < 1e-9 and s == t for (u, s), (v, t) in zip(a, b))
+    assert characterise.steady_outputs(buffer_block(), x1, x2)[0]      # a coupled block: no error

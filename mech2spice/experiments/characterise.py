@@ -49,8 +49,25 @@ def gate_forcing(p: GateParams, x1: np.ndarray, x2: np.ndarray) -> tuple[Envelop
 def steady_outputs(p: GateParams, x1, x2) -> list[list[tuple[float, bool]]]:
     """For each input pair: [(channel amplitude in u_R, stable)] over all steady states."""
     env, F, ch = gate_forcing(p, x1, x2)
+    if env.slow.size == 1 and not env.diagonal:       # a block with internal couplings (physics/blocks.py)
+        return _coupled_steady_outputs(p, x1, x2)
     return [[(abs(s.A[ch]) / p.u_r, s.stable) for s in steady.steady_states(env, F[:, b])]
             for b in range(F.shape[1])]
+
+
+def _coupled_steady_outputs(p: GateParams, x1, x2) -> list[list[tuple[float, bool]]]:
+    """steady_outputs for a block whose oscillators are coupled inside it: the batched all-roots scan
+    (physics/steady_batch.py, coupled fast DOFs, one insulator) over every input pair at once."""
+    from ..physics import steady_batch
+    m = nor.single_gate(p, 1.0, 1.0)
+    groups = np.zeros(len(m.drives), int)
+    for k, drives in enumerate(m.design.input_drives):
+        groups[list(drives)] = k + 1
+    x1, x2 = np.atleast_1d(x1).astype(float), np.atleast_1d(x2).astype(float)
+    r = steady_batch.roots(steady_batch.stack([m], groups, m.probes["g0"]), 0,
+                           np.stack([np.ones_like(x1), x1, x2], axis=1))
+    return [[(a / p.u_r, bool(ok)) for a, ok in zip(r.amp[r.point == k], r.stable[r.point == k])]
+            for k in range(x1.size)]
 
 
 def steady_map(p: GateParams, n: int = 61, lo: float = 0.2, hi: float = 1.15):

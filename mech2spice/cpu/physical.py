@@ -31,8 +31,8 @@ from .memory import Memory
 from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
 
 PHYSICAL = ("envelope", "rk4")   # engines that continue from a state, so a cycle can follow the last
-# The defaults: 0.0098 u_R from the full envelope at step 2 over the first 30 sieve cycles, 6.6x faster than
-# step 8 + settle alone (reports/fidelity.md; latency 0.2 was 0.042 u_R: over the 0.02 bound)
+# The defaults: 0.0098 u_R from the full envelope at step 2 over the first 30 sieve cycles, 7.2x faster than
+# step 8 + settle alone (reports/fidelity.md; latency 0.2: 0.042 u_R, over the 0.02 bound; step 20: slower)
 PROCESSOR_STEP = 16.0   # envelope periods with the exponential step (its bound: 27.5)
 RK4_PROCESSOR_STEP = 8.0   # the step without it (RK4's bound: 15.1 periods)
 SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fidelity.md)

@@ -46,7 +46,8 @@ SETTINGS = [("reference: step 2, full pauses", 2.0, None, None, False, False),
             ("step 12, settle 0.1", 12.0, 0.1, None, False, False),
             ("step 16, settle 0.1, exponential", 16.0, 0.1, None, True, False),
             ("step 16, settle 0.1, exponential, latency 0.1", 16.0, 0.1, 0.1, True, False),
-            ("step 16, settle 0.1, exponential, latency 0.2", 16.0, 0.1, 0.2, True, False)]
+            ("step 16, settle 0.1, exponential, latency 0.2", 16.0, 0.1, 0.2, True, False),
+            ("step 20, settle 0.1, exponential, latency 0.1", 20.0, 0.1, 0.1, True, False)]
 
 
 def run_setting(prog, cycles: int, step: float, settle, latency=None, exponential=False, parallel=False) -> dict:

@@ -52,7 +52,7 @@ REPORTS: dict[str, Report] = {
     "design": Report("automated block design: the structures searched, tolerance/margin/delay/energy Pareto "
                      "front, what limits each, the best block on the adder, sqrt and the sieve (needs "
                      "`mech2spice design`)", "~20 min", ("design.md", "design.json", "design_pareto.png"),
-                     ("skip_slow",)),
+                     ("skip_slow", "render")),
 }
 
 

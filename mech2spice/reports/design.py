@@ -145,8 +145,9 @@ def plot_pareto(figs: dict, path: Path, machine: str) -> None:
     save_figure(fig, path)
 
 
-def write(directory="reports", skip_slow: bool = False, search: str | None = None) -> Path:
-    """Write design.md and design_pareto.png from the search record; cache slow results in design.json."""
+def write(directory="reports", skip_slow: bool = False, render: bool = False, search: str | None = None) -> Path:
+    """Write design.md and design_pareto.png from the search record; cache slow results in design.json
+    (render=True: measure nothing, use what the cache holds)."""
     d = out_dir(directory)
     log = lambda msg: print(f"[design] {msg}", file=sys.stderr, flush=True)   # noqa: E731
     rec = read_json(Path(search) if search else SEARCH)
@@ -156,25 +157,26 @@ def write(directory="reports", skip_slow: bool = False, search: str | None = Non
     cache = read_json(cache_path, {})
     figs = cache.setdefault("blocks", {})
     for name, p in blocks(rec).items():
-        if name not in figs:
+        if name not in figs and not render:
             log(f"block {name}")
             figs[name] = block_figures(name, p, rec["structures"].get(name), log)
             write_json(cache_path, cache)
     checks = cache.setdefault("checks", {})
     for name, argv in CHECKS.items():
-        if name not in checks and not (skip_slow and name in SLOW):
+        if name not in checks and not (skip_slow and name in SLOW) and not render:
             log(f"check {name}: mech2spice {' '.join(argv)}")
             checks[name] = run_check(argv)
             write_json(cache_path, cache)
     from ..physics.params import load_params
     for backend in ("rk4", "envelope"):
         key = f"robust_adder_{backend}"
-        if key not in checks:
+        if key not in checks and not render:
             log(f"check {key}")
             checks[key] = adder_check(load_params("robust"), backend)
             write_json(cache_path, cache)
     cache["machine"] = cache.get("machine", MACHINE)
     write_json(cache_path, cache)
+    figs = {n: f for n, f in figs.items() if n in blocks(rec)}
     plot_pareto(figs, d / "design_pareto.png", cache["machine"])
     md = d / "design.md"
     md.write_text(render(rec, figs, checks, cache["machine"]))

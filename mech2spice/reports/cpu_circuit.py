@@ -244,7 +244,8 @@ def _settings_md(data: dict) -> list[str]:
     env = data.get("envelope")
     lines = ["\n## Settings: accuracy against cost\n",
              f"Each row one VACASK run of the sieve's first cycles ({runs[0]['machine']}; wall times are of a "
-             "machine shared with other jobs, so the per-cycle costs compare only roughly). *max amp diff*: the "
+             "machine shared with other jobs: time points and Newton iterations per cycle do not depend on the load, "
+             "ms per point and s per cycle do, and the load changed between the runs). *max amp diff*: the "
              "worst amplitude difference of any probe at any sample against the envelope engine; *sieve*: the "
              f"wall time per cycle (reset included) times the sieve's {SIEVE_CYCLES} cycles.\n",
              "| setting | cycles = ISS | max amp diff (u_R) | mean step (T) | points / cycle | Newton it. / point "

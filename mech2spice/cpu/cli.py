@@ -86,7 +86,7 @@ def circuit_args(parser) -> None:
     parser.add_argument("--max-step", type=number(0), default=None, metavar="PERIODS",
                         help=f"vacask-envelope: VACASK's largest time step in drive periods (default {MAX_STEP:g})")
     parser.add_argument("--reltol", type=number(0), default=None, metavar="TOL",
-                        help="vacask-envelope: VACASK's relative tolerance (default 1e-3; it sets the time step: "
+                        help="vacask-envelope: VACASK's relative tolerance (default 1e-2; it sets the time step: "
                              "reports/cpu_circuit.md)")
     parser.add_argument("--settle-periods", type=integer(1, 10**6), default=None, metavar="N",
                         help="vacask-envelope: periods each cycle settles before its clock pulse (default one "

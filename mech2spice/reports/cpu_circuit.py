@@ -247,7 +247,9 @@ def _settings_md(data: dict) -> list[str]:
              "machine shared with other jobs: time points and Newton iterations per cycle do not depend on the load, "
              "ms per point and s per cycle do, and the load changed between the runs). *max amp diff*: the "
              "worst amplitude difference of any probe at any sample against the envelope engine; *sieve*: the "
-             f"wall time per cycle (reset included) times the sieve's {SIEVE_CYCLES} cycles.\n",
+             f"wall time per cycle (reset included) times the sieve's {SIEVE_CYCLES} cycles. The first row is the "
+             "main run; the others: `python -m mech2spice.reports.cpu_circuit --only setting --cycles N "
+             "--max_step P --reltol TOL`.\n",
              "| setting | cycles = ISS | max amp diff (u_R) | mean step (T) | points / cycle | Newton it. / point "
              "| ms / point | device eval share | s / cycle | sieve (h) |", "|---|---|---|---|---|---|---|---|---|---|"]
     for c in runs:
@@ -264,7 +266,8 @@ def _profile_md(data: dict) -> list[str]:
     if not pr:
         return []
     lines = ["\n## Profile: the memory's share\n",
-             f"The reset and one cycle (max step {pr['max_step']:g} T, reltol {pr['reltol']:g}), one run each "
+             f"The reset and one cycle (max step {pr['max_step']:g} T, reltol {pr['reltol']:g}; `--only profile`), "
+             "one run each "
              f"({pr['machine']}):\n", "| netlist | unknowns | nonzeros | time points | Newton iterations | "
              "Newton time (s) | device eval (s) | refactorisation (s) | solves (s) | wall (s) |",
              "|---|---|---|---|---|---|---|---|---|---|"]

@@ -99,7 +99,7 @@ def test_bad_input(tmp_path):
 @pytest.mark.slow
 def test_emitted_processor_runs_standalone_and_matches_the_iss(tmp_path, capsys):
     """`cpu emit` -> `vacask` alone (the Verilog-A embedded) -> its first 2 cycles decode to the ISS's
-    (136 s on the shared 2-core machine)."""
+    (31-136 s on the shared 2-core machine, by its load)."""
     exe, _ = _vacask()
     from mech2spice.cpu.circuit import CircuitCPU, emit_cpu
     from mech2spice.cpu.iss import ISS

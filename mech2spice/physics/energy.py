@@ -12,7 +12,7 @@ and in steady state P equals the power the drives put in, sum_d 1/2 Re(conj(F_d)
 that of another (RK4 run); its energy is the integral of P(t) from the input step until the output
 stays inside its new band (the delay), and `excess_over_final` the integral of P(t) minus the final
 steady P over the whole transient (negative when the gate dissipates less on the way).  Physical scaling (`Scaling`): model units are mapped to a resonator by a frequency, the
-channel's effective mass and the displacement u_R stands for; energies compared with kT ln 2.
+source-driven channel's effective mass and the displacement u_R stands for; energies compared with kT ln 2.
 """
 from __future__ import annotations
 
@@ -68,20 +68,22 @@ def steady_amplitudes(model: MechModel) -> list[tuple[np.ndarray, float, bool]]:
 
 @dataclass(frozen=True)
 class Scaling:
-    """Model units -> SI: the drive frequency, the effective mass of the output DOF, the displacement u_R."""
+    """Model units -> SI: the drive frequency, the effective mass of the source-driven channel (the same
+    resonator for every block), the displacement u_R stands for."""
     frequency_hz: float = 1e6
-    output_mass_kg: float = 1e-12        # a ~ (50 um)^3 silicon resonator's effective mass
+    channel_mass_kg: float = 1e-12       # a ~ (50 um)^3 silicon resonator's effective mass
     u_r_m: float = 10e-9                 # u_R stands for 10 nm of output amplitude
 
-    def energy_unit(self, model: MechModel, output_mass: float, u_r: float) -> float:
+    def energy_unit(self, model: MechModel, channel_mass: float, u_r: float) -> float:
         """Joules per model energy unit: mass scale x length scale^2 / time scale^2."""
-        mass = self.output_mass_kg / output_mass
+        mass = self.channel_mass_kg / channel_mass
         length = self.u_r_m / u_r
         time = model.omega / (2 * math.pi * self.frequency_hz)
         return mass * length ** 2 / time ** 2
 
     def describe(self) -> str:
-        return (f"{self.frequency_hz / 1e6:g} MHz drive, output DOF effective mass {self.output_mass_kg:.0e} kg, "
+        return (f"{self.frequency_hz / 1e6:g} MHz drive, channel (source DOF) effective mass "
+                f"{self.channel_mass_kg:.0e} kg, "
                 f"u_R = {self.u_r_m * 1e9:g} nm")
 
 
@@ -115,7 +117,7 @@ def gate_energy(p, scaling: Scaling = Scaling(), transient_periods: int = 3000, 
     s_dot_full[slow] = np.moveaxis(s_dot, 1, 0)
     P = dissipated_power(m, A, s_dot_full)              # (P, B)
     out_row = names.index(m.names[m.probes["g0"]])
-    unit = scaling.energy_unit(m, p.structure.dof(p.structure.output).m, p.u_r)
+    unit = scaling.energy_unit(m, p.structure.dof(p.structure.source).m, p.u_r)
     events = {}
     for b, (a, z) in enumerate(seq):
         p_after = P[-20:, b].mean()

@@ -179,7 +179,7 @@ def write(directory="reports", skip_slow: bool = False, render: bool = False, se
     figs = {n: f for n, f in figs.items() if n in blocks(rec)}
     plot_pareto(figs, d / "design_pareto.png", cache["machine"])
     md = d / "design.md"
-    md.write_text(render(rec, figs, checks, cache["machine"]))
+    md.write_text(markdown(rec, figs, checks, cache["machine"]))
     return md
 
 
@@ -187,7 +187,7 @@ def _fmt(x, f="{:.3g}"):
     return "-" if x is None else f.format(x)
 
 
-def render(rec: dict, figs: dict, checks: dict, machine: str) -> str:
+def markdown(rec: dict, figs: dict, checks: dict, machine: str) -> str:
     """The markdown of design.md."""
     from ..physics.energy import Scaling
     s = rec["settings"]

@@ -124,6 +124,7 @@ def plot_pareto(figs: dict, path: Path, machine: str) -> None:
     fig, axs = plt.subplots(1, 4, figsize=(15, 4), sharey=True)
     keys = (("nominal_margin", "nominal worst margin (band widths)"), ("delay_periods", "switching delay (periods)"),
             ("energy_per_period", "energy per drive period, '00' (model units)"), ("dofs_per_gate", "DOFs per gate"))
+    colour = {name: f"C{k}" for k, name in enumerate(figs)}        # one colour per block in every panel
     for ax, (key, label) in zip(axs, keys):
         for name, f in figs.items():
             tol, x = f["tolerance"], f.get(key)
@@ -131,7 +132,7 @@ def plot_pareto(figs: dict, path: Path, machine: str) -> None:
                 continue
             y = tol if tol else 1e-8
             mk = {"default": "s", "printed": "X"}.get(name, "o")
-            ax.scatter([x], [y], marker=mk, s=60 if name in ("default", "printed") else 40,
+            ax.scatter([x], [y], marker=mk, s=60 if name in ("default", "printed") else 40, color=colour[name],
                        label=name if ax is axs[0] else None)
             ax.annotate(name, (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
         ax.set_yscale("log")
@@ -139,8 +140,9 @@ def plot_pareto(figs: dict, path: Path, machine: str) -> None:
         ax.grid(alpha=0.3)
     axs[0].set_ylabel("tolerance: largest sigma with >= 99 % yield\n(1e-8: none, nominal fails)")
     axs[0].axhline(0.01, color="k", lw=0.5, ls="--")
-    fig.suptitle(f"Blocks searched by `mech2spice design`: loaded gate, steady-state scan, {TOL_SAMPLES}-sample "
-                 f"bisection; delay/energy from RK4 (40 steps/period) on a free-standing gate; {machine}", fontsize=9)
+    fig.suptitle(f"Blocks searched by `mech2spice design`: tolerance of the loaded gate (steady-state scan, "
+                 f"{TOL_SAMPLES}-sample bisection); delay and energy from RK4 (40 steps/period) on a free-standing "
+                 f"gate\n{machine}; dashed: the issue's aim (1 %)", fontsize=9)
     axs[0].legend(fontsize=7)
     save_figure(fig, path)
 

@@ -73,8 +73,8 @@ def curve(name: str, samples: int, scheduler: str, log) -> list[dict]:
     return rows
 
 
-CLOCKED_SIGMAS = {"sqrt": (3e-5, 1e-4, 2e-4), "processor": (3e-5, 6e-5, 1e-4)}
-CLOCKED_SAMPLES = {"sqrt": 12, "processor": 3}
+CLOCKED_SIGMAS = {"sqrt": (3e-5, 6e-5, 1e-4, 2e-4), "processor": (3e-5, 6e-5, 8e-5, 1e-4)}
+CLOCKED_SAMPLES = {"sqrt": 12, "processor": 8}
 QUICK_CLOCKED_SAMPLES = {"sqrt": 2, "processor": 1}
 CPU_PROGRAM, CPU_CYCLES = "sieve.asm", 30
 
@@ -403,14 +403,19 @@ def agreement_section(a: dict) -> list[str]:
 
 def clocked_section(d: dict) -> list[str]:
     """sqrt(2809) and the processor: yield with Wilson intervals (small sample counts, stated)."""
+    from .. import simulation
+    from ..cpu import physical as cpu_physical
     out = ["## Clocked designs: sqrt(2809) and the processor", "",
            "`mech2spice montecarlo verilog/sqrt.v --stimulus verilog/sqrt_2809.json --spread S` (7 clock cycles, every "
            "cycle's outputs against the clocked logic oracle) and `mech2spice cpu montecarlo programs/sieve.asm "
            f"--cycles {CPU_CYCLES} --spread S` (every cycle's pc, phase, read address and data, write enable, and write "
            "address and data where it writes, against the instruction-set simulator; the memory's data forces and the clock/reset drives stay nominal, every "
-           "element of the oscillator network is spread). Envelope engine at the defaults (sqrt: 4-period steps; "
-           "the processor: 8-period steps, settle 0.1 u_R). **Small samples**: each processor sample costs ~30-60 s "
-           "here, so the intervals are wide; no per-gate rate is measured on clocked runs (only outputs are kept).", ""]
+           "element of the oscillator network is spread). Envelope engine at the defaults (sqrt: the envelope "
+           f"engine's default step (4 periods on sqrt), settle {simulation.CLOCKED_SETTLE_TOL} u_R; the processor: cpu/physical.py's "
+           f"{cpu_physical.PROCESSOR_STEP:g}-period steps, exponential insulator step {cpu_physical.EXPONENTIAL}, "
+           f"settle {cpu_physical.SETTLE_TOL} u_R, latency {cpu_physical.LATENCY} u_R). **Small samples**: a sample "
+           "builds and powers up its own 6486-oscillator processor (tens of seconds here), so the intervals are "
+           "wide; no per-gate rate is measured on clocked runs (only outputs are kept).", ""]
     for name, rows in d["clocked"].items():
         out += [f"### {name}", "", "| sigma | samples | failures | yield | 95 % CI (Wilson) | failing (samples) |",
                 "|---|---|---|---|---|---|"]

@@ -275,10 +275,15 @@ def render_checks(checks: dict) -> list[str]:
             continue
         j = c["json"]
         t = j.get("tolerance", {})
-        out.append(f"- `mech2spice {' '.join(c['argv'])}`: yield {j.get('yield')} (95 % {j.get('yield_ci95')}), "
-                   f"margin quantiles {json.dumps({k: round(v, 4) for k, v in j.get('margin_quantiles', {}).items()})}, "
-                   f"tolerance {t.get('sigma')} (bracket {t.get('bracket')}), nominal margin "
-                   f"{j.get('nominal_margin')}; {c['wall_s']:.0f} s")
+        if "yield" not in j:
+            out.append(f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, {j}")
+            continue
+        lo, hi = j["yield_ci95"]
+        out.append(f"- `mech2spice {' '.join(c['argv'])}`: yield {j['yield']:.3f} ({j['samples']} samples, 95 % "
+                   f"Wilson {lo:.4f} .. {hi:.4f}), margin quantiles "
+                   f"{json.dumps({k: round(v, 3) for k, v in j['margin_quantiles'].items()})}, tolerance "
+                   f"{_fmt(t.get('sigma'))} (bracket {' .. '.join(_fmt(b) for b in t.get('bracket', []))}), nominal "
+                   f"margin {j['nominal_margin']:+.4f}; {c['wall_s']:.0f} s on the loaded machine")
     c = checks.get("robust_gate")
     if c:
         req = c["json"].get("requirements", {})

@@ -39,3 +39,31 @@ def test_design_resumes_without_redoing_a_finished_structure(tmp_path, monkeypat
 def test_unknown_structure_is_one_line():
     with pytest.raises(Mech2SpiceError, match="unknown structure"):
         search.run(["triangle"], None, TINY)
+
+
+def _record(tolerance, margin=0.02, budget=200.0, **settings):
+    rec = {"score": -5.0, "parameters": {}, "measured": {"nominal_margin": margin, "tolerance": tolerance,
+                                                        "tolerance_bracket": [tolerance, tolerance]},
+           "search": {"budget_s": budget, "generations": 1, "evaluations": 10, "wall_s": budget}}
+    return {"settings": {**TINY, **settings}, "structures": {"classic": rec}}
+
+
+def test_merge_keeps_the_larger_tolerance_and_lists_every_run(tmp_path):
+    out, worse, better = tmp_path / "out.json", tmp_path / "worse.json", tmp_path / "better.json"
+    out.write_text(json.dumps(_record(2e-6)))
+    worse.write_text(json.dumps(_record(1e-6, budget=900.0)))
+    better.write_text(json.dumps(_record(3e-6, budget=900.0)))
+    kept = search.merge(out, [worse])["structures"]["classic"]
+    assert kept["measured"]["tolerance"] == 2e-6 and kept["source"] == str(out)
+    won = search.merge(out, [better])["structures"]["classic"]
+    assert won["measured"]["tolerance"] == 3e-6 and won["source"] == str(better)
+    assert [r["tolerance"] for r in won["runs"]] == [2e-6, 1e-6, 3e-6]
+    assert json.loads(out.read_text())["structures"]["classic"]["search"]["budget_s"] == 900.0
+
+
+def test_merge_refuses_tolerances_from_another_bisection(tmp_path):
+    out, other = tmp_path / "out.json", tmp_path / "other.json"
+    out.write_text(json.dumps(_record(2e-6)))
+    other.write_text(json.dumps(_record(3e-6, tol_samples=1000)))
+    with pytest.raises(Mech2SpiceError, match="tol_samples"):
+        search.merge(out, [other])

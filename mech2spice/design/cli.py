@@ -1,7 +1,6 @@
 """`mech2spice design`: the block-structure search (design/search.py), resumable from its checkpoint."""
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -19,7 +18,7 @@ def add_parser(subparsers) -> None:
                     "differential evolution on its tolerance: the largest spread at which the 1st-percentile "
                     "worst margin of the loaded gate stays > 0 (nominal truth table, bands and stable steady "
                     "states as constraints), then measure the best point's yield at SIGMA and its tolerance "
-                    "(largest sigma with >= 99 %% yield) on more samples. "
+                    "(largest sigma with >= 99 % yield) on more samples. "
                     "Each finished structure is checkpointed to --out; a rerun with the same settings resumes.")
     s.add_argument("--structures", default=",".join(STRUCTURES), metavar="A,B,...",
                    help=f"structures to search (default all: {','.join(STRUCTURES)})")
@@ -34,6 +33,9 @@ def add_parser(subparsers) -> None:
     s.add_argument("--budget-s", type=inputs.number(0), default=300.0,
                    help="wall-clock budget of each structure's search in seconds (300)")
     s.add_argument("--out", default=DEFAULT_OUT, help=f"checkpoint / result file (default {DEFAULT_OUT})")
+    s.add_argument("--merge", nargs="+", metavar="FILE",
+                   help="search nothing: merge these records of other runs into --out (per structure the run with "
+                        "the larger tolerance wins; every run is listed under the entry's 'runs')")
     s.add_argument("--install-robust", action="store_true",
                    help="write the best block to the package's blocks/robust.json (--params robust)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
@@ -47,7 +49,12 @@ def cmd_design(args) -> int:
     settings = {"sigma": args.sigma, "samples": args.samples, "seed": args.seed, "maxiter": args.maxiter,
                 "popsize": args.popsize, "budget_s": args.budget_s, "tol_samples": args.tol_samples}
     structures = [s.strip() for s in args.structures.split(",") if s.strip()]
-    state = search.run(structures, Path(args.out), settings, _log(args), progress=not args.json and sys.stderr.isatty())
+    if args.merge:
+        state = search.merge(Path(args.out), [Path(f) for f in args.merge], _log(args))
+        settings = state["settings"]
+    else:
+        state = search.run(structures, Path(args.out), settings, _log(args),
+                           progress=not args.json and sys.stderr.isatty())
     out = search.summary(state)
     if args.install_robust and out["best"]:
         from .. import data

@@ -97,7 +97,7 @@ def search_structure(name: str, samples: int, seed: int, maxiter: int, popsize: 
     st = grammar.Structure(name)
     obj = Objective(st, samples, seed)
     bounds = list(st.bounds.values())
-    t0 = time.time()
+    t0, load0 = time.time(), os.getloadavg()[0]
     x0, repair = repaired_seed(obj, grammar.x_default(name), bounds)
     log(f"{name}: seed score {repair['seed_score']:+.3f}, after repair {repair['score']:+.3f} "
         f"({repair['evaluations']} evaluations)")
@@ -120,6 +120,7 @@ def search_structure(name: str, samples: int, seed: int, maxiter: int, popsize: 
                        "popsize": popsize, "budget_s": budget_s, "evaluations": obj.evaluations,
                        "rejected_candidates": obj.errors,
                        "generations": int(res.nit), "wall_s": wall, "stopped": res.message,
+                       "loadavg_1min": [load0, os.getloadavg()[0]],          # at the start and the end
                        "objective": {"score": "log10 of the largest ladder sigma with q1 > 0, interpolated",
                                      "ladder": [float(v) for v in LADDER], "samples": samples,
                                      "quantile": "1%", **SEARCH_GRID},
@@ -255,3 +256,42 @@ def summary(state: dict) -> dict:
                                "yield": r["measured"]["yield"], "margin_quantiles": r["measured"]["margin_quantiles"],
                                "dofs_per_gate": r["measured"]["dofs_per_gate"], "search": r["search"]}
                            for n, r in state["structures"].items()}}
+
+
+def run_summary(rec: dict, source: str) -> dict:
+    """One search run of a structure, as listed under its entry's "runs" in a merged record."""
+    srch, m = rec["search"], rec["measured"]
+    return {"source": source, "budget_s": srch["budget_s"], "generations": srch["generations"],
+            "evaluations": srch["evaluations"], "wall_s": srch["wall_s"], "loadavg_1min": srch.get("loadavg_1min"),
+            "score": rec["score"], "nominal_margin": m["nominal_margin"], "tolerance": m["tolerance"],
+            "tolerance_bracket": m["tolerance_bracket"]}
+
+
+def merge(out: Path, sources: list[Path], log=lambda msg: None) -> dict:
+    """Merge other runs' records (e.g. longer searches of some structures) into the record `out`: per
+    structure, a run's best replaces the entry when its tolerance, measured by the same bisection (same
+    tolerance samples and seed), is larger.  Every run compared is listed under the entry's "runs"."""
+    def load(path: Path) -> dict:
+        try:
+            return json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError) as e:
+            raise Mech2SpiceError(f"cannot read search record {path}: {e}")
+    state = load(out)
+    for src in sources:
+        other = load(src)
+        for key in ("tol_samples", "seed", "sigma", "samples"):
+            if other["settings"][key] != state["settings"][key]:
+                raise Mech2SpiceError(f"{src}: {key} {other['settings'][key]} differs from {out}'s "
+                                      f"{state['settings'][key]}: tolerances not comparable")
+        for name, rec in other["structures"].items():
+            old = state["structures"].get(name)
+            runs = (old or {}).get("runs") or ([run_summary(old, str(out))] if old else [])
+            new_tol, old_tol = rec["measured"]["tolerance"] or 0.0, old and (old["measured"]["tolerance"] or 0.0)
+            better = old is None or (rec["measured"]["nominal_margin"] > 0 and new_tol > old_tol)
+            log(f"{name}: {src} tolerance {new_tol:.3g} against {old_tol or 0:.3g}: "
+                + ("replaces the entry" if better else "entry kept"))
+            source = str(src) if better else old.get("source", str(out))
+            state["structures"][name] = {**(rec if better else old), "source": source,
+                                         "runs": runs + [run_summary(rec, str(src))]}
+    write_atomic(out, state)
+    return state

@@ -91,7 +91,7 @@ def threshold_gap(p) -> dict:
 
 def run_check(argv: list[str]) -> dict:
     """One command line run through `python -m mech2spice.cli`; its JSON, exit code and wall time."""
-    t0 = time.time()
+    t0, load0 = time.time(), os.getloadavg()[0]
     root = Path(__file__).resolve().parents[2]
     r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *argv], capture_output=True, text=True, cwd=root,
                        env={**os.environ, "PYTHONPATH": str(root)})
@@ -99,7 +99,8 @@ def run_check(argv: list[str]) -> dict:
         data = json.loads(r.stdout)
     except json.JSONDecodeError:
         data = {"stdout": r.stdout[-2000:], "stderr": r.stderr[-2000:]}
-    return {"argv": argv, "rc": r.returncode, "wall_s": time.time() - t0, "json": data}
+    return {"argv": argv, "rc": r.returncode, "wall_s": time.time() - t0, "json": data,
+            "loadavg_1min": [load0, os.getloadavg()[0]]}
 
 
 def adder_check(p, backend: str) -> dict:
@@ -109,13 +110,13 @@ def adder_check(p, backend: str) -> dict:
     from ..experiments.scenes import ADDER_INPUTS
     from ..synthesis import synth
     nl = synth.synthesize(data.verilog("adder2.v"))
-    t0 = time.time()
+    t0, load0 = time.time(), os.getloadavg()[0]
     res = simulation.run_physical(nl, p, list(ADDER_INPUTS), backend)
     rows = [{"inputs": v, "s": r["outputs"].get("s"), "expected": logic.evaluate(nl, v)["s"],
              "min_margin": r.get("min_margin")} for v, r in zip(ADDER_INPUTS, res)]
     return {"backend": backend, "correct": sum(r["s"] == r["expected"] for r in rows), "of": len(rows),
             "min_margin": min((r["min_margin"] for r in rows if r["min_margin"] is not None), default=None),
-            "rows": rows, "wall_s": time.time() - t0}
+            "rows": rows, "wall_s": time.time() - t0, "loadavg_1min": [load0, os.getloadavg()[0]]}
 
 
 def plot_pareto(figs: dict, path: Path, machine: str) -> None:
@@ -159,11 +160,18 @@ def write(directory="reports", skip_slow: bool = False, render: bool = False, se
     cache = read_json(cache_path, {})
     figs = cache.setdefault("blocks", {})
     for name, p in blocks(rec).items():
+        if name in figs and not _same_block(figs[name], rec["structures"].get(name)):
+            del figs[name]                  # the search record has a new best for this structure: measure it
         if name not in figs and not render:
             log(f"block {name}")
             figs[name] = block_figures(name, p, rec["structures"].get(name), log)
             write_json(cache_path, cache)
     checks = cache.setdefault("checks", {})
+    robust = _robust_digest()
+    if cache.setdefault("robust_sha256", robust) != robust and not render:
+        log("robust.json changed since its checks: rerunning them")
+        checks = cache["checks"] = {k: v for k, v in checks.items() if not k.startswith("robust")}
+        cache["robust_sha256"] = robust
     for name, argv in CHECKS.items():
         if name not in checks and not (skip_slow and name in SLOW) and not render:
             log(f"check {name}: mech2spice {' '.join(argv)}")
@@ -176,13 +184,41 @@ def write(directory="reports", skip_slow: bool = False, render: bool = False, se
             log(f"check {key}")
             checks[key] = adder_check(load_params("robust"), backend)
             write_json(cache_path, cache)
-    cache["machine"] = cache.get("machine", MACHINE)
+    cache["machine"] = MACHINE         # the load of each search and check is recorded with it
     write_json(cache_path, cache)
     figs = {n: f for n, f in figs.items() if n in blocks(rec)}
     plot_pareto(figs, d / "design_pareto.png", cache["machine"])
     md = d / "design.md"
     md.write_text(markdown(rec, figs, checks, cache["machine"]))
     return md
+
+
+def _same_block(fig: dict, rec: dict | None) -> bool:
+    """Whether cached figures were measured on this search entry (its measured margin and tolerance)."""
+    if rec is None:
+        return True                         # default / printed: not from the search
+    m = rec["measured"]
+    return fig["nominal_margin"] == m["nominal_margin"] and fig["tolerance"] == m["tolerance"]
+
+
+def _robust_digest() -> str:
+    """sha256 of the shipped robust block file: its checks are valid for this content only."""
+    import hashlib
+    from .. import data
+    return hashlib.sha256(Path(data.path("blocks", "robust.json")).read_bytes()).hexdigest()
+
+
+def _load(x) -> str:
+    """A recorded 1-minute load average pair (start, end), or that none was recorded."""
+    return f"load {x[0]:.1f} .. {x[1]:.1f}" if x else "load not recorded: machine shared"
+
+
+def search_cell(search: dict | None) -> str:
+    """The search column: evaluations, generations, wall time, budget, machine load."""
+    if not search:
+        return "(not searched)"
+    return (f"{search['evaluations']} ev., {search['generations']} gen., {search['wall_s']:.0f} s "
+            f"(budget {search['budget_s']:.0f} s, {_load(search.get('loadavg_1min'))})")
 
 
 def _fmt(x, f="{:.3g}"):
@@ -197,7 +233,8 @@ def markdown(rec: dict, figs: dict, checks: dict, machine: str) -> str:
                key=lambda n: figs[n]["tolerance"] or 0, default=None)
     lines = ["# Automated design of the NOR block", "",
              "Generated by `mech2spice report design` from `mech2spice design` "
-             f"(settings: {json.dumps(s)}), machine: {machine}. Grammar, objective and how to read this: "
+             f"(settings of the first run: {json.dumps(s)}; each structure's budget and the 1-min load average during "
+             f"its search, and of each check, are given with it), machine: {machine}. Grammar, objective and how to read this: "
              "docs/design.md.", "",
              "![Pareto](design_pareto.png)", "",
              "## Blocks", "",
@@ -216,10 +253,10 @@ def markdown(rec: dict, figs: dict, checks: dict, machine: str) -> str:
                                               f"{_fmt(f['tolerance_bracket'][1])})" if f["tolerance"] else ""),
                      _fmt(f["yield_1pct"], "{:.3f}") + f" ({f.get('yield_samples')})", _fmt(f["q1_1pct"], "{:+.2f}"), _fmt(f["delay_periods"], "{}"),
                      _fmt(f["energy_per_period"]), _fmt(f["energy_per_switch"]),
-                     f"{search['evaluations']} ev., {search['generations']} gen., {search['wall_s']:.0f} s"
-                     if search else "(not searched)"])
+                     search_cell(search)])
     lines += md_table(["block", "DOFs", "nominal margin", "tolerance (bracket)", "yield at 1 %", "q1 at 1 %",
                        "delay", "E/period", "E/switch", "search"], rows)
+    lines += search_runs(rec)
     lines += ["", "## What limits each block", "",
               "The limiting input point is the one with the smallest margin / |gradient| (physics/sensitivity.py, "
               "implicit-function derivatives of the steady state); sigma_1 = margin / |gradient| is the spread at "
@@ -266,6 +303,23 @@ def markdown(rec: dict, figs: dict, checks: dict, machine: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def search_runs(rec: dict) -> list[str]:
+    """Every search run merged into the record (`mech2spice design --merge`), per structure."""
+    rows = [[name, r["source"], f"{r['budget_s']:.0f}", r["generations"], r["evaluations"], f"{r['wall_s']:.0f}",
+             _load(r.get("loadavg_1min")), _fmt(r["nominal_margin"], "{:+.4f}"),
+             _fmt(r["tolerance"]) + (f" ({_fmt(r['tolerance_bracket'][0])} .. {_fmt(r['tolerance_bracket'][1])})"
+                                     if r["tolerance"] else ""),
+             "yes" if r["source"] == e.get("source") else "no"]
+            for name, e in rec["structures"].items() for r in e.get("runs", [])]
+    if not rows:
+        return []
+    return ["", "Search runs merged into the record (`mech2spice design --merge`; same seed, 16 CRN samples, "
+            f"popsize 6; tolerance by the same {TOL_SAMPLES}-sample bisection); the run with the larger tolerance "
+            "is the structure's entry above:", "",
+            *md_table(["structure", "record", "budget s", "generations", "evaluations", "wall s", "1-min load",
+                       "nominal margin", "tolerance (bracket)", "entry"], rows)]
+
+
 def render_checks(checks: dict) -> list[str]:
     """The command-line checks of the robust block, as found."""
     out = []
@@ -283,27 +337,28 @@ def render_checks(checks: dict) -> list[str]:
                    f"Wilson {lo:.4f} .. {hi:.4f}), margin quantiles "
                    f"{json.dumps({k: round(v, 3) for k, v in j['margin_quantiles'].items()})}, tolerance "
                    f"{_fmt(t.get('sigma'))} (bracket {' .. '.join(_fmt(b) for b in t.get('bracket', []))}), nominal "
-                   f"margin {j['nominal_margin']:+.4f}; {c['wall_s']:.0f} s on the loaded machine")
+                   f"margin {j['nominal_margin']:+.4f}; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
     c = checks.get("robust_gate")
     if c:
         req = c["json"].get("requirements", {})
         out.append(f"- `mech2spice {' '.join(c['argv'])}` (RK4 at nominal): switches {c['json'].get('switches')}; "
                    + "; ".join(f"{k}: {'pass' if v['pass'] else 'FAIL'}" for k, v in req.items())
-                   + f"; {c['wall_s']:.0f} s")
+                   + f"; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
     for backend in ("rk4", "envelope"):
         c = checks.get(f"robust_adder_{backend}")
         if c:
-            out.append(f"- adder, 16 sums on {backend}: {c['correct']}/{c['of']} correct; {c['wall_s']:.0f} s")
+            out.append(f"- adder, 16 sums on {backend}: {c['correct']}/{c['of']} correct; {c['wall_s']:.0f} s "
+                       f"({_load(c.get('loadavg_1min'))})")
     c = checks.get("robust_sqrt")
     if c:
         j = c["json"]
         out.append(f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, outputs {j.get('outputs')}, valid "
-                   f"{j.get('valid')}, min margin {j.get('min_margin')}; {c['wall_s']:.0f} s")
+                   f"{j.get('valid')}, min margin {j.get('min_margin')}; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
     c = checks.get("robust_sieve")
     if c:
         j = c["json"]
         out.append(f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, halted {j.get('halted')} after "
-                   f"{j.get('cycles')} cycles; {c['wall_s']:.0f} s")
+                   f"{j.get('cycles')} cycles; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
     else:
         out.append("- the sieve on the envelope with `--params robust`: not run (skip_slow)")
     return out

@@ -210,7 +210,7 @@ def _robust_digest() -> str:
 
 def _load(x) -> str:
     """A recorded 1-minute load average pair (start, end), or that none was recorded."""
-    return f"load {x[0]:.1f} .. {x[1]:.1f}" if x else "load not recorded: machine shared"
+    return f"load {x[0]:.1f} .. {x[1]:.1f}" if x else "load not recorded"
 
 
 def search_cell(search: dict | None) -> str:

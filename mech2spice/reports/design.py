@@ -172,17 +172,22 @@ def write(directory="reports", skip_slow: bool = False, render: bool = False, se
         log("robust.json changed since its checks: rerunning them")
         checks = cache["checks"] = {k: v for k, v in checks.items() if not k.startswith("robust")}
         cache["robust_sha256"] = robust
-    for name, argv in CHECKS.items():
-        if name not in checks and not (skip_slow and name in SLOW) and not render:
-            log(f"check {name}: mech2spice {' '.join(argv)}")
-            checks[name] = run_check(argv)
-            write_json(cache_path, cache)
-    from ..physics.params import load_params
-    for backend in ("rk4", "envelope"):
-        key = f"robust_adder_{backend}"
-        if key not in checks and not render:
-            log(f"check {key}")
-            checks[key] = adder_check(load_params("robust"), backend)
+    todo = [n for n in CHECKS if n not in checks and not (skip_slow and n in SLOW) and not render]
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+    with ThreadPoolExecutor(max_workers=2) as pool:     # the command checks are subprocesses: two at a time
+        futures = {pool.submit(run_check, CHECKS[n]): n for n in todo}
+        for n in todo:
+            log(f"check {n}: mech2spice {' '.join(CHECKS[n])}")
+        from ..physics.params import load_params
+        for backend in ("rk4", "envelope"):
+            key = f"robust_adder_{backend}"
+            if key not in checks and not render:
+                log(f"check {key}")
+                checks[key] = adder_check(load_params("robust"), backend)
+                write_json(cache_path, cache)
+        for f in as_completed(futures):
+            checks[futures[f]] = f.result()
+            log(f"check {futures[f]} done ({checks[futures[f]]['wall_s']:.0f} s)")
             write_json(cache_path, cache)
     cache["machine"] = MACHINE         # the load of each search and check is recorded with it
     write_json(cache_path, cache)

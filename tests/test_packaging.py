@@ -50,3 +50,11 @@ def test_installed_package_runs_the_processor_and_the_gate(installed):
     assert out["halted"] and out["cycles"] == 457
     gate = run(installed, "gate", "--quick", "--json")
     assert gate["switches"] and [r["logic"] for r in gate["truth_table"]] == [1, 0, 0, 0]
+
+
+def test_installed_package_reads_its_shipped_blocks(installed):
+    exe, _ = installed
+    adder = next((exe.parent.parent / "lib").rglob("mech2spice/data/verilog/adder2.v"))
+    out = run(installed, "simulate", str(adder), "--set", "a=1", "--set", "b=2", "--backend", "envelope",
+              "--params", "robust", "--json")
+    assert out["outputs"] == {"s": 3} and out["valid"]

@@ -135,6 +135,18 @@ def test_interrupted_sweep_resumes_each_sample_once(tmp_path):
         mc_run.run({**j, "seed": 4}, 8, part, scheduler="inline")
 
 
+def test_results_file_is_keyed_by_parameter_values_not_file_names(tmp_path):
+    """A parameter file edited between two runs must not resume the first run's samples."""
+    params = tmp_path / "p.json"
+    params.write_text(json.dumps({"q_c": 210.0}))
+    j = {"design": "x.v", "params": str(params), "seed": 1}
+    before = mc.job_key(j)
+    params.write_text(json.dumps({"q_c": 190.0}))
+    assert mc.job_key(j) != before
+    import hashlib                       # a built-in preset keys by name: older results files still resume
+    plain = {**j, "params": "default"}
+    assert mc.job_key(plain) == hashlib.sha256(json.dumps(plain, sort_keys=True).encode()).hexdigest()[:16]
+
 def test_dask_local_cluster_matches_inline(tmp_path, nor_v):
     j = job(nor_v, "1e-3")
     a = mc_run.run(j, 4, tmp_path / "a.jsonl", scheduler="inline")

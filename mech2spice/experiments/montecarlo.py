@@ -274,8 +274,16 @@ def _with_probes(model, channels, gates, prefix):
 
 
 def job_key(job: dict) -> str:
-    """A short hash naming what a results file holds (design, params, vectors, spec, seed, backend...)."""
-    return hashlib.sha256(json.dumps(job, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    """A short hash naming what a results file holds (design, params, vectors, spec, seed, backend...).
+
+    Parameters named by a file or a shipped block ('robust' changes when `mech2spice design` installs a
+    better one) enter by their values, so a results file never resumes under other values; the built-in
+    presets enter by name, which keeps the keys of results files written before blocks were data."""
+    from ..physics.params import PRESETS, load_params
+    keyed = dict(job)
+    if job.get("params") not in PRESETS:
+        keyed["params_values"] = load_params(job["params"]).to_dict()
+    return hashlib.sha256(json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def summary(records: list[dict], n_gates: int) -> dict:

@@ -168,10 +168,11 @@ def write(directory="reports", skip_slow: bool = False, render: bool = False, se
             write_json(cache_path, cache)
     checks = cache.setdefault("checks", {})
     robust = _robust_digest()
-    if cache.setdefault("robust_sha256", robust) != robust and not render:
-        log("robust.json changed since its checks: rerunning them")
-        checks = cache["checks"] = {k: v for k, v in checks.items() if not k.startswith("robust")}
-        cache["robust_sha256"] = robust
+    cache.pop("robust_sha256", None)          # an earlier layout kept one digest for all checks
+    stale = [k for k, v in checks.items() if k.startswith("robust") and v.get("robust_sha256") != robust]
+    if stale and not render:           # checks of another robust.json (or of one not recorded): run again
+        log(f"robust.json differs from the one {', '.join(stale)} ran on: rerunning them")
+        checks = cache["checks"] = {k: v for k, v in checks.items() if k not in stale}
     todo = [n for n in CHECKS if n not in checks and not (skip_slow and n in SLOW) and not render]
     from concurrent.futures import ThreadPoolExecutor, as_completed
     with ThreadPoolExecutor(max_workers=2) as pool:     # the command checks are subprocesses: two at a time
@@ -183,10 +184,10 @@ def write(directory="reports", skip_slow: bool = False, render: bool = False, se
             key = f"robust_adder_{backend}"
             if key not in checks and not render:
                 log(f"check {key}")
-                checks[key] = adder_check(load_params("robust"), backend)
+                checks[key] = {**adder_check(load_params("robust"), backend), "robust_sha256": robust}
                 write_json(cache_path, cache)
         for f in as_completed(futures):
-            checks[futures[f]] = f.result()
+            checks[futures[f]] = {**f.result(), "robust_sha256": robust}
             log(f"check {futures[f]} done ({checks[futures[f]]['wall_s']:.0f} s)")
             write_json(cache_path, cache)
     cache["machine"] = MACHINE         # the load of each search and check is recorded with it

@@ -24,6 +24,7 @@ SIGMAS = (1e-5, 3e-5, 6e-5, 1e-4, 1.5e-4, 2e-4, 3e-4, 1e-3)
 SAMPLES = {"gate": 200, "chain": 100, "adder": 48}
 QUICK_SAMPLES = {"gate": 24, "chain": 16, "adder": 8}
 SEED = 2024
+OTHER_PARAMS = ("robust",)      # parameter sets studied beside the default (the design search's best)
 BIG = ("adder", 1e-4, 10_000)          # the large sweep: design, sigma, samples
 SCALING_SAMPLES = 96
 VERILOG = {
@@ -50,22 +51,30 @@ def design_file(name: str) -> Path:
     return path
 
 
-def job(name: str, sigma: float, backend: str = "envelope") -> dict:
-    """The montecarlo job of one design at one sigma (every input vector, default parameters)."""
+def job(name: str, sigma: float, backend: str = "envelope", params: str = "default") -> dict:
+    """The montecarlo job of one design at one sigma (every input vector) with parameters `params`."""
     from ..physics import network
     from ..synthesis.synth import synthesize
     path = design_file(name)
     nl = synthesize(path, max_fanout=network.MAX_FANOUT)
-    return {"design": str(path), "params": "default", "vectors": mc.all_vectors(nl), "backend": backend,
+    return {"design": str(path), "params": params, "vectors": mc.all_vectors(nl), "backend": backend,
             "spread": mc.spec_of(sigma).describe(), "seed": SEED, "periods": None, "union": 8}
 
 
-def curve(name: str, samples: int, scheduler: str, log) -> list[dict]:
+def cache_file(name: str, sigma: float, j: dict) -> Path:
+    """Where one curve point's samples live: by design and sigma, and for a block file by its values too."""
+    if j["params"] == "default":
+        return CACHE / f"{name}_{sigma:g}.jsonl"
+    return CACHE / f"{name}_{j['params']}-{mc.job_key(j)[:8]}_{sigma:g}.jsonl"
+
+
+def curve(name: str, samples: int, scheduler: str, log, params: str = "default") -> list[dict]:
     """Yield at every sigma of SIGMAS (results resumed from CACHE)."""
     rows = []
     for s in SIGMAS:
-        res = mc_run.run(job(name, s), samples, CACHE / f"{name}_{s:g}.jsonl", scheduler=scheduler)
-        log(f"{name} sigma {s:g}: yield {res['yield']:.3f} ({res['samples']} samples, {res['wall_s']:.0f} s)")
+        j = job(name, s, params=params)
+        res = mc_run.run(j, samples, cache_file(name, s, j), scheduler=scheduler)
+        log(f"{name} ({params}) sigma {s:g}: yield {res['yield']:.3f} ({res['samples']} samples, {res['wall_s']:.0f} s)")
         rows.append({"sigma": s, **{k: res[k] for k in ("samples", "failures", "yield", "yield_ci95",
                                                          "margin_quantiles", "failing_bits", "gate_failure_rate",
                                                          "gate_failure_rate_ci95", "gates", "failing_gates",
@@ -73,14 +82,15 @@ def curve(name: str, samples: int, scheduler: str, log) -> list[dict]:
     return rows
 
 
-CLOCKED_SIGMAS = {"sqrt": (3e-5, 6e-5, 1e-4, 2e-4), "processor": (3e-5, 6e-5, 8e-5, 1e-4)}
-CLOCKED_SAMPLES = {"sqrt": 12, "processor": 8}
-QUICK_CLOCKED_SAMPLES = {"sqrt": 2, "processor": 1}
+CLOCKED_SIGMAS = {"sqrt": (3e-5, 6e-5, 1e-4, 2e-4), "processor": (3e-5, 6e-5, 8e-5, 1e-4), "sieve": (3e-5, 6e-5)}
+CLOCKED_SAMPLES = {"sqrt": 12, "processor": 8, "sieve": 8}
+QUICK_CLOCKED_SAMPLES = {"sqrt": 2, "processor": 1, "sieve": 1}
 CPU_PROGRAM, CPU_CYCLES = "sieve.asm", 30
+SIEVE_CYCLES = 457     # the sieve to its halt (the ISS halts after 457 cycles)
 
 
 def clocked_job(name: str, sigma: float) -> dict:
-    """sqrt(2809) (its 7-cycle stimulus) or the processor (the sieve, CPU_CYCLES cycles) at one sigma."""
+    """sqrt(2809) (its 7-cycle stimulus), the processor (the sieve, CPU_CYCLES cycles) or the whole sieve at one sigma."""
     import hashlib
     from .. import data, inputs
     base = {"params": "default", "backend": "envelope", "spread": mc.spec_of(sigma).describe(), "seed": SEED,
@@ -90,7 +100,7 @@ def clocked_job(name: str, sigma: float) -> dict:
                 "steps": inputs.stimulus_steps(data.verilog("sqrt_2809.json"), {}, "envelope"), **base}
     prog = Path(data.program(CPU_PROGRAM)).resolve()
     return {"program": str(prog), "program_sha256": hashlib.sha256(prog.read_bytes()).hexdigest(),
-            "cycles": CPU_CYCLES, **base}
+            "cycles": SIEVE_CYCLES if name == "sieve" else CPU_CYCLES, **base}
 
 
 def clocked_curve(name: str, samples: int, scheduler: str, log) -> list[dict]:
@@ -229,8 +239,11 @@ def write(directory, quick: bool = False, scheduler: str = "inline", big: bool =
     t0 = time.time()
     counts = QUICK_SAMPLES if quick else SAMPLES
     curves = {name: curve(name, counts[name], scheduler, log) for name in ("gate", "chain", "adder")}
+    for params in OTHER_PARAMS:      # the blocks `mech2spice design` produced, beside the default
+        curves.update({f"{name}, {params}": curve(name, counts[name], scheduler, log, params)
+                       for name in ("gate", "chain", "adder")})
     ccounts = QUICK_CLOCKED_SAMPLES if quick else CLOCKED_SAMPLES
-    clocked = {name: clocked_curve(name, ccounts[name], scheduler, log) for name in ("sqrt", "processor")}
+    clocked = {name: clocked_curve(name, ccounts[name], scheduler, log) for name in CLOCKED_SIGMAS}
     ncounts = QUICK_NOISE_SAMPLES if quick else NOISE_SAMPLES
     noise = {name: noise_curve(name, ncounts[name], scheduler, log) for name in ("gate", "adder")}
     name, temps, n = RK4_NOISE
@@ -256,12 +269,14 @@ def figure(curves: dict, path: Path) -> None:
         y = np.array([r["yield"] for r in rows])
         lo, hi = np.array([r["yield_ci95"] for r in rows]).T
         what = f"{rows[0]['gates']} gates" if rows[0]["gates"] else f"{rows[0]['samples']} samples/point"
-        ax.errorbar(s, y, yerr=[np.maximum(y - lo, 0), np.maximum(hi - y, 0)], marker="o", capsize=3,
-                    label=f"{name} ({what})")
+        other = any(name.endswith(f", {q}") for q in OTHER_PARAMS)     # dashed: drawn over the default's line
+        ax.errorbar(s, y, yerr=[np.maximum(y - lo, 0), np.maximum(hi - y, 0)], marker="s" if other else "o",
+                    linestyle="--" if other else "-", capsize=3, label=f"{name} ({what})")
     ax.set_xscale("log")
     ax.set_xlabel("relative spread sigma (every element, independent)")
     ax.set_ylabel("yield (all outputs right, every input vector / cycle)")
-    ax.set_title(f"envelope engine, default parameters, seed {SEED}; {MACHINE}", fontsize=8)
+    ax.set_title(f"envelope engine, default and {', '.join(OTHER_PARAMS)} parameters, seed {SEED}; {MACHINE}",
+                 fontsize=8)
     ax.set_ylim(-0.03, 1.03)
     ax.legend()
     ax.grid(alpha=0.3)
@@ -307,7 +322,9 @@ def markdown(d: dict) -> str:
     """The report text from the measured data."""
     out = ["# Robustness of whole designs: yield under per-element spread", "",
            f"Generated by `mech2spice report robustness` on {d['machine']} (the checked-in numbers: the shared "
-           f"{SANDBOX}, other jobs running); seed {SEED}, envelope engine (default step), default parameters, "
+           f"{SANDBOX}, other jobs running); seed {SEED}, envelope engine (default step), default parameters "
+           f"(and, where a heading says so, the {', '.join(OTHER_PARAMS)} block of `mech2spice design`: "
+           "reports/design.md), "
            "every input vector of each sample, each run until its outputs settle or the settle budget ends.", "",
            "A sample multiplies every element (each DOF's local k, m, c; each coupling spring and dashpot; each "
            "gamma; each drive) by 1 + sigma z, z independent standard normals (`--spread SIGMA`; "
@@ -331,10 +348,10 @@ def markdown(d: dict) -> str:
     out += noise_section(d)
     out += throughput(d)
     out += ["## What is not here yet", "",
-            "* whole sieves (457 cycles, ~4 min each at envelope fidelity) under spread: only 30-cycle runs above;",
             "* thermal noise on clocked designs and the processor in the report (`simulate --noise` runs clocked "
             "designs; `cpu montecarlo` has no --noise);",
-            "* presets other than `default`.", ""]
+            "* the clocked designs and the processor with the robust block (only gate, chain and adder);",
+            f"* more than {CLOCKED_SAMPLES['sieve']} whole sieves per sigma.", ""]
     return "\n".join(out)
 
 
@@ -415,7 +432,8 @@ def clocked_section(d: dict) -> list[str]:
            f"{cpu_physical.PROCESSOR_STEP:g}-period steps, exponential insulator step {cpu_physical.EXPONENTIAL}, "
            f"settle {cpu_physical.SETTLE_TOL} u_R, latency {cpu_physical.LATENCY} u_R). **Small samples**: a sample "
            "builds and powers up its own 6486-oscillator processor (tens of seconds here), so the intervals are "
-           "wide; no per-gate rate is measured on clocked runs (only outputs are kept).", ""]
+           "wide; no per-gate rate is measured on clocked runs (only outputs are kept). *sieve*: the same as "
+           f"*processor*, to the program's halt ({SIEVE_CYCLES} cycles, every one against the ISS).", ""]
     for name, rows in d["clocked"].items():
         out += [f"### {name}", "", "| sigma | samples | failures | yield | 95 % CI (Wilson) | failing (samples) |",
                 "|---|---|---|---|---|---|"]

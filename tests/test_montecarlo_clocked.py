@@ -52,6 +52,22 @@ def test_clocked_cli(tmp_path, capsys):
     assert "--stimulus" in capsys.readouterr().err
 
 
+def test_processor_with_noise_runs_on_the_noisy_envelope_each_sample_its_own_seed(monkeypatch):
+    """cpu montecarlo --noise T: sample i's processor runs every cycle on the noisy engine, seeded from (seed, i)
+    (the power-up itself is skipped here: on the noisy envelope it takes about a minute)."""
+    from mech2spice.backends._noise_envelope import NoisyEnvelopeEngine
+    from mech2spice.cpu.physical import PhysicalCPU
+    monkeypatch.setattr(PhysicalCPU, "_reset", lambda self: None)
+    noisy = mc_clocked.CpuMC(str(ROOT / "programs/sieve.asm"), 1, DEFAULT, "envelope", mc.parse_spread("0"), 5,
+                             noise=1e-6)
+    cpus = [noisy._machine(i) for i in (0, 1)]
+    for cpu in cpus:
+        assert isinstance(cpu.pulse_engine, NoisyEnvelopeEngine) and cpu.pause_engine is cpu.pulse_engine
+        assert cpu.pulse_engine.options.noise_temperature == 1e-6
+    assert cpus[0].pulse_engine.options.noise_seed != cpus[1].pulse_engine.options.noise_seed
+    quiet = mc_clocked.CpuMC(str(ROOT / "programs/sieve.asm"), 1, DEFAULT, "envelope", mc.parse_spread("0"), 5)
+    assert not isinstance(quiet._machine(0).pulse_engine, NoisyEnvelopeEngine)
+
 @pytest.mark.slow
 def test_cpu_montecarlo_spread_zero_matches_the_iss(capsys):
     """Two cycles of the sieve on the nominal processor: equal to the ISS (about 20 s)."""
@@ -59,3 +75,14 @@ def test_cpu_montecarlo_spread_zero_matches_the_iss(capsys):
                  "--spread", "0", "--scheduler", "inline", "--json"])
     res = json.loads(capsys.readouterr().out)
     assert code == 0 and res["failures"] == 0 and res["cycles"] == 2
+
+
+@pytest.mark.slow
+def test_cpu_montecarlo_with_thermal_noise_below_the_onset_matches_the_iss(capsys):
+    """One sieve cycle with k_B T = 1e-6 (the gate's bits start to flip near 6e-5: reports/robustness.md) on
+    the noisy envelope: the noise reaches the processor (a noisy job keys its own results) and the cycle still
+    equals the ISS (about 90 s: the noisy envelope steps one period and freezes no gate)."""
+    code = main(["cpu", "montecarlo", str(ROOT / "programs/sieve.asm"), "--cycles", "1", "--samples", "1",
+                 "--spread", "0", "--noise", "1e-6", "--scheduler", "inline", "--json"])
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["failures"] == 0 and res["noise"] == 1e-6

@@ -45,7 +45,8 @@ class PhysicalCPU:
 
     def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float | None = None,
                  settle: float | None = SETTLE_TOL, latency: float | None = LATENCY,
-                 exponential: bool = EXPONENTIAL, parallel: bool = False, power_up: bool = True):
+                 exponential: bool = EXPONENTIAL, parallel: bool = False, power_up: bool = True,
+                 noise: tuple[float, int] | None = None):
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
         self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
@@ -56,6 +57,9 @@ class PhysicalCPU:
         self.probes = list(self.model.probes)
         step = step or (PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP)
         self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, exponential, parallel)
+        if noise and noise[0]:          # thermal noise (k_B T, seed): the noisy engine, never settled or frozen
+            from ..backends._noise_envelope import noisy_engine
+            self.pulse_engine = self.pause_engine = noisy_engine(backend, self.pulse_engine.options, *noise)
         t = simulation.clock_timing(self.netlist)
         whole = max(1, int(round(step))) if backend == "envelope" else 1   # changes fall on step boundaries
         self.pulse, self.pause = -(-t["pulse"] // whole) * whole, -(-t["pause"] // whole) * whole

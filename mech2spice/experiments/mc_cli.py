@@ -148,15 +148,21 @@ def add_cpu_parser(sub) -> None:
         description="Sample the processor's oscillator model with a relative Gaussian spread on every element, "
                     "run PROG for --cycles cycles on each sample and compare every cycle (pc, phase, read "
                     "address and data, write enable, address and data) with the instruction-set simulator. "
-                    "Results stream to --out (resumable). An envelope sample costs about 1 s of CPU per "
-                    "cycle. Exit 0 when every sample passed, 1 otherwise.")
+                    "Results stream to --out (resumable). An envelope sample costs about 0.05 s of CPU per "
+                    "cycle at the processor's defaults (reports/cpu_physical.md), far more with --noise (the "
+                    "noisy envelope steps at most one period and never freezes a gate). Exit 0 when every "
+                    "sample passed, 1 otherwise.")
     c.add_argument("program", help="assembly source (.asm) or binary image")
     c.add_argument("--cycles", type=inputs.integer(1, 100_000), default=30, help="clock cycles per sample (default 30)")
     c.add_argument("--samples", type=inputs.integer(1, 1_000_000), required=True, metavar="N")
     c.add_argument("--spread", required=True, metavar="SIGMA|JSON", help="as for `mech2spice montecarlo`")
     c.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, metavar="S")
     c.add_argument("--backend", default="envelope", choices=("envelope", "rk4"))
-    c.add_argument("--params", default="default", help="gate parameters: default, printed or a JSON file")
+    c.add_argument("--params", default="default",
+                   help="gate parameters: default, printed, robust, or a JSON file (fields or a block)")
+    c.add_argument("--noise", type=inputs.number(0, lo_open=False), default=0.0, metavar="T",
+                   help="thermal noise on the envelope: k_B T in model energy units, each sample its own seed "
+                        "(docs/robustness.md)")
     c.add_argument("--scheduler", default="local", metavar="local|inline|ADDRESS",
                    help="local: a LocalCluster, one worker per core (default); inline: no Dask; or an address")
     c.add_argument("--workers", type=inputs.integer(1, 4096), default=None, help="LocalCluster workers")
@@ -174,7 +180,8 @@ def cpu_job_of(args) -> dict:
         raise Mech2SpiceError(f"no such program: {args.program}")
     return {"program": str(path.resolve()), "program_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
             "cycles": args.cycles, "params": args.params, "backend": args.backend,
-            "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "union": 1}
+            "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "union": 1,
+            **({"noise": args.noise} if args.noise else {})}      # noiseless files keep their keys
 
 
 def cmd_cpu_montecarlo(args) -> int:
@@ -190,7 +197,7 @@ def cmd_cpu_montecarlo(args) -> int:
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=not args.json and sys.stderr.isatty(), log=_log(args))
     res.update({"program": job["program"], "cycles": job["cycles"], "backend": job["backend"],
-                "spread": job["spread"], "seed": job["seed"]})
+                "spread": job["spread"], "seed": job["seed"], "noise": job.get("noise", 0.0)})
     if not args.out:
         res.pop("out")
     if args.json:

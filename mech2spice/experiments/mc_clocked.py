@@ -93,9 +93,8 @@ class CpuMC:
         from ..cpu.physical import PHYSICAL
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"cpu montecarlo runs on {', '.join(PHYSICAL)}, not '{backend}'")
-        if check_temperature(noise):
-            raise Mech2SpiceError("cpu montecarlo: thermal noise is not wired into the processor yet (--noise 0)")
         self.program, self.cycles, self.p, self.backend = program, cycles, p, backend
+        self.noise = check_temperature(noise)
         self.spec, self.seed = spec, seed
         self.want = self._iss()
         self.gates, self.union, self.outs = [], 1, ["pc", "phase", "raddr", "rdata", "we", "waddr", "wdata"]
@@ -122,7 +121,8 @@ class CpuMC:
         """The processor on sample i's model, powered up."""
         from ..cpu.physical import PhysicalCPU
         from ..cpu.run import load_program, make_memory
-        cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False)
+        cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
+                          noise=(self.noise, noise_seed(self.seed, i)))
         nominal = cpu.model
         model, _ = sampled(nominal, spread.elements(nominal), self.spec, self.seed, i)
         cpu.model = model               # the probes (latch outputs) are copied with the model

@@ -332,6 +332,7 @@ def render_checks(checks: dict) -> list[str]:
     for name in ("robust_spread", "default_spread"):
         c = checks.get(name)
         if not c:
+            out.append(f"- `mech2spice {' '.join(CHECKS[name])}`: not measured on this robust.json (not in the cache)")
             continue
         j = c["json"]
         t = j.get("tolerance", {})

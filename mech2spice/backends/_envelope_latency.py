@@ -122,62 +122,8 @@ def propagators(env, h: float):
 
 
 @njit(cache=True, fastmath=FAST)
-def _lists(active, blk, mark, frows, srows, rrows, ablk):
-    """Rows of the active blocks: (n fast, n slow, n residual, n active blocks); residual rows deduplicated."""
-    fp, fi, sp_, si, rp, ri = blk[0], blk[1], blk[2], blk[3], blk[4], blk[5]
-    nf = ns = nr = na = 0
-    mark[:] = 0
-    for b in range(active.size):
-        if active[b] == 0:
-            continue
-        ablk[na] = b
-        na += 1
-        for k in range(fp[b], fp[b + 1]):
-            frows[nf] = fi[k]
-            nf += 1
-        for k in range(sp_[b], sp_[b + 1]):
-            srows[ns] = si[k]
-            ns += 1
-        for k in range(rp[b], rp[b + 1]):
-            r = ri[k]
-            if mark[r] == 0:
-                mark[r] = 1
-                rrows[nr] = r
-                nr += 1
-    return nf, ns, nr, na
-
-
-@njit(cache=True, fastmath=FAST)
-def _relist(active, blk, mark, frows, srows, rrows, ablk, nr_old, na_old):
-    """_lists after some blocks froze, from the previous lists only (O(active), not O(network))."""
-    fp, fi, sp_, si, rp, ri = blk[0], blk[1], blk[2], blk[3], blk[4], blk[5]
-    for q in range(nr_old):
-        mark[rrows[q]] = 0
-    nf = ns = nr = na = 0
-    for q in range(na_old):
-        b = ablk[q]
-        if active[b] == 0:
-            continue
-        ablk[na] = b                      # na <= q: compacts in place
-        na += 1
-        for k in range(fp[b], fp[b + 1]):
-            frows[nf] = fi[k]
-            nf += 1
-        for k in range(sp_[b], sp_[b + 1]):
-            srows[ns] = si[k]
-            ns += 1
-        for k in range(rp[b], rp[b + 1]):
-            r = ri[k]
-            if mark[r] == 0:
-                mark[r] = 1
-                rrows[nr] = r
-                nr += 1
-    return nf, ns, nr, na
-
-
-@njit(cache=True, fastmath=FAST)
 def _append(b, blk, mark, frows, srows, rrows, ablk, nf, ns, nr, na):
-    """_lists after block b woke: its rows appended (residual rows not yet listed)."""
+    """Block b's rows appended to the lists (residual rows only if not yet listed); the new counts."""
     fp, fi, sp_, si, rp, ri = blk[0], blk[1], blk[2], blk[3], blk[4], blk[5]
     ablk[na] = b
     na += 1
@@ -193,6 +139,30 @@ def _append(b, blk, mark, frows, srows, rrows, ablk, nf, ns, nr, na):
             mark[r] = 1
             rrows[nr] = r
             nr += 1
+    return nf, ns, nr, na
+
+
+@njit(cache=True, fastmath=FAST)
+def _lists(active, blk, mark, frows, srows, rrows, ablk):
+    """Rows of the active blocks: (n fast, n slow, n residual, n active blocks); residual rows deduplicated."""
+    nf = ns = nr = na = 0
+    mark[:] = 0
+    for b in range(active.size):
+        if active[b] != 0:
+            nf, ns, nr, na = _append(b, blk, mark, frows, srows, rrows, ablk, nf, ns, nr, na)
+    return nf, ns, nr, na
+
+
+@njit(cache=True, fastmath=FAST)
+def _relist(active, blk, mark, frows, srows, rrows, ablk, nr_old, na_old):
+    """_lists after some blocks froze, from the previous lists only (O(active), not O(network))."""
+    for q in range(nr_old):
+        mark[rrows[q]] = 0
+    nf = ns = nr = na = 0
+    for q in range(na_old):
+        b = ablk[q]
+        if active[b] != 0:            # _append writes ablk[na], na <= q: compacts in place
+            nf, ns, nr, na = _append(b, blk, mark, frows, srows, rrows, ablk, nf, ns, nr, na)
     return nf, ns, nr, na
 
 

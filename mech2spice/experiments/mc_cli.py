@@ -20,12 +20,24 @@ def add_parser(subparsers) -> None:
                     "JSON-lines file (--out) that a rerun of the same command resumes. Exit 0 when every "
                     "sample passed, 1 otherwise.")
     s.add_argument("design", help="Verilog file (combinational, or clocked with --stimulus)")
-    s.add_argument("--params", default="default", help="gate parameters: default, printed or a JSON file")
     s.add_argument("--set", action="append", metavar="PORT=INT",
                    help="one input vector (repeatable ports; default: every input combination, up to 256)")
     s.add_argument("--stimulus", metavar="FILE.json",
                    help="input vectors: a list of {\"set\": {PORT: INT}} steps; for a clocked design its clock "
                         "cycles, [{\"set\": ..., \"cycles\": N}, ...], compared with the logic oracle every cycle")
+    s.add_argument("--backend", default="envelope", choices=BACKENDS)
+    s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
+                   help="simulate exactly this many periods (default: until the outputs settle)")
+    s.add_argument("--batch", type=inputs.integer(1, 4096), default=None, metavar="B",
+                   help="samples per engine run and task (default 8 on envelope/rk4, 1 on ngspice)")
+    add_sweep_arguments(s)
+    s.set_defaults(func=cmd_montecarlo)
+
+
+def add_sweep_arguments(s) -> None:
+    """The options every Monte-Carlo command shares: parameters, samples, spread, noise, seed, Dask, results."""
+    s.add_argument("--params", default="default",
+                   help="gate parameters: default, printed, robust, or a JSON file (fields or a block)")
     s.add_argument("--samples", type=inputs.integer(1, 10_000_000), required=True, metavar="N")
     s.add_argument("--spread", required=True, metavar="SIGMA|JSON",
                    help='relative sigma on every element, or {"local": SIGMA|{KIND: SIGMA}, "wafer": '
@@ -33,13 +45,9 @@ def add_parser(subparsers) -> None:
                         'dashpot gamma drive, "*" for all')
     s.add_argument("--noise", type=inputs.number(0, lo_open=False), default=0.0, metavar="T",
                    help="thermal noise: k_B T in model energy units (docs/robustness.md gives kelvin for a "
-                        "1 MHz silicon scaling); a Langevin force on every dashpot; default 0 (none)")
+                        "1 MHz silicon scaling); a Langevin force on every dashpot, each sample its own seed; "
+                        "default 0 (none)")
     s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, metavar="S")
-    s.add_argument("--backend", default="envelope", choices=BACKENDS)
-    s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
-                   help="simulate exactly this many periods (default: until the outputs settle)")
-    s.add_argument("--batch", type=inputs.integer(1, 4096), default=None, metavar="B",
-                   help="samples per engine run and task (default 8 on envelope/rk4, 1 on ngspice)")
     s.add_argument("--scheduler", default="local", metavar="local|inline|ADDRESS",
                    help="local: a LocalCluster, one worker per core (default); inline: no Dask; or a "
                         "Dask scheduler address (tcp://host:8786)")
@@ -47,7 +55,6 @@ def add_parser(subparsers) -> None:
     s.add_argument("--out", metavar="RESULTS.jsonl",
                    help="results file, appended and resumed (default: a temporary file, removed after)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
-    s.set_defaults(func=cmd_montecarlo)
 
 
 def vectors_of(args, netlist) -> list[dict[str, int]]:
@@ -154,20 +161,8 @@ def add_cpu_parser(sub) -> None:
                     "sample passed, 1 otherwise.")
     c.add_argument("program", help="assembly source (.asm) or binary image")
     c.add_argument("--cycles", type=inputs.integer(1, 100_000), default=30, help="clock cycles per sample (default 30)")
-    c.add_argument("--samples", type=inputs.integer(1, 1_000_000), required=True, metavar="N")
-    c.add_argument("--spread", required=True, metavar="SIGMA|JSON", help="as for `mech2spice montecarlo`")
-    c.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, metavar="S")
     c.add_argument("--backend", default="envelope", choices=("envelope", "rk4"))
-    c.add_argument("--params", default="default",
-                   help="gate parameters: default, printed, robust, or a JSON file (fields or a block)")
-    c.add_argument("--noise", type=inputs.number(0, lo_open=False), default=0.0, metavar="T",
-                   help="thermal noise on the envelope: k_B T in model energy units, each sample its own seed "
-                        "(docs/robustness.md)")
-    c.add_argument("--scheduler", default="local", metavar="local|inline|ADDRESS",
-                   help="local: a LocalCluster, one worker per core (default); inline: no Dask; or an address")
-    c.add_argument("--workers", type=inputs.integer(1, 4096), default=None, help="LocalCluster workers")
-    c.add_argument("--out", metavar="RESULTS.jsonl", help="results file, appended and resumed")
-    c.add_argument("--json", action="store_true", help="machine-readable output")
+    add_sweep_arguments(c)
     c.set_defaults(func=cmd_cpu_montecarlo)
 
 

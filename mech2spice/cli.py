@@ -279,11 +279,11 @@ def _engine_options(args, backend: str | None = None):
         changes.update({k: v for k, v in (("method", method), ("max_step_periods", max_step), ("timeout_s", timeout))
                         if v is not None})
         if steps:
-            raise Mech2SpiceError(f"--steps applies to rk4 and envelope; {name}'s step is --max-step")
+            raise Mech2SpiceError(f"--steps applies to rk4, carrier and envelope; {name}'s step is --max-step")
     elif method or max_step or timeout:
         raise Mech2SpiceError(f"--method, --max-step and --ngspice-timeout apply to the circuit simulators "
                               f"(ngspice, vacask), not {name}")
-    elif steps and name == "rk4":
+    elif steps and name in ("rk4", "carrier"):
         changes["steps_per_period"] = steps
     elif steps and name == "envelope":
         changes["step_periods"] = 1.0 / steps
@@ -385,7 +385,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
                    help="simulate exactly this many drive periods (default: until the outputs settle)")
     s.add_argument("--steps", type=inputs.integer(1, inputs.MAX_STEPS), default=None,
-                   help="steps per drive period (rk4 default 80; envelope default: one step per 4 periods, "
+                   help="steps per drive period (rk4 default 80, carrier 12; envelope default: one step per 4 periods, "
                         "fewer where the stability bound is lower)")
     inputs.envelope_speed_args(s)
     s.add_argument("--method", choices=["trap", "gear"],

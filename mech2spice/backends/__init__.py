@@ -3,13 +3,14 @@ from __future__ import annotations
 
 from ..errors import Mech2SpiceError
 from ._base import Capabilities, Engine, Run
+from .carrier import CarrierEngine
 from .envelope import EnvelopeEngine
 from .logic import LogicEngine
 from .ngspice import NgspiceEngine, NgspiceEnvelopeEngine
 from .rk4 import RK4Engine
 from .vacask import VacaskEngine, VacaskEnvelopeEngine
 
-_ENGINES = (LogicEngine, RK4Engine, EnvelopeEngine, NgspiceEngine, NgspiceEnvelopeEngine, VacaskEngine, VacaskEnvelopeEngine)
+_ENGINES = (LogicEngine, RK4Engine, CarrierEngine, EnvelopeEngine, NgspiceEngine, NgspiceEnvelopeEngine, VacaskEngine, VacaskEnvelopeEngine)
 BACKENDS: dict[str, type] = {e.name: e for e in _ENGINES}
 
 

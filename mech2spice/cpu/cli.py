@@ -52,8 +52,9 @@ def add_parser(subparsers) -> None:
                                    "Exit code 0 when it halted, 1 when it ran out of cycles.")
     r.add_argument("program", help="assembly source (.asm) or binary image")
     r.add_argument("--backend", default="iss", choices=BACKENDS,
-                   help="iss (instruction-set simulator), logic (the NOR netlist), envelope or rk4 (the "
-                        "netlist as 6486 oscillators; envelope ~0.05 CPU-s per cycle, the sieve in ~25 CPU-s: reports/cpu_physical.md), "
+                   help="iss (instruction-set simulator), logic (the NOR netlist), envelope, carrier or rk4 (the "
+                        "netlist as 6486 oscillators; envelope ~0.05 CPU-s per cycle, the sieve in ~25 CPU-s: "
+                        "reports/cpu_physical.md; carrier: oscillator level, Lawson RK4, reports/carrier.md), "
                         "vacask-envelope (the whole processor and its memory as one VACASK netlist, run for "
                         "--max-cycles cycles in one process: reports/cpu_circuit.md)")
     r.add_argument("--max-cycles", type=integer(0, MAX_CPU_CYCLES), default=100_000,
@@ -66,11 +67,17 @@ def add_parser(subparsers) -> None:
                    help=f"envelope step in drive periods (default {PROCESSOR_STEP:g}; refused above the "
                         "stability bound)")
     r.add_argument("--settle", type=number(0, lo_open=False), default=None, metavar="TOL",
-                   help=f"envelope: end each pause once every channel stays within TOL u_R for two 200-period "
+                   help=f"envelope, carrier: end each pause once every channel stays within TOL u_R for two 200-period "
                         f"windows (default {SETTLE_TOL}; 0 = full fixed-length pauses)")
     r.add_argument("--params", default=None, help="gate parameters of envelope / rk4 runs: default, printed, "
                    "robust, classic or a JSON file (fields, or a block file: docs/design.md)")
     envelope_speed_args(r)
+    r.add_argument("--steps", type=integer(4, 10_000), default=None, metavar="N",
+                   help="carrier: steps per drive period (default 12)")
+    r.add_argument("--threads", type=integer(1, 64), default=None, metavar="N",
+                   help="carrier: split each step over N threads (default 1; 2 uses both cores of an idle machine)")
+    r.add_argument("--trace", metavar="FILE", help="write one JSON line per cycle to FILE: the cycle's record, the "
+                   "registers after it and (envelope, carrier, rk4) every probed amplitude in u_R")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
     circuit_args(r)
     r.add_argument("--json", action="store_true", help="machine-readable output")
@@ -147,12 +154,19 @@ def cmd_run(args) -> int:
     if args.latency is not None:
         physical["latency"] = args.latency or None
     physical.update({k: getattr(args, k) == "on" for k in ("exponential", "parallel") if getattr(args, k)})
-    if physical and args.backend != "envelope":
+    carrier = {k: v for k, v in (("steps_per_period", args.steps), ("threads", args.threads)) if v is not None}
+    if carrier and args.backend != "carrier":
+        raise Mech2SpiceError("--steps and --threads apply to the carrier backend only")
+    if args.backend == "carrier" and set(physical) - {"settle"}:
+        raise Mech2SpiceError("--step, --latency, --exponential and --parallel apply to the envelope backend; "
+                              "the carrier's are --steps, --threads and --settle")
+    if physical and args.backend not in ("envelope", "carrier"):
         raise Mech2SpiceError("--step, --settle, --latency, --exponential and --parallel apply to the envelope "
-                              "backend only")
+                              "backend only (--settle also to carrier)")
+    physical.update(carrier)
     if args.params is not None:
-        if args.backend not in ("envelope", "rk4"):
-            raise Mech2SpiceError("--params applies to the envelope and rk4 backends only")
+        if args.backend not in ("envelope", "rk4", "carrier"):
+            raise Mech2SpiceError("--params applies to the envelope, carrier and rk4 backends only")
         from ..physics.params import load_params
         physical["p"] = load_params(args.params)
     physical.update(_circuit_options(args))
@@ -168,9 +182,13 @@ def cmd_run(args) -> int:
         raise Mech2SpiceError("--max-step and --settle-periods apply to the vacask-envelope backend only")
     if args.checkpoint_every and not args.checkpoint:
         raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
+    if args.trace is not None:
+        check_output_file(args.trace, [args.program, args.checkpoint], "trace")
+        if args.resume and not Path(args.trace).exists():
+            raise Mech2SpiceError(f"--resume with --trace {args.trace}: the trace to continue does not exist")
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=not args.json and sys.stderr.isatty(),
-                      checkpoint_every=args.checkpoint_every, **physical)
+                      checkpoint_every=args.checkpoint_every, trace=args.trace, **physical)
     if args.json:
         print(json.dumps(res, indent=2))
     else:

@@ -30,7 +30,7 @@ from .iss import FETCH, Cycle
 from .memory import Memory
 from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
 
-PHYSICAL = ("envelope", "rk4")   # engines that continue from a state, so a cycle can follow the last
+PHYSICAL = ("envelope", "rk4", "carrier")   # engines that continue from a state, so a cycle can follow the last
 # The defaults: 0.0098 u_R from the full envelope at step 2 over the first 30 sieve cycles, 7.2x faster than
 # step 8 + settle alone (reports/fidelity.md; latency 0.2: 0.042 u_R, over the 0.02 bound; step 20: slower)
 PROCESSOR_STEP = 16.0   # envelope periods with the exponential step (its bound: 27.5)
@@ -46,7 +46,7 @@ class PhysicalCPU:
     def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float | None = None,
                  settle: float | None = SETTLE_TOL, latency: float | None = LATENCY,
                  exponential: bool = EXPONENTIAL, parallel: bool = False, power_up: bool = True,
-                 noise: tuple[float, int] | None = None):
+                 noise: tuple[float, int] | None = None, steps_per_period: int | None = None, threads: int = 1):
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
         self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
@@ -56,7 +56,11 @@ class PhysicalCPU:
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
         step = step or (PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP)
-        self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, exponential, parallel)
+        if backend == "carrier":
+            self.pulse_engine, self.pause_engine = self._carrier_engines(settle, steps_per_period, threads)
+            step = 1.0 / self.pulse_engine.options.steps_per_period      # the step, in drive periods
+        else:
+            self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, exponential, parallel)
         if noise and noise[0]:          # thermal noise (k_B T, seed): the noisy engine, never settled or frozen
             from ..backends._noise_envelope import noisy_engine
             self.pulse_engine = self.pause_engine = noisy_engine(backend, self.pulse_engine.options, *noise)
@@ -82,6 +86,14 @@ class PhysicalCPU:
         pulse = make_engine(backend, make_engine(backend).Options(step_periods=step, latency=latency or None,
                                                                   exponential=exponential, parallel=parallel))
         return pulse, make_engine(backend, replace(pulse.options, settle_tol=settle or None))
+
+    @staticmethod
+    def _carrier_engines(settle: float | None, steps_per_period: int | None, threads: int):
+        """(pulse engine, pause engine) at oscillator level: Lawson RK4, pauses end once the channels settle."""
+        from ..backends.carrier import CarrierOptions
+        options = CarrierOptions(threads=threads, **({"steps_per_period": steps_per_period} if steps_per_period else {}))
+        pulse = make_engine("carrier", options)
+        return pulse, make_engine("carrier", replace(options, settle_tol=settle or None))
 
     def _run(self, periods: int, values: dict, clock: int) -> dict[str, float]:
         stim = network.stimulus(self.model, self.netlist, self.p, [(0, [values])], clock=[[clock]])

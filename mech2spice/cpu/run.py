@@ -7,6 +7,7 @@ cycles and at the end; ``resume=True`` continues from that file (cycle counts ar
 
 from __future__ import annotations
 
+import dataclasses
 import glob
 import hashlib
 import json
@@ -244,11 +245,53 @@ def _cycle_bar(enabled: bool, done: int, total: int, backend: str):
 
 
 
+class TraceFile:
+    """`cpu run --trace FILE`: one JSON line per cycle (what the ISS records, the registers after it and, on
+    the oscillator-level backends, every probed amplitude in u_R), flushed as it goes.  A resumed run first
+    drops the lines past its checkpoint's cycle (rewritten atomically), so the file always continues it."""
+
+    def __init__(self, path, resume_cycle: int | None):
+        self.path = Path(path)
+        if resume_cycle is None:
+            self.file = open(self.path, "w", encoding="utf-8")
+            return
+        kept = [line for line in self._lines() if json.loads(line)["cycle"] < resume_cycle]
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text("".join(kept), encoding="utf-8")
+        os.replace(tmp, self.path)
+        self.file = open(self.path, "a", encoding="utf-8")
+
+    def _lines(self) -> list[str]:
+        try:
+            lines = self.path.read_text(encoding="utf-8").splitlines(keepends=True)
+            for line in lines:
+                json.loads(line)["cycle"]
+        except FileNotFoundError:
+            return []
+        except (OSError, ValueError, KeyError, TypeError) as err:
+            raise Mech2SpiceError(f"trace {self.path} is not a cpu run trace (one JSON object per line): "
+                                  f"{err}") from None
+        return [line if line.endswith("\n") else line + "\n" for line in lines]
+
+    def __call__(self, rec, cpu) -> None:
+        row = {**dataclasses.asdict(rec), "registers": cpu.registers()}
+        amps = getattr(cpu, "amps", None)
+        if isinstance(amps, dict):
+            row.update(period=cpu.period, simulated_periods=cpu.simulated,
+                       amps={k: round(float(v), 6) for k, v in amps.items()})
+        self.file.write(json.dumps(row) + "\n")
+        self.file.flush()
+
+    def close(self) -> None:
+        self.file.close()
+
+
 def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpoint=None,
                 resume: bool = False, progress: bool = False, checkpoint_every: int | None = None,
                 trace=None, **physical) -> dict:
     """Run until halted or ``max_cycles`` (total) and return the result dict.  Checkpoints are written
-    every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level backends)."""
+    every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level backends).  ``trace``:
+    a callable(record, cpu) called after each cycle, or a path for a TraceFile."""
     checkpoint_every = checkpoint_every or (10 if backend in PHYSICAL else 1000)
     if max_cycles < 0 or checkpoint_every < 1:
         raise Mech2SpiceError("max_cycles must be >= 0 and checkpoint_every >= 1")
@@ -264,6 +307,8 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     cpu = make_cpu(backend, make_memory(program), power_up=not resume, **physical)
     if resume:
         _restore(cpu, state, checkpoint)
+    if trace is not None and not callable(trace):
+        trace = TraceFile(trace, cpu.cycle if resume else None)
     bar = _cycle_bar(progress and backend != "iss", cpu.cycle, max_cycles, backend)
     while not cpu.halted and cpu.cycle < max_cycles:
         rec = cpu.step()
@@ -273,6 +318,8 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         if checkpoint is not None and cpu.cycle % checkpoint_every == 0:
             save_checkpoint(cpu, checkpoint, program, backend)
     bar.close()
+    if isinstance(trace, TraceFile):
+        trace.close()
     if checkpoint is not None:
         save_checkpoint(cpu, checkpoint, program, backend)
     result = {"backend": backend, "cycles": cpu.cycle, "halted": cpu.halted,

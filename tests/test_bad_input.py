@@ -113,6 +113,14 @@ def test_outputs_never_overwrite_inputs(tmp_path, capsys):
     refused(capsys, "cpu", "run", prog, "--checkpoint", notes, needle="not a processor checkpoint")
     assert src.read_text() == before and prog.read_text() == Path(SIEVE).read_text()
     assert notes.read_text() == "my notes"
+    refused(capsys, "cpu", "run", prog, "--trace", prog, needle="refusing to overwrite")
+    assert prog.read_text() == Path(SIEVE).read_text()
+
+
+def test_carrier_options_belong_to_their_backend(capsys):
+    refused(capsys, "cpu", "run", SIEVE, "--backend", "envelope", "--threads", "2", needle="carrier backend only")
+    refused(capsys, "cpu", "run", SIEVE, "--backend", "carrier", "--step", "4", needle="the carrier's are --steps")
+    refused(capsys, "simulate", ADDER, "--backend", "carrier", "--noise", "1e-4", needle="no thermal noise")
 
 
 # ------------------------------------------------------------------ resource guards
@@ -145,6 +153,8 @@ NUMERIC = [  # (command line before the option, option, the values that must be 
     (["cpu", "run", SIEVE, "--backend", "envelope"], "--settle", ["-1", "nan", "inf"]),
     (["cpu", "run", SIEVE], "--max-cycles", ["-1", "nan", "inf", "1e3"]),
     (["cpu", "run", SIEVE, "--checkpoint", "ck.json"], "--checkpoint-every", ["-1", "0", "nan"]),
+    (["cpu", "run", SIEVE, "--backend", "carrier"], "--steps", ["-1", "0", "3", "nan", "12.5"]),
+    (["cpu", "run", SIEVE, "--backend", "carrier"], "--threads", ["-1", "0", "nan", "65"]),
 ]
 
 

@@ -119,7 +119,8 @@ def test_outputs_never_overwrite_inputs(tmp_path, capsys):
 
 def test_carrier_options_belong_to_their_backend(capsys):
     refused(capsys, "cpu", "run", SIEVE, "--backend", "envelope", "--threads", "2", needle="carrier backend only")
-    refused(capsys, "cpu", "run", SIEVE, "--backend", "carrier", "--step", "4", needle="the carrier's are --steps")
+    refused(capsys, "cpu", "run", SIEVE, "--backend", "logic", "--steps", "20", needle="carrier and rk4 backends only")
+    refused(capsys, "cpu", "run", SIEVE, "--backend", "carrier", "--step", "4", needle="the carrier backend's are --steps")
     refused(capsys, "simulate", ADDER, "--backend", "carrier", "--noise", "1e-4", needle="no thermal noise")
 
 

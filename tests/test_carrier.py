@@ -139,3 +139,17 @@ def test_trace_continues_across_a_resume(tmp_path):
     rows = [json.loads(line) for line in trace.read_text().splitlines()]
     assert [r["cycle"] for r in rows] == list(range(40))
     assert rows[-1]["registers"] == run_program(PROGRAMS / "sieve.asm", "iss", 40)["registers"]
+
+
+def test_rk4_skips_idle_time_by_the_same_rule():
+    """RK4 with settle 0.1 u_R (the processor's pauses): the same periods skipped as the carrier, the
+    compiled loop and the numpy path alike, amplitudes within 1e-3 u_R of the carrier's."""
+    sc = S.chain_scene(hold=1500, edges=False)
+    kw = dict(stimulus=sc.stimulus, probes=sc.probes, settle_tol=0.1)
+    c = carrier.integrate(sc.model, sc.periods, **kw)
+    r = rk4.integrate(sc.model, sc.periods, steps_per_period=80, **kw)
+    r_np = rk4.integrate(sc.model, 1500, steps_per_period=80, compiled=False, **kw)
+    assert c.settled_periods == r.settled_periods > 1000 and r_np.settled_periods == 700
+    assert np.abs(np.abs(c.amp) - np.abs(r.amp)).max() / sc.model.amplitude_unit < AMP_TOL
+    with pytest.raises(Mech2SpiceError, match="thermal noise"):
+        make_engine("rk4", rk4.RK4Options(settle_tol=0.1, noise_temperature=1e-4))

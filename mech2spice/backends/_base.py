@@ -142,6 +142,49 @@ def probe_dofs(model: MechModel, names: list[str]) -> np.ndarray:
     return np.array([model.probes[n] if n in model.probes else model.index(n) for n in names], int)
 
 
+def watched_dofs(model: MechModel) -> np.ndarray:
+    """The DOFs idle-time detection watches: the gates' channels (the logic signals), else every oscillating DOF.
+    Gate oscillators ring in slow gate-insulator modes that change no logic level (reports/fidelity.md)."""
+    gates = model.design.gates
+    dofs = [g.channel for g in gates] if gates else np.flatnonzero(~model.arrays["slow"])
+    return np.asarray(dofs, np.int64)
+
+
+class SettleWatch:
+    """Idle-time detection for engines that see per-period amplitudes: a stretch of constant stimulus has
+    settled once every watched amplitude stayed within a range of `tol` for two windows of `window` periods
+    in a row, the windows starting `first` periods after the stimulus changed (the envelope's rule,
+    envelope.integrate; the carrier's kernel applies it inside its compiled loop)."""
+
+    def __init__(self, tol: float, first: int, window: int):
+        self.tol, self.first, self.window = tol, first, window
+        self.restart()
+
+    def restart(self) -> None:
+        """A new stretch of constant stimulus: no window seen yet."""
+        self.lo, self.hi, self.quiet = np.inf, -np.inf, 0
+
+    def periods_to_check(self, age: int) -> int:
+        """Periods from `age` (periods since the change) to the end of the next window."""
+        if age < self.first:
+            return self.first + self.window - age
+        return self.window - (age - self.first) % self.window
+
+    def update(self, amps: np.ndarray, age: int) -> bool:
+        """Watched |A| (periods, ...) of the periods ending at ages age+1 ... : True once settled (at the last one)."""
+        for k, a in enumerate(amps):
+            now = age + k + 1
+            if now <= self.first:
+                continue
+            self.lo, self.hi = np.minimum(self.lo, a), np.maximum(self.hi, a)
+            if (now - self.first) % self.window == 0:
+                self.quiet = self.quiet + 1 if np.max(self.hi - self.lo, initial=0.0) < self.tol else 0
+                self.lo, self.hi = np.inf, -np.inf
+                if self.quiet >= 2:
+                    return True
+        return False
+
+
 def whole_periods(x: float) -> bool:
     """True for a whole number of periods."""
     return abs(x - round(x)) < 1e-9 and math.isfinite(x)

@@ -34,7 +34,8 @@ from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import _carrier_kernel as kernel
-from ._base import Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar
+from ._base import (Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar,
+                    watched_dofs)
 from .envelope import SETTLE_MIN, SETTLE_WINDOW
 
 DEFAULT_STEPS_PER_PERIOD = 12    # as accurate as RK4 at 160 steps on a switching gate; within 4e-4 u_R of it on
@@ -188,7 +189,7 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     op = operator(model, N)
     names = list(probes or model.probes)
     pidx = op.pos[probe_dofs(model, names)]
-    widx = op.pos[_watched(model)]
+    widx = op.pos[watched_dofs(model)]
     X, V = _start(model, op, state, B)
     amp = np.empty((periods, len(names), B), complex)
     mean = np.empty((periods, len(names), B))
@@ -223,13 +224,6 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     t_end = (start_period + 1 + np.arange(periods)) * T
     return Run(names, T, t_end, amp, mean, x, v, (start_period + periods) * T, state=(x, v),
                settled_periods=settled, extra={"steps_per_period": N})
-
-
-def _watched(model: MechModel) -> np.ndarray:
-    """The DOFs settle detection watches: the gates' channels (the logic signals), else every oscillating DOF."""
-    gates = model.design.gates
-    dofs = [g.channel for g in gates] if gates else np.flatnonzero(~model.arrays["slow"])
-    return np.asarray(dofs, np.int64)
 
 
 def _start(model: MechModel, op: Operator, state, B: int) -> tuple[np.ndarray, np.ndarray]:

@@ -31,7 +31,9 @@ from ..errors import Mech2SpiceError
 from ..physics import noise as thermal
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
-from ._base import Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar
+from ._base import (Capabilities, Engine, Run, SettleWatch, blowup_bound, check_divergence, probe_dofs,
+                    progress_bar, watched_dofs)
+from .envelope import SETTLE_MIN, SETTLE_WINDOW
 
 DEFAULT_STEPS_PER_PERIOD = 80   # 40 (the paper's 0.025 periods) leaves a 1e-3 u_R error; see reports/gate.md
 
@@ -67,12 +69,14 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
               stimulus: Stimulus | None = None, state: tuple[np.ndarray, np.ndarray] | None = None,
               start_period: int = 0, probes: list[str] | None = None, trace_every: int = 0,
               blowup: float | None = None, progress: bool = False, compiled: bool = True,
-              noise_temperature: float = 0.0, noise_seed: int = 0) -> Run:
+              noise_temperature: float = 0.0, noise_seed: int = 0, settle_tol: float | None = None) -> Run:
     """Integrate `periods` drive periods from `start_period` (state at rest unless given).
 
     compiled=True uses the numba kernel (rk4_kernel.py) for whole periods at constant drive
     amplitudes; the numpy path (compiled=False) is the same scheme and the fallback.
-    noise_temperature > 0 adds the Langevin forces of every dashpot (module doc)."""
+    noise_temperature > 0 adds the Langevin forces of every dashpot (module doc).
+    settle_tol (u_R): skip idle time by the envelope's rule (`_base.SettleWatch`): once every channel
+    settled, the state at the period boundary is held until the stimulus next changes."""
     model.check()
     stimulus = stimulus or Stimulus.constant(model)
     B, N = stimulus.batch, int(steps_per_period)
@@ -83,6 +87,9 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     rhs = _Rhs(model)
     names = list(probes or model.probes)
     pidx = probe_dofs(model, names)
+    watch = SettleWatch(settle_tol * model.amplitude_unit, SETTLE_MIN, SETTLE_WINDOW) if settle_tol else None
+    if watch is not None:                   # the watched channels ride along as extra probes
+        pidx = np.concatenate([pidx, watched_dofs(model)])
     blowup = blowup or blowup_bound(model)
 
     # Drive phase tables for the three distinct stage times of step j (periodic in N).
@@ -95,19 +102,24 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
 
     x, v = (np.zeros((model.n, B)), np.zeros((model.n, B))) if state is None else \
         (np.array(state[0], float), np.array(state[1], float))
-    amp = np.zeros((periods, len(names), B), complex)
-    mean = np.zeros((periods, len(names), B))
+    amp = np.zeros((periods, pidx.size, B), complex)
+    mean = np.zeros((periods, pidx.size, B))
     traces, trace_t = [], []
     kern = _kernel(model, N, h, sin_full, sin_half, demod, pidx, blowup, compiled and not trace_every, B)
     noise = _Noise(model, noise_temperature, noise_seed, N, h, B)
     bar = progress_bar(periods, progress)
-    k = 0
+    k, seg_now, since, settled = 0, None, 0, 0
     while k < periods:
         t = (start_period + k) * T
         amps = stimulus.at(t + 1e-9 * h)
         whole = int(min(np.floor((stimulus.next_change(t + 1e-9 * h) - t) / T + 1e-9), periods))  # at these amps
+        if stimulus.segment(t + 1e-9 * h) != seg_now:
+            seg_now, since = stimulus.segment(t + 1e-9 * h), 0
+            if watch is not None:
+                watch.restart()
         if kern is not None and whole >= 1:
             n = min(whole, periods - k, KERNEL_CHUNK if noise.off else 1)
+            n = min(n, watch.periods_to_check(since)) if watch is not None else n
             x, v = np.ascontiguousarray(x), np.ascontiguousarray(v)
             amp[k:k + n], mean[k:k + n], bad = kern.run(x, v, amps, n, noise.period(start_period + k))
             if bad >= 0:
@@ -117,13 +129,19 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
             x, v = _numpy_period(rhs, x, v, stimulus, start_period + k, N, h, T, sin_full, sin_half, demod,
                                  pidx, amp[k], mean[k], trace_every, traces, trace_t, noise)
             check_divergence(model, x, (start_period + k + 1) * T, bound=blowup)
+        if watch is not None and whole >= n and watch.update(np.abs(amp[k:k + n, len(names):]), since):
+            hold = min(whole, periods - k) - n          # the settled orbit, held up to the stimulus change
+            amp[k + n:k + n + hold], mean[k + n:k + n + hold] = amp[k + n - 1], mean[k + n - 1]
+            settled += hold
+            n += hold
         k += n
+        since += n
         bar.update(n)
     bar.close()
     t_end = (start_period + 1 + np.arange(periods)) * T
-    return Run(names, T, t_end, amp, mean, x, v, (start_period + periods) * T,
+    return Run(names, T, t_end, amp[:, :len(names)], mean[:, :len(names)], x, v, (start_period + periods) * T,
                np.array(traces) if traces else None, np.array(trace_t) if trace_t else None,
-               extra={"compiled": kern is not None}, state=(x, v))
+               extra={"compiled": kern is not None}, state=(x, v), settled_periods=settled)
 
 
 KERNEL_CHUNK = 200     # periods per compiled call: bounds the progress-bar and Ctrl-C latency
@@ -204,12 +222,17 @@ class RK4Options:
     compiled: bool = True
     noise_temperature: float = 0.0       # k_B T in model energy units (physics/noise.py); 0: deterministic
     noise_seed: int = 0                  # the Langevin forces' seed (with the period index)
+    settle_tol: float | None = None      # u_R; None: integrate every period (no idle skipping)
 
     def validate(self) -> None:
         """Refuse steps the scheme cannot take and temperatures that are not numbers >= 0."""
         if int(self.steps_per_period) != self.steps_per_period or self.steps_per_period < 4:
             raise Mech2SpiceError("RK4 needs a whole number of at least 4 steps per drive period")
         thermal.check_temperature(self.noise_temperature)
+        if self.settle_tol is not None and not (np.isfinite(self.settle_tol) and self.settle_tol > 0):
+            raise Mech2SpiceError(f"settle tolerance {self.settle_tol!r} u_R: must be a positive number")
+        if self.settle_tol is not None and self.noise_temperature:
+            raise Mech2SpiceError("idle-time skipping holds a settled state: it cannot be combined with thermal noise")
         if isinstance(self.noise_seed, bool) or not isinstance(self.noise_seed, (int, np.integer)) or self.noise_seed < 0:
             raise Mech2SpiceError(f"RK4 noise seed {self.noise_seed!r}: must be an integer >= 0")
 
@@ -221,7 +244,7 @@ class RK4Engine(Engine):
     """Fixed-step classical RK4 on the carrier: the textbook reference every reduced model is checked against."""
 
     name = "rk4"
-    capabilities = Capabilities(batch=True, state=True, checkpoint=True)
+    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True)
     Options = RK4Options
 
     def estimate_seconds(self, model, periods, batch=1):
@@ -233,4 +256,4 @@ class RK4Engine(Engine):
         return integrate(model, periods, steps_per_period=self.options.steps_per_period, stimulus=stimulus,
                          state=state, start_period=start_period, probes=probes, progress=progress,
                          compiled=self.options.compiled, noise_temperature=self.options.noise_temperature,
-                         noise_seed=self.options.noise_seed)
+                         noise_seed=self.options.noise_seed, settle_tol=self.options.settle_tol)

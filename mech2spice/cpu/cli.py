@@ -67,13 +67,13 @@ def add_parser(subparsers) -> None:
                    help=f"envelope step in drive periods (default {PROCESSOR_STEP:g}; refused above the "
                         "stability bound)")
     r.add_argument("--settle", type=number(0, lo_open=False), default=None, metavar="TOL",
-                   help=f"envelope, carrier: end each pause once every channel stays within TOL u_R for two 200-period "
+                   help=f"envelope, carrier, rk4: end each pause once every channel stays within TOL u_R for two 200-period "
                         f"windows (default {SETTLE_TOL}; 0 = full fixed-length pauses)")
     r.add_argument("--params", default=None, help="gate parameters of envelope / rk4 runs: default, printed, "
                    "robust, classic or a JSON file (fields, or a block file: docs/design.md)")
     envelope_speed_args(r)
     r.add_argument("--steps", type=integer(4, 10_000), default=None, metavar="N",
-                   help="carrier: steps per drive period (default 12)")
+                   help="carrier, rk4: steps per drive period (default 12 and 80)")
     r.add_argument("--threads", type=integer(1, 64), default=None, metavar="N",
                    help="carrier: split each step over N threads (default 1; 2 uses both cores of an idle machine)")
     r.add_argument("--trace", metavar="FILE", help="write one JSON line per cycle to FILE: the cycle's record, the "
@@ -155,14 +155,17 @@ def cmd_run(args) -> int:
         physical["latency"] = args.latency or None
     physical.update({k: getattr(args, k) == "on" for k in ("exponential", "parallel") if getattr(args, k)})
     carrier = {k: v for k, v in (("steps_per_period", args.steps), ("threads", args.threads)) if v is not None}
-    if carrier and args.backend != "carrier":
-        raise Mech2SpiceError("--steps and --threads apply to the carrier backend only")
-    if args.backend == "carrier" and set(physical) - {"settle"}:
-        raise Mech2SpiceError("--step, --latency, --exponential and --parallel apply to the envelope backend; "
-                              "the carrier's are --steps, --threads and --settle")
-    if physical and args.backend not in ("envelope", "carrier"):
+    if args.threads is not None and args.backend != "carrier":
+        raise Mech2SpiceError("--threads applies to the carrier backend only")
+    if args.steps is not None and args.backend not in ("carrier", "rk4"):
+        raise Mech2SpiceError("--steps applies to the carrier and rk4 backends only")
+    if args.backend in ("carrier", "rk4") and set(physical) - {"settle"}:
+        raise Mech2SpiceError(f"--step, --latency, --exponential and --parallel apply to the envelope backend; "
+                              f"the {args.backend} backend's are --steps{', --threads' if args.backend == 'carrier' else ''} "
+                              "and --settle")
+    if physical and args.backend not in ("envelope", "carrier", "rk4"):
         raise Mech2SpiceError("--step, --settle, --latency, --exponential and --parallel apply to the envelope "
-                              "backend only (--settle also to carrier)")
+                              "backend only (--settle also to carrier and rk4)")
     physical.update(carrier)
     if args.params is not None:
         if args.backend not in ("envelope", "rk4", "carrier"):

@@ -60,7 +60,8 @@ class PhysicalCPU:
             self.pulse_engine, self.pause_engine = self._carrier_engines(settle, steps_per_period, threads)
             step = 1.0 / self.pulse_engine.options.steps_per_period      # the step, in drive periods
         else:
-            self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, exponential, parallel)
+            self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, exponential, parallel,
+                                                                 steps_per_period)
         if noise and noise[0]:          # thermal noise (k_B T, seed): the noisy engine, never settled or frozen
             from ..backends._noise_envelope import noisy_engine
             self.pulse_engine = self.pause_engine = noisy_engine(backend, self.pulse_engine.options, *noise)
@@ -78,11 +79,13 @@ class PhysicalCPU:
     # --- integration -----------------------------------------------------------------------
     @staticmethod
     def _engines(backend: str, step: float, settle: float | None, latency: float | None, exponential: bool,
-                 parallel: bool):
+                 parallel: bool, steps_per_period: int | None = None):
         """(pulse engine, pause engine): only pauses may end early once settled; pulses always run in full."""
-        if backend != "envelope":
+        if backend != "envelope":                  # rk4: the same rule for ending pauses
             engine = make_engine(backend)
-            return engine, engine
+            if steps_per_period:
+                engine = make_engine(backend, replace(engine.options, steps_per_period=steps_per_period))
+            return engine, make_engine(backend, replace(engine.options, settle_tol=settle or None))
         pulse = make_engine(backend, make_engine(backend).Options(step_periods=step, latency=latency or None,
                                                                   exponential=exponential, parallel=parallel))
         return pulse, make_engine(backend, replace(pulse.options, settle_tol=settle or None))

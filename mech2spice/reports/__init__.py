@@ -20,7 +20,8 @@ class Report:
 
 
 # In `all` order: a report reading another's JSON comes after it (cpu_physical reads fidelity.json; cpu and
-# performance read cpu_physical.json).  spice reads speed_accuracy.json, the last one written.
+# performance read cpu_physical.json).  spice reads speed_accuracy.json, the last one written;
+# speed_accuracy.md appends carrier.json's section.
 REPORTS: dict[str, Report] = {
     "gate": Report("the NOR gate against the paper's six requirements; why the printed parameters fail",
                    "~1 min", ("gate.md",), ("quick",)),
@@ -43,6 +44,10 @@ REPORTS: dict[str, Report] = {
                        ("envelope.md",), ("cache", "render")),
     "performance": Report("what every fidelity level costs as circuits grow, and where the time goes",
                           "~15 min", ("performance.md",), ("only", "quick", "sqrt_rk4_full", "render")),
+    "carrier": Report("the carrier engine (Lawson RK4): accuracy against RK4, convergence against wall time, its rate "
+                      "and roofline on the processor, the whole sieve against the envelope", "~10 min",
+                      ("carrier.md", "carrier.json", "carrier_speed_accuracy.png", "carrier_roofline.png",
+                       "carrier_sieve_fidelity.png"), ("only", "quick", "render", "carrier_trace", "envelope_trace")),
     "speed_accuracy": Report("RK4 and ngspice (carrier and envelope netlists): speed, accuracy, failure points",
                              "~40 min", ("speed_accuracy.md",), ("only", "design", "quick", "render")),
     "robustness": Report("yield of the gate, a 3-gate chain and the adder under per-element spread (Monte-Carlo "

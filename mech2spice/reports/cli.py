@@ -38,6 +38,10 @@ OPTIONS = [
     ("--settle", "settle", dict(type=float, metavar="TOL", help="envelope settle tolerance in u_R (0: full pauses)")),
     ("--checkpoint", "checkpoint", dict(metavar="FILE", help="checkpoint file (with --resume: continue from it)")),
     ("--resume", "resume", dict(action="store_true", help="continue from --checkpoint FILE")),
+    ("--carrier-trace", "carrier_trace", dict(metavar="FILE", help="carrier `cpu run --trace` of the sieve (default "
+                                                                   "build/carrier/sieve_carrier.jsonl)")),
+    ("--envelope-trace", "envelope_trace", dict(metavar="FILE", help="envelope `cpu run --trace` of the sieve "
+                                                                     "(default build/carrier/sieve_envelope.jsonl)")),
     ("--name", "name", dict(metavar="STEM", help="report file stem (default cpu_physical)")),
 ]
 

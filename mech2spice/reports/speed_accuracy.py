@@ -51,7 +51,7 @@ from ..spice import runner as ngspice
 from ..spice import num
 from ..spice.carrier import SpiceOptions, emit_with_probes
 from ..synthesis import synth
-from . import envelope_spice, vacask
+from . import carrier as carrier_report, envelope_spice, vacask
 from ._common import SANDBOX, out_dir, pyplot, read_json, save_figure, timed, write_json
 
 MACHINE = SANDBOX
@@ -930,11 +930,13 @@ def markdown(res: dict) -> str:
     return render(res)
 
 
-def write_markdown(path: Path, res: dict | None, envelope_block: str = "", vacask_block: str = "") -> str:
-    """Write the .md: this report from `res`, then the envelope-spice section (`envelope_spice.block`) and the
-    VACASK section (`vacask.block`, from vacask.json); nothing of the old file is kept."""
+def write_markdown(path: Path, res: dict | None, envelope_block: str = "", vacask_block: str = "",
+                   carrier_block: str = "") -> str:
+    """Write the .md: this report from `res`, then the envelope-spice section (`envelope_spice.block`), the
+    VACASK section (`vacask.block`, from vacask.json) and the carrier engine's (`carrier.block`, from
+    carrier.json); nothing of the old file is kept."""
     parts = [markdown(res).rstrip("\n")] if res else []
-    for extra in (envelope_block, vacask_block):
+    for extra in (envelope_block, vacask_block, carrier_block):
         if extra:
             parts.append(extra.rstrip("\n"))
     text = "\n\n".join(parts) + "\n"
@@ -964,7 +966,7 @@ def write(directory="reports", only=None, design=None, quick: bool = False, rend
     if res is not None:
         res["charts"] = charts(res, out)
         write_json(jpath, res, default=None)
-    write_markdown(mpath, res, envelope_spice.block(out), vacask.block(out))
+    write_markdown(mpath, res, envelope_spice.block(out), vacask.block(out), carrier_report.block(out))
     return mpath
 
 

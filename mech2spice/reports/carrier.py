@@ -40,6 +40,7 @@ RK4_N = (20, 24, 32, 40, 48, 64, 80, 120, 160, 240)
 CARRIER_SCAN = (2, 3)                   # where it fails: below the engine's minimum of 4 (carrier.integrate
 RK4_SCAN = (4, 6, 8, 12, 16)            # directly, as CarrierOptions refuses them); RK4's coarse steps
 NG_STEPS = (1 / 20, 1 / 40, 1 / 80)     # ngspice max step (periods), gate only
+REDUCED_TOL = 0.02                      # u_R: issue 6's agreement tolerance for reduced models
 SIEVE_CYCLES = 457                      # the sieve halts after 457 cycles (reports/cpu.md)
 CARRIER_TRACE = "build/carrier/sieve_carrier.jsonl"
 ENVELOPE_TRACE = "build/carrier/sieve_envelope.jsonl"
@@ -520,6 +521,19 @@ def _per_cycle_periods(rows: list[dict]) -> list[int]:
     return [sim[0]] + [b - a for a, b in zip(sim, sim[1:])]
 
 
+def iss_registers(cycles: int) -> list[dict]:
+    """The ISS's registers after each of the sieve's first `cycles` cycles (programs/sieve.asm)."""
+    from .. import data
+    from ..cpu import run as R
+    from ..cpu.iss import ISS
+    iss = ISS(R.make_memory(R.load_program(data.program("sieve.asm"))))
+    out = []
+    for _ in range(cycles):
+        iss.step()
+        out.append(iss.registers())
+    return out
+
+
 def sieve(carrier_trace=CARRIER_TRACE, envelope_trace=ENVELOPE_TRACE) -> dict:
     """Carrier against envelope per cycle: worst |amplitude difference|, registers equal, margins, periods."""
     from ..physics.params import margin
@@ -537,6 +551,7 @@ def sieve(carrier_trace=CARRIER_TRACE, envelope_trace=ENVELOPE_TRACE) -> dict:
         same.append(c.get("registers") == e.get("registers"))
         mc.append(min(margin(v) for v in c["amps"].values()))
         me.append(min(margin(v) for v in e["amps"].values()))
+    iss = iss_registers(max(len(car), len(env)))
     rc, re_ = _result(carrier_trace), _result(envelope_trace)
     total = (re_ or {}).get("cycles") if (re_ or {}).get("halted") else None
     total = (rc or {}).get("cycles") if (rc or {}).get("halted") else (total or SIEVE_CYCLES)
@@ -547,9 +562,12 @@ def sieve(carrier_trace=CARRIER_TRACE, envelope_trace=ENVELOPE_TRACE) -> dict:
             "worst_ur": worst, "worst_probe": probe, "registers_equal": same,
             "min_margin_carrier": mc, "min_margin_envelope": me,
             "periods_carrier": _per_cycle_periods(car[:n]), "periods_envelope": _per_cycle_periods(env[:n]),
+            "schedule_end": [car[n - 1].get("period"), env[n - 1].get("period")] if n else None,
             "max_worst_ur": max(worst) if worst else None, "max_at_cycle": k,
             "max_probe": probe[k] if k is not None else None,
-            "all_registers_equal": all(same), "carrier_result": _trim(rc), "envelope_result": _trim(re_)}
+            "all_registers_equal": all(same), "carrier_result": _trim(rc), "envelope_result": _trim(re_),
+            "carrier_iss_mismatches": [r["cycle"] for r, w in zip(car, iss) if r.get("registers") != w],
+            "envelope_iss_mismatches": [r["cycle"] for r, w in zip(env, iss) if r.get("registers") != w]}
 
 
 def _trim(res: dict | None) -> dict | None:
@@ -704,7 +722,9 @@ def convergence_md(c: dict, chart: str | None, heading: str = "##") -> list[str]
          f"points, carrier by the trapezoid rule, ~1e-4 u_R apart at 160 steps). A run fails where it diverges "
          f"(`DivergenceError`) or its amplitude error exceeds {c['fail_ur']} u_R; *(scan)* rows look for those "
          f"points (carrier below its minimum of 4 steps, run through `carrier.integrate`). The gate's runs take "
-         f"milliseconds, so its wall times are mostly call overhead; the adder's measure the integrators. "
+         f"milliseconds, so its wall times are mostly call overhead; the adder's measure the integrators. ngspice "
+         f"(trap + prewarp, reltol 1e-5: the package default) runs on the gate only, and only where installed "
+         f"(the adder's 16 members would be 16 processes). "
          f"Wall times are ratios within this run (one run after another; {_measured_on(', load ' + ', '.join(f'{x:g}' for x in c['load']))}"
          f"{', --quick' if c.get('quick') else ''}); ngspice's is the sum of its processes' wall times.", ""]
     for name, s in c["scenes"].items():
@@ -804,31 +824,50 @@ def sieve_md(s: dict, chart: str | None, heading: str = "##") -> list[str]:
     so_far = "" if s["complete"] else f" ({s['carrier_cycles']} of {total} cycles so far: the carrier run has not halted yet)"
     L = [f"{heading} The whole sieve: envelope against oscillator level", "",
          f"Two `mech2spice cpu run --trace` files of the sieve compared cycle by cycle: `carrier` (Lawson RK4, "
-         f"oscillator level) and the envelope, each cycle's last amplitudes of every probe (output bits and latch "
-         f"outputs). Compared: **{n} cycles**{so_far}. Traces: `{s['carrier_trace']}`, `{s['envelope_trace']}`; "
+         f"oscillator level) and the envelope, the amplitudes each cycle is decoded from (mean of "
+         f"its last 10 periods) for every probe (output bits and latch outputs). Compared: **{n} cycles**{so_far}. Traces: `{s['carrier_trace']}`, `{s['envelope_trace']}`; "
          f"{SANDBOX}.", ""]
     if n:
         L += [f"- worst amplitude difference over all compared cycles: **{s['max_worst_ur']:.4f} u_R** (cycle "
-              f"{s['max_at_cycle']}, `{s['max_probe']}`); median per cycle {np.median(s['worst_ur']):.4f} u_R",
+              f"{s['max_at_cycle']}, `{s['max_probe']}`); median per cycle {np.median(s['worst_ur']):.4f} u_R; "
+              f"cycles above the 0.02 u_R tolerance of reduced models (reports/fidelity.md): "
+              f"{sum(w > REDUCED_TOL for w in s['worst_ur'])}",
               f"- registers equal at every compared cycle: **{'yes' if s['all_registers_equal'] else 'no'}**"
               + ("" if s["all_registers_equal"] else
                  f" (differ at {sum(not x for x in s['registers_equal'])} cycles, first "
                  f"{s['registers_equal'].index(False)})"),
+              f"- against the ISS (programs/sieve.asm), registers after every traced cycle: carrier "
+              f"{_iss_line(s, 'carrier')}, envelope {_iss_line(s, 'envelope')}",
               f"- smallest margin to a band edge: carrier {min(s['min_margin_carrier']):+.3f}, envelope "
               f"{min(s['min_margin_envelope']):+.3f} band widths",
               f"- integrated periods per cycle (median; cycle 0 includes the power-up): carrier "
               f"{np.median(s['periods_carrier'][1:] or s['periods_carrier']):.0f}, envelope "
               f"{np.median(s['periods_envelope'][1:] or s['periods_envelope']):.0f}; over the compared cycles "
               f"{sum(s['periods_carrier']):,} and {sum(s['periods_envelope']):,}"]
+        if s.get("schedule_end") and None not in s["schedule_end"]:
+            L.append(f"- schedules: by the end of cycle {n - 1} the carrier run had simulated "
+                     f"{s['schedule_end'][0]:,} periods and the envelope {s['schedule_end'][1]:,} (the envelope rounds "
+                     f"each pulse and pause up to whole steps), so the two are compared at slightly different times")
         for name, res in (("carrier", s.get("carrier_result")), ("envelope", s.get("envelope_result"))):
             if res:
-                L.append(f"- {name} run: {res.get('cycles')} cycles, halted {res.get('halted')}, wall "
+                setting = (f"step {res['step']:g} periods" if res.get("step") else "") + \
+                    (f", settle {res['settle']:g} u_R" if res.get("settle") else "")
+                L.append(f"- {name} run ({setting or 'settings not recorded'}): {res.get('cycles')} cycles, halted "
+                         f"{res.get('halted')}, wall "
                          f"{res.get('wall_s', float('nan')):.0f} s, {res.get('simulated_periods', 0):,} of "
                          f"{res.get('periods', 0):,} periods integrated")
         L.append("")
     if chart:
         L += [f"![worst difference and margins per cycle]({chart})", ""]
     return L
+
+
+def _iss_line(s: dict, which: str) -> str:
+    bad = s.get(f"{which}_iss_mismatches")
+    n = s[f"{which}_cycles"]
+    if bad is None:
+        return "not checked"
+    return f"**{n - len(bad)} of {n} equal**" + (f" (first differing cycle {bad[0]})" if bad else "")
 
 
 def markdown(d: dict) -> str:

@@ -391,7 +391,8 @@ def carrier_counts(model, N: int = 12) -> dict:
     model's groups: per stage the gather loop (drive 3 flops; per coupling entry 2 FMAs = 4 flops and
     index 4 + two values 16 + gathered x, v 16 + f read/written 16 bytes; per quadratic entry 3 flops and
     index 4 + value 8 + gathered x 8 (+ own x 8 on a fast DOF) + f 16 bytes), then the four combine loops:
-    46 flops and 240 bytes of unit-stride loads and stores per DOF per step."""
+    45 flops (23 + 7 + 13 + 2) and 240 bytes (72 + 56 + 72 + 40) of unit-stride loads and stores per DOF per
+    step."""
     from ..backends import carrier
     op = carrier.operator(model, N)
     flops = bytes_ = 0.0
@@ -403,7 +404,7 @@ def carrier_counts(model, N: int = 12) -> dict:
         bytes_ += 4 * b * cnt
     n = model.n
     ws = sum(a.nbytes for a in op.ell) + op.groups.nbytes + 12 * n * 8      # x, v, 8 work arrays, P, Q
-    return {"flops": flops / n + 46, "bytes": bytes_ / n + 240, "working_set_bytes": int(ws),
+    return {"flops": flops / n + 45, "bytes": bytes_ / n + 240, "working_set_bytes": int(ws),
             "entries_per_dof": float(sum((g[1] - g[0]) * (g[2] + g[3]) for g in op.groups) / n)}
 
 
@@ -413,21 +414,26 @@ def rk4_counts(model) -> dict:
     output 12 per row), the quadratic products (2 per quad) and 1/m (1 per DOF); per step 26 elementwise
     flops per DOF (stage states and the final sums) and 3 per drive.  Numpy's bytes count each array once
     per elementwise operation (24 per binary op: its temporaries are arrays too); the compiled kernel's the
-    loads and stores of its loops (8-byte indices)."""
+    loads and stores of its loops (its own CSR of K and C with 8-byte indices, 7 flops per quadratic coupling).
+    Working sets: the matrices, and the state, stage and temporary arrays (~20 of n doubles for numpy, 10 for
+    the kernel)."""
     from ..backends import rk4
     A = rk4.force_matrix(model)
     n, nq, nd = model.n, len(model.quads), len(model.drives)
     nnz = A.nnz
     flops = 4 * (2 * nnz + 2 * nq + n) + 26 * n + 3 * nd
     z = 2 * n + 2 * nq + nd
-    stage_np = 20 * nnz + 12 * n + 16 * z + 2 * 24 * nq + 24 * nq + 24 * n
+    stage_np = 20 * nnz + 12 * n + 16 * z + 4 * 24 * nq + 24 * n       # two gathers, two products: 4 per quad
     numpy_bytes = 4 * stage_np + 26 * 24 * n + 3 * 24 * nd
     kK, kC = model.K.nnz, model.C.nnz
     stage_c = 24 * (kK + kC) + 16 * n + 8 * n + 72 * nq + 40 * nd + 24 * n
-    compiled_bytes = 4 * stage_c + 3 * 40 * n + 2 * 96 * n
-    compiled_flops = 4 * (2 * (kK + kC) + 3.5 * nq + 2 * nd + n) + 3 * 4 * n + 2 * 14 * n
-    return {"numpy": {"flops": flops / n, "bytes": numpy_bytes / n},
-            "compiled": {"flops": compiled_flops / n, "bytes": compiled_bytes / n}, "nnz": int(nnz)}
+    compiled_bytes = 4 * stage_c + 3 * 40 * n + 96 * n                 # 3 stage-state loops, the final sums
+    compiled_flops = 4 * (2 * (kK + kC) + 7 * nq + 2 * nd + n) + 3 * 4 * n + 14 * n
+    ws_np = 12 * nnz + 4 * n + 8 * z + 20 * 8 * n
+    ws_c = 16 * (kK + kC) + 16 * n + 10 * 8 * n + 24 * nq
+    return {"numpy": {"flops": flops / n, "bytes": numpy_bytes / n, "working_set_bytes": int(ws_np)},
+            "compiled": {"flops": compiled_flops / n, "bytes": compiled_bytes / n, "working_set_bytes": int(ws_c)},
+            "nnz": int(nnz)}
 
 
 def roofline(quick: bool = False, proc: dict | None = None) -> dict:
@@ -472,8 +478,7 @@ def roofline_points(roof: dict, proc: dict | None) -> list[dict]:
         if method not in by:
             continue
         c, rate = counts[kernel], by[method]["osc_steps_per_s"]
-        ws = counts["carrier"]["working_set_bytes"] if kernel == "carrier" else 0
-        level = _level_for(ws, roof.get("lscpu", {})) if ws else "L3 (8 MB)"
+        level = _level_for(c["working_set_bytes"], roof.get("lscpu", {}))
         bw = peaks["triad"].get(level) or next(iter(peaks["triad"].values()))
         flop_peak = peaks["fma_2t_gflops"] if threads == 2 else peaks["fma_1t_gflops"]
         mem_peak = bw["gbs_2t"] if threads == 2 else bw["gbs_1t"]
@@ -805,15 +810,13 @@ def roofline_md(roof: dict, chart: str | None, heading: str = "##") -> list[str]
                    [[k, f"{c['flops']:.0f}", f"{c['bytes']:.0f}", f"{c['flops'] / c['bytes']:.3f}"]
                     for k, c in roof["counts"].items()]), ""]
     if roof.get("points"):
-        L += ["Achieved (the processor section's rates) and the bound min(FMA peak, intensity x bandwidth of the "
-              "cache level the kernel's working set fits in; the compiled/numpy RK4 taken at L3):", "",
+        L += ["Achieved (the processor section's rates) and the bound min(FMA peak, intensity x triad bandwidth "
+              "of the cache level the kernel's working set fits in, by lscpu's per-core sizes):", "",
               *md_table(["run", "GFLOP/s", "GB/s", "level", "bound [GFLOP/s]", "limited by", "distance: achieved / bound"],
                         [[p["method"], f"{p['gflops']:.2f}", f"{p['gbs']:.1f}", p["level"], f"{p['bound_gflops']:.1f}",
                           p["limited_by"], f"**{p['fraction_of_bound']:.0%}**"] for p in roof["points"]]), ""]
-        ws = roof["counts"]["carrier"].get("working_set_bytes")
-        if ws:
-            L += [f"The carrier kernel's working set on the processor: {ws / 1024:.0f} KiB (state, work arrays, "
-                  f"partner groups).", ""]
+        L += ["Working sets on the processor: " + ", ".join(f"{k} {c['working_set_bytes'] / 1024:.0f} KiB"
+                                                           for k, c in roof["counts"].items()) + ".", ""]
     if chart:
         L += [f"![roofline]({chart})", ""]
     return L

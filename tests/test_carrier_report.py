@@ -79,6 +79,7 @@ def test_sieve_section_reads_a_partial_trace_pair(tmp_path):
     assert s["cycles_compared"] == 3 and s["total_cycles"] == 5 and not s["complete"]
     assert s["worst_ur"] == pytest.approx([0.0, 0.03, 0.0]) and s["max_probe"] == "x[0]"
     assert s["registers_equal"] == [True, True, False]
+    assert s["carrier_iss_mismatches"] == [0, 1, 2]         # synthetic registers: none is the ISS's
     assert s["periods_carrier"] == [100, 100, 100] and s["periods_envelope"] == [60, 60, 60]
     assert s["min_margin_carrier"][1] == pytest.approx(min((0.53 - 0.365) / 0.305, (0.67 - 0.53) / 0.305,
                                                           (0.96 - 0.92) / 0.105))

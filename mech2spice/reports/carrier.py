@@ -627,6 +627,7 @@ def _error_panel(ax, s: dict, key: str) -> None:
     ax.axhline(AMP_TOL, color="0.5", ls="--", lw=0.8)
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.xaxis.set_minor_formatter(pyplot().NullFormatter())
     ax.set_xlabel("wall time [s]")
     ax.legend(fontsize=6)
 
@@ -682,7 +683,8 @@ def chart_sieve(d: dict, out: Path) -> str | None:
     a2.set_xlabel("sieve cycle")
     a2.legend(fontsize=7)
     fig.suptitle(f"the sieve on the processor: carrier (oscillator level) vs envelope at each cycle's end,\n"
-                 f"{s['cycles_compared']} of {s['total_cycles']} cycles; traces by `cpu run --trace`; {SANDBOX}",
+                 f"{s['cycles_compared']} of {s['total_cycles']} cycles; traces by `cpu run --trace`; {SANDBOX} (shared; "
+                 f"the runs' load is not in the traces)",
                  fontsize=8)
     name = "carrier_sieve_fidelity.png"
     save_figure(fig, out / name)
@@ -728,8 +730,8 @@ def convergence_md(c: dict, chart: str | None, heading: str = "##") -> list[str]
          f"(`DivergenceError`) or its amplitude error exceeds {c['fail_ur']} u_R; *(scan)* rows look for those "
          f"points (carrier below its minimum of 4 steps, run through `carrier.integrate`). The gate's runs take "
          f"milliseconds, so its wall times are mostly call overhead; the adder's measure the integrators. ngspice "
-         f"(trap + prewarp, reltol 1e-5: the package default) runs on the gate only, and only where installed "
-         f"(the adder's 16 members would be 16 processes). "
+         f"(trap + prewarp, reltol 1e-5: the package default) runs on the gate only, where installed and not "
+         f"with --quick (the adder's 16 members would be 16 processes). "
          f"Wall times are ratios within this run (one run after another; {_measured_on(', load ' + ', '.join(f'{x:g}' for x in c['load']))}"
          f"{', --quick' if c.get('quick') else ''}); ngspice's is the sum of its processes' wall times.", ""]
     for name, s in c["scenes"].items():

@@ -783,7 +783,7 @@ def processor_md(p: dict, r: dict, eq: dict | None, conv: dict | None = None) ->
               f". RK4's periods/s there = its measured oscillator-steps/s / "
               f"({p['oscillators']} x {eq['rk4_steps']}): " +
               "; ".join(f"{k}: **{v:.1f}x**" for k, v in r["b"].items()) +
-              f". The issue's bar: >= 10x.", ""]
+              ". The issue's bar: >= 10x.", ""]
         other = equal_accuracy(conv, eq["carrier_steps"], "adder2")
         if other:
             rb = ratios(p, other)["b"]

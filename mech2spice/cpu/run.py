@@ -246,8 +246,8 @@ def _cycle_bar(enabled: bool, done: int, total: int, backend: str):
 
 
 class TraceFile:
-    """`cpu run --trace FILE`: one JSON line per cycle (what the ISS records, the registers after it and, on
-    the oscillator-level backends, every probed amplitude in u_R), flushed as it goes.  A resumed run first
+    """`cpu run --trace FILE`: one JSON line per cycle (what the ISS records, the registers after it, the time
+    it ended and, on the oscillator-level backends, every probed amplitude in u_R), flushed as it goes.  A resumed run first
     drops the lines past its checkpoint's cycle (rewritten atomically), so the file always continues it."""
 
     def __init__(self, path, resume_cycle: int | None):
@@ -274,7 +274,7 @@ class TraceFile:
         return [line if line.endswith("\n") else line + "\n" for line in lines]
 
     def __call__(self, rec, cpu) -> None:
-        row = {**dataclasses.asdict(rec), "registers": cpu.registers()}
+        row = {**dataclasses.asdict(rec), "registers": cpu.registers(), "unix_time": round(time.time(), 3)}
         amps = getattr(cpu, "amps", None)
         if isinstance(amps, dict):
             row.update(period=cpu.period, simulated_periods=cpu.simulated,

@@ -385,7 +385,9 @@ def write(directory="reports", only=None, cycles: int = 30, render: bool = False
         d["cone"] = cone()
     write_json(path, d, default=None)
     figure(d, out / "fidelity_options.png")
-    (out / "fidelity.md").write_text(markdown(d))
+    from . import carrier                   # the whole sieve, envelope against oscillator level (carrier.json)
+    sieve = carrier.sieve_block(out)
+    (out / "fidelity.md").write_text(markdown(d).rstrip("\n") + ("\n\n" + sieve if sieve else "\n"))
     return out / "fidelity.md"
 
 

@@ -800,7 +800,10 @@ def _section(sec: str, res: dict, tmp: Path, quick: bool, sqrt_rk4_full: bool) -
 
 def write_markdown(res: dict, out: Path, charts_made: list[str]) -> None:
     """reports/performance.md from the JSON (filled in below)."""
-    (out / "performance.md").write_text(markdown(res, charts_made))
+    from . import carrier                   # the carrier kernel's roofline (carrier.json), appended
+    text = markdown(res, charts_made).rstrip("\n")
+    roof = carrier.roofline_block(out)
+    (out / "performance.md").write_text(text + ("\n\n" + roof if roof else "\n"))
 
 
 def _f(x, fmt="{:.3g}"):

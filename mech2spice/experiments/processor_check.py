@@ -1,0 +1,107 @@
+"""The carrier engine against textbook RK4 on the processor: whole clock cycles from one saved state.
+
+RK4 at 160 steps per period costs ~40x the carrier on the 6486-oscillator processor, so it cannot run the
+sieve; instead both engines continue the same `cpu run --backend carrier` checkpoint (the oscillator state
+after cycle k) for a few whole cycles under the same rules (pulses in full, pauses ending once the channels
+settle), and every probed amplitude (output ports and the 43 latch outputs) is compared at the end of each
+cycle: magnitude in u_R and phase in degrees.
+
+    python -m mech2spice.experiments.processor_check CHECKPOINT.json [--cycles 3] [--steps 160] [--out F.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+from ..cpu import run as cpu_run
+from ..cpu.machines import make_cpu
+
+
+def _recording(engine, log: list):
+    """The engine with each run's last-period complex amplitudes appended to `log`."""
+    original = engine.run
+
+    def run(*args, **kwargs):
+        result = original(*args, **kwargs)
+        log.append(result.amp[-1, :, 0].copy())
+        return result
+    engine.run = run
+    return engine
+
+
+def continue_cycles(checkpoint: str, program: str, backend: str, cycles: int, steps: int | None,
+                    full_pauses: bool = False) -> dict:
+    """Load the carrier checkpoint's oscillator state into a `backend` processor and run `cycles` cycles
+    (`full_pauses`: every pause integrated to its end, no idle skipping)."""
+    prog = cpu_run.load_program(program)
+    state = cpu_run.read_checkpoint(checkpoint, prog, "carrier")
+    cpu = make_cpu("carrier", cpu_run.make_memory(prog), power_up=False, **({"settle": None} if full_pauses else {}))
+    cpu_run._restore(cpu, state, checkpoint)              # the carrier's (x, v): the same state for both engines
+    if backend != "carrier":
+        other = make_cpu(backend, cpu_run.make_memory(prog), power_up=False,
+                         **({"steps_per_period": steps} if steps else {}))
+        other.mem = cpu.mem
+        other.state, other.period, other.rdata, other.cycle, other.amps = \
+            cpu.state, cpu.period, cpu.rdata, cpu.cycle, cpu.amps
+        cpu = other
+    cpu.simulated = 0                                        # periods integrated from here on
+    log: list = []
+    _recording(cpu.pulse_engine, log)
+    if cpu.pause_engine is not cpu.pulse_engine:
+        _recording(cpu.pause_engine, log)
+    rows, t0 = [], time.perf_counter()
+    for _ in range(cycles):
+        rec = cpu.step()
+        rows.append({"cycle": rec.cycle, "instr": rec.instr, "registers": cpu.registers(),
+                     "amp": log[-1], "simulated": cpu.simulated, "wall_s": time.perf_counter() - t0})
+    return {"probes": cpu.probes, "rows": rows, "unit": 1.0 / cpu.p.u_r}
+
+
+def compare(a: dict, b: dict) -> list[dict]:
+    """Per cycle: the largest |A| difference (u_R) and phase difference (deg, where |A| > 0.1 u_R)."""
+    out = []
+    for x, y in zip(a["rows"], b["rows"]):
+        ax, ay = x["amp"] * a["unit"], y["amp"] * b["unit"]
+        big = np.abs(ay) > 0.1
+        out.append({"cycle": x["cycle"], "instr": x["instr"], "registers_equal": x["registers"] == y["registers"],
+                    "amp_diff": float(np.abs(np.abs(ax) - np.abs(ay)).max()),
+                    "phase_diff_deg": float(np.degrees(np.abs(np.angle(ax[big] / ay[big]))).max())})
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("checkpoint", help="a `cpu run --backend carrier --checkpoint` file")
+    ap.add_argument("--program", default=None, help="the program (default: the shipped sieve)")
+    ap.add_argument("--cycles", type=int, default=3)
+    ap.add_argument("--steps", type=int, default=160, help="RK4 steps per period (default 160)")
+    ap.add_argument("--out", default=None, help="write the comparison as JSON")
+    ap.add_argument("--full-pauses", action="store_true", help="also the carrier without idle skipping: what "
+                    "ending pauses early costs")
+    args = ap.parse_args(argv)
+    from .. import data
+    program = args.program or str(data.program("sieve.asm"))
+    carrier = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None)
+    rk4 = continue_cycles(args.checkpoint, program, "rk4", args.cycles, args.steps)
+    rows = compare(carrier, rk4)
+    res = {"checkpoint": args.checkpoint, "steps": args.steps, "cycles": rows,
+           "carrier_wall_s": carrier["rows"][-1]["wall_s"], "rk4_wall_s": rk4["rows"][-1]["wall_s"],
+           "carrier_periods": carrier["rows"][-1]["simulated"], "rk4_periods": rk4["rows"][-1]["simulated"]}
+    if args.full_pauses:
+        full = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, full_pauses=True)
+        res["settle_vs_full"] = compare(carrier, full)
+        res["full_wall_s"], res["full_periods"] = full["rows"][-1]["wall_s"], full["rows"][-1]["simulated"]
+    text = json.dumps(res, indent=2)
+    if args.out:
+        with open(args.out, "w") as f:
+            f.write(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     ap.add_argument("checkpoint", help="a `cpu run --backend carrier --checkpoint` file")
     ap.add_argument("--program", default=None, help="the program (default: the shipped sieve)")
     ap.add_argument("--cycles", type=int, default=3)
-    ap.add_argument("--steps", type=int, default=160, help="RK4 steps per period (default 160)")
+    ap.add_argument("--steps", type=int, default=160, help="RK4 steps per period (default 160; 0: no RK4 run)")
     ap.add_argument("--out", default=None, help="write the comparison as JSON")
     ap.add_argument("--full-pauses", action="store_true", help="also the carrier without idle skipping: what "
                     "ending pauses early costs")
@@ -86,11 +86,12 @@ def main(argv=None) -> int:
     from .. import data
     program = args.program or str(data.program("sieve.asm"))
     carrier = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None)
-    rk4 = continue_cycles(args.checkpoint, program, "rk4", args.cycles, args.steps)
-    rows = compare(carrier, rk4)
-    res = {"checkpoint": args.checkpoint, "steps": args.steps, "cycles": rows,
-           "carrier_wall_s": carrier["rows"][-1]["wall_s"], "rk4_wall_s": rk4["rows"][-1]["wall_s"],
-           "carrier_periods": carrier["rows"][-1]["simulated"], "rk4_periods": rk4["rows"][-1]["simulated"]}
+    res = {"checkpoint": args.checkpoint, "steps": args.steps,
+           "carrier_wall_s": carrier["rows"][-1]["wall_s"], "carrier_periods": carrier["rows"][-1]["simulated"]}
+    if args.steps:
+        rk4 = continue_cycles(args.checkpoint, program, "rk4", args.cycles, args.steps)
+        res.update(cycles=compare(carrier, rk4), rk4_wall_s=rk4["rows"][-1]["wall_s"],
+                   rk4_periods=rk4["rows"][-1]["simulated"])
     if args.full_pauses:
         full = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, full_pauses=True)
         res["settle_vs_full"] = compare(carrier, full)

@@ -12,6 +12,8 @@ JSON, `--render` measures nothing):
                threads), RK4's numpy path (N = 80, 160) and its compiled kernel forced (N = 80), alternated.
   roofline     this machine's measured FLOP/s and triad bandwidths (numba microbenchmarks), flops and bytes
                per oscillator-step of each kernel counted from the code and the processor's structure.
+  cycles       (no integration) experiments.processor_check's JSON: carrier against RK4 at 160 steps on whole
+               processor cycles continued from one carrier checkpoint (RK4 at 160 cannot run the sieve).
   sieve        (no integration) two `cpu run --trace` files, carrier and envelope, compared cycle by cycle.
 
 Blocks other reports append: `block` (speed_accuracy.md), `roofline_block` (performance.md), `sieve_block`
@@ -31,7 +33,7 @@ import numpy as np
 from ..errors import DivergenceError, Mech2SpiceError
 from ._common import SANDBOX, md_table, out_dir, pyplot, read_json, save_figure, write_json
 
-SECTIONS = ("accuracy", "convergence", "processor", "roofline", "sieve")
+SECTIONS = ("accuracy", "convergence", "processor", "roofline", "cycles", "sieve")
 AMP_TOL, PHASE_TOL = 1e-3, 0.5          # the issue's bounds against RK4 at 160 steps (u_R, degrees)
 FAIL_UR = 0.1                           # an error above this (u_R) counts as a failed run
 REF_STEPS, FINE_STEPS = 160, 640
@@ -43,6 +45,7 @@ NG_STEPS = (1 / 20, 1 / 40, 1 / 80)     # ngspice max step (periods), gate only
 REDUCED_TOL = 0.02                      # u_R: issue 6's agreement tolerance for reduced models
 SIEVE_CYCLES = 457                      # the sieve halts after 457 cycles (reports/cpu.md)
 CARRIER_TRACE = "build/carrier/sieve_carrier.jsonl"
+PROCESSOR_CHECK = "build/carrier/processor_check.json"   # experiments.processor_check's output
 ENVELOPE_TRACE = "build/carrier/sieve_envelope.jsonl"
 
 
@@ -891,9 +894,43 @@ def markdown(d: dict) -> str:
         L += processor_md(d["processor"], ratios(d["processor"], eq), eq, d.get("convergence"))
     if "roofline" in d:
         L += roofline_md(d["roofline"], charts.get("roofline"))
+    if "cycles" in d:
+        L += cycles_md(d["cycles"])
     if "sieve" in d:
         L += sieve_md(d["sieve"], charts.get("sieve"))
     return "\n".join(L) + "\n"
+
+
+def cycles(path=PROCESSOR_CHECK) -> dict:
+    """experiments.processor_check's comparison (a separate ~20-minute run: RK4 at 160 steps on the processor)."""
+    path = Path(path)
+    if not path.exists():
+        raise Mech2SpiceError(f"cycles: no {path} (make it with `python -m mech2spice.experiments.processor_check "
+                              f"CHECKPOINT --out {path}`)")
+    return {**read_json(path), "file": str(path)}
+
+
+def cycles_md(c: dict) -> list[str]:
+    rows = [[r["cycle"], r["instr"] or "(data cycle)", _e(r["amp_diff"]), f"{r['phase_diff_deg']:.3f}",
+             "yes" if r["registers_equal"] else "**no**",
+             "PASS" if r["amp_diff"] < AMP_TOL and r["phase_diff_deg"] < PHASE_TOL else "**FAIL**"]
+            for r in c.get("cycles", [])]
+    L = ["## Processor cycles against RK4 at 160 steps per period", "",
+         f"Both engines continue the same `cpu run --backend carrier` checkpoint ({Path(c['checkpoint']).name}) for "
+         f"{len(rows)} whole cycles under the same rules (pulses in full, pauses ending once the channels settle "
+         f"within 0.1 u_R), and every probed amplitude (output ports and latch outputs) is compared at the end of "
+         f"each cycle (`python -m mech2spice.experiments.processor_check`). RK4 at {c['steps']} steps costs "
+         f"{c['rk4_wall_s']:.0f} s for these {c['rk4_periods']:,} periods against the carrier's "
+         f"{c['carrier_wall_s']:.0f} s for {c['carrier_periods']:,} ({SANDBOX}, shared: the sieve ran beside it), "
+         "which is why the whole sieve is not checked against it.", "",
+         *md_table(["cycle", "instruction", "max amplitude diff [u_R]", "max phase [deg]", "registers equal",
+                    "verdict"], rows), ""]
+    if "settle_vs_full" in c:
+        worst = max(r["amp_diff"] for r in c["settle_vs_full"])
+        L += [f"What ending the pauses early costs (the carrier with idle skipping against full pauses, the same "
+              f"cycles): at most {worst:.1e} u_R at the end of a cycle; {c['carrier_periods']:,} against "
+              f"{c['full_periods']:,} integrated periods.", ""]
+    return L
 
 
 # --- blocks other reports append ---------------------------------------------------------------------------
@@ -952,7 +989,8 @@ def render_all(d: dict, out: Path) -> Path:
 
 
 def write(directory="reports", only=None, quick: bool = False, render: bool = False,
-          carrier_trace: str | None = None, envelope_trace: str | None = None) -> Path:
+          carrier_trace: str | None = None, envelope_trace: str | None = None,
+          processor_check: str | None = None) -> Path:
     """Measure the sections in `only` (default all; `render`: none), merge them into carrier.json, rewrite
     carrier.md and the charts from the whole JSON."""
     sections = [] if render else _sections(only)
@@ -969,6 +1007,11 @@ def write(directory="reports", only=None, quick: bool = False, render: bool = Fa
             d[name] = sieve(*traces)
         elif name == "roofline":
             d[name] = roofline(quick, d.get("processor"))
+        elif name == "cycles":
+            if not only and not Path(processor_check or PROCESSOR_CHECK).exists():
+                print(f"[carrier] cycles: skipped, no {processor_check or PROCESSOR_CHECK}", flush=True)
+                continue
+            d[name] = cycles(processor_check or PROCESSOR_CHECK)
         else:
             d[name] = globals()[name](quick)
         if name == "processor" and "roofline" in d:       # new rates: new achieved points

@@ -42,6 +42,8 @@ OPTIONS = [
                                                                    "build/carrier/sieve_carrier.jsonl)")),
     ("--envelope-trace", "envelope_trace", dict(metavar="FILE", help="envelope `cpu run --trace` of the sieve "
                                                                      "(default build/carrier/sieve_envelope.jsonl)")),
+    ("--processor-check", "processor_check", dict(metavar="FILE", help="experiments.processor_check's JSON "
+                                                                       "(default build/carrier/processor_check.json)")),
     ("--name", "name", dict(metavar="STEM", help="report file stem (default cpu_physical)")),
 ]
 

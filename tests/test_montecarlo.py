@@ -70,7 +70,7 @@ def test_wafer_shift_is_shared_within_a_kind():
 
 
 # --- spread 0 reproduces the deterministic result bit for bit ---------------------------
-@pytest.mark.parametrize("backend", ["envelope", "rk4"])
+@pytest.mark.parametrize("backend", ["envelope", "rk4", "carrier"])
 def test_spread_zero_is_the_deterministic_run_bit_for_bit(backend, nor_v):
     path = ADDER if backend == "envelope" else nor_v
     nl = netlist(str(path))

@@ -161,7 +161,7 @@ def add_cpu_parser(sub) -> None:
                     "sample passed, 1 otherwise.")
     c.add_argument("program", help="assembly source (.asm) or binary image")
     c.add_argument("--cycles", type=inputs.integer(1, 100_000), default=30, help="clock cycles per sample (default 30)")
-    c.add_argument("--backend", default="envelope", choices=("envelope", "rk4"))
+    c.add_argument("--backend", default="envelope", choices=("envelope", "carrier", "rk4"))
     add_sweep_arguments(c)
     c.set_defaults(func=cmd_cpu_montecarlo)
 

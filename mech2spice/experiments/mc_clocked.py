@@ -23,7 +23,7 @@ from ..physics.noise import check_temperature
 from ..synthesis.ports import output_bits
 from .montecarlo import SpreadSpec, noise_seed
 
-CLOCKED_BACKENDS = ("envelope", "rk4")
+CLOCKED_BACKENDS = ("envelope", "carrier", "rk4")
 
 
 def sampled(model, elems, spec: SpreadSpec, seed: int, i: int):

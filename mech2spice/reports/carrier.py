@@ -926,10 +926,13 @@ def cycles_md(c: dict) -> list[str]:
          *md_table(["cycle", "instruction", "max amplitude diff [u_R]", "max phase [deg]", "registers equal",
                     "verdict"], rows), ""]
     if "settle_vs_full" in c:
-        worst = max(r["amp_diff"] for r in c["settle_vs_full"])
-        L += [f"What ending the pauses early costs (the carrier with idle skipping against full pauses, the same "
-              f"cycles): at most {worst:.1e} u_R at the end of a cycle; {c['carrier_periods']:,} against "
-              f"{c['full_periods']:,} integrated periods.", ""]
+        rows = c["settle_vs_full"]
+        worst, phase = max(r["amp_diff"] for r in rows), max(r["phase_diff_deg"] for r in rows)
+        L += [f"What ending the pauses early costs (the carrier with idle skipping against full pauses, the last "
+              f"{len(rows)} cycles above): at most {worst:.3f} u_R and {phase:.1f} deg at the end of a cycle, every "
+              f"register equal; {c.get('settle_periods', c['carrier_periods']):,} against {c['full_periods']:,} "
+              "integrated periods. The phase is not part of the rule (it watches amplitudes) and not of the "
+              "decoding; the difference is the slow ringing the rule ignores (docs/carrier.md).", ""]
     return L
 
 

@@ -152,7 +152,14 @@ def test_dask_local_cluster_matches_inline(tmp_path, nor_v):
     a = mc_run.run(j, 4, tmp_path / "a.jsonl", scheduler="inline")
     b = mc_run.run(j, 4, tmp_path / "b.jsonl", scheduler="local", workers=1)
     assert b["workers"] == 1 and b["worker_peak_rss_mb"] > 0
-    assert _records(tmp_path / "a.jsonl") == sorted(_records(tmp_path / "b.jsonl"), key=lambda r: r["i"])
+    # Equal except the last bits of the margins, which a Dask worker (its own process, BLAS on one thread,
+    # other allocations) reproduced only to 4e-16 once in CI (0.04436496685341719 against ...737)
+    inline, dask = _records(tmp_path / "a.jsonl"), sorted(_records(tmp_path / "b.jsonl"), key=lambda r: r["i"])
+    margins = ("margin", "gate_margin")
+    assert [{k: v for k, v in r.items() if k not in margins} for r in inline] == \
+        [{k: v for k, v in r.items() if k not in margins} for r in dask]
+    for r, q in zip(inline, dask):
+        assert all(r[k] == pytest.approx(q[k], rel=1e-12, abs=1e-15) for k in margins if k in r)
     assert a["yield_ci95"] == b["yield_ci95"]
 
 

@@ -153,3 +153,14 @@ def test_rk4_skips_idle_time_by_the_same_rule():
     assert np.abs(np.abs(c.amp) - np.abs(r.amp)).max() / sc.model.amplitude_unit < AMP_TOL
     with pytest.raises(Mech2SpiceError, match="thermal noise"):
         make_engine("rk4", rk4.RK4Options(settle_tol=0.1, noise_temperature=1e-4))
+
+
+def test_run_cost_adds_up_over_resumed_parts(tmp_path):
+    """A resumed run reports the wall and CPU seconds of all its parts: its own plus the checkpoint's."""
+    ck = tmp_path / "ck.json"
+    first = run_program(PROGRAMS / "sieve.asm", "iss", 30, checkpoint=ck)
+    prior = json.loads(ck.read_text())
+    assert 0 < prior["wall_s_total"] <= first["wall_s"] and prior["cpu_s_total"] > 0
+    done = run_program(PROGRAMS / "sieve.asm", "iss", 100_000, checkpoint=ck, resume=True)
+    assert done["halted"] and done["wall_s_total"] - done["wall_s"] == pytest.approx(prior["wall_s_total"], abs=0.01)
+    assert done["cpu_s_total"] > prior["cpu_s_total"]

@@ -94,11 +94,30 @@ def checkpoint_state_file(checkpoint) -> Path | None:
     return Path(checkpoint).with_name(name) if isinstance(name, str) else None
 
 
-def save_checkpoint(cpu, path, program: Program, backend: str) -> None:
+class _Cost:
+    """Wall and CPU seconds of a run summed over its resumed parts (each part up to its last checkpoint;
+    unknown after a resume from a checkpoint that did not record them)."""
+
+    def __init__(self, resumed_from: dict | None):
+        self.wall0, self.cpu0 = time.perf_counter(), time.process_time()
+        prior = resumed_from or {"wall_s_total": 0.0, "cpu_s_total": 0.0}
+        ok = all(isinstance(prior.get(k), (int, float)) and prior[k] >= 0 for k in ("wall_s_total", "cpu_s_total"))
+        self.prior = (prior["wall_s_total"], prior["cpu_s_total"]) if ok else None
+
+    def totals(self) -> dict:
+        """{wall_s_total, cpu_s_total} so far, or {} when an earlier part's cost is unknown."""
+        if self.prior is None:
+            return {}
+        return {"wall_s_total": self.prior[0] + time.perf_counter() - self.wall0,
+                "cpu_s_total": self.prior[1] + time.process_time() - self.cpu0}
+
+
+def save_checkpoint(cpu, path, program: Program, backend: str, cost: dict | None = None) -> None:
     """Write the whole machine state (with a physical run's oscillator state) so that a kill at any
-    instant leaves a checkpoint that resumes: the old one or the new one."""
+    instant leaves a checkpoint that resumes: the old one or the new one.  `cost`: the run's
+    wall_s_total / cpu_s_total so far, carried into a resumed run."""
     path = Path(path)
-    state = _state(cpu, program, backend)
+    state = {**_state(cpu, program, backend), **(cost or {})}
     try:
         if hasattr(cpu, "save"):
             name = f"{path.name}.state-{secrets.token_hex(8)}.npz"
@@ -302,6 +321,7 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     program = load_program(source)
     state = read_checkpoint(checkpoint, program, backend) if resume else None
     t0 = time.perf_counter()                       # wall_s includes building the model and power-up
+    cost = _Cost(state)
     if progress and backend in PHYSICAL:
         print(f"[{backend}] building the processor's oscillator model ...", file=sys.stderr, flush=True)
     cpu = make_cpu(backend, make_memory(program), power_up=not resume, **physical)
@@ -316,15 +336,15 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         if trace is not None:
             trace(rec, cpu)
         if checkpoint is not None and cpu.cycle % checkpoint_every == 0:
-            save_checkpoint(cpu, checkpoint, program, backend)
+            save_checkpoint(cpu, checkpoint, program, backend, cost.totals())
     bar.close()
     if isinstance(trace, TraceFile):
         trace.close()
     if checkpoint is not None:
-        save_checkpoint(cpu, checkpoint, program, backend)
+        save_checkpoint(cpu, checkpoint, program, backend, cost.totals())
     result = {"backend": backend, "cycles": cpu.cycle, "halted": cpu.halted,
               "memory": cpu.mem.snapshot(), "registers": cpu.registers(),
-              "wall_s": time.perf_counter() - t0}
+              "wall_s": time.perf_counter() - t0, **cost.totals()}
     if backend in PHYSICAL:
         result.update(periods=cpu.period, simulated_periods=cpu.simulated, step=cpu.step_periods,
                       settle=cpu.settle)

@@ -306,14 +306,7 @@ def _bench_kernels():
     @njit(parallel=True, **flags)
     def fma2(xs, reps, a, b):
         for t in prange(xs.shape[0]):
-            x = xs[t]
-            for _ in range(reps):
-                for j in range(x.size):
-                    y = x[j]
-                    y = y * a + b
-                    y = y * a + b
-                    y = y * a + b
-                    x[j] = y * a + b
+            fma(xs[t], reps, a, b)
 
     @njit(**flags)
     def triad(a, b, c, s, reps):

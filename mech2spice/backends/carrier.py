@@ -39,7 +39,7 @@ from ._base import (Capabilities, Engine, Run, blowup_bound, check_divergence, p
 from .envelope import SETTLE_MIN, SETTLE_WINDOW
 
 DEFAULT_STEPS_PER_PERIOD = 12    # as accurate as RK4 at 160 steps on a switching gate; within 4e-4 u_R of it on
-                                 # the adder's 16 inputs (10 steps: 8.6e-4; reports/speed_accuracy.md)
+                                 # the adder's 16 inputs (10 steps: 8.6e-4; reports/carrier.md)
 CHUNK_PERIODS = 200              # periods per compiled call: bounds the progress-bar and Ctrl-C latency
 
 
@@ -49,14 +49,14 @@ def propagators(mkc: np.ndarray, h: float) -> np.ndarray:
 
     exp(L h) = e^{mu h} [cosh(nu h) I + sinh(nu h)/nu (L - mu I)],  mu = -c/2m,  nu = sqrt(mu^2 - k/m),
     real for every damping (nu is imaginary below critical damping); sinh(nu h)/nu -> h as nu -> 0."""
-    k, c, m = mkc[:, 1] / mkc[:, 0], mkc[:, 2] / mkc[:, 0], 1.0
-    mu = -0.5 * c
+    k, c = mkc[:, 1] / mkc[:, 0], mkc[:, 2] / mkc[:, 0]
+    mu = -0.5 * c                                   # L - mu I = [[-mu, 1], [-k, mu]]
     nu = np.sqrt((mu * mu - k).astype(complex))
     ch = np.cosh(nu * h).real
     small = np.abs(nu * h) < 1e-8
-    sh = np.where(small, h, np.sinh(nu * h) / np.where(small, m, nu)).real
+    sh = np.where(small, h, np.sinh(nu * h) / np.where(small, 1.0, nu)).real
     g = np.exp(mu * h)
-    return np.array([g * (ch - mu * sh), g * sh, g * (-k * sh), g * (ch + (-c - mu) * sh)])
+    return np.array([g * (ch - mu * sh), g * sh, g * (-k * sh), g * (ch + mu * sh)])
 
 
 class Operator:

@@ -572,7 +572,8 @@ def sieve(carrier_trace=CARRIER_TRACE, envelope_trace=ENVELOPE_TRACE) -> dict:
 
 
 def _trim(res: dict | None) -> dict | None:
-    keys = ("backend", "cycles", "halted", "wall_s", "periods", "simulated_periods", "step", "settle", "registers")
+    keys = ("backend", "cycles", "halted", "wall_s", "wall_s_total", "cpu_s_total", "periods", "simulated_periods",
+            "step", "settle", "registers")
     return {k: res[k] for k in keys if k in res} if res else None
 
 
@@ -853,9 +854,12 @@ def sieve_md(s: dict, chart: str | None, heading: str = "##") -> list[str]:
             if res:
                 setting = (f"step {res['step']:g} periods" if res.get("step") else "") + \
                     (f", settle {res['settle']:g} u_R" if res.get("settle") else "")
+                wall = (f"wall {res['wall_s_total']:.0f} s and {res['cpu_s_total']:.0f} CPU-s over all its parts"
+                        if "wall_s_total" in res else
+                        f"wall {res.get('wall_s', float('nan')):.0f} s of its last process (the parts before a "
+                        "resume not included)")
                 L.append(f"- {name} run ({setting or 'settings not recorded'}): {res.get('cycles')} cycles, halted "
-                         f"{res.get('halted')}, wall "
-                         f"{res.get('wall_s', float('nan')):.0f} s, {res.get('simulated_periods', 0):,} of "
+                         f"{res.get('halted')}, {wall}, {res.get('simulated_periods', 0):,} of "
                          f"{res.get('periods', 0):,} periods integrated")
         L.append("")
     if chart:

@@ -105,4 +105,9 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from ..errors import Mech2SpiceError
+    try:
+        sys.exit(main())
+    except Mech2SpiceError as err:                # bad input: one line, exit 2
+        print(f"processor_check: error: {err}", file=sys.stderr)
+        sys.exit(2)

@@ -153,12 +153,10 @@ class Operator:
 
     def drive_weights(self, amps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(P, Q), each (B, n): the drive force on each DOF is P sin(omega t) + Q cos(omega t)."""
-        B = amps.shape[1]
-        P, Q = np.zeros((B, self.n)), np.zeros((B, self.n))
-        for d, dof in enumerate(self.drive_dof):
-            P[:, dof] += amps[d] * self.drive_cos[d]
-            Q[:, dof] += amps[d] * self.drive_sin[d]
-        return P, Q
+        P, Q = np.zeros((self.n, amps.shape[1])), np.zeros((self.n, amps.shape[1]))
+        np.add.at(P, self.drive_dof, amps * self.drive_cos[:, None])     # several drives may share a DOF
+        np.add.at(Q, self.drive_dof, amps * self.drive_sin[:, None])
+        return np.ascontiguousarray(P.T), np.ascontiguousarray(Q.T)
 
     def cuts(self, threads: int) -> np.ndarray:
         """DOF range boundaries of each thread's share of a pass."""

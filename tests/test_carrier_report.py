@@ -97,3 +97,25 @@ def test_bad_section_and_missing_trace_are_one_line_errors(tmp_path):
     with pytest.raises(Mech2SpiceError, match="no trace file"):
         R.write(tmp_path, only=["sieve"], carrier_trace=str(tmp_path / "none.jsonl"))
     assert "carrier_trace" in REPORTS["carrier"].options
+
+
+def test_processor_check_keeps_each_finished_cycle_and_reads_a_complete_run_back(tmp_path):
+    """The RK4 side of processor_check runs for hours: each cycle is appended as it finishes, and a run
+    already complete in the file is read back (amplitudes exact) instead of run again."""
+    import numpy as np
+    from mech2spice.experiments import processor_check as pc
+    rows = tmp_path / "rows.jsonl"
+    amp = np.array([0.5 + 0.25j, -1e-3 + 2j])
+    for k in (30, 31):
+        pc._append_row(str(rows), "rk4", "ck.json", 160, {"cycle": k, "instr": None, "registers": {"pc": k},
+                                                          "amp": amp * k, "simulated": 10 * k, "wall_s": 1.0},
+                       ["a", "b"], 2.0)
+    pc._append_row(str(rows), "carrier", "ck.json", None, {"cycle": 30, "instr": None, "registers": {},
+                                                           "amp": amp, "simulated": 1, "wall_s": 1.0}, ["a", "b"], 2.0)
+    with open(rows, "a") as f:
+        f.write('{"cut short')                     # an interrupted write is skipped
+    got = pc.continue_cycles("ck.json", "unused.asm", "rk4", 2, 160, rows_file=str(rows))
+    assert [r["cycle"] for r in got["rows"]] == [30, 31] and got["probes"] == ["a", "b"] and got["unit"] == 2.0
+    assert np.array_equal(got["rows"][1]["amp"], amp * 31)
+    assert len(pc._read_rows(str(rows), "carrier", "ck.json", None)) == 1
+    assert pc._read_rows(str(tmp_path / "none.jsonl"), "rk4", "ck.json", 160) == []

@@ -34,9 +34,15 @@ def _recording(engine, log: list):
 
 
 def continue_cycles(checkpoint: str, program: str, backend: str, cycles: int, steps: int | None,
-                    full_pauses: bool = False) -> dict:
+                    full_pauses: bool = False, rows_file: str | None = None) -> dict:
     """Load the carrier checkpoint's oscillator state into a `backend` processor and run `cycles` cycles
-    (`full_pauses`: every pause integrated to its end, no idle skipping)."""
+    (`full_pauses`: every pause integrated to its end, no idle skipping).  With `rows_file`, each finished
+    cycle is appended to it as a JSON line (an RK4 run takes hours: what finished is kept), and a run whose
+    every cycle is already there is read back instead of run again."""
+    label = backend + ("-full" if full_pauses else "")
+    done = _read_rows(rows_file, label, checkpoint, steps)
+    if len(done) >= cycles:
+        return {"probes": done[0]["probes"], "rows": done[:cycles], "unit": done[0]["unit"]}
     prog = cpu_run.load_program(program)
     state = cpu_run.read_checkpoint(checkpoint, prog, "carrier")
     cpu = make_cpu("carrier", cpu_run.make_memory(prog), power_up=False, **({"settle": None} if full_pauses else {}))
@@ -58,7 +64,38 @@ def continue_cycles(checkpoint: str, program: str, backend: str, cycles: int, st
         rec = cpu.step()
         rows.append({"cycle": rec.cycle, "instr": rec.instr, "registers": cpu.registers(),
                      "amp": log[-1], "simulated": cpu.simulated, "wall_s": time.perf_counter() - t0})
+        _append_row(rows_file, label, checkpoint, steps, rows[-1], cpu.probes, 1.0 / cpu.p.u_r)
+        print(f"{label}: cycle {rec.cycle} done, {cpu.simulated} periods, {rows[-1]['wall_s']:.0f} s",
+              file=sys.stderr, flush=True)
     return {"probes": cpu.probes, "rows": rows, "unit": 1.0 / cpu.p.u_r}
+
+
+def _append_row(path, label, checkpoint, steps, row, probes, unit) -> None:
+    if path is None:
+        return
+    line = {**row, "amp": [row["amp"].real.tolist(), row["amp"].imag.tolist()], "backend": label,
+            "checkpoint": checkpoint, "steps": steps, "probes": probes, "unit": unit}
+    with open(path, "a") as f:
+        f.write(json.dumps(line) + "\n")
+        f.flush()
+
+
+def _read_rows(path, label, checkpoint, steps) -> list[dict]:
+    """The consecutive cycles of one run (backend, checkpoint, steps) that `path` holds."""
+    rows = []
+    try:
+        lines = open(path).read().splitlines() if path else []
+    except FileNotFoundError:
+        return rows
+    for text in lines:
+        try:
+            r = json.loads(text)
+        except json.JSONDecodeError:                     # a line cut by an interrupted write
+            continue
+        if (r["backend"], r["checkpoint"], r["steps"]) == (label, checkpoint, steps):
+            r["amp"] = np.array(r["amp"][0]) + 1j * np.array(r["amp"][1])
+            rows.append(r)
+    return rows
 
 
 def compare(a: dict, b: dict) -> list[dict]:
@@ -80,20 +117,23 @@ def main(argv=None) -> int:
     ap.add_argument("--cycles", type=int, default=3)
     ap.add_argument("--steps", type=int, default=160, help="RK4 steps per period (default 160; 0: no RK4 run)")
     ap.add_argument("--out", default=None, help="write the comparison as JSON")
+    ap.add_argument("--rows", default=None, help="append each finished cycle to this JSON-lines file; "
+                    "a run already complete there is read back, not run again")
     ap.add_argument("--full-pauses", action="store_true", help="also the carrier without idle skipping: what "
                     "ending pauses early costs")
     args = ap.parse_args(argv)
     from .. import data
     program = args.program or str(data.program("sieve.asm"))
-    carrier = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None)
+    carrier = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, rows_file=args.rows)
     res = {"checkpoint": args.checkpoint, "steps": args.steps,
            "carrier_wall_s": carrier["rows"][-1]["wall_s"], "carrier_periods": carrier["rows"][-1]["simulated"]}
     if args.steps:
-        rk4 = continue_cycles(args.checkpoint, program, "rk4", args.cycles, args.steps)
+        rk4 = continue_cycles(args.checkpoint, program, "rk4", args.cycles, args.steps, rows_file=args.rows)
         res.update(cycles=compare(carrier, rk4), rk4_wall_s=rk4["rows"][-1]["wall_s"],
                    rk4_periods=rk4["rows"][-1]["simulated"])
     if args.full_pauses:
-        full = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, full_pauses=True)
+        full = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, full_pauses=True,
+                               rows_file=args.rows)
         res["settle_vs_full"] = compare(carrier, full)
         res["full_wall_s"], res["full_periods"] = full["rows"][-1]["wall_s"], full["rows"][-1]["simulated"]
     text = json.dumps(res, indent=2)

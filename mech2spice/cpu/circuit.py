@@ -18,9 +18,15 @@ cycle by cycle.  VACASK cannot continue from a saved state, so a run is one simu
 """
 from __future__ import annotations
 
+import hashlib
+import io
+import json
+import math
+import os
 import re
 import time
-from dataclasses import dataclass, field
+import zipfile
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +37,7 @@ from ..physics import network
 from ..physics.params import DEFAULT, NOMINAL0, NOMINAL1, band_of
 from ..spice import memory as vmem
 from ..spice._common import num
-from ..spice.vacask import ENVELOPE, OSDI, VacaskEnvelopeOptions, _Emitter, run_netlist
+from ..spice.vacask import ENVELOPE, OSDI, VacaskEnvelopeOptions, _Emitter, run_netlist_raws
 from .isa import MEM_SIZE, mnemonic
 from .iss import FETCH, Cycle
 from .memory import Memory
@@ -49,11 +55,16 @@ _DUMP = re.compile(r"m2s_mem\s+(\S+)((?:\s+\S+){8})")
 
 @dataclass(frozen=True)
 class Schedule:
-    """The netlist's clock schedule in drive periods."""
+    """The netlist's clock schedule in drive periods (absolute: from the power-up).  A segment of a
+    checkpointed run simulates cycles first .. first + cycles - 1 from the state at absolute period `offset`
+    (the netlist's t = 0) and ends at its last sample (`to_sample`)."""
     pulse: int
     pause: int            # the reset's first pause
     settle: int           # each cycle's settle before its pulse
     cycles: int
+    first: int = 0
+    offset: float = 0.0
+    to_sample: bool = False
 
     @property
     def length(self) -> int:
@@ -68,21 +79,37 @@ class Schedule:
         """Period at which cycle k's clock pulse begins."""
         return self.start(k) + self.settle
 
+    def sample_at(self, k: int) -> float:
+        """Period at which cycle k is sampled (its state: settled, before its pulse)."""
+        return self.pulse_at(k) - SAMPLE_BEFORE
+
     @property
-    def stop(self) -> int:
-        """The run ends one settle after the last pulse (so the state after it is sampled)."""
-        return self.start(self.cycles) + self.settle
+    def stop(self) -> float:
+        """The run ends one settle after the last pulse (so the state after it is sampled), or at that
+        sample (`to_sample`: where the next segment starts)."""
+        end = self.first + self.cycles
+        return self.sample_at(end) if self.to_sample else self.pulse_at(end)
+
+    @property
+    def resets(self) -> bool:
+        """Whether this netlist starts from rest with the reset (else: from a saved state, rst released)."""
+        return self.offset == 0 and self.first == 0
 
     def samples(self) -> np.ndarray:
         """Sample periods: one before each cycle's pulse, and one after the last (cycles + 1)."""
-        return np.array([self.pulse_at(k) - SAMPLE_BEFORE for k in range(self.cycles + 1)], float)
+        return np.array([self.sample_at(k) for k in range(self.first, self.first + self.cycles + 1)], float)
+
+    def segment(self, first: int, cycles: int) -> "Schedule":
+        """The schedule of `cycles` cycles from cycle `first`'s sample, ending at its last sample."""
+        return replace(self, first=first, cycles=cycles, offset=self.sample_at(first) if first else 0.0,
+                       to_sample=True)
 
 
-def default_schedule(netlist, cycles: int, settle: int | None = None) -> Schedule:
+def default_schedule(netlist, cycles: int, settle: int | None = None, p=DEFAULT) -> Schedule:
     """simulation.clock_timing's pulse and pause; each cycle settles one pause (derived for the longest NOR
     path, 44 gates: the path latch -> raddr -> memory -> rdata -> latch is 5 + 30, `memory_path`, and the
     memory adds ~5 periods, its read stage's time constants, to a pause of 11575)."""
-    t = simulation.clock_timing(netlist)
+    t = simulation.clock_timing(netlist, p=p)
     return Schedule(t["pulse"], t["pause"], settle or t["pause"], cycles)
 
 
@@ -125,7 +152,7 @@ class _CpuEmitter(_Emitter):
     """The envelope emitter with the input drives taken over: rdata from the memory, rst and clk scheduled."""
 
     def __init__(self, model, netlist, p, sched: Schedule, options):
-        super().__init__(model, sched.stop, None, 0, options, ENVELOPE)
+        super().__init__(model, math.ceil(sched.stop - sched.offset), None, 0, options, ENVELOPE)
         self.p_gate, self.sched = p, sched
         self.taken: dict[int, str] = {}
         for b in range(netlist.inputs["rdata"]):
@@ -141,18 +168,23 @@ class _CpuEmitter(_Emitter):
         return self.taken.get(d) or super().amp_node(d, share)
 
     def sources(self) -> list[str]:
-        """rst (1 through the reset pulse), the clock and the write window as pulse sources."""
+        """rst (1 through the reset pulse), the clock and the write window as pulse sources; times are
+        local (absolute period - the schedule's offset)."""
         p, s, T = self.p_gate, self.sched, self.T
         f0, f1 = p.force(NOMINAL0), p.force(NOMINAL1)
         ramp = self.opt.RAMP_PERIODS * T
-        t_rst = s.start(0) * T
         w0, w1 = s.pulse * WINDOW, s.pulse * (1 - WINDOW)
+        first_pulse = s.pause if s.resets else s.pulse_at(s.first)    # the reset pulse, or cycle first's
+        rst = (f"vrst (amp_rst 0) vsource type=\"pulse\" val0={num(f1)} val1={num(f0)} "
+               f"delay={num(s.start(0) * T - ramp / 2)} rise={num(ramp)} fall={num(ramp)} width={num(10 * s.stop * T)}"
+               if s.resets else f"vrst (amp_rst 0) vsource dc={num(f0)}")
         return [
-            f"vrst (amp_rst 0) vsource type=\"pulse\" val0={num(f1)} val1={num(f0)} delay={num(t_rst - ramp / 2)} "
-            f"rise={num(ramp)} fall={num(ramp)} width={num(10 * s.stop * T)}",
-            f"vclk (amp_clk 0) vsource type=\"pulse\" val0={num(f0)} val1={num(f1)} delay={num(s.pause * T - ramp / 2)} "
+            rst,
+            f"vclk (amp_clk 0) vsource type=\"pulse\" val0={num(f0)} val1={num(f1)} "
+            f"delay={num((first_pulse - s.offset) * T - ramp / 2)} "
             f"rise={num(ramp)} fall={num(ramp)} width={num(s.pulse * T - ramp)} period={num(s.length * T)}",
-            f"vwclk (mwclk 0) vsource type=\"pulse\" val0=0 val1=1 delay={num((s.pulse_at(0) + w0) * T)} "
+            f"vwclk (mwclk 0) vsource type=\"pulse\" val0=0 val1=1 "
+            f"delay={num((s.pulse_at(s.first) + w0 - s.offset) * T)} "
             f"rise={num(ramp)} fall={num(ramp)} width={num((w1 - w0) * T - ramp)} period={num(s.length * T)}"]
 
     def memory(self, image: list[int], netlist) -> list[str]:
@@ -168,19 +200,30 @@ class _CpuEmitter(_Emitter):
         return out
 
 
+STATE = "tstate"            # the analysis that writes a segment's final state (every unknown) to its raw file
+
+
 def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_step: float = MAX_STEP,
-             reltol: float = RELTOL, standalone: bool = False, title: str = "", memory: bool = True) -> CpuNetlist:
+             reltol: float = RELTOL, standalone: bool = False, title: str = "", memory: bool = True,
+             first: int | None = None, state: dict | None = None) -> CpuNetlist:
     """The processor with `image` in its memory, clocked `cycles` times, as one VACASK netlist.  Standalone:
     the Verilog-A is embedded (VACASK compiles it on load); else the compiled .osdi are expected beside it.
-    memory=False (a cost profile only): no memory devices, rdata held at 0 by sources."""
+    memory=False (a cost profile only): no memory devices, rdata held at 0 by sources.
+    first (a segment of a checkpointed run): cycles first .. first + cycles - 1, ending at the last one's
+    sample, where a second analysis (STATE) writes every unknown; with `state` (node -> value, that
+    analysis' output of the previous segment) the run starts from it instead of from the reset."""
     image = list(image) + [0] * (MEM_SIZE - len(image))
     if not 1 <= cycles:
         raise Mech2SpiceError("the processor netlist needs at least one cycle")
+    if (state is not None) != bool(first):
+        raise Mech2SpiceError("a segment after the first starts from a saved state, and only it does")
     net = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
     model = network.build(net, p)
     for q, block in model.design.latch_outputs.items():
         model.add_probe(f"latch.{q}", block.channel)
-    sched = default_schedule(net, cycles, settle)
+    sched = default_schedule(net, cycles, settle, p)
+    if first is not None:
+        sched = sched.segment(first, cycles)
     e = _CpuEmitter(model, net, p, sched, VacaskEnvelopeOptions(max_step_periods=max_step, reltol=reltol))
     e.circuit()
     e.amp_lines += e.sources()
@@ -191,9 +234,18 @@ def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_st
         e.amp_lines += [f"vrd{b} ({node} 0) vsource dc={num(p.force(NOMINAL0))}" for b, node in enumerate(rdata)]
     osdi = OSDI[ENVELOPE].replace(".osdi", ".va") if standalone else OSDI[ENVELOPE]
     mem_ref = vmem.FILE if standalone else vmem.FILE.replace(".va", ".osdi")
-    tran = [f"analysis tran1 tran stop={num(sched.stop * e.T)} step={num(max_step * e.T)} "
-            f"maxstep={num(max_step * e.T)} icmode=\"uic\""]
-    tend = (sched.stop - 0.5) * e.T          # the cells print the memory over the last half period
+    span = sched.stop - sched.offset
+    # exact values (repr); subnormals are out of range for VACASK's parser: they are 0 to the circuit
+    ic = "" if state is None else " ic={" + ", ".join(f'"{n}", {v if abs(v) > 1e-300 else 0.0!r}'
+                                                      for n, v in state.items()) + "}"
+    tran = [f"analysis tran1 tran stop={num(span * e.T)} step={num(max_step * e.T)} "
+            f"maxstep={num(max_step * e.T)} icmode=\"uic\"{ic}" + (' store="end"' if first is not None else "")]
+    if first is not None:      # every unknown at the end: the next segment's initial condition
+        # its first point is the stored end state; one period, because a much shorter run fails Newton
+        # at its second point (18k unknowns, steps of 1e-3 T: measured)
+        tran += ["save default", f'analysis {STATE} tran stop={num(e.T)} step={num(e.T)} maxstep={num(e.T)} '
+                 'icmode="uic" ic="end"']
+    tend = (span - 0.5) * e.T          # the cells print the memory over the last half period
     head = [f'load "{mem_ref}"', "model mem_bit m2s_mem_bit", f"model mem_byte m2s_mem_byte tend={num(tend)}",
             "model mem_read m2s_mem_read"]
     text = e.text(title or f"mech2spice processor, {cycles} cycles", osdi, tran)
@@ -211,23 +263,33 @@ def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_st
 
 # --- running and decoding ---------------------------------------------------------------------------------
 def run_cpu_netlist(cpu: CpuNetlist, timeout: float | None = None, keep_dir=None) -> dict:
-    """Run the netlist under VACASK and decode it (`decode`); adds the simulator's wall time."""
+    """Run the netlist under VACASK and decode it (`decode`); adds the simulator's wall time and, for a
+    segment, its final state (every differential unknown: node -> value)."""
     t0 = time.perf_counter()
+    segment = cpu.schedule.to_sample
     try:
-        names, data, log = run_netlist(cpu.text, timeout=timeout, workdir=keep_dir, forms=(ENVELOPE,),
-                                       extra_files={vmem.FILE.replace(".va", ".osdi"): vmem.compiled()})
+        raws, log = run_netlist_raws(cpu.text, ("tran1", STATE) if segment else ("tran1",), timeout=timeout,
+                                     workdir=keep_dir, forms=(ENVELOPE,),
+                                     extra_files={vmem.FILE.replace(".va", ".osdi"): vmem.compiled()})
     except Mech2SpiceError as err:
         data = getattr(err, "data", None)
         raise Mech2SpiceError(f"{err} (after {0 if data is None else len(data)} time points)") from None
-    return {**decode(cpu, names, data, log), "wall_s": time.perf_counter() - t0}
+    out = {**decode(cpu, *raws["tran1"], log), "wall_s": time.perf_counter() - t0}
+    if segment:
+        names, data = raws[STATE]
+        if not len(data):
+            raise Mech2SpiceError("VACASK wrote no final state for the segment (its state analysis failed)")
+        out["state"] = {n: float(data[0, k].real) for k, n in enumerate(names)
+                        if n != "time" and ":flow(" not in n}     # branch flows are algebraic: not state
+    return out
 
 
 def decode(cpu: CpuNetlist, names: list[str], data: np.ndarray, log: str) -> dict:
     """From a run's raw file and output: the probes' amplitudes (u_R) and rdata levels at every sample, the
     circuit's final memory, the time points (periods) and VACASK's cost counters."""
-    t = data[:, 0].real / cpu.period
+    t = data[:, 0].real / cpu.period + cpu.schedule.offset        # absolute periods
     at = cpu.schedule.samples()
-    if t[-1] < at[-1]:
+    if t[-1] < at[-1] - 1e-6:
         raise Mech2SpiceError(f"the run stopped at period {t[-1]:.0f}, before the last sample ({at[-1]:.0f})")
     col = {n: data[:, names.index(n)].real for n in cpu.vectors}
     interp = lambda v: np.interp(at, t, col[v])
@@ -264,38 +326,144 @@ def final_memory(log: str) -> list[int] | None:
 
 
 class CircuitCPU:
-    """The processor in VACASK (envelope level, memory inside the circuit), replayed cycle by cycle."""
+    """The processor in VACASK (envelope level, memory inside the circuit), replayed cycle by cycle.
+
+    Without `segment` the whole run is one simulator process (the netlist `cpu emit` writes).  With
+    `segment` (a checkpointed run) it is a chain of processes of `segment` cycles each: a segment ends at its
+    last cycle's sample, writes every unknown of the circuit there (oscillator amplitudes, insulators,
+    the memory cells' stored bits, the read stage), and the next starts from them (tran icmode="uic" with
+    those initial conditions), so `save` / `load` continue a run across processes."""
 
     def __init__(self, memory: Memory, p=DEFAULT, *, cycles: int = 30, settle: int | None = None,
                  max_step: float = MAX_STEP, reltol: float = RELTOL, timeout: float | None = None,
-                 power_up: bool = True, keep_dir=None):
-        if not power_up:
-            raise Mech2SpiceError(f"the {NAME} backend runs in one simulator process and cannot resume "
-                                  "from a checkpoint: run it again without --resume")
+                 power_up: bool = True, keep_dir=None, segment: int | None = None):
         if memory.devices:
             raise Mech2SpiceError(f"the {NAME} backend has no memory-mapped devices (tapes): the memory "
                                   "inside the circuit is the 256-byte array only")
-        net = emit_cpu(memory.snapshot(), cycles, p, settle=settle, max_step=max_step, reltol=reltol)
-        self.result = run_cpu_netlist(net, timeout, keep_dir)
+        if not power_up and not segment:
+            raise Mech2SpiceError(f"the {NAME} backend resumes only a checkpointed run (one written with "
+                                  "--checkpoint): run it again without --resume")
+        self._blank(memory, {"settle": settle, "max_step": max_step, "reltol": reltol}, timeout, keep_dir, segment)
+        net = emit_cpu(self.image, min(segment, cycles) if segment else cycles, p, **self.settings,
+                       first=0 if segment else None)
+        self.result = {"memory": None}
+        if power_up:                             # else: load() a checkpoint
+            self.result = self._absorb(net, run_cpu_netlist(net, timeout, keep_dir))
         self._setup(memory, p, net, cycles)
+
+    def _blank(self, memory: Memory, settings: dict, timeout, keep_dir, segment) -> None:
+        """Nothing simulated yet."""
+        self.image = memory.snapshot()           # the program: the cells' parameters in every segment
+        self.settings, self.timeout, self.keep_dir, self.segment = settings, timeout, keep_dir, segment
+        self.samples: dict[int, tuple[dict, np.ndarray]] = {}   # cycle -> (probe amplitudes, rdata levels)
+        self.state, self.state_cycle = None, 0   # every unknown at cycle state_cycle's sample (segments)
+        self.cost = {"time_points": 0, "simulator_wall_s": 0.0, "segments": 0}
+        self.simulated = 0.0                     # periods the simulator ran in this process
+
+    @classmethod
+    def replay(cls, memory: Memory, p, net: CpuNetlist, result: dict, cycles: int) -> "CircuitCPU":
+        """A run decoded elsewhere (`decode` of `vacask` run on the netlist `cpu emit` wrote), cycle by cycle."""
+        cpu = cls.__new__(cls)
+        cpu._blank(memory, {}, None, None, None)
+        cpu.result = cpu._absorb(net, {"wall_s": 0.0, **result})
+        cpu._setup(memory, p, net, cycles)
+        return cpu
+
+    def _absorb(self, net: CpuNetlist, result: dict) -> dict:
+        """Keep a run's decoded samples (by absolute cycle), its final state and its cost."""
+        for j, k in enumerate(range(net.schedule.first, net.schedule.first + net.schedule.cycles + 1)):
+            self.samples[k] = (dict(zip(net.probes, result["amps"][j])), result["rdata_levels"][j])
+        if "state" in result:
+            self.state, self.state_cycle = result["state"], net.schedule.first + net.schedule.cycles
+        self.simulated += net.schedule.stop - net.schedule.offset
+        self.cost["time_points"] += result["points"]
+        self.cost["simulator_wall_s"] += result["wall_s"]
+        self.cost["segments"] += 1
+        return result
 
     def _setup(self, memory: Memory, p, net: CpuNetlist, cycles: int) -> None:
         """Replay state over a decoded run (`self.result`): also for a netlist run standalone."""
         self.mem, self.p, self.net = memory, p, net
         self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
         self.regmap = register_map(self.netlist)
-        self.amps = [dict(zip(net.probes, row)) for row in self.result["amps"]]
         self.cycle, self.halted = 0, False
         self.period = net.schedule.stop
         self.cycles_run = cycles
 
+    @property
+    def amps(self) -> dict:
+        """Probe amplitudes (u_R) now: at the sample of the next cycle (the state after the last one)."""
+        return self._sample(self.cycle)[0]
+
+    def _sample(self, k: int) -> tuple[dict, np.ndarray]:
+        """Cycle k's sample, simulating the next segment from the saved state if it is not there yet."""
+        while k not in self.samples and self.segment and self.state is not None and self.state_cycle < k:
+            first = self.state_cycle
+            n = min(self.segment, self.cycles_run - first)
+            if n < 1:
+                break
+            net = emit_cpu(self.image, n, self.p, **self.settings, first=first, state=self.state)
+            self.result = self._absorb(net, run_cpu_netlist(net, self.timeout, self.keep_dir))
+            self.period = net.schedule.stop
+        if k not in self.samples:
+            raise Mech2SpiceError(f"the circuit was simulated for {self.cycles_run} cycles only")
+        return self.samples[k]
+
+    # --- checkpoints: the circuit's unknowns at the last segment's end, and the samples not yet replayed
+    def save(self, path) -> str:
+        """Write the circuit state to `path` (durably); returns its sha256."""
+        if self.state is None:
+            raise Mech2SpiceError(f"the {NAME} backend checkpoints only a segmented run")
+        pending = sorted(k for k in self.samples if k >= self.cycle)
+        buf = io.BytesIO()
+        np.savez(buf, names=np.array(list(self.state)), values=np.array(list(self.state.values())),
+                 state_cycle=self.state_cycle, period=self.period, pending=np.array(pending, np.int64),
+                 probes=np.array(self.net.probes),
+                 amps=np.array([[self.samples[k][0][n] for n in self.net.probes] for k in pending]),
+                 levels=np.array([self.samples[k][1] for k in pending]), backend=NAME,
+                 settings=json.dumps(self.settings), memory=np.array(self.result["memory"] or [], np.int64),
+                 simulated=self.simulated, cost=json.dumps(self.cost))
+        data = buf.getvalue()
+        with open(path, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        return hashlib.sha256(data).hexdigest()
+
+    def load(self, path, sha256: str | None = None) -> None:
+        """Restore the state save() wrote; with `sha256`, the file must be exactly the one saved."""
+        try:
+            data = Path(path).read_bytes()
+        except OSError as err:
+            raise Mech2SpiceError(f"cannot read the circuit state {path}: {err.strerror or err}") from None
+        if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
+            raise Mech2SpiceError(f"the circuit state {path} does not match its checkpoint (changed or damaged "
+                                  "since it was written)")
+        try:
+            with np.load(io.BytesIO(data)) as z:
+                if str(z["backend"]) != NAME or list(z["probes"]) != self.net.probes:
+                    raise Mech2SpiceError(f"{path} holds the state of a different processor model or backend")
+                if json.loads(str(z["settings"])) != self.settings:
+                    raise Mech2SpiceError(f"{path} was written with other circuit settings "
+                                          f"{json.loads(str(z['settings']))}: resume with those")
+                self.state = dict(zip(map(str, z["names"]), map(float, z["values"])))
+                self.state_cycle, self.period = int(z["state_cycle"]), float(z["period"])
+                self.samples = {int(k): (dict(zip(self.net.probes, map(float, a))), lv)
+                                for k, a, lv in zip(z["pending"], z["amps"], z["levels"])}
+                self.cycle = int(z["pending"][0])
+                self.simulated, self.cost = float(z["simulated"]), json.loads(str(z["cost"]))
+                self.result = {**self.result, "memory": [int(v) for v in z["memory"]] or None}
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
+            raise Mech2SpiceError(f"cannot read the circuit state {path}: {err}") from None
+
     def _port(self, k: int, port: str, what: str) -> int:
-        bits = [band_of(self.amps[k][f"{port}[{i}]"]) for i in range(self.netlist.outputs[port])]
+        amps = self._sample(k)[0]
+        bits = [band_of(amps[f"{port}[{i}]"]) for i in range(self.netlist.outputs[port])]
         return Memory.decode_address(bits, k, what)
 
     def _rdata(self, k: int) -> int:
         f0, f1 = self.p.force(NOMINAL0), self.p.force(NOMINAL1)
-        x = (self.result["rdata_levels"][k] - f0) / (f1 - f0)
+        x = (self._sample(k)[1] - f0) / (f1 - f0)
         if np.any(np.abs(x - np.round(x)) > 0.1):
             raise Mech2SpiceError(f"cycle {k}: the memory's rdata levels {np.round(x, 3).tolist()} are not bits")
         return int(sum(int(round(v)) << b for b, v in enumerate(x)))
@@ -303,7 +471,7 @@ class CircuitCPU:
     def registers(self, k: int | None = None) -> dict:
         """The registers decoded from the latch outputs at sample k (default: now)."""
         k = self.cycle if k is None else k
-        amps = self.amps[k]
+        amps = self._sample(k)[0]
 
         def bit(q: str) -> int:
             b = band_of(amps[f"latch.{q}"])
@@ -315,8 +483,13 @@ class CircuitCPU:
         return registers_from_latches(self.regmap, bit)
 
     def set_registers(self, regs: dict) -> None:
-        """A circuit run cannot be resumed (one simulator process)."""
-        raise Mech2SpiceError(f"the {NAME} backend cannot resume from a checkpoint")
+        """Registers cannot be forced into the circuit: after load(), check that the restored samples
+        decode to the checkpoint's registers."""
+        if self.state is None:
+            raise Mech2SpiceError(f"the {NAME} backend resumes from its saved circuit state (load() it first)")
+        if self.registers() != regs:
+            raise Mech2SpiceError(f"the saved circuit state decodes to {self.registers()}, not the checkpoint's "
+                                  f"registers {regs}")
 
     def step(self) -> Cycle:
         """The next simulated cycle, decoded; its write is committed to `mem` (checked at the end against the
@@ -330,16 +503,16 @@ class CircuitCPU:
                             self._port(k, "wdata", "write data"))
         self.mem.commit(waddr, wdata, we)
         self.cycle += 1
-        self.halted = self.registers(k + 1) == regs
-        mem = self.result["memory"]
-        if (self.halted or self.cycle == self.cycles_run) and mem is not None and mem != self.mem.snapshot():
+        mem, printed_at = self.result["memory"], self.state_cycle if self.segment else self.cycles_run
+        self.halted = self.registers(k + 1) == regs           # may simulate the next segment
+        if (self.halted or self.cycle == printed_at) and mem is not None and mem != self.mem.snapshot():
             raise Mech2SpiceError("the circuit's final memory differs from the writes decoded cycle by cycle")
         return Cycle(k, regs["pc"], regs["phase"], mnemonic(rdata) if regs["phase"] == FETCH else None,
                      raddr, rdata, we, waddr, wdata)
 
     def extra(self) -> dict:
-        """What the run cost and how it ended, for the result JSON."""
-        r = self.result
-        return {"simulator": "vacask", "periods": self.period, "time_points": r["points"],
-                "simulator_wall_s": r.get("wall_s"), "cycles_simulated": self.cycles_run,
-                "circuit_memory": r["memory"], "schedule": vars(self.net.schedule)}
+        """What the run cost and how it ended, for the result JSON (time points and simulator time of this
+        process's simulator runs; `segments`: how many)."""
+        return {"simulator": "vacask", "periods": self.period, **self.cost,
+                "cycles_simulated": self.cycles_run, "circuit_memory": self.result["memory"],
+                "schedule": vars(self.net.schedule)}

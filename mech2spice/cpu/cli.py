@@ -56,7 +56,8 @@ def add_parser(subparsers) -> None:
                         "netlist as 6486 oscillators; envelope ~0.05 CPU-s per cycle, the sieve in ~25 CPU-s: "
                         "reports/cpu_physical.md; carrier: oscillator level, Lawson RK4, reports/carrier.md), "
                         "vacask-envelope (the whole processor and its memory as one VACASK netlist, run for "
-                        "--max-cycles cycles in one process: reports/cpu_circuit.md)")
+                        "--max-cycles cycles in one process, or with --checkpoint one process per "
+                        "--checkpoint-every cycles, each continuing the last one's state: reports/cpu_circuit.md)")
     r.add_argument("--max-cycles", type=integer(0, MAX_CPU_CYCLES), default=100_000,
                    help="stop after this many cycles in total (default 100000)")
     r.add_argument("--checkpoint", metavar="FILE", help="write the machine state to FILE (JSON) as it runs")
@@ -175,8 +176,8 @@ def cmd_run(args) -> int:
     physical.update(_circuit_options(args))
     if args.backend == "vacask-envelope":
         if args.max_cycles > MAX_CIRCUIT_CYCLES:
-            raise Mech2SpiceError(f"--backend vacask-envelope simulates --max-cycles cycles in one VACASK process: "
-                                  f"give --max-cycles N <= {MAX_CIRCUIT_CYCLES} (the sieve halts after 457)")
+            raise Mech2SpiceError(f"--backend vacask-envelope: give --max-cycles N <= {MAX_CIRCUIT_CYCLES} "
+                                  "(the sieve halts after 457)")
         if len(physical) != len(_circuit_options(args)):
             raise Mech2SpiceError("--step, --settle, --latency and --params do not apply to vacask-envelope "
                                   "(use --max-step, --settle-periods)")

@@ -23,7 +23,7 @@ from ..inputs import check_output_file, is_int, read_json
 from .isa import MEM_SIZE
 from .iss import FETCH, LDNX, LOAD, REGISTERS
 from .asm import Program, assemble_program
-from .machines import PHYSICAL, make_cpu
+from .machines import CIRCUIT, PHYSICAL, make_cpu
 from .memory import Memory
 from .tm import Tape
 
@@ -167,7 +167,7 @@ def read_checkpoint(path, program: Program, backend: str) -> dict:
     if state["backend"] != backend:
         raise Mech2SpiceError(f"checkpoint {path} was written by the {state['backend']} backend, "
                               f"not {backend}")
-    if backend in PHYSICAL and state["version"] >= 2:
+    if backend in PHYSICAL + CIRCUIT and state["version"] >= 2:
         _check_state_file(state, Path(path))
     return state
 
@@ -311,7 +311,7 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     """Run until halted or ``max_cycles`` (total) and return the result dict.  Checkpoints are written
     every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level backends).  ``trace``:
     a callable(record, cpu) called after each cycle, or a path for a TraceFile."""
-    checkpoint_every = checkpoint_every or (10 if backend in PHYSICAL else 1000)
+    checkpoint_every = checkpoint_every or (10 if backend in PHYSICAL + CIRCUIT else 1000)
     if max_cycles < 0 or checkpoint_every < 1:
         raise Mech2SpiceError("max_cycles must be >= 0 and checkpoint_every >= 1")
     if resume and checkpoint is None:
@@ -324,6 +324,8 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     cost = _Cost(state)
     if progress and backend in PHYSICAL:
         print(f"[{backend}] building the processor's oscillator model ...", file=sys.stderr, flush=True)
+    if backend in CIRCUIT and checkpoint is not None:    # one simulator process per checkpoint interval
+        physical.setdefault("segment", checkpoint_every)
     cpu = make_cpu(backend, make_memory(program), power_up=not resume, **physical)
     if resume:
         _restore(cpu, state, checkpoint)

@@ -348,10 +348,19 @@ def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None, w
     """Run a netlist under `vacask` in a temporary directory, the compiled libraries of `forms` (and
     `extra_files`: name -> path) beside it; returns (vector names, data, log) of the raw file
     `<analysis>.raw` (complex data as complex arrays)."""
+    raws, log = run_netlist_raws(text, (analysis,), timeout, workdir, forms, extra_files)
+    return (*raws[analysis], log)
+
+
+def run_netlist_raws(text: str, analyses: tuple[str, ...], timeout: float | None = None, workdir=None,
+                     forms: tuple[str, ...] = (), extra_files: dict | None = None) -> tuple[dict, str]:
+    """`run_netlist` for a netlist of several analyses: ({analysis: (names, data)}, log); the first
+    analysis must write data, the others may be missing (empty) when the first failed."""
     from . import veriloga as va
     from .runner import run_guarded       # the process guard: timeout, interrupt and SIGTERM kill the child
     exe, _ = va.tools()
     timeout = timeout or DEFAULT_TIMEOUT_S
+    raws = {}
     with tempfile.TemporaryDirectory(prefix="m2s_vc_") as tmp:
         d = Path(workdir or tmp)
         (d / "circuit.sim").write_text(text, encoding="ascii")
@@ -368,15 +377,17 @@ def run_netlist(text: str, analysis: str = TRAN, timeout: float | None = None, w
                                       "(simulate --ngspice-timeout sets the limit)") from None
             raise
         log = proc.stdout + "\n" + proc.stderr
-        raw = d / f"{analysis}.raw"
-        names, data = read_raw_any(raw) if raw.exists() and raw.stat().st_size else ([], np.zeros((0, 0)))
+        for analysis in analyses:
+            raw = d / f"{analysis}.raw"
+            raws[analysis] = read_raw_any(raw) if raw.exists() and raw.stat().st_size else ([], np.zeros((0, 0)))
+    names, data = raws[analyses[0]]
     # VACASK exits 0 when an analysis aborts: its log says so
     msg = _message(log) if proc.returncode != 0 or not len(data) or _ABORTED.search(log) else None
     if proc.returncode != 0 or msg or not len(data):
         err = Mech2SpiceError(f"VACASK failed (exit {proc.returncode}): {msg or 'no data written'}")
         err.names, err.data, err.log = names, data, log
         raise err
-    return names, data, log
+    return raws, log
 
 
 def read_raw_any(path) -> tuple[list[str], np.ndarray]:

@@ -36,7 +36,7 @@ def simulate(design, inputs: dict[str, int] | None = None, *, backend: str = "rk
     if nl.clock:
         steps = _clocked_steps(nl, inputs, backend, cycles, stimulus)
         cycle_values = simulation.expand_steps(steps)
-        timing = simulation.clock_timing(nl)
+        timing = simulation.clock_timing(nl, p=p)
         return simulation.run_clocked_physical(nl, p, cycle_values, backend, timing, progress=progress,
                                                options=options)
     if cycles or stimulus:

@@ -164,8 +164,9 @@ def cmd_simulate_clocked(args, nl) -> int:
     if args.backend == "logic":
         res = simulation.run_clocked_logic(nl, cycles)
     else:
-        timing = simulation.clock_timing(nl, args.pulse, args.pause)
-        res = simulation.run_clocked_physical(nl, load_params(args.params), cycles, args.backend, timing,
+        p = load_params(args.params)
+        timing = simulation.clock_timing(nl, args.pulse, args.pause, p)
+        res = simulation.run_clocked_physical(nl, p, cycles, args.backend, timing,
                                             progress=not args.json and sys.stderr.isatty(),
                                             options=_engine_options(args), log=_log(args),
                                             noise=(args.noise, args.noise_seed))

@@ -6,6 +6,8 @@ run the whole budget.  A bit outside both bands is reported as invalid, never ro
 """
 from __future__ import annotations
 
+import json
+import math
 import time
 from dataclasses import dataclass, replace
 
@@ -157,18 +159,41 @@ GATE_DELAY_MAX = 225
 SETTLE_MARGIN = 600
 
 
-def clock_timing(netlist: Netlist, pulse: int | None = None, pause: int | None = None) -> dict:
-    """Pulse and pause (drive periods) from the measured latch and gate delays and the logic depth."""
-    pulse = pulse or int(1.6 * LATCH_MIN_PULSE)
-    if pulse >= LATCH_OUTPUT_DELAY_MIN:
+def block_slowdown(p: GateParams | None) -> float:
+    """How much slower this block's gates switch than the default block's, >= 1: the largest gate delay of
+    the 3-gate chain on RK4 (experiments/characterise.cascade, the measurement GATE_DELAY_MAX comes from),
+    against the default's.  The schedule's latch and gate delays were measured on the default block; a
+    slower block needs them stretched (the robust block: 340 against 224 periods, 1.52x).  Cached."""
+    from .physics.params import DEFAULT
+    if p is None or p == DEFAULT:
+        return 1.0
+    key = json.dumps(p.to_dict(), sort_keys=True, default=str)
+    if key not in _SLOWDOWN:
+        from .experiments.characterise import cascade
+        _SLOWDOWN[key] = max(1.0, cascade(p)["delay_max"] / cascade(DEFAULT)["delay_max"])
+    return _SLOWDOWN[key]
+
+
+_SLOWDOWN: dict[str, float] = {}
+
+
+def clock_timing(netlist: Netlist, pulse: int | None = None, pause: int | None = None,
+                 p: GateParams | None = None) -> dict:
+    """Pulse and pause (drive periods) from the measured latch and gate delays and the logic depth, the
+    delays stretched by `block_slowdown(p)` for a block slower than the default."""
+    s = block_slowdown(p)
+    min_pulse, out_min = int(math.ceil(s * LATCH_MIN_PULSE)), int(s * LATCH_OUTPUT_DELAY_MIN)
+    pulse = pulse or int(1.6 * min_pulse)
+    if pulse >= out_min:
         raise Mech2SpiceError(f"a {pulse}-period clock pulse outlasts the latch's shortest output delay "
-                              f"({LATCH_OUTPUT_DELAY_MIN} periods): outputs would change while it latches")
-    if pulse < LATCH_MIN_PULSE:
-        raise Mech2SpiceError(f"a {pulse}-period clock pulse is shorter than the {LATCH_MIN_PULSE} periods "
+                              f"({out_min} periods): outputs would change while it latches")
+    if pulse < min_pulse:
+        raise Mech2SpiceError(f"a {pulse}-period clock pulse is shorter than the {min_pulse} periods "
                               "the latch was measured to need")
-    need = LATCH_OUTPUT_DELAY - pulse + GATE_DELAY_MAX * (network.logic_depth(netlist) + 1) + SETTLE_MARGIN
-    return {"pulse": pulse, "pause": pause or need, "derived_pause": need,
-            "logic_depth": network.logic_depth(netlist)}
+    depth = network.logic_depth(netlist)
+    need = int(math.ceil(s * (LATCH_OUTPUT_DELAY + GATE_DELAY_MAX * (depth + 1) + SETTLE_MARGIN))) - pulse
+    return {"pulse": pulse, "pause": pause or need, "derived_pause": need, "logic_depth": depth,
+            "block_slowdown": s}
 
 
 def expand_steps(steps: list[dict]) -> list[dict[str, int]]:

@@ -94,3 +94,22 @@ def test_fsm_detects_sequence():
 def test_clocking_errors(args, needle):
     rc, _, err = cli(*args)
     assert rc == 2 and needle in err and err.count("\n") == 1, err
+
+
+def test_the_clock_schedule_stretches_with_a_slower_block():
+    """The schedule's latch and gate delays were measured on the default block: a block whose gates switch
+    more slowly (the robust preset: 340 against 224 periods, the 3-gate chain's largest delay on RK4) gets
+    a proportionally longer pulse and pause; the default's schedule is unchanged."""
+    from mech2spice import data, simulation
+    from mech2spice.physics.params import DEFAULT, load_params
+    from mech2spice.synthesis.synth import synthesize
+    nl = synthesize(data.verilog("sqrt.v"))
+    base, same = simulation.clock_timing(nl), simulation.clock_timing(nl, p=DEFAULT)
+    assert base == same and base["pulse"] == int(1.6 * simulation.LATCH_MIN_PULSE)
+    assert base["pause"] == (simulation.LATCH_OUTPUT_DELAY - base["pulse"] + simulation.SETTLE_MARGIN
+                             + simulation.GATE_DELAY_MAX * (base["logic_depth"] + 1))
+    slow = simulation.clock_timing(nl, p=load_params("robust"))
+    s = slow["block_slowdown"]
+    assert 1.4 < s < 1.7
+    assert slow["pulse"] >= s * simulation.LATCH_MIN_PULSE and slow["pulse"] < s * simulation.LATCH_OUTPUT_DELAY_MIN
+    assert slow["pause"] + slow["pulse"] >= s * (base["pause"] + base["pulse"]) - 1

@@ -56,7 +56,7 @@ class ClockedMC:
         self.netlist, self.p, self.backend, self.spec, self.seed = netlist, p, backend, spec, seed
         self.options, self.noise = options, check_temperature(noise)
         self.cycles = simulation.expand_steps(steps)
-        self.timing = simulation.clock_timing(netlist)
+        self.timing = simulation.clock_timing(netlist, p=p)
         self.want = simulation.run_clocked_logic(netlist, self.cycles)["trace"]
         self.model = network.build(netlist, p)
         self.elems = spread.elements(self.model)

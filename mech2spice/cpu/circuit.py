@@ -14,7 +14,8 @@ just before its pulse: registers (latch outputs), raddr, rdata, we, waddr, wdata
 `CircuitCPU` (the machine `vacask-envelope`) runs that netlist once for the cycles asked and replays the
 decoded cycles through the Machine interface (cpu/machines.py); the final memory is the circuit's own
 (the byte cells print their bits over the run's last half period) and is checked against the writes decoded
-cycle by cycle.  VACASK cannot continue from a saved state, so a run is one simulator process: no resume.
+cycle by cycle.  A checkpointed run is a chain of segments, each a simulator process continuing the last
+one's unknowns (`CircuitCPU`'s docstring, docs/cpu_circuit.md).
 """
 from __future__ import annotations
 

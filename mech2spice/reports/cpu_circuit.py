@@ -83,10 +83,16 @@ def measure_profile(max_step: float, reltol: float) -> dict:
 # --- the envelope reference --------------------------------------------------------------------------------
 def measure_envelope(cycles: int, step: float = ENVELOPE_STEP) -> dict:
     """The envelope engine's probes just before each clock pulse (PhysicalCPU, full pauses)."""
+    return measure_physical("envelope", cycles, step=step)
+
+
+def measure_physical(backend: str, cycles: int, **options) -> dict:
+    """An oscillator-level processor's probes just before each clock pulse (PhysicalCPU, full pauses), where
+    the circuit is sampled."""
     from ..cpu.physical import PhysicalCPU
     prog = R.load_program(PROGRAM)
     t0 = time.perf_counter()
-    cpu = PhysicalCPU(R.make_memory(prog), "envelope", step=step, settle=None)
+    cpu = PhysicalCPU(R.make_memory(prog), backend, settle=None, **options)
     samples, last = [], {"amps": cpu.amps}
     run = cpu._run
 
@@ -99,7 +105,7 @@ def measure_envelope(cycles: int, step: float = ENVELOPE_STEP) -> dict:
     for _ in range(cycles):
         cpu.step()
     samples.append([cpu.amps[p] for p in cpu.probes])   # the state after the last edge
-    return {"cycles": cycles, "step": step, "probes": cpu.probes, "amps": samples,
+    return {"cycles": cycles, "backend": backend, **options, "probes": cpu.probes, "amps": samples,
             "wall_s": time.perf_counter() - t0, "machine": _machine()}
 
 
@@ -135,6 +141,10 @@ def write(directory="reports", cycles: int = 30, max_step: float = 32.0, reltol:
         if "envelope" in parts:
             n = min(data.get("circuit", {}).get("cycles", cycles), max(cycles, 1))
             data["envelope"] = measure_envelope(n)
+            write_json(path, data)
+        if "carrier" in parts:         # oscillator level (not in the default parts: ~1 min per cycle here)
+            n = min(data.get("circuit", {}).get("cycles", cycles), max(cycles, 1))
+            data["carrier"] = measure_physical("carrier", n)
             write_json(path, data)
     if "circuit" not in data:
         raise Mech2SpiceError(f"{path} has no circuit run: run without --render first")
@@ -212,15 +222,24 @@ def _markdown(data: dict, diffs: list[float]) -> str:
         lines.append(f"- against the envelope engine (step 2, full pauses, {data['envelope']['wall_s']:.0f} s): "
                      f"worst amplitude difference per cycle {min(diffs):.4f}..{worst:.4f} u_R over "
                      f"{len(diffs)} samples ({'within' if worst <= TARGET else 'ABOVE'} the {TARGET} u_R target).")
+    osc = amplitude_differences(c, data["carrier"]) if "carrier" in data else []
+    if osc:
+        ref = amplitude_differences(data["envelope"], data["carrier"]) if "envelope" in data else []
+        lines.append(f"- against the oscillator level (`carrier`, 12 steps per period, full pauses, "
+                     f"{data['carrier']['wall_s']:.0f} s; `--only carrier`): worst amplitude difference per cycle "
+                     f"{min(osc):.4f}..{max(osc):.4f} u_R over {len(osc)} samples"
+                     + (f"; the envelope engine against it: {min(ref):.4f}..{max(ref):.4f} u_R" if ref else "") + ".")
     lines += _settings_md(data) + _profile_md(data) + _gap_md(data)
     lines += ["\n![time step and amplitude difference per cycle](cpu_circuit.png)\n", "## Every cycle\n",
               "| cycle | pc | instruction | raddr | rdata | we | waddr | wdata | = ISS | time points | "
-              "max amp diff (u_R) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "max amp diff to the envelope (u_R) | to the oscillator level (u_R) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for k, r in enumerate(rows):
         d = f"{diffs[k]:.4f}" if k < len(diffs) else ""
+        o = f"{osc[k]:.4f}" if k < len(osc) else ""
         p = points[k] if k < len(points) else ""
         lines.append(f"| {r['cycle']} | {r['pc']} | {r['instr']} | {r['raddr']} | {r['rdata']} | {r['we']} | "
-                     f"{r['waddr']} | {r['wdata']} | {'yes' if r['same'] else 'NO'} | {p} | {d} |")
+                     f"{r['waddr']} | {r['wdata']} | {'yes' if r['same'] else 'NO'} | {p} | {d} | {o} |")
     return "\n".join(lines) + "\n"
 
 

@@ -34,6 +34,7 @@ CHECKS = {     # name -> argv after `mech2spice` (the issue's commands, on the r
     "robust_sieve": ["cpu", "run", "programs/sieve.asm", "--backend", "envelope", "--params", "robust", "--json"],
 }
 SLOW = ("robust_sieve",)
+ADDER_BACKENDS = ("rk4", "envelope", "ngspice")   # the issue: the adder on RK4 and ngspice (carrier level)
 
 
 def blocks(search: dict) -> dict:
@@ -180,7 +181,7 @@ def write(directory="reports", skip_slow: bool = False, render: bool = False, se
         for n in todo:
             log(f"check {n}: mech2spice {' '.join(CHECKS[n])}")
         from ..physics.params import load_params
-        for backend in ("rk4", "envelope"):
+        for backend in ADDER_BACKENDS:
             key = f"robust_adder_{backend}"
             if key not in checks and not render:
                 log(f"check {key}")
@@ -351,7 +352,7 @@ def render_checks(checks: dict) -> list[str]:
         out.append(f"- `mech2spice {' '.join(c['argv'])}` (RK4 at nominal): switches {c['json'].get('switches')}; "
                    + "; ".join(f"{k}: {'pass' if v['pass'] else 'FAIL'}" for k, v in req.items())
                    + f"; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
-    for backend in ("rk4", "envelope"):
+    for backend in ADDER_BACKENDS:
         c = checks.get(f"robust_adder_{backend}")
         if c:
             out.append(f"- adder, 16 sums on {backend}: {c['correct']}/{c['of']} correct; {c['wall_s']:.0f} s "

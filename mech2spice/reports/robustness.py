@@ -246,9 +246,9 @@ def write(directory, quick: bool = False, scheduler: str = "inline", big: bool =
                        for name in ("gate", "chain", "adder")})
     ccounts = QUICK_CLOCKED_SAMPLES if quick else CLOCKED_SAMPLES
     clocked = {name: clocked_curve(name, ccounts[name], scheduler, log) for name in CLOCKED_SIGMAS}
-    for params in OTHER_PARAMS:      # sqrt and the processor's 30 cycles with the designed block (no whole sieves)
+    for params in OTHER_PARAMS:      # sqrt, the processor's 30 cycles and whole sieves with the designed block
         clocked.update({f"{name}, {params}": clocked_curve(name, ccounts[name], scheduler, log, params)
-                        for name in ("sqrt", "processor")})
+                        for name in CLOCKED_SIGMAS})
     ncounts = QUICK_NOISE_SAMPLES if quick else NOISE_SAMPLES
     noise = {name: noise_curve(name, ncounts[name], scheduler, log) for name in ("gate", "adder")}
     name, temps, n = RK4_NOISE
@@ -349,6 +349,7 @@ def markdown(d: dict) -> str:
                        f"{r['gate_failure_rate']:.2e} | {first} |")
         out.append("")
     out += clocked_section(d)
+    out += comparison(d)
     out += extrapolation(d)
     out += noise_section(d)
     out += throughput(d)
@@ -356,7 +357,6 @@ def markdown(d: dict) -> str:
             "* thermal noise on clocked designs and the processor in the report: `simulate --noise` runs clocked "
             "designs and `cpu montecarlo --noise T` the processor, but the noisy envelope steps one period and "
             "freezes no gate (one sieve cycle with its power-up: about 90 s here), so no curve is measured;",
-            f"* whole sieves with the {', '.join(OTHER_PARAMS)} block (sqrt and the processor's {CPU_CYCLES} cycles only);",
             f"* more than {CLOCKED_SAMPLES['sieve']} whole sieves per sigma.", ""]
     return "\n".join(out)
 
@@ -454,6 +454,27 @@ def clocked_section(d: dict) -> list[str]:
                        f"{_pct(r['yield_ci95'][0])} - {_pct(r['yield_ci95'][1])} | {why} |")
         out.append("")
     return out
+
+
+def comparison(d: dict) -> list[str]:
+    """Per design: the largest sigma measured at which every sample passed, default block against each
+    designed block (the same sigmas and samples for both)."""
+    out = ["## Default block against the designed block", "",
+           "Largest sigma of the sweep at which every sample passed (and the yield at the next sigma):", "",
+           "| design | " + " | ".join(["default", *OTHER_PARAMS]) + " |", "|---|" + "---|" * (1 + len(OTHER_PARAMS))]
+    rows = {**d["curves"], **d["clocked"]}
+
+    def cell(name: str) -> str:
+        pts = rows.get(name)
+        if not pts:
+            return "-"
+        clean = [r["sigma"] for r in pts if r["failures"] == 0]
+        top = max(clean, default=None)
+        nxt = next((r for r in pts if top is not None and r["sigma"] > top), None)
+        return (f"{top:g}" if top is not None else "none") + (f" ({_pct(nxt['yield'])} at {nxt['sigma']:g})" if nxt else "")
+    for name in ("gate", "chain", "adder", *CLOCKED_SIGMAS):
+        out.append(f"| {name} | " + " | ".join(cell(n) for n in [name, *[f"{name}, {q}" for q in OTHER_PARAMS]]) + " |")
+    return out + [""]
 
 
 def _slowdown(params: str) -> float:

@@ -268,23 +268,26 @@ def write(directory, quick: bool = False, scheduler: str = "inline", big: bool =
 def figure(curves: dict, path: Path) -> None:
     """Yield against sigma with Wilson intervals, one line per design."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6.4, 4))
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    designs = list(dict.fromkeys(name.split(", ")[0] for name in curves))
     for name, rows in curves.items():
         s = np.array([r["sigma"] for r in rows])
         y = np.array([r["yield"] for r in rows])
         lo, hi = np.array([r["yield_ci95"] for r in rows]).T
         what = f"{rows[0]['gates']} gates" if rows[0]["gates"] else f"{rows[0]['samples']} samples/point"
-        other = any(name.endswith(f", {q}") for q in OTHER_PARAMS)     # dashed: drawn over the default's line
+        other = any(name.endswith(f", {q}") for q in OTHER_PARAMS)     # dashed, the default's colour
         ax.errorbar(s, y, yerr=[np.maximum(y - lo, 0), np.maximum(hi - y, 0)], marker="s" if other else "o",
-                    linestyle="--" if other else "-", capsize=3, label=f"{name} ({what})")
+                    linestyle="--" if other else "-", capsize=3, label=f"{name} ({what})",
+                    color=f"C{designs.index(name.split(', ')[0]) % 10}", alpha=0.8)
     ax.set_xscale("log")
     ax.set_xlabel("relative spread sigma (every element, independent)")
     ax.set_ylabel("yield (all outputs right, every input vector / cycle)")
     ax.set_title(f"envelope engine, default and {', '.join(OTHER_PARAMS)} parameters, seed {SEED}; {MACHINE}",
                  fontsize=8)
     ax.set_ylim(-0.03, 1.03)
-    ax.legend()
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.grid(alpha=0.3)
+    fig.tight_layout()
     save_figure(fig, path)
 
 

@@ -454,7 +454,7 @@ class CircuitCPU:
                 self.cycle = int(z["pending"][0])
                 self.simulated, self.cost = float(z["simulated"]), json.loads(str(z["cost"]))
                 self.result = {**self.result, "memory": [int(v) for v in z["memory"]] or None}
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
+        except (OSError, ValueError, KeyError, IndexError, EOFError, zipfile.BadZipFile) as err:
             raise Mech2SpiceError(f"cannot read the circuit state {path}: {err}") from None
 
     def _port(self, k: int, port: str, what: str) -> int:

@@ -112,6 +112,9 @@ def test_processor_check_keeps_each_finished_cycle_and_reads_a_complete_run_back
                        ["a", "b"], 2.0)
     pc._append_row(str(rows), "carrier", "ck.json", None, {"cycle": 30, "instr": None, "registers": {},
                                                            "amp": amp, "simulated": 1, "wall_s": 1.0}, ["a", "b"], 2.0)
+    pc._append_row(str(rows), "rk4", "ck.json", 160, {"cycle": 30, "instr": None, "registers": {"pc": 30},
+                                                      "amp": amp * 30, "simulated": 300, "wall_s": 1.0},
+                   ["a", "b"], 2.0)                # a run started over writes its cycles again
     with open(rows, "a") as f:
         f.write('{"cut short')                     # an interrupted write is skipped
     got = pc.continue_cycles("ck.json", "unused.asm", "rk4", 2, 160, rows_file=str(rows))
@@ -119,3 +122,24 @@ def test_processor_check_keeps_each_finished_cycle_and_reads_a_complete_run_back
     assert np.array_equal(got["rows"][1]["amp"], amp * 31)
     assert len(pc._read_rows(str(rows), "carrier", "ck.json", None)) == 1
     assert pc._read_rows(str(tmp_path / "none.jsonl"), "rk4", "ck.json", 160) == []
+
+
+@pytest.mark.slow
+def test_processor_check_continues_an_unfinished_run_exactly(tmp_path, capsys):
+    """A processor_check run stopped after its first cycle continues from the state kept beside its rows:
+    its second cycle equals an unbroken run's, bit for bit (carrier; ~3 min here)."""
+    import numpy as np
+    from mech2spice.cli import main
+    from mech2spice.experiments import processor_check as pc
+    ck = tmp_path / "ck.json"
+    assert main(["cpu", "run", "programs/sieve.asm", "--backend", "carrier", "--max-cycles", "1",
+                 "--checkpoint", str(ck), "--json"]) == 1
+    args = [str(ck), "--steps", "0", "--rows"]
+    assert pc.main(args + [str(tmp_path / "a.jsonl"), "--cycles", "1"]) == 0
+    assert pc.main(args + [str(tmp_path / "a.jsonl"), "--cycles", "2"]) == 0
+    assert "continuing after cycle 1" in capsys.readouterr().err
+    assert pc.main(args + [str(tmp_path / "b.jsonl"), "--cycles", "2"]) == 0
+    a, b = ([json.loads(line) for line in open(tmp_path / f)] for f in ("a.jsonl", "b.jsonl"))
+    assert [r["cycle"] for r in a] == [1, 2] == [r["cycle"] for r in b]
+    for x, y in zip(a, b):
+        assert np.array_equal(np.array(x["amp"]), np.array(y["amp"])) and x["registers"] == y["registers"]

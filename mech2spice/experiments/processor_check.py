@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -37,37 +39,88 @@ def continue_cycles(checkpoint: str, program: str, backend: str, cycles: int, st
                     full_pauses: bool = False, rows_file: str | None = None) -> dict:
     """Load the carrier checkpoint's oscillator state into a `backend` processor and run `cycles` cycles
     (`full_pauses`: every pause integrated to its end, no idle skipping).  With `rows_file`, each finished
-    cycle is appended to it as a JSON line (an RK4 run takes hours: what finished is kept), and a run whose
-    every cycle is already there is read back instead of run again."""
+    cycle is appended to it as a JSON line and the machine's state after it is kept beside it (an RK4 run
+    takes hours): a run whose every cycle is there is read back, an unfinished one continues from its last
+    finished cycle."""
     label = backend + ("-full" if full_pauses else "")
     done = _read_rows(rows_file, label, checkpoint, steps)
     if len(done) >= cycles:
         return {"probes": done[0]["probes"], "rows": done[:cycles], "unit": done[0]["unit"]}
     prog = cpu_run.load_program(program)
+    options = {"steps_per_period": steps} if steps and backend != "carrier" else {}
+    options.update({"settle": None} if full_pauses else {})
+    cpu, wall0 = _resumed(rows_file, label, checkpoint, steps, done, backend, prog, options)
+    if cpu is None:
+        done, wall0 = [], 0.0
+        cpu = _from_checkpoint(checkpoint, prog, backend, options, full_pauses)
+    log: list = []
+    _recording(cpu.pulse_engine, log)
+    if cpu.pause_engine is not cpu.pulse_engine:
+        _recording(cpu.pause_engine, log)
+    rows, t0 = list(done), time.perf_counter() - wall0
+    while len(rows) < cycles:
+        rec = cpu.step()
+        rows.append({"cycle": rec.cycle, "instr": rec.instr, "registers": cpu.registers(),
+                     "amp": log[-1], "simulated": cpu.simulated, "wall_s": time.perf_counter() - t0})
+        _append_row(rows_file, label, checkpoint, steps, rows[-1], cpu.probes, 1.0 / cpu.p.u_r)
+        _keep_state(rows_file, label, checkpoint, steps, cpu, rows[-1]["wall_s"])
+        print(f"{label}: cycle {rec.cycle} done, {cpu.simulated} periods, {rows[-1]['wall_s']:.0f} s",
+              file=sys.stderr, flush=True)
+    return {"probes": cpu.probes, "rows": rows, "unit": 1.0 / cpu.p.u_r}
+
+
+def _from_checkpoint(checkpoint, prog, backend, options, full_pauses):
+    """A `backend` processor holding the carrier checkpoint's state (x, v: the same for every engine)."""
     state = cpu_run.read_checkpoint(checkpoint, prog, "carrier")
     cpu = make_cpu("carrier", cpu_run.make_memory(prog), power_up=False, **({"settle": None} if full_pauses else {}))
-    cpu_run._restore(cpu, state, checkpoint)              # the carrier's (x, v): the same state for both engines
+    cpu_run._restore(cpu, state, checkpoint)
     if backend != "carrier":
-        other = make_cpu(backend, cpu_run.make_memory(prog), power_up=False,
-                         **({"steps_per_period": steps} if steps else {}))
+        other = make_cpu(backend, cpu_run.make_memory(prog), power_up=False, **options)
         other.mem = cpu.mem
         other.state, other.period, other.rdata, other.cycle, other.amps = \
             cpu.state, cpu.period, cpu.rdata, cpu.cycle, cpu.amps
         cpu = other
     cpu.simulated = 0                                        # periods integrated from here on
-    log: list = []
-    _recording(cpu.pulse_engine, log)
-    if cpu.pause_engine is not cpu.pulse_engine:
-        _recording(cpu.pause_engine, log)
-    rows, t0 = [], time.perf_counter()
-    for _ in range(cycles):
-        rec = cpu.step()
-        rows.append({"cycle": rec.cycle, "instr": rec.instr, "registers": cpu.registers(),
-                     "amp": log[-1], "simulated": cpu.simulated, "wall_s": time.perf_counter() - t0})
-        _append_row(rows_file, label, checkpoint, steps, rows[-1], cpu.probes, 1.0 / cpu.p.u_r)
-        print(f"{label}: cycle {rec.cycle} done, {cpu.simulated} periods, {rows[-1]['wall_s']:.0f} s",
-              file=sys.stderr, flush=True)
-    return {"probes": cpu.probes, "rows": rows, "unit": 1.0 / cpu.p.u_r}
+    return cpu
+
+
+def _state_paths(rows_file, label, steps):
+    stem = f"{rows_file}.{label}-{steps}"
+    return Path(stem + ".state.npz"), Path(stem + ".json")
+
+
+def _keep_state(rows_file, label, checkpoint, steps, cpu, wall_s) -> None:
+    """The machine after its last finished cycle, beside the rows (each file replaced atomically)."""
+    if rows_file is None:
+        return
+    npz, meta = _state_paths(rows_file, label, steps)
+    tmp = npz.with_name(npz.name + ".tmp")
+    sha = cpu.save(tmp)
+    os.replace(tmp, npz)
+    info = {"checkpoint": checkpoint, "cycle": cpu.cycle, "memory": cpu.mem.snapshot(), "sha256": sha,
+            "wall_s": wall_s}
+    tmp = meta.with_name(meta.name + ".tmp")
+    tmp.write_text(json.dumps(info))
+    os.replace(tmp, meta)
+
+
+def _resumed(rows_file, label, checkpoint, steps, done, backend, prog, options):
+    """(the machine after the last finished cycle, wall seconds so far), or (None, 0) to start over."""
+    if rows_file is None or not done:
+        return None, 0.0
+    npz, meta = _state_paths(rows_file, label, steps)
+    try:
+        info = json.loads(meta.read_text())
+    except (OSError, ValueError):
+        return None, 0.0
+    if info.get("checkpoint") != checkpoint or info.get("cycle") != done[-1]["cycle"] + 1:
+        return None, 0.0
+    cpu = make_cpu(backend, cpu_run.make_memory(prog), power_up=False, **options)
+    cpu.load(npz, sha256=info["sha256"])
+    cpu.mem.cells = [int(v) for v in info["memory"]]
+    cpu.cycle = info["cycle"]
+    print(f"{label}: continuing after cycle {cpu.cycle - 1} ({len(done)} cycles kept)", file=sys.stderr, flush=True)
+    return cpu, float(info["wall_s"])
 
 
 def _append_row(path, label, checkpoint, steps, row, probes, unit) -> None:
@@ -81,12 +134,13 @@ def _append_row(path, label, checkpoint, steps, row, probes, unit) -> None:
 
 
 def _read_rows(path, label, checkpoint, steps) -> list[dict]:
-    """The consecutive cycles of one run (backend, checkpoint, steps) that `path` holds."""
-    rows = []
+    """The consecutive cycles of one run (backend, checkpoint, steps) that `path` holds (a cycle written
+    twice, by a run started over, once: the runs are deterministic)."""
+    rows = {}
     try:
         lines = open(path).read().splitlines() if path else []
     except FileNotFoundError:
-        return rows
+        return []
     for text in lines:
         try:
             r = json.loads(text)
@@ -94,8 +148,13 @@ def _read_rows(path, label, checkpoint, steps) -> list[dict]:
             continue
         if (r["backend"], r["checkpoint"], r["steps"]) == (label, checkpoint, steps):
             r["amp"] = np.array(r["amp"][0]) + 1j * np.array(r["amp"][1])
-            rows.append(r)
-    return rows
+            rows[r["cycle"]] = r
+    out = []
+    for k in sorted(rows):
+        if out and k != out[-1]["cycle"] + 1:
+            break
+        out.append(rows[k])
+    return out
 
 
 def compare(a: dict, b: dict) -> list[dict]:

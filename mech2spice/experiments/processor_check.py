@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -63,7 +62,7 @@ def continue_cycles(checkpoint: str, program: str, backend: str, cycles: int, st
         rows.append({"cycle": rec.cycle, "instr": rec.instr, "registers": cpu.registers(),
                      "amp": log[-1], "simulated": cpu.simulated, "wall_s": time.perf_counter() - t0})
         _append_row(rows_file, label, checkpoint, steps, rows[-1], cpu.probes, 1.0 / cpu.p.u_r)
-        _keep_state(rows_file, label, checkpoint, steps, cpu, rows[-1]["wall_s"])
+        _keep_state(rows_file, label, checkpoint, steps, cpu, prog, rows[-1]["wall_s"])
         print(f"{label}: cycle {rec.cycle} done, {cpu.simulated} periods, {rows[-1]['wall_s']:.0f} s",
               file=sys.stderr, flush=True)
     return {"probes": cpu.probes, "rows": rows, "unit": 1.0 / cpu.p.u_r}
@@ -84,43 +83,30 @@ def _from_checkpoint(checkpoint, prog, backend, options, full_pauses):
     return cpu
 
 
-def _state_paths(rows_file, label, steps):
-    stem = f"{rows_file}.{label}-{steps}"
-    return Path(stem + ".state.npz"), Path(stem + ".json")
+def _kept_checkpoint(rows_file, label, steps) -> Path:
+    return Path(f"{rows_file}.{label}-{steps}.ckpt.json")
 
 
-def _keep_state(rows_file, label, checkpoint, steps, cpu, wall_s) -> None:
-    """The machine after its last finished cycle, beside the rows (each file replaced atomically)."""
+def _keep_state(rows_file, label, checkpoint, steps, cpu, prog, wall_s) -> None:
+    """The machine after its last finished cycle, as a `cpu run` checkpoint beside the rows (atomic)."""
     if rows_file is None:
         return
-    npz, meta = _state_paths(rows_file, label, steps)
-    tmp = npz.with_name(npz.name + ".tmp")
-    sha = cpu.save(tmp)
-    os.replace(tmp, npz)
-    info = {"checkpoint": checkpoint, "cycle": cpu.cycle, "memory": cpu.mem.snapshot(), "sha256": sha,
-            "wall_s": wall_s}
-    tmp = meta.with_name(meta.name + ".tmp")
-    tmp.write_text(json.dumps(info))
-    os.replace(tmp, meta)
+    cpu_run.save_checkpoint(cpu, _kept_checkpoint(rows_file, label, steps), prog, cpu.backend,
+                            {"wall_s_total": wall_s, "cpu_s_total": 0.0, "origin": checkpoint})
 
 
 def _resumed(rows_file, label, checkpoint, steps, done, backend, prog, options):
     """(the machine after the last finished cycle, wall seconds so far), or (None, 0) to start over."""
-    if rows_file is None or not done:
+    path = _kept_checkpoint(rows_file, label, steps)
+    if rows_file is None or not done or not path.exists():
         return None, 0.0
-    npz, meta = _state_paths(rows_file, label, steps)
-    try:
-        info = json.loads(meta.read_text())
-    except (OSError, ValueError):
-        return None, 0.0
-    if info.get("checkpoint") != checkpoint or info.get("cycle") != done[-1]["cycle"] + 1:
+    state = cpu_run.read_checkpoint(path, prog, backend)
+    if state.get("origin") != checkpoint or state["cycle"] != done[-1]["cycle"] + 1:
         return None, 0.0
     cpu = make_cpu(backend, cpu_run.make_memory(prog), power_up=False, **options)
-    cpu.load(npz, sha256=info["sha256"])
-    cpu.mem.cells = [int(v) for v in info["memory"]]
-    cpu.cycle = info["cycle"]
+    cpu_run._restore(cpu, state, path)
     print(f"{label}: continuing after cycle {cpu.cycle - 1} ({len(done)} cycles kept)", file=sys.stderr, flush=True)
-    return cpu, float(info["wall_s"])
+    return cpu, float(state["wall_s_total"])
 
 
 def _append_row(path, label, checkpoint, steps, row, probes, unit) -> None:

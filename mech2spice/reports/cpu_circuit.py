@@ -110,12 +110,14 @@ def measure_physical(backend: str, cycles: int, **options) -> dict:
 
 
 def amplitude_differences(circ: dict, env: dict) -> list[float]:
-    """Per sample, the largest |amplitude difference| (u_R) over the probes both runs have."""
+    """Per sample before a clock pulse, the largest |amplitude difference| (u_R) over the probes both runs
+    have.  An oscillator-level run's last sample (the state after its last edge, before the next cycle's
+    rdata) is not one: the circuit samples after that rdata has settled."""
     ce, ee = dict(zip(circ["probes"], range(len(circ["probes"])))), env["probes"]
     common = [p for p in ee if p in ce]
     a = np.array(circ["amps"])[:, [ce[p] for p in common]]
     b = np.array(env["amps"])[:, [ee.index(p) for p in common]]
-    n = min(len(a), len(b))
+    n = min(len(a), len(b), env.get("cycles", len(b)))
     return np.abs(a[:n] - b[:n]).max(axis=1).tolist()
 
 

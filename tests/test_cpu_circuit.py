@@ -166,3 +166,19 @@ def test_a_resumed_circuit_run_continues_exactly(tmp_path):
                           for line in open(path)]
     a, b = strip(tmp_path / "a.jsonl"), strip(tmp_path / "b.jsonl")
     assert len(a) == 2 and a == b
+
+
+def test_a_circuit_state_file_that_is_not_the_one_saved_is_refused(tmp_path):
+    """Resuming a circuit run: a damaged state file, or one whose digest differs from the checkpoint's, is
+    one clear error (no VACASK run: the resumed machine only emits its netlist until it loads)."""
+    from mech2spice.cpu.circuit import CircuitCPU
+    from mech2spice.cpu.run import load_program, make_memory
+    cpu = CircuitCPU(make_memory(load_program("programs/sieve.asm")), cycles=4, segment=2, power_up=False)
+    bad = tmp_path / "state.npz"
+    bad.write_bytes(b"not an npz")
+    with pytest.raises(Mech2SpiceError, match="cannot read the circuit state"):
+        cpu.load(bad)
+    with pytest.raises(Mech2SpiceError, match="does not match its checkpoint"):
+        cpu.load(bad, sha256="0" * 64)
+    with pytest.raises(Mech2SpiceError, match="resumes only a checkpointed run"):
+        CircuitCPU(make_memory(load_program("programs/sieve.asm")), cycles=4, power_up=False)

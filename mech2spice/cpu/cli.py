@@ -62,8 +62,10 @@ def add_parser(subparsers) -> None:
                    help="stop after this many cycles in total (default 100000)")
     r.add_argument("--checkpoint", metavar="FILE", help="write the machine state to FILE (JSON) as it runs")
     r.add_argument("--checkpoint-every", type=integer(1, MAX_CPU_CYCLES), default=None, metavar="N",
-                   help="cycles between checkpoints (default 1000; 10 for envelope / rk4, whose checkpoint "
-                        "also keeps the oscillator state in a file FILE.state-*.npz that FILE names)")
+                   help="cycles between checkpoints (default 1000; 10 for envelope / carrier / rk4 and "
+                        "vacask-envelope, whose checkpoint also keeps the oscillator or circuit state in a file "
+                        "FILE.state-*.npz that FILE names; for vacask-envelope also the cycles per simulator "
+                        "process)")
     r.add_argument("--step", type=number(0), default=None, metavar="PERIODS",
                    help=f"envelope step in drive periods (default {PROCESSOR_STEP:g}; refused above the "
                         "stability bound)")

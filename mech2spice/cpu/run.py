@@ -309,7 +309,7 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
                 resume: bool = False, progress: bool = False, checkpoint_every: int | None = None,
                 trace=None, **physical) -> dict:
     """Run until halted or ``max_cycles`` (total) and return the result dict.  Checkpoints are written
-    every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level backends).  ``trace``:
+    every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level and circuit backends).  ``trace``:
     a callable(record, cpu) called after each cycle, or a path for a TraceFile."""
     checkpoint_every = checkpoint_every or (10 if backend in PHYSICAL + CIRCUIT else 1000)
     if max_cycles < 0 or checkpoint_every < 1:

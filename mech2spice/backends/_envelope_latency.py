@@ -292,6 +292,7 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
     nf, B = A.shape
     ns = s.shape[0]
     nblk = active.size
+    bound2 = bound * bound
     a1 = np.zeros_like(A)
     a2 = np.zeros_like(A)
     a3 = np.zeros_like(A)
@@ -363,13 +364,13 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
                 nfr, nsr, nr, na = _relist(active, blk, mark, frows, srows, rrows, ablk, nr, na)
                 if na == 0:
                     return n, SETTLED, work_done
-        for q in range(nfr):
-            f = frows[q]
-            for b in range(B):
+        for b in range(B):            # members outside: the row loops run with a fixed b
+            for q in range(nfr):
+                f = frows[q]
                 At[f, b] = A[f, b] + 0.5 * h * a1[f, b]
-        for q in range(nsr):
-            j = srows[q]
-            for b in range(B):
+        for b in range(B):
+            for q in range(nsr):
+                j = srows[q]
                 if expo:                           # E(h/2) (y + h/2 k1)
                     w = sd[j, b] + 0.5 * h * c1[j, b]
                     st[j, b] = Eh[j, 0] * s[j, b] + Eh[j, 1] * w
@@ -378,13 +379,13 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
                     st[j, b] = s[j, b] + 0.5 * h * sd[j, b]
                     v2[j, b] = sd[j, b] + 0.5 * h * c1[j, b]
         _rhs(At, st, v2, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a2, c2, work, not expo)
-        for q in range(nfr):
-            f = frows[q]
-            for b in range(B):
+        for b in range(B):
+            for q in range(nfr):
+                f = frows[q]
                 At[f, b] = A[f, b] + 0.5 * h * a2[f, b]
-        for q in range(nsr):
-            j = srows[q]
-            for b in range(B):
+        for b in range(B):
+            for q in range(nsr):
+                j = srows[q]
                 if expo:                           # E(h/2) y + h/2 k2
                     st[j, b] = Eh[j, 0] * s[j, b] + Eh[j, 1] * sd[j, b]
                     v3[j, b] = Eh[j, 2] * s[j, b] + Eh[j, 3] * sd[j, b] + 0.5 * h * c2[j, b]
@@ -392,13 +393,13 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
                     st[j, b] = s[j, b] + 0.5 * h * v2[j, b]
                     v3[j, b] = sd[j, b] + 0.5 * h * c2[j, b]
         _rhs(At, st, v3, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a3, c3, work, not expo)
-        for q in range(nfr):
-            f = frows[q]
-            for b in range(B):
+        for b in range(B):
+            for q in range(nfr):
+                f = frows[q]
                 At[f, b] = A[f, b] + h * a3[f, b]
-        for q in range(nsr):
-            j = srows[q]
-            for b in range(B):
+        for b in range(B):
+            for q in range(nsr):
+                j = srows[q]
                 if expo:                           # E(h) y + h E(h/2) k3
                     st[j, b] = Ef[j, 0] * s[j, b] + Ef[j, 1] * sd[j, b] + h * Eh[j, 1] * c3[j, b]
                     v4[j, b] = Ef[j, 2] * s[j, b] + Ef[j, 3] * sd[j, b] + h * Eh[j, 3] * c3[j, b]
@@ -406,15 +407,16 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
                     st[j, b] = s[j, b] + h * v3[j, b]
                     v4[j, b] = sd[j, b] + h * c3[j, b]
         _rhs(At, st, v4, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nfr, srows, nsr, a4, c4, work, not expo)
-        for q in range(nfr):
-            f = frows[q]
-            for b in range(B):
+        for b in range(B):
+            for q in range(nfr):
+                f = frows[q]
                 A[f, b] += (h / 6.0) * (a1[f, b] + 2.0 * a2[f, b] + 2.0 * a3[f, b] + a4[f, b])
-                if not abs(A[f, b]) < bound:     # catches NaN too
+                z = A[f, b]
+                if not z.real * z.real + z.imag * z.imag < bound2:     # |A| < bound without a hypot; NaN too
                     return n, DIVERGED, work_done
-        for q in range(nsr):
-            j = srows[q]
-            for b in range(B):
+        for b in range(B):
+            for q in range(nsr):
+                j = srows[q]
                 if expo:                           # E(h) (y + h/6 k1) + h/3 E(h/2) (k2 + k3) + h/6 k4
                     w = sd[j, b] + (h / 6.0) * c1[j, b]
                     k23 = (h / 3.0) * (c2[j, b] + c3[j, b])

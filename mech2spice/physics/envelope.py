@@ -16,6 +16,30 @@ from ..errors import Mech2SpiceError
 from .model import MechModel
 
 
+def _block_inverse(Bop, label: np.ndarray, sizes: np.ndarray):
+    """The inverse of a block-diagonal sparse matrix (blocks: the connected components `label`), as sparse:
+    the blocks of each size gathered into one dense stack and inverted together."""
+    n = label.size
+    order = np.argsort(label, kind="stable")                     # members of each block, ascending
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    pos = np.empty(n, np.int64)
+    pos[order] = np.arange(n) - np.repeat(starts, sizes)         # a row's place inside its block
+    coo = sp.coo_matrix(Bop)
+    rows, cols, vals = [], [], []
+    for k in np.unique(sizes):
+        blocks = np.flatnonzero(sizes == k)
+        slot = np.full(sizes.size, -1)
+        slot[blocks] = np.arange(blocks.size)
+        mine = slot[label[coo.row]] >= 0
+        dense = np.zeros((blocks.size, k, k), coo.dtype)
+        np.add.at(dense, (slot[label[coo.row[mine]]], pos[coo.row[mine]], pos[coo.col[mine]]), coo.data[mine])
+        members = order[starts[blocks][:, None] + np.arange(k)]   # (blocks, k)
+        rows.append(np.repeat(members, k, axis=1).ravel())
+        cols.append(np.tile(members, (1, k)).ravel())
+        vals.append(np.linalg.inv(dense).ravel())
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+
+
 class Envelope:
     """The envelope equations' operators (Z0, Bop, G, H, slow block, drive map) for one model."""
     def __init__(self, model: MechModel):
@@ -85,17 +109,8 @@ class Envelope:
             sizes = np.bincount(label, minlength=n)
             self._binv = None
             if sizes.size == 0 or sizes.max() <= max_block:
-                B = self.Bop.tocsr()
-                rows, cols, vals = [], [], []
-                order = np.argsort(label, kind="stable")
-                for idx in np.split(order, np.cumsum(sizes)[:-1]):
-                    inv = np.linalg.inv(B[idx][:, idx].toarray())
-                    rows.append(np.repeat(idx, idx.size))
-                    cols.append(np.tile(idx, idx.size))
-                    vals.append(inv.ravel())
                 nf = self.fast.size
-                self._binv = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                                           shape=(nf, nf)) if nf else None
+                self._binv = _block_inverse(self.Bop, label, sizes) if nf else None
         return self._binv
 
     # --- pieces --------------------------------------------------------------

@@ -359,3 +359,25 @@ def test_observe_prunes_to_the_cone_of_the_named_outputs():
         observe(full, ["ne"])
     fsm = synthesize(VERILOG / "fsm.v")
     assert observe(fsm, ["found"]).clock == fsm.clock          # latches in the cone keep the clock
+
+
+def test_a_synthesised_source_comes_from_the_cache_the_second_time(tmp_path, monkeypatch):
+    """Yosys output is kept by content (flow, source, Yosys build): the same netlist again without running
+    Yosys; an edited source, or one that `includes other files, runs it."""
+    monkeypatch.setenv("MECH2SPICE_CACHE", str(tmp_path / "cache"))
+    src = tmp_path / "t.v"
+    src.write_text("module t(input a, input b, output y); assign y = ~(a | b); endmodule\n")
+    first = synthesize(src)
+    runs = []
+    real = yosys.run_script
+    monkeypatch.setattr(yosys, "run_script", lambda *a: runs.append(1) or real(*a))
+    again = synthesize(src)
+    assert runs == [] and evaluate(again, {"a": 0, "b": 0}) == evaluate(first, {"a": 0, "b": 0}) == {"y": 1}
+    assert sorted(again.graph.nodes) == sorted(first.graph.nodes)
+    src.write_text("module t(input a, input b, output y); assign y = a | b; endmodule\n")
+    assert evaluate(synthesize(src), {"a": 1, "b": 0}) == {"y": 1} and runs == [1]
+    (tmp_path / "inc.vh").write_text("`define W 1\n")
+    src.write_text('`include "inc.vh"\nmodule t(input a, output y); assign y = ~a; endmodule\n')
+    synthesize(src)
+    synthesize(src)
+    assert runs == [1, 1, 1]

@@ -32,6 +32,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
+from .._cache import cache_dir
 from ..errors import Mech2SpiceError, ToolMissingError
 from ..physics.params import DEFAULT, GateParams
 from ._common import comment_text, num
@@ -257,15 +258,6 @@ def tools() -> tuple[str, str]:
     if None in pair:
         raise ToolMissingError(MISSING)
     return pair
-
-
-def cache_dir() -> Path:
-    """Where compiled models are kept: $MECH2SPICE_CACHE, else $XDG_CACHE_HOME/mech2spice, else ~/.cache."""
-    env = os.environ.get("MECH2SPICE_CACHE")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "mech2spice"
 
 
 def compile_va(source: str, name: str, timeout: float = 300.0) -> tuple[Path, str]:

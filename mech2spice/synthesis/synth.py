@@ -22,6 +22,7 @@ subject to the fan-out limit (they are the mechanical ground/bias, not a driven 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -81,10 +82,11 @@ def combinational_view(g: nx.DiGraph) -> nx.DiGraph:
 def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -> Netlist:
     """Synthesize the Verilog file ``path`` into a clean Netlist of 2-input NOR gates (and latches)."""
     path = Path(path)
-    _check_source(path, _read_source(path))
+    source = _read_source(path)
+    _check_source(path, source)
     if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
         raise Mech2SpiceError(f"invalid top module name {top!r}")
-    name, module = _run_yosys(path, top)
+    name, module = _run_yosys(path, top, source)
     return clean(build_netlist(name, module), max_fanout=max_fanout)
 
 
@@ -157,7 +159,56 @@ def _flow(source: str, top: str | None) -> str:
         "write_json netlist.json", ""])
 
 
-def _run_yosys(path: Path, top: str | None) -> tuple[str, dict]:
+def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict]:
+    """(top module name, its Yosys JSON module): from the cache when this source went through this flow
+    and this Yosys before, else from a run of the flow in a scratch folder (`_yosys_run`)."""
+    key = _cache_key(source, top)
+    cached = _cache_read(key)
+    if cached is not None:
+        return cached
+    name, module = _yosys_run(path, top)
+    _cache_write(key, name, module)
+    return name, module
+
+
+def _cache_key(source: str, top: str | None) -> str | None:
+    """A content key of (flow, source, Yosys build); None for a source with `include (other files take part)."""
+    if "`include" in source:
+        return None
+    text = json.dumps([_flow("SOURCE", top), source, yosys.identity()])
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def _cache_path(key: str) -> Path:
+    from .._cache import cache_dir
+    return cache_dir() / "yosys" / f"{key}.json"
+
+
+def _cache_read(key: str | None) -> tuple[str, dict] | None:
+    if key is None:
+        return None
+    try:
+        data = json.loads(_cache_path(key).read_text())
+        return data["top"], data["module"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _cache_write(key: str | None, name: str, module: dict) -> None:
+    """Keep a synthesised module (atomically; a cache that cannot be written is skipped)."""
+    if key is None:
+        return
+    path = _cache_path(key)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps({"top": name, "module": module}))
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
+def _yosys_run(path: Path, top: str | None) -> tuple[str, dict]:
     """Run the flow in a scratch folder; return (top module name, its Yosys JSON module)."""
     with tempfile.TemporaryDirectory(prefix="mech2spice_yosys_") as tmp:
         # A relative path works for both yowasp (which maps /tmp elsewhere) and `include`s.

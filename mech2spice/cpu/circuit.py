@@ -19,16 +19,11 @@ one's unknowns (`CircuitCPU`'s docstring, docs/cpu_circuit.md).
 """
 from __future__ import annotations
 
-import hashlib
-import io
 import json
 import math
-import os
 import re
 import time
-import zipfile
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
@@ -38,6 +33,7 @@ from ..physics import network
 from ..physics.params import DEFAULT, NOMINAL0, NOMINAL1, band_of
 from ..spice import memory as vmem
 from ..spice._common import num
+from . import state_file
 from ..spice.vacask import ENVELOPE, OSDI, VacaskEnvelopeOptions, _Emitter, run_netlist_raws
 from .isa import MEM_SIZE, mnemonic
 from .iss import FETCH, Cycle
@@ -416,46 +412,32 @@ class CircuitCPU:
         if self.state is None:
             raise Mech2SpiceError(f"the {NAME} backend checkpoints only a segmented run")
         pending = sorted(k for k in self.samples if k >= self.cycle)
-        buf = io.BytesIO()
-        np.savez(buf, names=np.array(list(self.state)), values=np.array(list(self.state.values())),
-                 state_cycle=self.state_cycle, period=self.period, pending=np.array(pending, np.int64),
-                 probes=np.array(self.net.probes),
-                 amps=np.array([[self.samples[k][0][n] for n in self.net.probes] for k in pending]),
-                 levels=np.array([self.samples[k][1] for k in pending]), backend=NAME,
-                 settings=json.dumps(self.settings), memory=np.array(self.result["memory"] or [], np.int64),
-                 simulated=self.simulated, cost=json.dumps(self.cost))
-        data = buf.getvalue()
-        with open(path, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        return hashlib.sha256(data).hexdigest()
+        return state_file.write(
+            path, names=np.array(list(self.state)), values=np.array(list(self.state.values())),
+            state_cycle=self.state_cycle, period=self.period, pending=np.array(pending, np.int64),
+            probes=np.array(self.net.probes),
+            amps=np.array([[self.samples[k][0][n] for n in self.net.probes] for k in pending]),
+            levels=np.array([self.samples[k][1] for k in pending]), backend=NAME,
+            settings=json.dumps(self.settings), memory=np.array(self.result["memory"] or [], np.int64),
+            simulated=self.simulated, cost=json.dumps(self.cost))
 
     def load(self, path, sha256: str | None = None) -> None:
         """Restore the state save() wrote; with `sha256`, the file must be exactly the one saved."""
-        try:
-            data = Path(path).read_bytes()
-        except OSError as err:
-            raise Mech2SpiceError(f"cannot read the circuit state {path}: {err.strerror or err}") from None
-        if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
-            raise Mech2SpiceError(f"the circuit state {path} does not match its checkpoint (changed or damaged "
-                                  "since it was written)")
-        try:
-            with np.load(io.BytesIO(data)) as z:
-                if str(z["backend"]) != NAME or list(z["probes"]) != self.net.probes:
-                    raise Mech2SpiceError(f"{path} holds the state of a different processor model or backend")
-                if json.loads(str(z["settings"])) != self.settings:
-                    raise Mech2SpiceError(f"{path} was written with other circuit settings "
-                                          f"{json.loads(str(z['settings']))}: resume with those")
-                self.state = dict(zip(map(str, z["names"]), map(float, z["values"])))
-                self.state_cycle, self.period = int(z["state_cycle"]), float(z["period"])
-                self.samples = {int(k): (dict(zip(self.net.probes, map(float, a))), lv)
-                                for k, a, lv in zip(z["pending"], z["amps"], z["levels"])}
-                self.cycle = int(z["pending"][0])
-                self.simulated, self.cost = float(z["simulated"]), json.loads(str(z["cost"]))
-                self.result = {**self.result, "memory": [int(v) for v in z["memory"]] or None}
-        except (OSError, ValueError, KeyError, IndexError, EOFError, zipfile.BadZipFile) as err:
-            raise Mech2SpiceError(f"cannot read the circuit state {path}: {err}") from None
+        state_file.read(path, sha256, "circuit state", lambda z: self._load_arrays(z, path))
+
+    def _load_arrays(self, z, path) -> None:
+        if str(z["backend"]) != NAME or list(z["probes"]) != self.net.probes:
+            raise Mech2SpiceError(f"{path} holds the state of a different processor model or backend")
+        if json.loads(str(z["settings"])) != self.settings:
+            raise Mech2SpiceError(f"{path} was written with other circuit settings "
+                                  f"{json.loads(str(z['settings']))}: resume with those")
+        self.state = dict(zip(map(str, z["names"]), map(float, z["values"])))
+        self.state_cycle, self.period = int(z["state_cycle"]), float(z["period"])
+        self.samples = {int(k): (dict(zip(self.net.probes, map(float, a))), lv)
+                        for k, a, lv in zip(z["pending"], z["amps"], z["levels"])}
+        self.cycle = int(z["pending"][0])
+        self.simulated, self.cost = float(z["simulated"]), json.loads(str(z["cost"]))
+        self.result = {**self.result, "memory": [int(v) for v in z["memory"]] or None}
 
     def _port(self, k: int, port: str, what: str) -> int:
         amps = self._sample(k)[0]

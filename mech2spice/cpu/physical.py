@@ -10,11 +10,6 @@ The halt is the logic backend's: no register changed at the edge.
 """
 from __future__ import annotations
 
-import hashlib
-import io
-import os
-import zipfile
-from pathlib import Path
 
 import numpy as np
 
@@ -25,6 +20,7 @@ from ..backends import make_engine
 from ..errors import Mech2SpiceError
 from ..physics import network
 from ..physics.params import DEFAULT, band_of
+from . import state_file
 from .isa import mnemonic
 from .iss import FETCH, Cycle
 from .memory import Memory
@@ -145,33 +141,14 @@ class PhysicalCPU:
     # --- checkpoints: the whole dynamical state, so a resumed run continues exactly ----------
     def save(self, path) -> str:
         """Write the dynamical state to `path` (durably: the checkpoint names it next); returns its sha256."""
-        buf = io.BytesIO()
         arrays = {f"state{k}": np.asarray(a) for k, a in enumerate(self.state)}
-        np.savez(buf, **arrays, period=self.period, rdata=self.rdata, simulated=self.simulated,
-                 probes=np.array(self.probes), amps=np.array([self.amps[k] for k in self.probes]),
-                 backend=self.backend, step=self.step_periods)
-        data = buf.getvalue()
-        with open(path, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        return hashlib.sha256(data).hexdigest()
+        return state_file.write(path, **arrays, period=self.period, rdata=self.rdata, simulated=self.simulated,
+                                probes=np.array(self.probes), amps=np.array([self.amps[k] for k in self.probes]),
+                                backend=self.backend, step=self.step_periods)
 
     def load(self, path, sha256: str | None = None) -> None:
         """Restore the state save() wrote; with `sha256`, the file must be exactly the one saved."""
-        try:
-            data = Path(path).read_bytes()
-        except OSError as err:
-            raise Mech2SpiceError(f"cannot read the oscillator state {path}: {err.strerror or err}") from None
-        if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
-            raise Mech2SpiceError(f"the oscillator state {path} does not match its checkpoint (changed or "
-                                  "damaged since it was written)")
-        try:
-            z = np.load(io.BytesIO(data))
-            with z:
-                self._load_arrays(z, path)
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
-            raise Mech2SpiceError(f"cannot read the oscillator state {path}: {err}") from None
+        state_file.read(path, sha256, "oscillator state", lambda z: self._load_arrays(z, path))
 
     def _load_arrays(self, z, path) -> None:
         if str(z["backend"]) != self.backend or list(z["probes"]) != self.probes:

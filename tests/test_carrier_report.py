@@ -122,6 +122,10 @@ def test_processor_check_keeps_each_finished_cycle_and_reads_a_complete_run_back
     assert np.array_equal(got["rows"][1]["amp"], amp * 31)
     assert len(pc._read_rows(str(rows), "carrier", "ck.json", None)) == 1
     assert pc._read_rows(str(tmp_path / "none.jsonl"), "rk4", "ck.json", 160) == []
+    merged = pc.merge([str(rows)], 160, {"settle_vs_full": [1], "other": 2})
+    assert [r["cycle"] for r in merged["cycles"]] == [30]          # the cycles both engines finished
+    assert merged["cycles"][0]["amp_diff"] == pytest.approx(abs(abs(amp * 30) - abs(amp)).max() * 2.0)
+    assert merged["settle_vs_full"] == [1] and "other" not in merged and merged["rk4_periods"] == 300
 
 
 @pytest.mark.slow

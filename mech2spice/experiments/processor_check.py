@@ -155,9 +155,37 @@ def compare(a: dict, b: dict) -> list[dict]:
     return out
 
 
+def merge(rows_files: list[str], steps: int = 160, base: dict | None = None) -> dict:
+    """One comparison over every cycle that both engines finished in `rows_files` (each run's rows, any
+    checkpoint), in the JSON layout of a single run; `base`'s settle-vs-full fields are kept."""
+    out = {"checkpoint": [], "steps": steps, "cycles": [], "carrier_wall_s": 0.0, "rk4_wall_s": 0.0,
+           "carrier_periods": 0, "rk4_periods": 0}
+    for path in rows_files:
+        starts = {json.loads(line)["checkpoint"] for line in open(path) if line.startswith("{")
+                  and line.rstrip().endswith("}")}
+        for ck in sorted(starts):
+            car, rk = _read_rows(path, "carrier", ck, None), _read_rows(path, "rk4", ck, steps)
+            n = min(len(car), len(rk))
+            if not n:
+                continue
+            out["checkpoint"].append(f"{Path(ck).name} ({n} cycles)")
+            out["cycles"] += compare({"rows": car[:n], "unit": car[0]["unit"]}, {"rows": rk[:n], "unit": rk[0]["unit"]})
+            out["carrier_wall_s"] += car[n - 1]["wall_s"]
+            out["rk4_wall_s"] += rk[n - 1]["wall_s"]
+            out["carrier_periods"] += car[n - 1]["simulated"]
+            out["rk4_periods"] += rk[n - 1]["simulated"]
+    out["checkpoint"] = " and ".join(out["checkpoint"])
+    kept = ("settle_vs_full", "full_wall_s", "full_periods", "settle_periods")
+    return {**out, **{k: base[k] for k in kept if base and k in base}}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("checkpoint", help="a `cpu run --backend carrier --checkpoint` file")
+    ap.add_argument("checkpoint", nargs="?", help="a `cpu run --backend carrier --checkpoint` file")
+    ap.add_argument("--merge", action="append", metavar="ROWS", help="no run: one comparison over every cycle "
+                    "both engines finished in these --rows files (repeatable), written to --out")
+    ap.add_argument("--base", default=None, help="with --merge: an earlier comparison whose settle-vs-full "
+                    "fields are kept")
     ap.add_argument("--program", default=None, help="the program (default: the shipped sieve)")
     ap.add_argument("--cycles", type=int, default=3)
     ap.add_argument("--steps", type=int, default=160, help="RK4 steps per period (default 160; 0: no RK4 run)")
@@ -167,6 +195,11 @@ def main(argv=None) -> int:
     ap.add_argument("--full-pauses", action="store_true", help="also the carrier without idle skipping: what "
                     "ending pauses early costs")
     args = ap.parse_args(argv)
+    if args.merge:
+        base = json.loads(Path(args.base).read_text()) if args.base else None
+        return _write(merge(args.merge, args.steps, base), args.out)
+    if not args.checkpoint:
+        ap.error("give a checkpoint, or --merge ROWS")
     from .. import data
     program = args.program or str(data.program("sieve.asm"))
     carrier = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, rows_file=args.rows)
@@ -181,9 +214,13 @@ def main(argv=None) -> int:
                                rows_file=args.rows)
         res["settle_vs_full"] = compare(carrier, full)
         res["full_wall_s"], res["full_periods"] = full["rows"][-1]["wall_s"], full["rows"][-1]["simulated"]
+    return _write(res, args.out)
+
+
+def _write(res: dict, out: str | None) -> int:
     text = json.dumps(res, indent=2)
-    if args.out:
-        with open(args.out, "w") as f:
+    if out:
+        with open(out, "w") as f:
             f.write(text)
     print(text)
     return 0

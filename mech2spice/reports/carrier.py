@@ -918,15 +918,15 @@ def cycles_md(c: dict) -> list[str]:
          f"within 0.1 u_R), and every probed amplitude (output ports and latch outputs) is compared at the end of "
          f"each cycle (`python -m mech2spice.experiments.processor_check`). RK4 at {c['steps']} steps costs "
          f"{c['rk4_wall_s']:.0f} s for these {c['rk4_periods']:,} periods against the carrier's "
-         f"{c['carrier_wall_s']:.0f} s for {c['carrier_periods']:,} ({SANDBOX}, shared: the sieve ran beside it), "
+         f"{c['carrier_wall_s']:.0f} s for {c['carrier_periods']:,} ({SANDBOX}, shared with other jobs), "
          "which is why the whole sieve is not checked against it.", "",
          *md_table(["cycle", "instruction", "max amplitude diff [u_R]", "max phase [deg]", "registers equal",
                     "verdict"], rows), ""]
     if "settle_vs_full" in c:
         rows = c["settle_vs_full"]
         worst, phase = max(r["amp_diff"] for r in rows), max(r["phase_diff_deg"] for r in rows)
-        L += [f"What ending the pauses early costs (the carrier with idle skipping against full pauses, the last "
-              f"{len(rows)} cycles above): at most {worst:.3f} u_R and {phase:.1f} deg at the end of a cycle, every "
+        L += [f"What ending the pauses early costs (the carrier with idle skipping against full pauses, on "
+              f"{len(rows)} of the cycles above, {', '.join(str(r['cycle']) for r in rows)}): at most {worst:.3f} u_R and {phase:.1f} deg at the end of a cycle, every "
               f"register equal; {c.get('settle_periods', c['carrier_periods']):,} against {c['full_periods']:,} "
               "integrated periods. The phase is not part of the rule (it watches amplitudes) and not of the "
               "decoding; the difference is the slow ringing the rule ignores (docs/carrier.md).", ""]

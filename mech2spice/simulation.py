@@ -167,14 +167,19 @@ def block_slowdown(p: GateParams | None) -> float:
     from .physics.params import DEFAULT
     if p is None or p == DEFAULT:
         return 1.0
+    return max(1.0, _largest_delay(p) / _largest_delay(DEFAULT))
+
+
+def _largest_delay(p: GateParams) -> float:
+    """The 3-gate chain's largest gate delay (periods, RK4), cached per parameter set."""
     key = json.dumps(p.to_dict(), sort_keys=True, default=str)
-    if key not in _SLOWDOWN:
+    if key not in _DELAY:
         from .experiments.characterise import cascade
-        _SLOWDOWN[key] = max(1.0, cascade(p)["delay_max"] / cascade(DEFAULT)["delay_max"])
-    return _SLOWDOWN[key]
+        _DELAY[key] = cascade(p)["delay_max"]
+    return _DELAY[key]
 
 
-_SLOWDOWN: dict[str, float] = {}
+_DELAY: dict[str, float] = {}
 
 
 def clock_timing(netlist: Netlist, pulse: int | None = None, pause: int | None = None,

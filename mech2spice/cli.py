@@ -260,10 +260,13 @@ def cmd_emit(args) -> int:
 
 
 def _envelope_speed_options(args, name: str) -> dict:
-    """--latency TOL|off, --exponential on|off, --parallel on|off: the envelope engine's speed-ups."""
+    """--latency TOL|off (envelope, carrier), --exponential on|off, --parallel on|off: the engines' speed-ups."""
     given = {k: getattr(args, k, None) for k in ("latency", "exponential", "parallel")}
     given = {k: v for k, v in given.items() if v is not None}
-    if given and name != "envelope":
+    if "latency" in given and name == "carrier":
+        if set(given) != {"latency"}:
+            raise Mech2SpiceError("--exponential and --parallel: envelope backend options, not carrier's")
+    elif given and name != "envelope":
         raise Mech2SpiceError(f"{', '.join('--' + k for k in given)}: envelope backend options, not {name}'s")
     return {k: (v or None) if k == "latency" else v == "on" for k, v in given.items()}
 

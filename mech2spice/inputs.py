@@ -73,10 +73,10 @@ def number_or_off(lo: float, hi: float):
 
 
 def envelope_speed_args(parser) -> None:
-    """The envelope speed-up flags (docs/latency.md), on `simulate` and `cpu run`."""
+    """The speed-up flags of the envelope (docs/latency.md) and the carrier's latency, on `simulate` and `cpu run`."""
     parser.add_argument("--latency", type=number_or_off(0, 1), default=None, metavar="TOL|off",
-                        help="envelope: freeze settled gates until an input moves by TOL u_R (off: integrate "
-                             "every gate; docs/latency.md)")
+                        help="envelope, carrier: freeze settled gates until an input moves by TOL u_R (off: "
+                             "integrate every gate; docs/latency.md, docs/carrier.md)")
     parser.add_argument("--exponential", choices=["on", "off"], default=None,
                         help="envelope: step the insulators exactly, which lifts the stability bound on the step")
     parser.add_argument("--parallel", choices=["on", "off"], default=None,

@@ -121,6 +121,10 @@ def test_carrier_options_belong_to_their_backend(capsys):
     refused(capsys, "cpu", "run", SIEVE, "--backend", "envelope", "--threads", "2", needle="carrier backend only")
     refused(capsys, "cpu", "run", SIEVE, "--backend", "logic", "--steps", "20", needle="carrier and rk4 backends only")
     refused(capsys, "cpu", "run", SIEVE, "--backend", "carrier", "--step", "4", needle="the carrier backend's are --steps")
+    refused(capsys, "cpu", "run", SIEVE, "--backend", "rk4", "--latency", "0.05", needle="the rk4 backend's are --steps")
+    refused(capsys, "cpu", "run", SIEVE, "--backend", "carrier", "--latency", "0.05", "--threads", "2",
+            needle="choose latency or threads")
+    refused(capsys, "simulate", ADDER, "--backend", "carrier", "--exponential", "on", needle="not carrier's")
     refused(capsys, "simulate", ADDER, "--backend", "carrier", "--noise", "1e-4", needle="no thermal noise")
 
 

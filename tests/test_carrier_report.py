@@ -91,6 +91,33 @@ def test_sieve_section_reads_a_partial_trace_pair(tmp_path):
     assert (out / "carrier_sieve_fidelity.png").exists()
 
 
+def test_latency_section_compares_the_latency_trace_with_the_carrier_and_the_iss(tmp_path):
+    """Per-cycle differences against the carrier trace, block-steps per cycle from the cumulative count, the
+    ISS check on the real sieve's registers, and the processor_check --latency table."""
+    from mech2spice.reports.carrier import iss_registers
+    regs = iss_registers(3)
+    car = [_cycle(k, {"x[0]": 0.5, "x[1]": 0.97}, regs=regs[k]) for k in range(3)]
+    lat = [{**_cycle(k, {"x[0]": 0.5 + 0.01 * k, "x[1]": 0.97}, regs=regs[k]), "block_steps": 1000 * (k + 1) ** 2,
+            "unix_time": 10.0 * k} for k in range(3)]
+    _trace(tmp_path / "car.jsonl", car)
+    _trace(tmp_path / "lat.jsonl", lat, torn=True)
+    (tmp_path / "lat.json").write_text(json.dumps({"cycles": 3, "halted": True, "wall_s_total": 600.0,
+                                                   "cpu_s_total": 540.0, "periods": 1000, "step": 1 / 12,
+                                                   "latency": 0.05, "simulated_periods": 300}))
+    check = {"settle_vs_full": [{"cycle": 30, "amp_diff": 0.01, "phase_diff_deg": 3.0, "registers_equal": True}],
+             "settle_periods": 100, "settle_wall_s": 9.0, "full_periods": 300, "full_wall_s": 30.0,
+             "latency": [{"tol": 0.05, "periods": 80, "wall_s": 2.0, "vs_full": [
+                 {"cycle": 30, "amp_diff": 0.012, "phase_diff_deg": 3.1, "registers_equal": True}]}]}
+    write_json(tmp_path / "check.json", check)
+    s = R.latency(tmp_path / "lat.jsonl", tmp_path / "car.jsonl", tmp_path / "none.jsonl", [tmp_path / "check.json"])
+    assert s["vs_carrier"]["worst_ur"] == pytest.approx([0.0, 0.01, 0.02]) and s["max_at_cycle"] == 2
+    assert s["block_steps"] == [1000, 3000, 5000] and s["iss_mismatches"] == [] and s["complete"]
+    assert s["vs_envelope"] == [] and s["blocks"] == 1081 and s["steps_per_period"] == 12
+    md = "\n".join(R.latency_md(s, None))
+    assert "halted **True**" in md and "**3 of 3 equal**" in md and "| 30-30 | + latency 0.05 | 0.0120 |" in md
+    assert f"{9000 / (1081 * 12 * 1000):.1%} of all 1081 blocks" in md
+
+
 def test_bad_section_and_missing_trace_are_one_line_errors(tmp_path):
     with pytest.raises(Mech2SpiceError, match="unknown section"):
         R.write(tmp_path, only=["nope"])

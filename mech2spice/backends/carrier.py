@@ -34,6 +34,7 @@ from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import _carrier_kernel as kernel
+from . import _carrier_latency as latent
 from ._base import (Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar,
                     watched_dofs)
 from .envelope import SETTLE_MIN, SETTLE_WINDOW
@@ -90,6 +91,7 @@ class Operator:
         key = np.stack([kind, driven, wc, wq], 1)[self.order]
         self.groups, self.ell = self._ell(key, kinds[:, 3], coupling[self.order][:, self.order].tocsr(),
                                           partners[self.order][:, self.order].tocsr())
+        self.gkind = (np.searchsorted(self.seg, self.groups[:, 0], side="right") - 1).astype(np.int64)
         w, t = model.omega, self.h * np.arange(N)[:, None] + self.h * np.array([0.0, 0.5, 1.0])
         self.trig = np.ascontiguousarray(np.stack([np.sin(w * t[:, 0]), np.cos(w * t[:, 0]),
                                                    np.sin(w * t[:, 1]), np.cos(w * t[:, 1]),
@@ -172,13 +174,25 @@ def operator(model: MechModel, N: int) -> Operator:
     return op
 
 
+def blocks(model: MechModel, op: Operator) -> latent.Blocks:
+    """The model's gate blocks in the operator's numbering (latency), cached with the model."""
+    key = ("carrier-blocks", op.N)
+    blk = model.derived.get(key)
+    if blk is None:
+        blk = model.derived[key] = latent.Blocks(model, op)
+    return blk
+
+
 @np.errstate(over="ignore", invalid="ignore")
 def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT_STEPS_PER_PERIOD,
               stimulus: Stimulus | None = None, state=None, start_period: int = 0, probes=None,
-              progress: bool = False, settle_tol: float | None = None, threads: int = 1) -> Run:
+              progress: bool = False, settle_tol: float | None = None, threads: int = 1,
+              latency: float | None = None) -> Run:
     """Lawson RK4 over `periods` drive periods from `start_period` (from rest unless `state` = (x, v), each (n, B)).
 
-    Stimulus changes must fall on whole periods.  settle_tol (u_R): skip idle time (module doc)."""
+    Stimulus changes must fall on whole periods.  settle_tol (u_R): skip idle time (module doc).
+    latency (u_R): freeze settled gate blocks until an input channel moves by more than this
+    (_carrier_latency.py, one thread); the state then carries the blocks' latency record too."""
     if not kernel.AVAILABLE:
         raise Mech2SpiceError("the carrier engine needs numba (pip install numba)")
     model.check()
@@ -189,11 +203,13 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     pidx = op.pos[probe_dofs(model, names)]
     widx = op.pos[watched_dofs(model)]
     X, V = _start(model, op, state, B)
+    lat = _latency(model, op, state, B, pidx, widx) if latency else None
     amp = np.empty((periods, len(names), B), complex)
     mean = np.empty((periods, len(names), B))
     tol = settle_tol * model.amplitude_unit if settle_tol else 0.0
     bound, cuts = blowup_bound(model), op.cuts(threads)
     settled, k, since, seg_now = 0, 0, 0, None
+    work = np.zeros(1, np.int64)                     # active blocks x steps (latency)
     bar = progress_bar(periods, progress)
     with _numba_threads(threads):
         while k < periods:
@@ -201,14 +217,20 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
             seg = stimulus.segment(t + 1e-9 * T)
             if seg != seg_now:                       # a new stretch of constant stimulus: fresh settle windows
                 seg_now, since = seg, 0
-                watch = (np.full((widx.size, B), np.inf), np.zeros((widx.size, B)), np.zeros(1, np.int64))
+                watch = (np.full((widx.size, B), np.inf), np.zeros((widx.size, B)), np.zeros(B, np.int64))
             to_change = _periods_to_change(stimulus, t, T, periods - k)
             n = min(to_change, CHUNK_PERIODS)
             P, Q = op.drive_weights(stimulus.at(t + 1e-9 * T))
-            done, status = kernel.run_periods(X, V, n, N, op.h, P, Q, op.seg, op.inv_m, op.E, op.H, op.groups,
-                                              *op.ell, op.trig, op.demod, pidx, widx, bound,
-                                              tol, SETTLE_WINDOW, SETTLE_MIN, since, watch,
-                                              amp[k:k + n], mean[k:k + n], cuts)
+            common = (X, V, n, N, op.h, P, Q)
+            tail = (op.trig, op.demod, pidx, widx, bound, tol, SETTLE_WINDOW, SETTLE_MIN, since, watch,
+                    amp[k:k + n], mean[k:k + n])
+            if lat is None:
+                done, status = kernel.run_periods(*common, op.seg, op.inv_m, op.E, op.H, op.groups, *op.ell, *tail,
+                                                  cuts)
+            else:
+                done, status = latent.run_periods(*common, op.gkind, op.inv_m, op.E, op.H, op.groups, *op.ell, *tail,
+                                                  *lat[0], latency * model.amplitude_unit, latent.WINDOW_PERIODS,
+                                                  lat[1], *lat[2], work)
             if status == kernel.DIVERGED:
                 check_divergence(model, op.from_loop(X), t + (done + 1) * T, bound=bound)
             if status == kernel.SETTLED:         # hold the settled orbit up to the stimulus change
@@ -220,8 +242,24 @@ def integrate(model: MechModel, periods: int, *, steps_per_period: int = DEFAULT
     bar.close()
     x, v = op.from_loop(X), op.from_loop(V)
     t_end = (start_period + 1 + np.arange(periods)) * T
-    return Run(names, T, t_end, amp, mean, x, v, (start_period + periods) * T, state=(x, v),
-               settled_periods=settled, extra={"steps_per_period": N})
+    out_state = (x, v) if lat is None else (x, v, *lat[2])
+    return Run(names, T, t_end, amp, mean, x, v, (start_period + periods) * T, state=out_state,
+               settled_periods=settled, extra={"steps_per_period": N, **({"block_steps": int(work[0])} if lat else {})})
+
+
+def _latency(model: MechModel, op: Operator, state, B: int, pidx, widx):
+    """(the blocks' arrays, the tracked-DOF mask, the latency record): the record the state carries (copied),
+    or a fresh one with every block active."""
+    blk = blocks(model, op)
+    track = np.zeros(op.n, np.bool_)
+    track[blk.channel], track[pidx], track[widx] = True, True, True
+    fresh = blk.fresh_record(B, op.N, op.n)
+    if state is not None and len(state) == 2 + len(fresh) and all(
+            np.shape(a) == f.shape for a, f in zip(state[2:], fresh)):
+        record = tuple(np.array(a, dtype=f.dtype) for a, f in zip(state[2:], fresh))
+    else:
+        record = fresh
+    return blk.arrays(), track, record
 
 
 def _start(model: MechModel, op: Operator, state, B: int) -> tuple[np.ndarray, np.ndarray]:
@@ -271,6 +309,7 @@ class CarrierOptions:
     steps_per_period: int = DEFAULT_STEPS_PER_PERIOD
     settle_tol: float | None = None      # u_R; None: integrate every period (no idle skipping)
     threads: int = 1                     # >1: each pass's DOFs split over numba's thread pool
+    latency: float | None = None         # u_R; None: integrate every gate at every step (_carrier_latency.py)
 
     def validate(self) -> None:
         """Refuse steps, tolerances and thread counts the engine cannot take."""
@@ -281,9 +320,14 @@ class CarrierOptions:
             raise Mech2SpiceError(f"settle tolerance {self.settle_tol!r} u_R: must be a positive number")
         if isinstance(self.threads, bool) or int(self.threads) != self.threads or not 1 <= self.threads <= 64:
             raise Mech2SpiceError(f"carrier threads {self.threads!r}: must be a whole number from 1 to 64")
+        if self.latency is not None and not (np.isfinite(self.latency) and 0 < self.latency < 1):
+            raise Mech2SpiceError(f"latency threshold {self.latency!r} u_R: must be a number between 0 and 1 "
+                                  "(or None for off)")
+        if self.latency is not None and self.threads > 1:
+            raise Mech2SpiceError("the carrier's latency loop runs on one thread: choose latency or threads")
 
 
-OSCILLATOR_STEPS_PER_S = 3.0e7   # placeholder until measured: replaced below by the benchmark's figure
+OSCILLATOR_STEPS_PER_S = 4.7e7   # one thread on the processor model, this 2-core machine (docs/carrier.md, "Measured")
 
 
 class CarrierEngine(Engine):
@@ -294,7 +338,7 @@ class CarrierEngine(Engine):
     Options = CarrierOptions
 
     def estimate_seconds(self, model, periods, batch=1):
-        """Wall time from the measured oscillator-step rate (without idle skipping)."""
+        """Wall time from the measured oscillator-step rate (without idle skipping or latency)."""
         return model.n * batch * periods * self.options.steps_per_period / OSCILLATOR_STEPS_PER_S
 
     def step(self, model: MechModel) -> float:
@@ -305,4 +349,5 @@ class CarrierEngine(Engine):
         """Lawson RK4 over `periods` drive periods (see `integrate`)."""
         return integrate(model, periods, steps_per_period=self.options.steps_per_period, stimulus=stimulus,
                          state=state, start_period=start_period, probes=probes, progress=progress,
-                         settle_tol=self.options.settle_tol, threads=self.options.threads)
+                         settle_tol=self.options.settle_tol, threads=self.options.threads,
+                         latency=self.options.latency)

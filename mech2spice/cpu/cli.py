@@ -78,7 +78,8 @@ def add_parser(subparsers) -> None:
     r.add_argument("--steps", type=integer(4, 10_000), default=None, metavar="N",
                    help="carrier, rk4: steps per drive period (default 12 and 80)")
     r.add_argument("--threads", type=integer(1, 64), default=None, metavar="N",
-                   help="carrier: split each step over N threads (default 1; 2 uses both cores of an idle machine)")
+                   help="carrier: split each step over N threads (default 1; 2 uses both cores of an idle machine; "
+                        "more than 1 turns the default latency off, the latency loop being serial)")
     r.add_argument("--trace", metavar="FILE", help="write one JSON line per cycle to FILE: the cycle's record, the "
                    "registers after it and (envelope, carrier, rk4) every probed amplitude in u_R")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
@@ -162,13 +163,14 @@ def cmd_run(args) -> int:
         raise Mech2SpiceError("--threads applies to the carrier backend only")
     if args.steps is not None and args.backend not in ("carrier", "rk4"):
         raise Mech2SpiceError("--steps applies to the carrier and rk4 backends only")
-    if args.backend in ("carrier", "rk4") and set(physical) - {"settle"}:
-        raise Mech2SpiceError(f"--step, --latency, --exponential and --parallel apply to the envelope backend; "
-                              f"the {args.backend} backend's are --steps{', --threads' if args.backend == 'carrier' else ''} "
-                              "and --settle")
+    own = {"carrier": {"settle", "latency"}, "rk4": {"settle"}}.get(args.backend)
+    if own is not None and set(physical) - own:
+        raise Mech2SpiceError(f"--step, --exponential and --parallel apply to the envelope backend; "
+                              f"the {args.backend} backend's are --steps"
+                              f"{', --threads, --latency' if args.backend == 'carrier' else ''} and --settle")
     if physical and args.backend not in ("envelope", "carrier", "rk4"):
         raise Mech2SpiceError("--step, --settle, --latency, --exponential and --parallel apply to the envelope "
-                              "backend only (--settle also to carrier and rk4)")
+                              "backend only (--settle also to carrier and rk4, --latency also to carrier)")
     physical.update(carrier)
     if args.params is not None:
         if args.backend not in ("envelope", "rk4", "carrier"):

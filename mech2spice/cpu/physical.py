@@ -33,6 +33,8 @@ PROCESSOR_STEP = 16.0   # envelope periods with the exponential step (its bound:
 RK4_PROCESSOR_STEP = 8.0   # the step without it (RK4's bound: 15.1 periods)
 SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fidelity.md)
 LATENCY = 0.1           # u_R: per-gate latency threshold (None: off; docs/latency.md)
+CARRIER_LATENCY = 0.05  # u_R: the carrier's (docs/carrier.md: its cost against the carrier without it)
+OWN_LATENCY = "own"     # latency: the backend's own default (LATENCY, CARRIER_LATENCY; rk4 has none)
 EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability bound; docs/latency.md)
 
 
@@ -40,7 +42,7 @@ class PhysicalCPU:
     """The processor as oscillators (an engine that continues from a state) against the behavioural memory."""
 
     def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float | None = None,
-                 settle: float | None = SETTLE_TOL, latency: float | None = LATENCY,
+                 settle: float | None = SETTLE_TOL, latency: float | None | str = OWN_LATENCY,
                  exponential: bool = EXPONENTIAL, parallel: bool = False, power_up: bool = True,
                  noise: tuple[float, int] | None = None, steps_per_period: int | None = None, threads: int = 1):
         if backend not in PHYSICAL:
@@ -52,8 +54,10 @@ class PhysicalCPU:
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
         step = step or (PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP)
+        if latency == OWN_LATENCY:           # the carrier's latency loop is serial: threads ask for every gate integrated
+            latency = {"envelope": LATENCY, "carrier": CARRIER_LATENCY if threads == 1 else None}.get(backend)
         if backend == "carrier":
-            self.pulse_engine, self.pause_engine = self._carrier_engines(settle, steps_per_period, threads)
+            self.pulse_engine, self.pause_engine = self._carrier_engines(settle, steps_per_period, threads, latency)
             step = 1.0 / self.pulse_engine.options.steps_per_period      # the step, in drive periods
         else:
             self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, exponential, parallel,
@@ -87,10 +91,11 @@ class PhysicalCPU:
         return pulse, make_engine(backend, replace(pulse.options, settle_tol=settle or None))
 
     @staticmethod
-    def _carrier_engines(settle: float | None, steps_per_period: int | None, threads: int):
+    def _carrier_engines(settle: float | None, steps_per_period: int | None, threads: int, latency: float | None):
         """(pulse engine, pause engine) at oscillator level: Lawson RK4, pauses end once the channels settle."""
         from ..backends.carrier import CarrierOptions
-        options = CarrierOptions(threads=threads, **({"steps_per_period": steps_per_period} if steps_per_period else {}))
+        options = CarrierOptions(threads=threads, latency=latency or None,
+                                 **({"steps_per_period": steps_per_period} if steps_per_period else {}))
         pulse = make_engine("carrier", options)
         return pulse, make_engine("carrier", replace(options, settle_tol=settle or None))
 

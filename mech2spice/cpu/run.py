@@ -296,7 +296,7 @@ class TraceFile:
         row = {**dataclasses.asdict(rec), "registers": cpu.registers(), "unix_time": round(time.time(), 3)}
         amps = getattr(cpu, "amps", None)
         if isinstance(amps, dict):
-            row.update(period=cpu.period, simulated_periods=cpu.simulated,
+            row.update(period=cpu.period, simulated_periods=cpu.simulated, block_steps=cpu.block_steps,
                        amps={k: round(float(v), 6) for k, v in amps.items()})
         self.file.write(json.dumps(row) + "\n")
         self.file.flush()
@@ -349,7 +349,7 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
               "wall_s": time.perf_counter() - t0, **cost.totals()}
     if backend in PHYSICAL:
         result.update(periods=cpu.period, simulated_periods=cpu.simulated, step=cpu.step_periods,
-                      settle=cpu.settle)
+                      settle=cpu.settle, latency=cpu.latency, block_steps=cpu.block_steps)
     if hasattr(cpu, "extra"):                      # the circuit backend: simulator cost, the circuit's memory
         result.update(cpu.extra())
     for addr, dev in cpu.mem.devices.items():

@@ -35,19 +35,21 @@ def _recording(engine, log: list):
 
 
 def continue_cycles(checkpoint: str, program: str, backend: str, cycles: int, steps: int | None,
-                    full_pauses: bool = False, rows_file: str | None = None) -> dict:
+                    full_pauses: bool = False, rows_file: str | None = None, latency: float | None = None) -> dict:
     """Load the carrier checkpoint's oscillator state into a `backend` processor and run `cycles` cycles
-    (`full_pauses`: every pause integrated to its end, no idle skipping).  With `rows_file`, each finished
+    (`full_pauses`: every pause integrated to its end, no idle skipping; `latency`: the carrier's per-gate
+    latency threshold in u_R, None for every gate integrated).  With `rows_file`, each finished
     cycle is appended to it as a JSON line and the machine's state after it is kept beside it (an RK4 run
     takes hours): a run whose every cycle is there is read back, an unfinished one continues from its last
     finished cycle."""
-    label = backend + ("-full" if full_pauses else "")
+    label = backend + ("-full" if full_pauses else "") + (f"-latency{latency:g}" if latency else "")
     done = _read_rows(rows_file, label, checkpoint, steps)
     if len(done) >= cycles:
         return {"probes": done[0]["probes"], "rows": done[:cycles], "unit": done[0]["unit"]}
     prog = cpu_run.load_program(program)
     options = {"steps_per_period": steps} if steps and backend != "carrier" else {}
     options.update({"settle": None} if full_pauses else {})
+    options.update({"latency": latency} if backend == "carrier" else {})
     cpu, wall0 = _resumed(rows_file, label, checkpoint, steps, done, backend, prog, options)
     if cpu is None:
         done, wall0 = [], 0.0
@@ -71,7 +73,8 @@ def continue_cycles(checkpoint: str, program: str, backend: str, cycles: int, st
 def _from_checkpoint(checkpoint, prog, backend, options, full_pauses):
     """A `backend` processor holding the carrier checkpoint's state (x, v: the same for every engine)."""
     state = cpu_run.read_checkpoint(checkpoint, prog, "carrier")
-    cpu = make_cpu("carrier", cpu_run.make_memory(prog), power_up=False, **({"settle": None} if full_pauses else {}))
+    cpu = make_cpu("carrier", cpu_run.make_memory(prog), power_up=False, latency=options.get("latency"),
+                   **({"settle": None} if full_pauses else {}))
     cpu_run._restore(cpu, state, checkpoint)
     if backend != "carrier":
         other = make_cpu(backend, cpu_run.make_memory(prog), power_up=False, **options)
@@ -194,6 +197,9 @@ def main(argv=None) -> int:
                     "a run already complete there is read back, not run again")
     ap.add_argument("--full-pauses", action="store_true", help="also the carrier without idle skipping: what "
                     "ending pauses early costs")
+    ap.add_argument("--latency", type=float, action="append", metavar="TOL", help="no RK4 run: the carrier with "
+                    "per-gate latency at TOL u_R (repeatable) against the carrier with full pauses and with idle "
+                    "skipping alone")
     args = ap.parse_args(argv)
     if args.merge:
         base = json.loads(Path(args.base).read_text()) if args.base else None
@@ -203,6 +209,8 @@ def main(argv=None) -> int:
     from .. import data
     program = args.program or str(data.program("sieve.asm"))
     carrier = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, rows_file=args.rows)
+    if args.latency:
+        return _write(_latency_check(args, program, carrier), args.out)
     res = {"checkpoint": args.checkpoint, "steps": args.steps,
            "carrier_wall_s": carrier["rows"][-1]["wall_s"], "carrier_periods": carrier["rows"][-1]["simulated"]}
     if args.steps:
@@ -215,6 +223,24 @@ def main(argv=None) -> int:
         res["settle_vs_full"] = compare(carrier, full)
         res["full_wall_s"], res["full_periods"] = full["rows"][-1]["wall_s"], full["rows"][-1]["simulated"]
     return _write(res, args.out)
+
+
+def _latency_check(args, program: str, carrier: dict) -> dict:
+    """The carrier with per-gate latency at each --latency threshold, cycle by cycle against the carrier
+    with full pauses (the reference) and with idle skipping alone (what latency adds to it)."""
+    full = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, full_pauses=True,
+                           rows_file=args.rows)
+    res = {"checkpoint": args.checkpoint, "full_wall_s": full["rows"][-1]["wall_s"],
+           "full_periods": full["rows"][-1]["simulated"], "settle_wall_s": carrier["rows"][-1]["wall_s"],
+           "settle_periods": carrier["rows"][-1]["simulated"], "settle_vs_full": compare(carrier, full),
+           "latency": []}
+    for tol in args.latency:
+        lat = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, rows_file=args.rows,
+                              latency=tol)
+        res["latency"].append({"tol": tol, "wall_s": lat["rows"][-1]["wall_s"],
+                               "periods": lat["rows"][-1]["simulated"], "vs_full": compare(lat, full),
+                               "vs_settle": compare(lat, carrier)})
+    return res
 
 
 def _write(res: dict, out: str | None) -> int:

@@ -45,11 +45,12 @@ REPORTS: dict[str, Report] = {
     "performance": Report("what every fidelity level costs as circuits grow, and where the time goes",
                           "~15 min", ("performance.md",), ("only", "quick", "sqrt_rk4_full", "render")),
     "carrier": Report("the carrier engine (Lawson RK4): accuracy against RK4, convergence against wall time, its rate "
-                      "and roofline on the processor, processor cycles against RK4, the whole sieve against the envelope",
+                      "and roofline on the processor, processor cycles against RK4, the whole sieve against the envelope "
+                      "and with per-gate latency",
                       "~10 min",
                       ("carrier.md", "carrier.json", "carrier_speed_accuracy.png", "carrier_roofline.png",
-                       "carrier_sieve_fidelity.png"), ("only", "quick", "render", "carrier_trace", "envelope_trace",
-                                                        "processor_check")),
+                       "carrier_sieve_fidelity.png", "carrier_latency_sieve.png"),
+                      ("only", "quick", "render", "carrier_trace", "envelope_trace", "processor_check", "latency_trace")),
     "speed_accuracy": Report("RK4 and ngspice (carrier and envelope netlists): speed, accuracy, failure points",
                              "~40 min", ("speed_accuracy.md",), ("only", "design", "quick", "render")),
     "robustness": Report("yield of the gate, a 3-gate chain and the adder under per-element spread (Monte-Carlo "

@@ -15,6 +15,9 @@ JSON, `--render` measures nothing):
   cycles       (no integration) experiments.processor_check's JSON: carrier against RK4 at 160 steps on whole
                processor cycles continued from one carrier checkpoint (RK4 at 160 cannot run the sieve).
   sieve        (no integration) two `cpu run --trace` files, carrier and envelope, compared cycle by cycle.
+  latency      (no integration) the sieve's `cpu run --trace` with per-gate latency against the carrier's without
+               it and against the ISS, its cost per cycle; experiments.processor_check --latency's cycles against
+               full pauses.
 
 Blocks other reports append: `block` (speed_accuracy.md), `roofline_block` (performance.md), `sieve_block`
 (fidelity.md).  ~10 min on an idle 2-core machine, `--quick` < 2 min.
@@ -33,7 +36,7 @@ import numpy as np
 from ..errors import DivergenceError, Mech2SpiceError
 from ._common import SANDBOX, md_table, out_dir, pyplot, read_json, save_figure, write_json
 
-SECTIONS = ("accuracy", "convergence", "processor", "roofline", "cycles", "sieve")
+SECTIONS = ("accuracy", "convergence", "processor", "roofline", "cycles", "sieve", "latency")
 AMP_TOL, PHASE_TOL = 1e-3, 0.5          # the issue's bounds against RK4 at 160 steps (u_R, degrees)
 FAIL_UR = 0.1                           # an error above this (u_R) counts as a failed run
 REF_STEPS, FINE_STEPS = 160, 640
@@ -47,6 +50,8 @@ SIEVE_CYCLES = 457                      # the sieve halts after 457 cycles (repo
 CARRIER_TRACE = "build/carrier/sieve_carrier.jsonl"
 PROCESSOR_CHECK = "build/carrier/processor_check.json"   # experiments.processor_check's output
 ENVELOPE_TRACE = "build/carrier/sieve_envelope.jsonl"
+LATENCY_TRACE = "build/carrier/sieve_latency.jsonl"     # cpu run --backend carrier (its default latency)
+LATENCY_CHECKS = ("build/carrier/latency_check_c30.json", "build/carrier/latency_check_c200.json")
 
 
 def _load() -> float:
@@ -535,23 +540,36 @@ def iss_registers(cycles: int) -> list[dict]:
     return out
 
 
+def compare_traces(a: list[dict], b: list[dict]) -> dict:
+    """Per cycle of two traces: worst |amplitude difference| (u_R) and its probe, registers equal, each
+    trace's smallest margin to a band edge."""
+    from ..physics.params import margin
+    n = min(len(a), len(b))
+    out = {"worst_ur": [], "worst_probe": [], "registers_equal": [], "min_margin_a": [], "min_margin_b": []}
+    for x, y in zip(a[:n], b[:n]):
+        if x.get("cycle") != y.get("cycle"):
+            raise Mech2SpiceError(f"sieve: the traces disagree on the cycle number ({x.get('cycle')} vs {y.get('cycle')})")
+        keys = sorted(set(x["amps"]) & set(y["amps"]))
+        d = {k: abs(x["amps"][k] - y["amps"][k]) for k in keys}
+        k = max(d, key=d.get)
+        out["worst_ur"].append(d[k])
+        out["worst_probe"].append(k)
+        out["registers_equal"].append(x.get("registers") == y.get("registers"))
+        out["min_margin_a"].append(min(margin(v) for v in x["amps"].values()))
+        out["min_margin_b"].append(min(margin(v) for v in y["amps"].values()))
+    return out
+
+
+def _iss_mismatches(rows: list[dict], iss: list[dict]) -> list[int]:
+    return [r["cycle"] for r, w in zip(rows, iss) if r.get("registers") != w]
+
+
 def sieve(carrier_trace=CARRIER_TRACE, envelope_trace=ENVELOPE_TRACE) -> dict:
     """Carrier against envelope per cycle: worst |amplitude difference|, registers equal, margins, periods."""
-    from ..physics.params import margin
     car, env = read_trace(carrier_trace), read_trace(envelope_trace)
     n = min(len(car), len(env))
-    worst, probe, same, mc, me = [], [], [], [], []
-    for c, e in zip(car[:n], env[:n]):
-        if c.get("cycle") != e.get("cycle"):
-            raise Mech2SpiceError(f"sieve: the traces disagree on the cycle number ({c.get('cycle')} vs {e.get('cycle')})")
-        keys = sorted(set(c["amps"]) & set(e["amps"]))
-        d = {k: abs(c["amps"][k] - e["amps"][k]) for k in keys}
-        k = max(d, key=d.get)
-        worst.append(d[k])
-        probe.append(k)
-        same.append(c.get("registers") == e.get("registers"))
-        mc.append(min(margin(v) for v in c["amps"].values()))
-        me.append(min(margin(v) for v in e["amps"].values()))
+    c = compare_traces(car, env)
+    worst = c["worst_ur"]
     iss = iss_registers(max(len(car), len(env)))
     rc, re_ = _result(carrier_trace), _result(envelope_trace)
     total = (re_ or {}).get("cycles") if (re_ or {}).get("halted") else None
@@ -560,20 +578,58 @@ def sieve(carrier_trace=CARRIER_TRACE, envelope_trace=ENVELOPE_TRACE) -> dict:
     return {"carrier_trace": str(carrier_trace), "envelope_trace": str(envelope_trace),
             "cycles_compared": n, "carrier_cycles": len(car), "envelope_cycles": len(env), "total_cycles": total,
             "complete": bool(rc and rc.get("halted") and len(car) == total),
-            "worst_ur": worst, "worst_probe": probe, "registers_equal": same,
-            "min_margin_carrier": mc, "min_margin_envelope": me,
+            "worst_ur": worst, "worst_probe": c["worst_probe"], "registers_equal": c["registers_equal"],
+            "min_margin_carrier": c["min_margin_a"], "min_margin_envelope": c["min_margin_b"],
             "periods_carrier": _per_cycle_periods(car[:n]), "periods_envelope": _per_cycle_periods(env[:n]),
             "schedule_end": [car[n - 1].get("period"), env[n - 1].get("period")] if n else None,
             "max_worst_ur": max(worst) if worst else None, "max_at_cycle": k,
-            "max_probe": probe[k] if k is not None else None,
-            "all_registers_equal": all(same), "carrier_result": _trim(rc), "envelope_result": _trim(re_),
-            "carrier_iss_mismatches": [r["cycle"] for r, w in zip(car, iss) if r.get("registers") != w],
-            "envelope_iss_mismatches": [r["cycle"] for r, w in zip(env, iss) if r.get("registers") != w]}
+            "max_probe": c["worst_probe"][k] if k is not None else None,
+            "all_registers_equal": all(c["registers_equal"]), "carrier_result": _trim(rc), "envelope_result": _trim(re_),
+            "carrier_iss_mismatches": _iss_mismatches(car, iss), "envelope_iss_mismatches": _iss_mismatches(env, iss)}
+
+
+def latency(latency_trace=LATENCY_TRACE, carrier_trace=CARRIER_TRACE, envelope_trace=ENVELOPE_TRACE,
+            checks=LATENCY_CHECKS) -> dict:
+    """The sieve with per-gate latency: per cycle against the carrier without it and against the envelope
+    (worst |amplitude difference|), registers against the ISS, integrated block-steps and wall time per
+    cycle; and the processor_check --latency files found (cycles against full pauses)."""
+    lat, car = read_trace(latency_trace), read_trace(carrier_trace)
+    env = read_trace(envelope_trace) if Path(envelope_trace).exists() else []
+    vs_car, vs_env = compare_traces(lat, car), compare_traces(lat, env)
+    res = _result(latency_trace)
+    steps = [r.get("block_steps", 0) for r in lat]
+    times = [r["unix_time"] for r in lat]
+    worst = vs_car["worst_ur"]
+    k = int(np.argmax(worst)) if worst else None
+    return {"latency_trace": str(latency_trace), "carrier_trace": str(carrier_trace),
+            "envelope_trace": str(envelope_trace), "cycles": len(lat), "carrier_cycles": len(car),
+            "complete": bool(res and res.get("halted") and len(lat) == res.get("cycles")),
+            "result": _trim(res), "vs_carrier": vs_car, "vs_envelope": vs_env["worst_ur"],
+            "max_vs_carrier_ur": max(worst) if worst else None, "max_at_cycle": k,
+            "max_probe": vs_car["worst_probe"][k] if k is not None else None,
+            "iss_mismatches": _iss_mismatches(lat, iss_registers(len(lat))),
+            "block_steps": [steps[0]] + [b - a for a, b in zip(steps, steps[1:])],
+            "periods": _per_cycle_periods(lat), "wall_s": [0.0] + [b - a for a, b in zip(times, times[1:])],
+            "carrier_result": _trim(_result(carrier_trace)), "blocks": processor_blocks(), "steps_per_period": round(1 / res["step"]) if res else _default_steps(),
+            "checks": [read_json(Path(p)) | {"file": p} for p in checks if Path(p).exists()]}
+
+
+def _default_steps() -> int:
+    from ..backends.carrier import DEFAULT_STEPS_PER_PERIOD
+    return DEFAULT_STEPS_PER_PERIOD
+
+
+def processor_blocks() -> int:
+    """The number of gate blocks of the processor model (what one step of full integration covers)."""
+    from ..cpu.netlist import CPU_VERILOG, cpu_netlist
+    from ..physics.params import DEFAULT
+    from ..simulation import network
+    return len(network.build(cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT), DEFAULT).design.gates)
 
 
 def _trim(res: dict | None) -> dict | None:
     keys = ("backend", "cycles", "halted", "wall_s", "wall_s_total", "cpu_s_total", "periods", "simulated_periods",
-            "step", "settle", "registers")
+            "step", "settle", "latency", "block_steps", "registers")
     return {k: res[k] for k in keys if k in res} if res else None
 
 
@@ -684,6 +740,36 @@ def chart_sieve(d: dict, out: Path) -> str | None:
                  f"the runs' load is not in the traces)",
                  fontsize=8)
     name = "carrier_sieve_fidelity.png"
+    save_figure(fig, out / name)
+    return name
+
+
+def chart_latency(d: dict, out: Path) -> str | None:
+    s = d.get("latency")
+    if not s or not s["cycles"]:
+        return None
+    plt = pyplot()
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7.5, 5.6), sharex=True)
+    vc = s["vs_carrier"]["worst_ur"]
+    a1.semilogy(np.arange(len(vc)), np.maximum(vc, 1e-7), ".", ms=3, label="latency vs carrier without it")
+    if s["vs_envelope"]:
+        a1.semilogy(np.arange(len(s["vs_envelope"])), np.maximum(s["vs_envelope"], 1e-7), ".", ms=2, alpha=0.5,
+                    color="tab:gray", label="latency vs envelope")
+    a1.axhline(REDUCED_TOL, color="tab:red", lw=0.8, ls="--", label=f"{REDUCED_TOL} u_R")
+    a1.set_ylabel("worst |A difference|\nat the cycle's end [u_R]")
+    a1.legend(fontsize=7)
+    full = s["blocks"] * s["steps_per_period"]
+    per = np.array(s["periods"], float)
+    frac = np.array(s["block_steps"], float) / np.maximum(full * per, 1)
+    a2.plot(np.arange(len(frac)), frac, ".", ms=3, label="block-steps / all blocks over the integrated periods")
+    a2.set_ylabel("active fraction")
+    a2.set_xlabel("sieve cycle")
+    a2.legend(fontsize=7)
+    res = s.get("result") or {}
+    fig.suptitle(f"the sieve at oscillator level with per-gate latency {res.get('latency', '(running)')} u_R: "
+                 f"{s['cycles']} cycles,\n"
+                 f"compared with the carrier without latency; {SANDBOX} (shared)", fontsize=8)
+    name = "carrier_latency_sieve.png"
     save_figure(fig, out / name)
     return name
 
@@ -867,6 +953,70 @@ def sieve_md(s: dict, chart: str | None, heading: str = "##") -> list[str]:
     return L
 
 
+def latency_md(s: dict, chart: str | None, heading: str = "##") -> list[str]:
+    res, n = s.get("result") or {}, s["cycles"]
+    vc = s["vs_carrier"]
+    m = min(n, s["carrier_cycles"])
+    full = s["blocks"] * s["steps_per_period"] * (res.get("periods") or 0)
+    L = [f"{heading} Per-gate latency at oscillator level: the whole sieve", "",
+         f"`mech2spice cpu run programs/sieve.asm --backend carrier --trace` with per-gate latency at "
+         f"{res.get('latency')} u_R (backends/_carrier_latency.py, docs/carrier.md): a gate block whose channel "
+         "stayed settled is frozen, its neighbours reading one recorded period of its orbit, until an input "
+         f"channel moves by the threshold. Trace `{s['latency_trace']}`, compared with the carrier run without "
+         f"latency (`{s['carrier_trace']}`, the same settle rule) at each cycle's end; {SANDBOX}.", ""]
+    if res:
+        L.append(f"- the run: {res.get('cycles')} cycles, halted **{res.get('halted')}**, wall "
+                 f"**{res.get('wall_s_total', res.get('wall_s', 0)) / 60:.1f} min** and "
+                 f"{res.get('cpu_s_total', 0) / 60:.1f} CPU-min (one thread; other jobs shared the machine, so "
+                 f"the CPU time is the figure for a free core)")
+    else:
+        L.append(f"- the run has not finished: {n} cycles traced so far")
+    car = s.get("carrier_result") or {}
+    if full:
+        L.append(f"- integrated: {sum(s['block_steps']):,} block-steps, {sum(s['block_steps']) / full:.1%} of "
+                 f"all {s['blocks']} blocks over all {res['periods']:,} periods of the schedule"
+                 + (f"; the carrier without latency integrates every block over "
+                    f"{car['simulated_periods'] / car['periods']:.1%} of them (its pauses end once all channels "
+                    f"settle) and took {car['cpu_s_total'] / 60:.0f} CPU-min" if car.get("periods") and
+                    car.get("cpu_s_total") else ""))
+    L += [f"- against the ISS, registers after every cycle: **{n - len(s['iss_mismatches'])} of {n} equal**"
+          + (f" (first differing cycle {s['iss_mismatches'][0]})" if s["iss_mismatches"] else ""),
+          f"- against the carrier without latency ({m} cycles): worst **{s['max_vs_carrier_ur']:.4f} u_R** (cycle "
+          f"{s['max_at_cycle']}, `{s['max_probe']}`), median {np.median(vc['worst_ur']):.4f} u_R, "
+          f"{sum(w > REDUCED_TOL for w in vc['worst_ur'])} cycles above {REDUCED_TOL} u_R; registers equal at "
+          f"{sum(vc['registers_equal'])} of {m}"]
+    if s["vs_envelope"]:
+        L.append(f"- against the envelope run: worst {max(s['vs_envelope']):.4f} u_R, median "
+                 f"{np.median(s['vs_envelope']):.4f} u_R (the carrier without latency against it is in the "
+                 "section above)")
+    L.append("")
+    if s["checks"]:
+        L += ["Whole cycles continued from one carrier checkpoint against the carrier with **full pauses** (no "
+              "idle skipping at all; `python -m mech2spice.experiments.processor_check CHECKPOINT --latency TOL`): "
+              "the worst amplitude and phase difference at a cycle's end over the cycles run, and the work.", ""]
+        rows = []
+        for c in s["checks"]:
+            cyc = f"{c['settle_vs_full'][0]['cycle']}-{c['settle_vs_full'][-1]['cycle']}"
+            rows.append([cyc, "idle skipping alone (settle 0.1)", f"{max(r['amp_diff'] for r in c['settle_vs_full']):.4f}",
+                         f"{max(r['phase_diff_deg'] for r in c['settle_vs_full']):.2f}",
+                         "yes" if all(r["registers_equal"] for r in c["settle_vs_full"]) else "**no**",
+                         f"{c['settle_periods']:,}", f"{c['settle_wall_s']:.0f}"])
+            for lat in c["latency"]:
+                rows.append([cyc, f"+ latency {lat['tol']:g}", f"{max(r['amp_diff'] for r in lat['vs_full']):.4f}",
+                             f"{max(r['phase_diff_deg'] for r in lat['vs_full']):.2f}",
+                             "yes" if all(r["registers_equal"] for r in lat["vs_full"]) else "**no**",
+                             f"{lat['periods']:,}", f"{lat['wall_s']:.0f}"])
+            rows.append([cyc, "full pauses (the reference)", "-", "-", "-", f"{c['full_periods']:,}",
+                         f"{c['full_wall_s']:.0f}"])
+        L += [*md_table(["cycles", "carrier", "max amplitude diff [u_R]", "max phase [deg]", "registers equal",
+                         "periods integrated", "wall [s]"], rows),
+              "", "Periods integrated count a period with any block active; wall times shared the machine with "
+              "other jobs.", ""]
+    if chart:
+        L += [f"![latency against the carrier per cycle]({chart})", ""]
+    return L
+
+
 def _iss_line(s: dict, which: str) -> str:
     bad = s.get(f"{which}_iss_mismatches")
     n = s[f"{which}_cycles"]
@@ -895,6 +1045,8 @@ def markdown(d: dict) -> str:
         L += cycles_md(d["cycles"])
     if "sieve" in d:
         L += sieve_md(d["sieve"], charts.get("sieve"))
+    if "latency" in d:
+        L += latency_md(d["latency"], charts.get("latency"))
     return "\n".join(L) + "\n"
 
 
@@ -982,7 +1134,8 @@ def _sections(only) -> list[str]:
 def render_all(d: dict, out: Path) -> Path:
     """Charts and carrier.md from the results `d` (written back with the chart names)."""
     d["charts"] = {k: v for k, v in (("speed_accuracy", chart_speed_accuracy(d, out)),
-                                     ("roofline", chart_roofline(d, out)), ("sieve", chart_sieve(d, out))) if v}
+                                     ("roofline", chart_roofline(d, out)), ("sieve", chart_sieve(d, out)),
+                                     ("latency", chart_latency(d, out))) if v}
     write_json(out / "carrier.json", d)
     (out / "carrier.md").write_text(markdown(d))
     return out / "carrier.md"
@@ -990,7 +1143,7 @@ def render_all(d: dict, out: Path) -> Path:
 
 def write(directory="reports", only=None, quick: bool = False, render: bool = False,
           carrier_trace: str | None = None, envelope_trace: str | None = None,
-          processor_check: str | None = None) -> Path:
+          processor_check: str | None = None, latency_trace: str | None = None) -> Path:
     """Measure the sections in `only` (default all; `render`: none), merge them into carrier.json, rewrite
     carrier.md and the charts from the whole JSON."""
     sections = [] if render else _sections(only)
@@ -1005,6 +1158,12 @@ def write(directory="reports", only=None, quick: bool = False, render: bool = Fa
                 print(f"[carrier] sieve: skipped, no trace files {traces[0]}, {traces[1]}", flush=True)
                 continue                                  # `all`: the traces come from a separate ~1 h run
             d[name] = sieve(*traces)
+        elif name == "latency":
+            traces = (latency_trace or LATENCY_TRACE, carrier_trace or CARRIER_TRACE, envelope_trace or ENVELOPE_TRACE)
+            if not only and not all(Path(t).exists() for t in traces[:2]):
+                print(f"[carrier] latency: skipped, no trace files {traces[0]}, {traces[1]}", flush=True)
+                continue
+            d[name] = latency(*traces)
         elif name == "roofline":
             d[name] = roofline(quick, d.get("processor"))
         elif name == "cycles":

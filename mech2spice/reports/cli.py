@@ -44,6 +44,9 @@ OPTIONS = [
                                                                      "(default build/carrier/sieve_envelope.jsonl)")),
     ("--processor-check", "processor_check", dict(metavar="FILE", help="experiments.processor_check's JSON "
                                                                        "(default build/carrier/processor_check.json)")),
+    ("--latency-trace", "latency_trace", dict(metavar="FILE", help="carrier `cpu run --trace` of the sieve with "
+                                                                   "per-gate latency (default "
+                                                                   "build/carrier/sieve_latency.jsonl)")),
     ("--name", "name", dict(metavar="STEM", help="report file stem (default cpu_physical)")),
 ]
 

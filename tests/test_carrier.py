@@ -200,3 +200,19 @@ def test_run_cost_adds_up_over_resumed_parts(tmp_path):
     done = run_program(PROGRAMS / "sieve.asm", "iss", 100_000, checkpoint=ck, resume=True)
     assert done["halted"] and done["wall_s_total"] - done["wall_s"] == pytest.approx(prior["wall_s_total"], abs=0.01)
     assert done["cpu_s_total"] > prior["cpu_s_total"]
+
+
+@pytest.mark.slow
+def test_processor_with_latency_resumes_exactly_and_matches_the_iss(tmp_path):
+    """`cpu run --backend carrier` (per-gate latency by default): four sieve cycles equal the ISS, and a run
+    checkpointed after two and resumed ends bit for bit where the unbroken run does (the latency record is
+    part of the saved state; ~2 min here)."""
+    sieve, ck = PROGRAMS / "sieve.asm", tmp_path / "ck.json"
+    whole = run_program(sieve, "carrier", 4, trace=tmp_path / "whole.jsonl")
+    run_program(sieve, "carrier", 2, checkpoint=ck, checkpoint_every=2)
+    resumed = run_program(sieve, "carrier", 4, checkpoint=ck, resume=True, trace=tmp_path / "part.jsonl")
+    assert whole["latency"] == 0.05 and whole["block_steps"] > 0
+    assert resumed["registers"] == whole["registers"] == run_program(sieve, "iss", 4)["registers"]
+    a = [json.loads(line) for line in open(tmp_path / "whole.jsonl")][2:]
+    b = [json.loads(line) for line in open(tmp_path / "part.jsonl")]
+    assert [r["amps"] for r in a] == [r["amps"] for r in b] and a[-1]["block_steps"] == b[-1]["block_steps"]

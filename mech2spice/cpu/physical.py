@@ -148,6 +148,7 @@ class PhysicalCPU:
         """Write the dynamical state to `path` (durably: the checkpoint names it next); returns its sha256."""
         arrays = {f"state{k}": np.asarray(a) for k, a in enumerate(self.state)}
         return state_file.write(path, **arrays, period=self.period, rdata=self.rdata, simulated=self.simulated,
+                                block_steps=self.block_steps,
                                 probes=np.array(self.probes), amps=np.array([self.amps[k] for k in self.probes]),
                                 backend=self.backend, step=self.step_periods)
 
@@ -162,6 +163,7 @@ class PhysicalCPU:
         self.state = tuple(z[f"state{k}"] for k in range(n))
         self.period, self.rdata = int(z["period"]), int(z["rdata"])
         self.simulated = int(z["simulated"])
+        self.block_steps = int(z["block_steps"]) if "block_steps" in z.files else 0     # older files: not kept
         self.amps = dict(zip(self.probes, map(float, z["amps"])))
 
     # --- one clock cycle --------------------------------------------------------------------

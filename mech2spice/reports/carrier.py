@@ -610,7 +610,7 @@ def latency(latency_trace=LATENCY_TRACE, carrier_trace=CARRIER_TRACE, envelope_t
             "iss_mismatches": _iss_mismatches(lat, iss_registers(len(lat))),
             "block_steps": [steps[0]] + [b - a for a, b in zip(steps, steps[1:])],
             "periods": _per_cycle_periods(lat), "wall_s": [0.0] + [b - a for a, b in zip(times, times[1:])],
-            "carrier_result": _trim(_result(carrier_trace)), "blocks": processor_blocks(), "steps_per_period": round(1 / res["step"]) if res else _default_steps(),
+            "carrier_result": _trim(_result(carrier_trace)), **processor_blocks(), "steps_per_period": round(1 / res["step"]) if res else _default_steps(),
             "checks": [read_json(Path(p)) | {"file": p} for p in checks if Path(p).exists()]}
 
 
@@ -619,12 +619,13 @@ def _default_steps() -> int:
     return DEFAULT_STEPS_PER_PERIOD
 
 
-def processor_blocks() -> int:
-    """The number of gate blocks of the processor model (what one step of full integration covers)."""
+def processor_blocks() -> dict:
+    """The processor model's gate blocks (what one step of full integration covers) and oscillators per block."""
     from ..cpu.netlist import CPU_VERILOG, cpu_netlist
     from ..physics.params import DEFAULT
     from ..simulation import network
-    return len(network.build(cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT), DEFAULT).design.gates)
+    model = network.build(cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT), DEFAULT)
+    return {"blocks": len(model.design.gates), "dofs_per_block": model.n / len(model.design.gates)}
 
 
 def _trim(res: dict | None) -> dict | None:
@@ -757,18 +758,17 @@ def chart_latency(d: dict, out: Path) -> str | None:
                     color="tab:gray", label="latency vs envelope")
     a1.axhline(REDUCED_TOL, color="tab:red", lw=0.8, ls="--", label=f"{REDUCED_TOL} u_R")
     a1.set_ylabel("worst |A difference|\nat the cycle's end [u_R]")
-    a1.legend(fontsize=7)
+    a1.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=3, frameon=False)
     full = s["blocks"] * s["steps_per_period"]
     per = np.array(s["periods"], float)
     frac = np.array(s["block_steps"], float) / np.maximum(full * per, 1)
-    a2.plot(np.arange(len(frac)), frac, ".", ms=3, label="block-steps / all blocks over the integrated periods")
-    a2.set_ylabel("active fraction")
+    a2.plot(np.arange(len(frac)), frac, ".", ms=3)
+    a2.set_ylabel("active fraction: block-steps /\nall blocks x integrated periods", fontsize=8)
     a2.set_xlabel("sieve cycle")
-    a2.legend(fontsize=7)
     res = s.get("result") or {}
     fig.suptitle(f"the sieve at oscillator level with per-gate latency {res.get('latency', '(running)')} u_R: "
                  f"{s['cycles']} cycles,\n"
-                 f"compared with the carrier without latency; {SANDBOX} (shared)", fontsize=8)
+                 f"compared with the carrier without latency; {SANDBOX} (shared)", fontsize=8, y=1.0)
     name = "carrier_latency_sieve.png"
     save_figure(fig, out / name)
     return name
@@ -977,8 +977,13 @@ def latency_md(s: dict, chart: str | None, heading: str = "##") -> list[str]:
                  f"all {s['blocks']} blocks over all {res['periods']:,} periods of the schedule"
                  + (f"; the carrier without latency integrates every block over "
                     f"{car['simulated_periods'] / car['periods']:.1%} of them (its pauses end once all channels "
-                    f"settle) and took {car['cpu_s_total'] / 60:.0f} CPU-min" if car.get("periods") and
-                    car.get("cpu_s_total") else ""))
+                    "settle)" if car.get("periods") else "")
+                 + (f", {car['cpu_s_total'] / 60:.0f} CPU-min" if car.get("cpu_s_total") else ""))
+        if res.get("cpu_s_total") and s.get("dofs_per_block"):
+            ns = res["cpu_s_total"] / sum(s["block_steps"]) / s["dofs_per_block"] * 1e9
+            L.append(f"- cost per oscillator-step integrated: {ns:.0f} ns (the run's CPU time over block-steps x "
+                     "oscillators per block, decisions and replay included; the full-range kernel's is in the "
+                     "processor section)")
     L += [f"- against the ISS, registers after every cycle: **{n - len(s['iss_mismatches'])} of {n} equal**"
           + (f" (first differing cycle {s['iss_mismatches'][0]})" if s["iss_mismatches"] else ""),
           f"- against the carrier without latency ({m} cycles): worst **{s['max_vs_carrier_ur']:.4f} u_R** (cycle "

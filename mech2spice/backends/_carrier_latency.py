@@ -207,6 +207,9 @@ def _step(h, x, v, w, sc, P, Q, gkind, inv_m, E, H, groups, Ci, Ck, Cd, Qi, Qg, 
             xin[j] = R[k, 0, j]
             vin[j] = R[k, 1, j]
         _forces(act, gact, xin, vin, sc[ti], sc[ti + 1], P, Q, groups, Ci, Ck, Cd, Qi, Qg, f, R[k, 0], R[k, 1])
+        # _carrier_kernel._combine1..4 over the index list.  Sharing the updates through inline helpers was
+        # tried: the compiler contracted differently (results moved in the last bits) and both loops ran
+        # 5-11 % slower, so the few lines of the scheme are written out here as there.
         for r in range(groups.shape[0]):
             a0, a1 = gact[r], gact[r + 1]
             if a0 >= a1:

@@ -118,6 +118,15 @@ def test_latency_section_compares_the_latency_trace_with_the_carrier_and_the_iss
     assert f"{9000 / (1081 * 12 * 1000):.1%} of all 1081 blocks" in md
 
 
+def test_processor_check_refuses_a_bad_latency_before_running(tmp_path):
+    from mech2spice.experiments import processor_check as pc
+    rows = tmp_path / "rows.jsonl"
+    for bad in ("nan", "5", "-1"):
+        with pytest.raises(Mech2SpiceError, match="latency threshold"):
+            pc.main(["ck.json", "--latency", bad, "--rows", str(rows)])
+    assert not rows.exists()
+
+
 def test_bad_section_and_missing_trace_are_one_line_errors(tmp_path):
     with pytest.raises(Mech2SpiceError, match="unknown section"):
         R.write(tmp_path, only=["nope"])

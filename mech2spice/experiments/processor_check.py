@@ -206,6 +206,9 @@ def main(argv=None) -> int:
         return _write(merge(args.merge, args.steps, base), args.out)
     if not args.checkpoint:
         ap.error("give a checkpoint, or --merge ROWS")
+    from ..backends.carrier import CarrierOptions
+    for tol in args.latency or ():                 # refused before hours of integration, not after
+        CarrierOptions(latency=tol).validate()
     from .. import data
     program = args.program or str(data.program("sieve.asm"))
     carrier = continue_cycles(args.checkpoint, program, "carrier", args.cycles, None, rows_file=args.rows)

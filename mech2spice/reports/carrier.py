@@ -591,14 +591,12 @@ def sieve(carrier_trace=CARRIER_TRACE, envelope_trace=ENVELOPE_TRACE) -> dict:
 def latency(latency_trace=LATENCY_TRACE, carrier_trace=CARRIER_TRACE, envelope_trace=ENVELOPE_TRACE,
             checks=LATENCY_CHECKS) -> dict:
     """The sieve with per-gate latency: per cycle against the carrier without it and against the envelope
-    (worst |amplitude difference|), registers against the ISS, integrated block-steps and wall time per
-    cycle; and the processor_check --latency files found (cycles against full pauses)."""
+    (worst |amplitude difference|), registers against the ISS, integrated block-steps per cycle; and the processor_check --latency files found (cycles against full pauses)."""
     lat, car = read_trace(latency_trace), read_trace(carrier_trace)
     env = read_trace(envelope_trace) if Path(envelope_trace).exists() else []
     vs_car, vs_env = compare_traces(lat, car), compare_traces(lat, env)
     res = _result(latency_trace)
     steps = [r.get("block_steps", 0) for r in lat]
-    times = [r["unix_time"] for r in lat]
     worst = vs_car["worst_ur"]
     k = int(np.argmax(worst)) if worst else None
     return {"latency_trace": str(latency_trace), "carrier_trace": str(carrier_trace),
@@ -609,7 +607,7 @@ def latency(latency_trace=LATENCY_TRACE, carrier_trace=CARRIER_TRACE, envelope_t
             "max_probe": vs_car["worst_probe"][k] if k is not None else None,
             "iss_mismatches": _iss_mismatches(lat, iss_registers(len(lat))),
             "block_steps": [steps[0]] + [b - a for a, b in zip(steps, steps[1:])],
-            "periods": _per_cycle_periods(lat), "wall_s": [0.0] + [b - a for a, b in zip(times, times[1:])],
+            "periods": _per_cycle_periods(lat),
             "carrier_result": _trim(_result(carrier_trace)), **processor_blocks(), "steps_per_period": round(1 / res["step"]) if res else _default_steps(),
             "checks": [read_json(Path(p)) | {"file": p} for p in checks if Path(p).exists()]}
 

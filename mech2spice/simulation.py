@@ -13,10 +13,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from . import verdict
 from .backends import logic, make_engine
 from .backends._base import progress_bar
 from .errors import Mech2SpiceError
 from .physics import network
+from .physics.envelope import Envelope
 from .physics.model import MechModel
 from .physics.params import GateParams, band_of, margin
 from .physics.stimulus import Stimulus
@@ -94,7 +96,8 @@ def _engine(backend: str, options, noise: tuple[float, int] | None):
 def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], backend: str = "rk4",
                  periods: int | None = None, progress: bool = False, options=None, log=None,
                  noise: tuple[float, int] | None = None) -> list[dict]:
-    """Simulate one batch of input assignments from rest; one result dict per member (`noise`: (k_B T, seed))."""
+    """Simulate one batch of input assignments from rest; one result dict per member (`noise`: (k_B T, seed)).
+    Each member's bits are judged by verdict.apply: valid only at a stable fixed point, settled onto it."""
     t0 = time.time()
     for v in values:
         pack_inputs(netlist, v)                  # validates ports and widths up front
@@ -106,46 +109,110 @@ def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], 
     budget = periods or period_budget(netlist)
     outs = _observed(netlist, model)
     _announce(engine, model, budget, len(values), log)
+    judged, source = None, "run"
     if not outs:
         amps, used = np.zeros((0, len(values))), 0
     elif engine.capabilities.state:
-        amps, used = _run_until_settled(engine, model, stim, outs, budget, progress, fixed=periods is not None)
+        amps, used, judged = _run_until_settled(engine, model, stim, outs, budget, progress,
+                                                fixed=periods is not None)
     else:
         run = engine.run(model, budget, stim, probes=outs, progress=progress)
         amps, used = run.final_amplitudes(outs, model.amplitude_unit), budget
+        judged, source = _reference_judged(model, stim, outs, budget), "envelope"
     wall = time.time() - t0
     results = []
     for b in range(len(values)):
         a = {n: float(amps[k, b]) for k, n in enumerate(outs)}
-        results.append({"backend": backend, **decode(netlist, a, model.design.const_outputs),
-                        "amplitudes": a, "periods": used, "wall_s": wall, **_engine_fields(engine)})
+        v, ok = judged[b] if judged else (None, False)
+        res = verdict.apply(decode(netlist, a, model.design.const_outputs), a, v, ok, source)
+        results.append({"backend": backend, **res, "amplitudes": a, "periods": used, "wall_s": wall,
+                        **_engine_fields(engine)})
     return results
 
 
+def _reference_judged(model: MechModel, stim, outs: list[str], budget: int) -> list:
+    """For engines that return no state (the circuit simulators): the verdict at the envelope's settled state
+    under the same stimulus; the mechanical model, and so its fixed points and modes, are the same."""
+    return _run_until_settled(make_engine("envelope"), model, stim, outs, budget, False, fixed=False)[2]
+
+
 def _run_until_settled(engine, model, stim, probes: list[str], budget: int, progress: bool, fixed: bool):
-    """CHUNK periods at a time, each continuing from the last state, until the outputs settle."""
-    state, done, history = None, 0, []
+    """CHUNK periods at a time, each continuing from the last state, until the outputs settle: the cheap rule
+    (_settled: nothing moved much over a window) first, then the verdict's (verdict.settled: stable, and
+    less than verdict.SETTLED_BW band widths still to come).  While an output is still moving, the next
+    verdict waits for the slowest mode to close the gap.  Returns (amplitudes, periods, [(verdict, settled)])."""
+    state, done, history, judged, next_check = None, 0, [], None, 0
     bar = progress_bar(budget, progress)
     while done < budget:
         n = min(CHUNK, budget - done)
         run = engine.run(model, n, stim, state=state, start_period=done, probes=probes)
         state = run.state
         done += n
-        history.append(run.final_amplitudes(probes, model.amplitude_unit))
+        history.append(_chunk_summary(run, probes, model.amplitude_unit))
         bar.update(n)
-        if not fixed and _settled(history):
-            break
+        judged = None
+        if not fixed and done >= next_check and _settled(history):
+            judged = _judge(engine, model, run, stim, probes, done, history)
+            wait = _periods_to_settle(judged, history, probes)
+            if wait == 0:
+                break
+            next_check = done + wait
     bar.close()
-    return history[-1], done
+    if judged is None:
+        judged = _judge(engine, model, run, stim, probes, done, history)
+    return history[-1][0], done, judged
+
+
+def _chunk_summary(run, probes: list[str], unit: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(last, mean, swing) of each probe's |A| / unit over one chunk, each (probes, B)."""
+    a = np.abs(run.amp[:, [run.probe(n) for n in probes], :]) / unit
+    return a[-1], a.mean(axis=0), a.max(axis=0) - a.min(axis=0)
+
+
+def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int, history: list) -> list | None:
+    """(verdict, settled) of each batch member at the run's final state (None: the engine returns no state)."""
+    ph = engine.phasors(model, run)
+    if ph is None:
+        return None
+    A, s = ph
+    F = Envelope.of(model).forcing(stim.at((t_periods - 1e-6) * model.period))
+    out = []
+    for b in range(A.shape[1]):
+        v = verdict.judge(model, A[:, b], s[:, b], F[:, b], outs)
+        a, swing, step = _recent(history, outs, b)
+        out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.capabilities.averaged)))
+    return out
+
+
+def _recent(history: list, outs: list[str], b: int) -> tuple[dict, dict, dict]:
+    """Member b's latest amplitudes, their swing over the last chunk, and the change of the chunk mean."""
+    last, mean, swing = (h[:, b] for h in history[-1])
+    step = np.abs(mean - history[-2][1][:, b]) if len(history) > 1 else np.full(len(outs), np.inf)
+    as_dict = lambda x: {n: float(x[k]) for k, n in enumerate(outs)}
+    return as_dict(last), as_dict(swing), as_dict(step)
 
 
 def _settled(history: list[np.ndarray]) -> bool:
+    """The cheap first test: every output moved less than SETTLED_CHANGE over SETTLE_WINDOW and is in a band."""
     k = SETTLE_WINDOW // CHUNK
     if len(history) <= k:
         return False
-    now, before = history[-1], history[-1 - k]
+    now, before = history[-1][0], history[-1 - k][0]
     inside = np.vectorize(lambda a: band_of(a) is not None)(now)
     return bool(np.all(np.abs(now - before) < SETTLED_CHANGE) and np.all(inside))
+
+
+def _periods_to_settle(judged, history: list, probes: list[str]) -> int:
+    """0 when every member is settled or unstable (no wait helps); else the periods for the slowest decaying
+    mode to bring what is still to come down to verdict.SETTLED_BW (at least one chunk)."""
+    wait = 0
+    for b, (v, ok) in enumerate(judged or []):
+        if ok or not v.stable:
+            continue
+        a, swing, step = _recent(history, probes, b)
+        left = max(verdict.still_to_come(v, a, swing, step, CHUNK), verdict.drift(v, a))
+        wait = max(wait, CHUNK, int(min(v.slowest_decay * np.log(max(left / verdict.SETTLED_BW, 1.0)), 1e7)))
+    return wait
 
 
 # --- clocked designs -------------------------------------------------------------------------
@@ -230,8 +297,55 @@ def run_clocked_logic(netlist: Netlist, cycles: list[dict[str, int]]) -> dict:
 
 def _final(trace: list[dict]) -> dict:
     last = trace[-1]
-    return {"outputs": last["outputs"], "bits": last["bits"], "valid": all(t["valid"] for t in trace),
-            "min_margin": min((t["min_margin"] for t in trace if t["min_margin"] is not None), default=None)}
+    out = {"outputs": last["outputs"], "bits": last["bits"], "valid": all(t["valid"] for t in trace),
+           "min_margin": min((t["min_margin"] for t in trace if t["min_margin"] is not None), default=None)}
+    if all("stable" in t for t in trace):
+        out.update(stable=all(t["stable"] for t in trace), settled=all(t["settled"] for t in trace))
+    return out
+
+
+def _run_cycles(engine, model: MechModel, stim, reads: list[int], outs: list[str], progress: bool):
+    """A clocked run read by read (each part continuing from the last one's state, so the whole equals one
+    run), judged at each read: (the whole run, [(verdict, settled) per cycle, or None])."""
+    state, t, parts, judged = None, 0, [], []
+    full = _without_skipping(engine)
+    bar = progress_bar(reads[-1], progress)
+    for r in reads:
+        part = engine.run(model, r - t, stim, state=state, start_period=t, probes=outs)
+        j = _judge_read(engine, model, part, stim, outs, r)
+        if j and j[0].stable and not j[1] and part.settled_periods and full is not None:
+            # idle skipping held a state that had not settled: this cycle again, integrated throughout
+            part = full.run(model, r - t, stim, state=state, start_period=t, probes=outs)
+            j = _judge_read(full, model, part, stim, outs, r)
+            part.extra["reintegrated"] = True
+        state, t = part.state, r
+        parts.append(part)
+        judged.append(j)
+        bar.update(part.amp.shape[0])
+    bar.close()
+    whole = replace(parts[-1], amp=np.concatenate([q.amp for q in parts]), mean=np.concatenate([q.mean for q in parts]),
+                    t_end=np.concatenate([q.t_end for q in parts]),
+                    settled_periods=sum(q.settled_periods for q in parts),
+                    extra={**parts[-1].extra, "reintegrated": sum(bool(q.extra.get("reintegrated")) for q in parts)})
+    return whole, judged
+
+
+def _without_skipping(engine):
+    """The same engine with idle skipping off (None if it skips none)."""
+    if not engine.capabilities.settle or getattr(engine.options, "settle_tol", None) is None:
+        return None
+    return make_engine(engine.name, replace(engine.options, settle_tol=None))
+
+
+def _judge_read(engine, model: MechModel, part, stim, outs: list[str], t_periods: int):
+    """(verdict, settled) of a single-member run at a clock read: its summary over the last 2 CHUNKs."""
+    if part.amp.shape[0] < 2 * CHUNK:
+        return None
+    a = np.abs(part.amp[-2 * CHUNK:, [part.probe(n) for n in outs], :]) / model.amplitude_unit
+    history = [(a[CHUNK - 1], a[:CHUNK].mean(axis=0), np.ptp(a[:CHUNK], axis=0)),
+               (a[-1], a[CHUNK:].mean(axis=0), np.ptp(a[CHUNK:], axis=0))]
+    judged = _judge(engine, model, part, stim, outs, t_periods, history)
+    return judged[0] if judged else None
 
 
 def clocked_schedule(cycles: list[dict[str, int]], timing: dict):
@@ -301,14 +415,23 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
     stim = network.stimulus(nominal, netlist, p, [(t, [v]) for t, v, _ in segs], clock=[[c] for *_, c in segs])
     if sample is not None and sample[1] is not None:
         stim = Stimulus(stim.times, stim.amps * sample[1][None, :, None])
-    run = engine.run(model, total, stim, probes=outs, progress=progress)
+    source = "run"
+    if engine.capabilities.state:
+        run, judged = _run_cycles(engine, model, stim, reads, outs, progress)
+    else:
+        run = engine.run(model, total, stim, probes=outs, progress=progress)
+        reference = make_engine("envelope", make_engine("envelope").Options(settle_tol=CLOCKED_SETTLE_TOL))
+        judged, source = _run_cycles(reference, model, stim, reads, outs, False)[1], "envelope"
     amp = np.abs(run.amp[:, [run.probe(n) for n in outs], 0]) / p.u_r
     trace = []
     for k, t in enumerate(reads):
         a = {n: float(amp[t - 10:t, j].mean()) for j, n in enumerate(outs)}
-        trace.append({"cycle": k, **decode(netlist, a, model.design.const_outputs), "amplitudes": a})
+        v, ok = judged[k] if judged and judged[k] else (None, False)
+        decoded = verdict.apply(decode(netlist, a, model.design.const_outputs), a, v, ok, source)
+        trace.append({"cycle": k, **decoded, "amplitudes": a})
     extra = {"envelope_step": step, "settle": engine.options.settle_tol,
-             "simulated_periods": total - run.settled_periods} if engine.capabilities.settle else {}
+             "simulated_periods": total - run.settled_periods,
+             "cycles_reintegrated": run.extra.get("reintegrated", 0)} if engine.capabilities.settle else {}
     res = {"backend": backend, **_final(trace), "amplitudes": trace[-1]["amplitudes"], "trace": trace,
            "periods": total, "timing": timing, "wall_s": time.time() - t0, **extra, **_engine_fields(engine)}
     if waveform:

@@ -62,6 +62,8 @@ class Capabilities:
     state: bool = False          # continues from a returned state (chunked runs, settle loops)
     checkpoint: bool = False     # its state can be saved and restored exactly (processor runs)
     settle: bool = False         # skips idle time once every channel has settled
+    averaged: bool = False       # integrates the envelope equations themselves: its states rest exactly on
+                                 # their fixed points (physics/stability.py), not within the averaging error
 
 
 class Engine(ABC):
@@ -86,6 +88,11 @@ class Engine(ABC):
 
     def step(self, model: MechModel) -> float | None:
         """The step (drive periods) that stimulus changes must fall on, for engines with whole-period steps."""
+        return None
+
+    def phasors(self, model: MechModel, run: Run) -> tuple[np.ndarray, np.ndarray] | None:
+        """The run's final state as envelope phasors: (A (n_fast, B) complex, s (n_slow, B)), what the
+        stability verdict linearises at (physics/stability.py); None where the engine returns no state."""
         return None
 
 
@@ -183,6 +190,16 @@ class SettleWatch:
                 if self.quiet >= 2:
                     return True
         return False
+
+
+def oscillator_phasors(model: MechModel, x: np.ndarray, v: np.ndarray, t: float):
+    """(A, s) from displacements and velocities (n, B) at time t: u = Re(A e^{i omega t}) and u' = Re(i omega A
+    e^{i omega t}) give A = (u - i u' / omega) e^{-i omega t}; the slow DOFs at their instantaneous position
+    (their 2-omega ripple is small, and the verdict refines (A, s) to the fixed point anyway)."""
+    slow = np.asarray(model.arrays["slow"], bool)
+    w = model.omega
+    A = (x[~slow] - 1j * v[~slow] / w) * np.exp(-1j * w * t)
+    return A, np.array(x[slow], float)
 
 
 def whole_periods(x: float) -> bool:

@@ -128,12 +128,16 @@ class NoisyEnvelopeEngine(Engine):
     Not in the registry: `noisy_engine` picks it for `--backend envelope --noise T` with T > 0."""
 
     name = "envelope"
-    capabilities = Capabilities(batch=True, state=True, checkpoint=True)
+    capabilities = Capabilities(batch=True, state=True, checkpoint=True, averaged=True)
     Options = NoisyEnvelopeOptions
 
     def step(self, model: MechModel) -> float:
         """The step (periods): the set one, else the longest of 1, 1/2, 1/4 ... within the stability bound."""
         return self.options.step_periods or det.default_step(model, cap=DEFAULT_NOISE_STEP)
+
+    def phasors(self, model, run):
+        """The envelope state itself: (A, s)."""
+        return run.state[0], run.state[1]
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """The noisy envelope equations over `periods` drive periods (see `integrate`)."""

@@ -35,7 +35,7 @@ from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import _carrier_kernel as kernel
 from . import _carrier_latency as latent
-from ._base import (Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar,
+from ._base import (Capabilities, Engine, Run, oscillator_phasors, blowup_bound, check_divergence, probe_dofs, progress_bar,
                     watched_dofs)
 from .envelope import SETTLE_MIN, SETTLE_WINDOW
 
@@ -344,6 +344,10 @@ class CarrierEngine(Engine):
     def step(self, model: MechModel) -> float:
         """Stimulus changes must fall on whole drive periods."""
         return 1.0
+
+    def phasors(self, model, run):
+        """The final displacements and velocities as phasors (_base.oscillator_phasors)."""
+        return oscillator_phasors(model, run.state[0], run.state[1], run.t)
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """Lawson RK4 over `periods` drive periods (see `integrate`)."""

@@ -284,7 +284,7 @@ class EnvelopeEngine(Engine):
     """RK4 on the slowly-varying amplitude equations, steps of whole drive periods."""
 
     name = "envelope"
-    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True)
+    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True, averaged=True)
     Options = EnvelopeOptions
 
     def estimate_seconds(self, model, periods, batch=1):
@@ -303,6 +303,10 @@ class EnvelopeEngine(Engine):
     def step(self, model: MechModel) -> float:
         """The step this engine takes on `model`, in drive periods."""
         return self.options.step_periods or default_step(model, exponential=self.options.exponential)
+
+    def phasors(self, model, run):
+        """The envelope state itself: (A, s)."""
+        return run.state[0], run.state[1]
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """The envelope equations over `periods` drive periods (see `integrate`)."""

@@ -31,7 +31,7 @@ from ..errors import Mech2SpiceError
 from ..physics import noise as thermal
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
-from ._base import (Capabilities, Engine, Run, SettleWatch, blowup_bound, check_divergence, probe_dofs,
+from ._base import (Capabilities, Engine, Run, oscillator_phasors, SettleWatch, blowup_bound, check_divergence, probe_dofs,
                     progress_bar, watched_dofs)
 from .envelope import SETTLE_MIN, SETTLE_WINDOW
 
@@ -250,6 +250,10 @@ class RK4Engine(Engine):
     def estimate_seconds(self, model, periods, batch=1):
         """Wall time from the measured oscillator-step rate."""
         return model.n * batch * periods * self.options.steps_per_period / OSCILLATOR_STEPS_PER_S
+
+    def phasors(self, model, run):
+        """The final displacements and velocities as phasors (_base.oscillator_phasors)."""
+        return oscillator_phasors(model, run.state[0], run.state[1], run.t)
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """RK4 over `periods` drive periods (see `integrate`)."""

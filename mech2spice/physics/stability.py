@@ -1,0 +1,188 @@
+"""Is a network's operating point settled and stable?  The linearised envelope equations of the whole network.
+
+The envelope equations (physics/envelope.py) are, for the oscillating amplitudes A and the slow DOFs s,
+
+    B A' = F - Z(s) A,          Z(s) = Z0 + diag(G s),   B = 2 i omega M + C
+    M_s s'' = -H |A|^2 / 2 - K_s s - C_s s'
+
+A steady state of the network (every amplitude constant) is a fixed point of these equations.  Around it,
+with dA = a + i b, they are the real sparse linear system E y' = J y, y = (a, b, ds, ds'): `linearise`.
+Its eigenvalues say whether the network rests there (all real parts < 0: stable; the largest real part is
+the slowest decay, which sets how long the network takes to settle) or leaves it by itself (a real part
+> 0: a self-oscillating mode, period 2 pi / |Im|).  `operating_point` finds the fixed point nearest an
+engine's state by Newton's method; the distance between the two says how far the run still has to move.
+docs/stability.md: the physics, and the mode that made ISCAS-89 s344 oscillate.
+
+Everything is sparse, so a network of thousands of gates costs a few sparse LU factorisations.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .envelope import Envelope
+
+DENSE_LIMIT = 1500        # real unknowns up to which the whole spectrum is computed densely (exact, < 1 s)
+MODES = 6                 # leading eigenvalues the sparse (Cayley) search returns
+NEWTON_TOL = 1e-10        # relative residual at which Newton's iterate is the fixed point
+NEWTON_MAX = 30
+STABLE_MARGIN = 1e-6      # growth rates (per drive period) below this count as stable: round-off of the
+                          # dense eigensolver on a decaying spectrum is ~1e-12 per period
+
+
+@dataclass
+class Mode:
+    """One eigenvalue of the linearised network: growth rate and period in drive periods, the DOFs that carry it."""
+    growth: float             # real part x T: > 0 grows by e^growth per drive period
+    period: float | None      # 2 pi / |imaginary part| in drive periods; None for a real eigenvalue
+    dofs: list[str] = field(default_factory=list)   # the DOFs with the largest share of the mode, largest first
+
+
+@dataclass
+class Verdict:
+    """Settled and stable?  What `simulate`, clocked runs and the processor report after each read."""
+    stable: bool
+    growth_rate: float        # largest real part of the spectrum, per drive period (the mode below)
+    mode: Mode                # the least stable mode
+    slowest_decay: float      # periods for the least stable stable mode to fall by e (inf if unstable)
+    distance: float           # largest |A_run - A_fixed| over the watched channels, u_R
+    converged: bool           # Newton found a fixed point near the run's state
+    fixed: dict = field(default_factory=dict)   # probe -> fixed-point amplitude (u_R)
+
+    def to_json(self) -> dict:
+        """The JSON fields of a run's stability verdict."""
+        return {"stable": self.stable, "growth_rate": self.growth_rate,
+                "mode_period": self.mode.period, "mode_dofs": self.mode.dofs[:5],
+                "slowest_decay_periods": self.slowest_decay if np.isfinite(self.slowest_decay) else None,
+                "fixed_point_distance": self.distance, "fixed_point_found": self.converged}
+
+
+# --- the linearised equations ----------------------------------------------------------------
+
+def _real_block(Z: sp.spmatrix) -> sp.csr_matrix:
+    """[[Re Z, -Im Z], [Im Z, Re Z]]: a complex-linear map on (a, b) with dA = a + i b."""
+    Zr, Zi = sp.csr_matrix(Z.real), sp.csr_matrix(Z.imag)
+    return sp.bmat([[Zr, -Zi], [Zi, Zr]], format="csr")
+
+
+def linearise(env: Envelope, A: np.ndarray, s: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """(E, J) with E y' = J y the envelope equations linearised at (A, s) with s' = 0, y = (a, b, ds, ds')."""
+    nf, ns = env.fast.size, env.slow.size
+    Zs = (env.Z0 + sp.diags(env.G @ s)).tocsr()
+    P = sp.diags(A) @ env.G                              # d[(G s) * A] / ds
+    W = env.H @ sp.diags(A.real), env.H @ sp.diags(A.imag)   # d[H |A|^2 / 2] / (a, b)
+    I_s, Z_s = sp.identity(ns, format="csr"), sp.csr_matrix((ns, ns))
+    J = sp.bmat([[-_real_block(Zs), sp.vstack([-sp.csr_matrix(P.real), -sp.csr_matrix(P.imag)]), None],
+                 [sp.csr_matrix((ns, 2 * nf)), Z_s, I_s],
+                 [-sp.hstack([W[0], W[1]]), -env.Ks, -env.Cs]], format="csr")
+    E = sp.block_diag([_real_block(env.Bop), I_s, sp.diags(env.ms)], format="csc")
+    return E, J
+
+
+# --- the fixed point nearest a state -----------------------------------------------------------
+
+def _residual(env: Envelope, A, s, F) -> np.ndarray:
+    R = F - env.Z0 @ A - (env.G @ s) * A
+    return np.concatenate([R.real, R.imag, -(env.H @ np.abs(A) ** 2) / 2 - env.Ks @ s])
+
+
+def operating_point(env: Envelope, A0: np.ndarray, s0: np.ndarray, F: np.ndarray):
+    """Newton's method on the steady-state equations from (A0, s0): (A, s, converged).  Each step is one
+    sparse LU of the steady-state Jacobian (the linearisation without the s' rows); steps are halved
+    while they do not reduce the residual, so a start near a fixed point stays at that fixed point."""
+    nf, ns = env.fast.size, env.slow.size
+    A, s = A0.astype(complex).copy(), s0.astype(float).copy()
+    scale = max(float(np.abs(F).max()), 1e-300)
+    r = _residual(env, A, s, F)
+    for _ in range(NEWTON_MAX):
+        if np.abs(r).max() < NEWTON_TOL * scale:
+            return A, s, True
+        _, J = linearise(env, A, s)
+        keep = np.r_[0:2 * nf + ns]                      # drop the s' unknowns and the s' = ds' rows
+        rows = np.r_[0:2 * nf, 2 * nf + ns:2 * nf + 2 * ns]
+        Jss = J[rows][:, keep].tocsc()
+        try:
+            dy = spla.splu(Jss).solve(-r)
+        except RuntimeError:                              # singular: a fold exactly here
+            return A, s, False
+        lam = 1.0
+        while lam > 1e-4:
+            A1 = A + lam * (dy[:nf] + 1j * dy[nf:2 * nf])
+            s1 = s + lam * dy[2 * nf:]
+            r1 = _residual(env, A1, s1, F)
+            if np.abs(r1).max() < np.abs(r).max():
+                break
+            lam /= 2
+        A, s, r = A1, s1, r1
+    return A, s, bool(np.abs(r).max() < NEWTON_TOL * scale * 1e3)
+
+
+# --- the leading eigenvalues -----------------------------------------------------------------
+
+def leading_modes(env: Envelope, A: np.ndarray, s: np.ndarray, k: int = MODES) -> list[Mode]:
+    """The k eigenvalues of the linearisation at (A, s) with the largest real parts, largest first.
+
+    Small networks: the whole spectrum (generalised dense eigenproblem).  Large ones: ARPACK on the
+    Cayley transform (J - sigma E)^-1 (J + sigma E), whose largest-magnitude eigenvalues are the
+    rightmost ones of the network (|mu| > 1 exactly when Re lambda > 0), with sigma near the rates of the
+    slow modes; one sparse LU."""
+    E, J = linearise(env, A, s)
+    T = env.model.period
+    if J.shape[0] <= DENSE_LIMIT:
+        lam, vec = sla.eig(J.toarray(), E.toarray())
+        ok = np.isfinite(lam)
+        lam, vec = lam[ok], vec[:, ok]
+    else:
+        lam, vec = _cayley(E, J, sigma=2 * np.pi / (50 * T), k=k)
+    order = np.argsort(-lam.real)[:k]
+    return [_mode(env, lam[i], vec[:, i], T) for i in order]
+
+
+def _cayley(E, J, sigma: float, k: int):
+    lu = spla.splu((J - sigma * E).tocsc())
+    K = (J + sigma * E).tocsr()
+    op = spla.LinearOperator(J.shape, matvec=lambda x: lu.solve(K @ x), dtype=float)
+    mu, vec = spla.eigs(op, k=min(k, J.shape[0] - 2), which="LM", tol=1e-8, maxiter=20 * J.shape[0],
+                        v0=np.ones(J.shape[0]))
+    return sigma * (mu + 1) / (mu - 1), vec
+
+
+def _mode(env: Envelope, lam: complex, v: np.ndarray, T: float) -> Mode:
+    """Growth and period per drive period; the DOFs by their share of the eigenvector (fast DOFs by
+    amplitude, slow DOFs by displacement, each kind scaled to unit largest entry)."""
+    nf, ns = env.fast.size, env.slow.size
+    share = np.zeros(env.model.n)
+    fast = np.hypot(np.abs(v[:nf]), np.abs(v[nf:2 * nf]))
+    slow = np.abs(v[2 * nf:2 * nf + ns])
+    for idx, w in ((env.fast, fast), (env.slow, slow)):
+        if w.size and w.max() > 0:
+            share[idx] = w / w.max()
+    top = np.argsort(-share)[:8]
+    period = 2 * np.pi / abs(lam.imag) / T if abs(lam.imag) * T > 1e-9 else None
+    return Mode(float(lam.real * T), period, [env.model.names[i] for i in top if share[i] > 0.1])
+
+
+# --- the verdict -----------------------------------------------------------------------------
+
+def verdict(model, A: np.ndarray, s: np.ndarray, F: np.ndarray, watch: dict[str, int] | None = None) -> Verdict:
+    """The stability verdict at a run's state (A, s) under forcing F (n_fast,): the fixed point nearest it,
+    the leading modes there, and how far the run's watched amplitudes (probe -> DOF) are from it."""
+    env = Envelope.of(model)
+    Af, sf, ok = operating_point(env, A, s, F)
+    modes = leading_modes(env, Af, sf)
+    lead = modes[0]
+    stable = ok and lead.growth < STABLE_MARGIN
+    decaying = [m for m in modes if m.growth < 0]
+    slowest = -1.0 / max(m.growth for m in decaying) if stable and decaying else float("inf")
+    pos = -np.ones(model.n, int)
+    pos[env.fast] = np.arange(env.fast.size)
+    u = model.amplitude_unit
+    watch = watch or {}
+    rows = {name: pos[d] for name, d in watch.items() if pos[d] >= 0}
+    fixed = {name: float(abs(Af[r]) / u) for name, r in rows.items()}
+    dist = max((abs(abs(A[r]) - abs(Af[r])) / u for r in rows.values()), default=0.0)
+    return Verdict(stable, lead.growth, lead, slowest, float(dist), ok, fixed)

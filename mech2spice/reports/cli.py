@@ -12,6 +12,7 @@ import sys
 import time
 
 from ..errors import Mech2SpiceError
+from ..inputs import check_output_dir
 from . import REPORTS, module
 
 # Options a report's write() takes, as command-line flags: (flag, dest, argparse keywords).  Defaults are
@@ -83,6 +84,7 @@ def cmd_report(args) -> int:
     if args.list:
         return _list(args.json)
     names = _names(args.names)
+    check_output_dir(args.out, "report directory", parents=True)      # before hours of measuring, not after
     options = {dest: getattr(args, dest) for _, dest, _ in OPTIONS if hasattr(args, dest)}
     for name in names:
         unused = sorted(set(options) - set(REPORTS[name].options))

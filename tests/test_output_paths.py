@@ -327,3 +327,11 @@ def test_report_out_under_a_file_is_refused_before_work(tmp_path, capsys, monkey
     monkeypatch.setattr(report_cli, "module", lambda name: pytest.fail("the report ran"))
     afile = write(tmp_path / "afile", "x")
     refused(capsys, keep(afile), "report", "gate", "--out", afile / "sub", needle="not a directory")
+
+
+def test_report_never_writes_over_a_file_its_options_read(tmp_path, capsys, monkeypatch):
+    from mech2spice.reports import cli as report_cli
+    monkeypatch.setattr(report_cli, "module", lambda name: pytest.fail("the report ran"))
+    trace = write(tmp_path / "carrier.md", '{"cycle": 0, "registers": {}}\n')
+    refused(capsys, keep(trace), "report", "carrier", "--render", "--out", tmp_path, "--carrier-trace", trace,
+            needle="refusing")

@@ -6,7 +6,7 @@ from pathlib import Path
 from . import simulation
 from .backends import BACKENDS
 from .errors import Mech2SpiceError
-from .inputs import stimulus_steps
+from .inputs import check_output_file, params_file, stimulus_steps, write_text
 from .physics import network
 from .physics.params import GateParams, load_params
 from .synthesis.ports import pack_inputs
@@ -57,9 +57,14 @@ def _clocked_steps(nl: Netlist, inputs: dict, backend: str, cycles, stimulus) ->
 
 
 def emit(design, inputs: dict[str, int] | None = None, *, params="default", periods: int | None = None,
-         options=None, path=None) -> str:
-    """The carrier-level ngspice netlist of a combinational design with these inputs (also written to `path`)."""
+         options=None, path=None, force: bool = False) -> str:
+    """The carrier-level ngspice netlist of a combinational design with these inputs (also written to `path`:
+    never the design or parameter file, nor an existing file that is not a netlist unless `force`)."""
     from .spice.carrier import SpiceOptions, emit as emit_netlist
+    if path is not None:                          # the command line's rule, before any work
+        from .spice._common import NETLIST
+        read = {"the design": design, "the params file": params_file(params) if isinstance(params, str) else None}
+        check_output_file(path, read, "netlist file", kind=NETLIST, force=force, remedy="force=True replaces it")
     nl, p, inputs = _netlist(design), _params(params), dict(inputs or {})
     pack_inputs(nl, inputs)
     model = network.build(nl, p)
@@ -69,7 +74,7 @@ def emit(design, inputs: dict[str, int] | None = None, *, params="default", peri
     title = f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in inputs.items()) or 'inputs 0'}"
     text = emit_netlist(model, periods or simulation.period_budget(nl), stim, options=options, title=title)
     if path is not None:
-        Path(path).write_text(text, encoding="ascii")
+        write_text(path, text, encoding="ascii")
     return text
 
 

@@ -421,6 +421,7 @@ def build_parser() -> argparse.ArgumentParser:
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
     s.add_argument("-o", "--output", required=True, help="netlist file to write")
+    inputs.force_arg(s, "-o")
     s.add_argument("--format", choices=["ngspice", "vacask", "vacask-envelope", "veriloga"], default="ngspice",
                    help="netlist for ngspice (default) or VACASK (carrier or envelope level), or the Verilog-A library")
     s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
@@ -535,7 +536,9 @@ def _precheck(args) -> None:
         load_params(args.params)
     design, command = getattr(args, "design", None), args.command
     if command == "emit":
-        inputs.check_output_file(args.output, [design, args.params], "netlist file")
+        from .spice._common import NETLIST
+        read = {"the design": design, "the --params file": inputs.params_file(args.params)}
+        inputs.check_output_file(args.output, read, "netlist file", kind=NETLIST, force=args.force)
     elif command == "subckts":
         inputs.check_output_dir(args.output, "subckt directory")
     elif command == "gate" and args.report:

@@ -10,6 +10,7 @@ import argparse
 import json
 import math
 import os
+import tempfile
 from pathlib import Path
 
 from .errors import Mech2SpiceError
@@ -181,35 +182,96 @@ def check_cycles(total: int, backend: str, what: str = "--cycles asks for") -> N
 
 
 # --------------------------------------------------------------------------- files written
+# One rule for every file a command writes, command line and API alike, checked before any work: never an
+# input of the same command, never an existing file of another kind unless forced, in a folder we can write.
 
-def check_output_file(path, inputs=(), what: str = "output file") -> Path:
-    """A file we may write: its folder exists, it is not a folder, and it is none of the inputs."""
+def check_output_file(path, inputs=(), what: str = "output file", *, kind=None, force: bool = False,
+                      remedy: str = "give --force to replace it", parents: bool = False) -> Path:
+    """A file we may write.  `inputs`: {label: path} (or paths) the same command reads or also writes,
+    compared through links, never written whatever `force`; `kind`: (name, test) telling a file this command
+    writes (replaced or resumed): an existing non-empty file that fails it is refused unless `force` (`remedy`
+    says how to give it); kind None: any file may be replaced (for the package's own files).  `parents`: the
+    writer creates missing folders, so the nearest existing one must take files."""
     p = Path(path)
     if not str(path):
         raise Mech2SpiceError(f"the {what} name is empty")
     if p.is_dir():
         raise Mech2SpiceError(f"{what} {path} is a directory")
-    _check_folder(p.parent, path, what)
-    if p.exists() and not os.access(p, os.W_OK):
-        raise Mech2SpiceError(f"{what} {path} is not writable")
-    for src in inputs:
-        if src is not None and _same_file(p, Path(src)):
-            raise Mech2SpiceError(f"{what} {path} is the input {src}: refusing to overwrite it")
+    for label, src in _labelled(inputs):
+        if _same_file(p, Path(src)):
+            raise Mech2SpiceError(f"{what} {path} is {label} {src}: refusing to overwrite it")
+    if p.exists() and not p.is_file():            # a device or pipe (/dev/null, /dev/stdout): written in place
+        if not os.access(p, os.W_OK):
+            raise Mech2SpiceError(f"{what} {path} is not writable")
+        return p
+    folder = p.parent
+    while parents and not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    _check_folder(folder, path, what)
+    if p.exists():
+        if not os.access(p, os.W_OK):
+            raise Mech2SpiceError(f"{what} {path} is not writable")
+        if kind is not None and not force and p.stat().st_size and not kind[1](p):
+            raise Mech2SpiceError(f"{what} {path} exists and is not {kind[0]}: refusing to overwrite it ({remedy})")
     return p
 
 
-def check_output_dir(path, what: str = "output directory") -> Path:
-    """A folder we may write into (created if missing, but only its last component)."""
+def force_arg(parser, option: str) -> None:
+    """--force: what lets an output replace a file of another kind (never an input of the command)."""
+    parser.add_argument("--force", action="store_true",
+                        help=f"let {option} replace an existing file that is not this command's own output "
+                             "(an input of the command is never replaced)")
+
+
+def head(path, size: int = 4096) -> bytes:
+    """The first bytes of a file (b"" if unreadable): enough to tell what wrote it."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(size)
+    except OSError:
+        return b""
+
+
+def first_json_line(path, limit: int = 64 << 20):
+    """The first line of a file parsed as JSON, or None (not UTF-8, not JSON, unreadable)."""
+    try:
+        with open(path, "rb") as f:
+            return json.loads(f.readline(limit).decode("utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return None
+
+
+def params_file(spec):
+    """The file a --params value reads (the package's file for a shipped block; None for a preset)."""
+    from .physics.params import BLOCK_PRESETS, PRESETS
+    if spec is None or spec in PRESETS:
+        return None
+    if spec in BLOCK_PRESETS:
+        from . import data
+        return data.path("blocks", f"{spec}.json")
+    return spec
+
+
+def _labelled(inputs):
+    """(label, path) pairs of the file inputs ({label: path}, (label, path) pairs or bare paths; program
+    bytes and None left out)."""
+    pairs = inputs.items() if isinstance(inputs, dict) else \
+        (src if isinstance(src, tuple) else ("the input", src) for src in inputs)
+    return [(label, src) for label, src in pairs if isinstance(src, (str, os.PathLike)) and str(src)]
+
+
+def check_output_dir(path, what: str = "output directory", parents: bool = False) -> Path:
+    """A folder we may write into: existing, or created (its last component only; with `parents`, every
+    missing one)."""
     p = Path(path)
     if not str(path):
         raise Mech2SpiceError(f"the {what} name is empty")
-    if p.exists():
-        if not p.is_dir():
-            raise Mech2SpiceError(f"{what} {path} exists and is not a directory")
-        if not os.access(p, os.W_OK | os.X_OK):
-            raise Mech2SpiceError(f"{what} {path} is not writable")
-        return p
-    _check_folder(p.parent, path, what)
+    if p.exists() and not p.is_dir():
+        raise Mech2SpiceError(f"{what} {path} exists and is not a directory")
+    base = p if p.exists() else p.parent
+    while parents and not base.exists() and base != base.parent:
+        base = base.parent
+    _check_folder(base, path, what)
     return p
 
 
@@ -241,8 +303,13 @@ def _check_folder(folder: Path, path, what: str) -> None:
         raise Mech2SpiceError(f"cannot write {what} {path}: directory {folder} does not exist")
     if not folder.is_dir():
         raise Mech2SpiceError(f"cannot write {what} {path}: {folder} is not a directory")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise Mech2SpiceError(f"cannot write {what} {path}: directory {folder} is not writable")
+    try:                          # a real file, not os.access: root passes that on a read-only mount
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".mech2spice-", suffix=".probe")
+    except OSError as err:
+        raise Mech2SpiceError(f"cannot write {what} {path}: directory {folder} is not writable "
+                              f"({err.strerror or err})") from None
+    os.close(fd)
+    os.unlink(probe)
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -42,8 +42,10 @@ def test_unknown_structure_is_one_line():
 
 
 def _record(tolerance, margin=0.02, budget=200.0, **settings):
-    rec = {"score": -5.0, "parameters": {}, "measured": {"nominal_margin": margin, "tolerance": tolerance,
-                                                        "tolerance_bracket": [tolerance, tolerance]},
+    """A complete search record of one structure (every field the command reads: search.ENTRY_FIELDS)."""
+    rec = {"structure": "classic", "score": -5.0, "parameters": {}, "block_file": {},
+           "measured": {"nominal_margin": margin, "tolerance": tolerance, "tolerance_bracket": [tolerance, tolerance],
+                        "yield": 1.0, "margin_quantiles": {"1%": margin}, "dofs_per_gate": 6},
            "search": {"budget_s": budget, "generations": 1, "evaluations": 10, "wall_s": budget}}
     return {"settings": {**TINY, **settings}, "structures": {"classic": rec}}
 

@@ -11,10 +11,12 @@ import sys
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import MAX_CPU_CYCLES, check_output_file, envelope_speed_args, integer, number, write_bytes
+from ..inputs import (MAX_CPU_CYCLES, check_output_file, envelope_speed_args, force_arg, head, integer, number,
+                      params_file, write_bytes, write_text)
 from .physical import PROCESSOR_STEP, SETTLE_TOL
 from .machines import BACKENDS
-from .run import load_program, run_program
+from .isa import MEM_SIZE
+from .run import check_run_outputs, load_program, run_program
 
 MAX_CIRCUIT_CYCLES = 2000    # one VACASK process; the sieve needs 457
 
@@ -31,6 +33,7 @@ def add_parser(subparsers) -> None:
                        description="Assemble PROG.asm into a binary memory image (address 0 first).")
     a.add_argument("program", help="assembly source (.asm)")
     a.add_argument("-o", "--output", required=True, help="binary image to write")
+    force_arg(a, "-o")
     a.add_argument("--listing", action="store_true", help="print the listing (address, bytes, source)")
     a.set_defaults(func=cmd_asm)
 
@@ -41,6 +44,7 @@ def add_parser(subparsers) -> None:
                                    "the program (docs/cpu_circuit.md).")
     e.add_argument("program", help="assembly source (.asm) or binary image")
     e.add_argument("-o", "--output", required=True, help="netlist to write (.sim)")
+    force_arg(e, "-o")
     e.add_argument("--cycles", type=integer(1, MAX_CPU_CYCLES), default=30,
                    help=f"clock cycles after the reset (default 30, at most {MAX_CIRCUIT_CYCLES})")
     circuit_args(e)
@@ -83,6 +87,7 @@ def add_parser(subparsers) -> None:
     r.add_argument("--trace", metavar="FILE", help="write one JSON line per cycle to FILE: the cycle's record, the "
                    "registers after it and (envelope, carrier, rk4) every probed amplitude in u_R")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
+    force_arg(r, "--checkpoint or --trace")
     circuit_args(r)
     r.add_argument("--json", action="store_true", help="machine-readable output")
     r.set_defaults(func=cmd_run)
@@ -120,13 +125,14 @@ def cmd_emit(args) -> int:
     from .circuit import emit_cpu
     if args.cycles > MAX_CIRCUIT_CYCLES:
         raise Mech2SpiceError(f"--cycles {args.cycles}: at most {MAX_CIRCUIT_CYCLES} cycles in one netlist")
-    check_output_file(args.output, [args.program], "netlist")
+    from ..spice._common import NETLIST
+    check_output_file(args.output, {"the program": args.program}, "netlist", kind=NETLIST, force=args.force)
     prog = load_program(args.program)
     if prog.tape is not None:
         raise Mech2SpiceError(f"{args.program} maps a tape: the circuit's memory is the 256-byte array only")
     opts = _circuit_options(args)
     net = emit_cpu(prog.image, args.cycles, standalone=True, **opts)
-    Path(args.output).write_text(net.text, encoding="ascii")
+    write_text(args.output, net.text, encoding="ascii")
     info = {"netlist": args.output, "cycles": args.cycles, "periods": net.schedule.stop,
             "schedule": vars(net.schedule), **net.stats, "bytes": len(net.text)}
     print(json.dumps(info, indent=2) if args.json else
@@ -139,7 +145,7 @@ def cmd_asm(args) -> int:
     """`cpu asm`: write PROG.asm's memory image (and print its listing if asked); returns 0."""
     if Path(args.program).suffix.lower() != ".asm":
         raise Mech2SpiceError(f"{args.program}: expected an assembly source (.asm)")
-    check_output_file(args.output, [args.program], "memory image")
+    check_output_file(args.output, {"the program": args.program}, "memory image", kind=IMAGE, force=args.force)
     prog = load_program(args.program)
     write_bytes(args.output, prog.image)
     if args.listing:
@@ -148,8 +154,24 @@ def cmd_asm(args) -> int:
     return 0
 
 
+def is_image(path) -> bool:
+    """Whether a file may be a memory image `cpu asm` wrote: at most MEM_SIZE bytes, neither an assembly
+    source nor text (an image holds opcodes, not printable characters only)."""
+    data = head(path, MEM_SIZE + 1)
+    if len(data) > MEM_SIZE or Path(path).suffix.lower() == ".asm":
+        return False
+    try:
+        return not all(c.isprintable() or c.isspace() for c in data.decode("utf-8"))
+    except UnicodeDecodeError:
+        return True
+
+
+IMAGE = ("a memory image", is_image)
+
+
 def cmd_run(args) -> int:
     """`cpu run`: run a program on the chosen backend; returns 0 if it halted, 1 if it ran out of cycles."""
+    check_run_outputs(args.checkpoint, args.trace, args.program, args.resume, args.force, params_file(args.params))
     physical = {}
     if args.step is not None:
         physical["step"] = args.step
@@ -190,13 +212,11 @@ def cmd_run(args) -> int:
         raise Mech2SpiceError("--max-step and --settle-periods apply to the vacask-envelope backend only")
     if args.checkpoint_every and not args.checkpoint:
         raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
-    if args.trace is not None:
-        check_output_file(args.trace, [args.program, args.checkpoint], "trace")
-        if args.resume and not Path(args.trace).exists():
-            raise Mech2SpiceError(f"--resume with --trace {args.trace}: the trace to continue does not exist")
+    if args.trace is not None and args.resume and not Path(args.trace).exists():
+        raise Mech2SpiceError(f"--resume with --trace {args.trace}: the trace to continue does not exist")
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=not args.json and sys.stderr.isatty(),
-                      checkpoint_every=args.checkpoint_every, trace=args.trace, **physical)
+                      checkpoint_every=args.checkpoint_every, trace=args.trace, force=args.force, **physical)
     if args.json:
         print(json.dumps(res, indent=2))
     else:

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import check_output_file, is_int, read_json
+from ..inputs import check_output_file, first_json_line, is_int, read_json
 from .isa import MEM_SIZE
 from .iss import FETCH, LDNX, LOAD, REGISTERS
 from .asm import Program, assemble_program
@@ -235,13 +235,28 @@ def _restore(cpu, state: dict, path) -> None:
     cpu.cycle, cpu.halted = int(state["cycle"]), bool(state["halted"])
 
 
-def check_checkpoint_path(checkpoint, program_source, resume: bool) -> None:
-    """The checkpoint may be written there: a writable place that is not the program and, unless
-    resuming, not some other file of the user's (an existing checkpoint is replaced)."""
-    inputs = [program_source] if isinstance(program_source, (str, os.PathLike)) else []
-    check_output_file(checkpoint, inputs, "checkpoint")
-    if not resume and Path(checkpoint).exists() and not is_checkpoint(checkpoint):
-        raise Mech2SpiceError(f"{checkpoint} exists and is not a processor checkpoint: refusing to overwrite it")
+def is_trace(path) -> bool:
+    """Whether `path` holds a `cpu run --trace` (its first line a cycle's record)."""
+    first = first_json_line(path)
+    return isinstance(first, dict) and {"cycle", "registers"} <= set(first)
+
+
+CHECKPOINT_KIND, TRACE_KIND = ("a processor checkpoint", is_checkpoint), ("a cpu run trace", is_trace)
+
+
+def check_run_outputs(checkpoint, trace, program_source, resume: bool = False, force: bool = False,
+                      params=None) -> None:
+    """--checkpoint and --trace, before any work: neither the program, the --params file nor each other;
+    a file of another kind only with `force`; a resumed trace must be one, whole."""
+    read = {"the program": program_source, "the --params file": params}
+    if checkpoint is not None:            # resuming, read_checkpoint says what else the file is
+        check_output_file(checkpoint, {**read, "the --trace file": trace}, "checkpoint",
+                          kind=None if resume else CHECKPOINT_KIND, force=force)
+    if trace is not None:
+        check_output_file(trace, {**read, "the --checkpoint file": checkpoint}, "trace",
+                          kind=None if resume else TRACE_KIND, force=force)
+        if resume:
+            trace_lines(trace)
 
 
 # --------------------------------------------------------------------------- the runner
@@ -264,6 +279,19 @@ def _cycle_bar(enabled: bool, done: int, total: int, backend: str):
 
 
 
+def trace_lines(path) -> list[str]:
+    """The lines of a `cpu run --trace` file (none if there is none), each checked to be a cycle's record."""
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines(keepends=True)
+        for line in lines:
+            json.loads(line)["cycle"]
+    except FileNotFoundError:
+        return []
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise Mech2SpiceError(f"trace {path} is not a cpu run trace (one JSON object per line): {err}") from None
+    return [line if line.endswith("\n") else line + "\n" for line in lines]
+
+
 class TraceFile:
     """`cpu run --trace FILE`: one JSON line per cycle (what the ISS records, the registers after it, the time
     it ended and, on the oscillator-level backends, every probed amplitude in u_R), flushed as it goes.  A resumed run first
@@ -274,23 +302,11 @@ class TraceFile:
         if resume_cycle is None:
             self.file = open(self.path, "w", encoding="utf-8")
             return
-        kept = [line for line in self._lines() if json.loads(line)["cycle"] < resume_cycle]
+        kept = [line for line in trace_lines(self.path) if json.loads(line)["cycle"] < resume_cycle]
         tmp = self.path.with_name(self.path.name + ".tmp")
         tmp.write_text("".join(kept), encoding="utf-8")
         os.replace(tmp, self.path)
         self.file = open(self.path, "a", encoding="utf-8")
-
-    def _lines(self) -> list[str]:
-        try:
-            lines = self.path.read_text(encoding="utf-8").splitlines(keepends=True)
-            for line in lines:
-                json.loads(line)["cycle"]
-        except FileNotFoundError:
-            return []
-        except (OSError, ValueError, KeyError, TypeError) as err:
-            raise Mech2SpiceError(f"trace {self.path} is not a cpu run trace (one JSON object per line): "
-                                  f"{err}") from None
-        return [line if line.endswith("\n") else line + "\n" for line in lines]
 
     def __call__(self, rec, cpu) -> None:
         row = {**dataclasses.asdict(rec), "registers": cpu.registers(), "unix_time": round(time.time(), 3)}
@@ -307,17 +323,17 @@ class TraceFile:
 
 def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpoint=None,
                 resume: bool = False, progress: bool = False, checkpoint_every: int | None = None,
-                trace=None, **physical) -> dict:
+                trace=None, force: bool = False, **physical) -> dict:
     """Run until halted or ``max_cycles`` (total) and return the result dict.  Checkpoints are written
     every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level and circuit backends).  ``trace``:
-    a callable(record, cpu) called after each cycle, or a path for a TraceFile."""
+    a callable(record, cpu) called after each cycle, or a path for a TraceFile.  Neither file may be the
+    program; one of another kind is replaced only with ``force``."""
     checkpoint_every = checkpoint_every or (10 if backend in PHYSICAL + CIRCUIT else 1000)
     if max_cycles < 0 or checkpoint_every < 1:
         raise Mech2SpiceError("max_cycles must be >= 0 and checkpoint_every >= 1")
     if resume and checkpoint is None:
         raise Mech2SpiceError("resume needs a checkpoint file")
-    if checkpoint is not None:
-        check_checkpoint_path(checkpoint, source, resume)
+    check_run_outputs(checkpoint, None if callable(trace) else trace, source, resume, force)
     program = load_program(source)
     state = read_checkpoint(checkpoint, program, backend) if resume else None
     t0 = time.perf_counter()                       # wall_s includes building the model and power-up

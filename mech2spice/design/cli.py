@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 from .. import inputs
+from ..errors import Mech2SpiceError
 
 DEFAULT_OUT = "reports/design_search.json"
 
@@ -37,9 +38,27 @@ def add_parser(subparsers) -> None:
                    help="search nothing: merge these records of other runs into --out (per structure the run with "
                         "the larger tolerance wins; every run is listed under the entry's 'runs')")
     s.add_argument("--install-robust", action="store_true",
-                   help="write the best block to the package's blocks/robust.json (--params robust)")
+                   help="write the best block to the package's blocks/robust.json (--params robust), once it "
+                        "loads and its nominal gate works (else exit 2, the installed block untouched)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_design)
+
+
+def _check_files(args) -> None:
+    """Before any search: --out (never a --merge file; a search record, whole, if it exists), every --merge
+    record whole, and that the package's blocks folder takes --install-robust."""
+    from . import search
+    merges = [("the --merge file", f) for f in args.merge or ()]
+    out = inputs.check_output_file(args.out, merges, "search record", kind=search.RECORD_KIND,
+                                   remedy="give another --out", parents=True)      # write_atomic makes folders
+    if args.merge or (out.is_file() and out.stat().st_size):
+        search.read_record(out)
+    for _, f in merges:
+        search.read_record(Path(f))
+    if args.install_robust:
+        from .. import data
+        inputs.check_output_file(data.path("blocks", "robust.json"), [("the --out file", args.out), *merges],
+                                 "installed block")
 
 
 def cmd_design(args) -> int:
@@ -49,6 +68,7 @@ def cmd_design(args) -> int:
     settings = {"sigma": args.sigma, "samples": args.samples, "seed": args.seed, "maxiter": args.maxiter,
                 "popsize": args.popsize, "budget_s": args.budget_s, "tol_samples": args.tol_samples}
     structures = [s.strip() for s in args.structures.split(",") if s.strip()]
+    _check_files(args)
     if args.merge:
         state = search.merge(Path(args.out), [Path(f) for f in args.merge], _log(args))
         settings = state["settings"]
@@ -56,11 +76,12 @@ def cmd_design(args) -> int:
         state = search.run(structures, Path(args.out), settings, _log(args),
                            progress=not args.json and sys.stderr.isatty())
     out = search.summary(state)
-    if args.install_robust and out["best"]:
+    if args.install_robust:
+        if not out["best"]:
+            raise Mech2SpiceError(f"--install-robust: no structure in {args.out} has a working nominal gate: "
+                                  "nothing installed")
         from .. import data
-        rec = state["structures"][out["best"]]
-        search.write_atomic(data.path("blocks", "robust.json"), {**rec["block_file"], "name": "robust",
-                                                                 "note": f"best of `mech2spice design` ({out['best']})"})
+        search.install_block(state["structures"][out["best"]], data.path("blocks", "robust.json"))
     if args.json:
         _print_json(out)
         return 0

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import Mech2SpiceError
 from ..experiments import tolerance as tol
+from ..inputs import is_int, is_number
 from . import grammar
 
 SEARCH_GRID = {"per_band": 6, "n_grid": 1000}     # coarse: 144 input points, 1000 s points
@@ -199,9 +200,73 @@ def write_atomic(path: Path, data) -> None:
     os.replace(tmp, path)
 
 
+# What summary(), best(), merge() and --install-robust read from each structure's entry: checked when a
+# record is read, so that a damaged or hand-edited file is one line, not a traceback after the search.
+_NUMBER, _OBJECT = (is_number, "a number"), (lambda v: isinstance(v, dict), "an object")
+ENTRY_FIELDS = {
+    "structure": (lambda v: isinstance(v, str), "a string"), "score": _NUMBER, "block_file": _OBJECT,
+    "parameters": (lambda v: isinstance(v, dict) and all(map(is_number, v.values())), "an object of numbers"),
+    **{f"search.{k}": _NUMBER for k in ("budget_s", "generations", "evaluations", "wall_s")},
+    "measured.nominal_margin": _NUMBER, "measured.yield": _NUMBER, "measured.margin_quantiles.1%": _NUMBER,
+    "measured.tolerance": (lambda v: v is None or is_number(v), "a number or null"),
+    "measured.tolerance_bracket": (lambda v: isinstance(v, list), "a list"),
+    "measured.dofs_per_gate": (is_int, "a whole number"),
+}
+
+
+def is_record(path) -> bool:
+    """Whether `path` holds a design search record (an object of settings and structures)."""
+    try:
+        data = json.loads(Path(path).read_bytes())
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(data, dict) and isinstance(data.get("settings"), dict) and \
+        isinstance(data.get("structures"), dict)
+
+
+RECORD_KIND = ("a design search record", is_record)
+
+
+def read_record(path: Path) -> dict:
+    """The design search record at `path`, every field the command reads checked (one line if not)."""
+    try:
+        state = json.loads(Path(path).read_bytes())
+    except OSError as e:
+        raise Mech2SpiceError(f"cannot read search record {path}: {e.strerror or e}") from None
+    except (ValueError, RecursionError) as e:         # not UTF-8, not JSON, nested too deep
+        raise Mech2SpiceError(f"search record {path} is damaged (not JSON: {e})") from None
+    if not (isinstance(state, dict) and isinstance(state.get("settings"), dict)
+            and isinstance(state.get("structures"), dict)):
+        raise Mech2SpiceError(f"{path} is not a design search record (an object of 'settings' and "
+                              "'structures')")
+    for key in SETTINGS:
+        if not is_number(state["settings"].get(key)):
+            raise Mech2SpiceError(f"search record {path}: settings '{key}' is missing or not a number")
+    for name, rec in state["structures"].items():
+        for field, (ok, what) in ENTRY_FIELDS.items():
+            if not ok(_field(rec, field)):
+                raise Mech2SpiceError(f"search record {path}: structure '{name}': '{field}' is missing or not {what}")
+    return state
+
+
+def _field(rec, dotted: str):
+    """rec["a"]["b"] for "a.b"; _MISSING where a key is absent (null is a value)."""
+    for key in dotted.split("."):
+        if not isinstance(rec, dict) or key not in rec:
+            return _MISSING
+        rec = rec[key]
+    return rec
+
+
+_MISSING = object()
+
+
+SETTINGS = ("sigma", "samples", "seed", "maxiter", "popsize", "budget_s", "tol_samples")
+
+
 def settings_key(settings: dict) -> dict:
     """The settings a finished structure must share to be reused on resume."""
-    return {k: settings[k] for k in ("sigma", "samples", "seed", "maxiter", "popsize", "budget_s", "tol_samples")}
+    return {k: settings[k] for k in SETTINGS}
 
 
 def run(structures: list[str], out: Path, settings: dict, log=lambda msg: None, progress: bool = False) -> dict:
@@ -210,14 +275,9 @@ def run(structures: list[str], out: Path, settings: dict, log=lambda msg: None, 
     if unknown:
         raise Mech2SpiceError(f"unknown structure(s) {', '.join(unknown)} (known: {', '.join(grammar.STRUCTURES)})")
     state = {"settings": settings, "structures": {}}
-    if out.exists():
-        try:
-            old = json.loads(out.read_text())
-        except json.JSONDecodeError as e:
-            raise Mech2SpiceError(f"checkpoint {out} is not valid JSON ({e}); delete it to start afresh")
-        same = set(settings_key(settings)) <= set(old.get("settings", {})) and \
-            settings_key(old["settings"]) == settings_key(settings)
-        if same:
+    if out.exists() and out.stat().st_size:
+        old = read_record(out)
+        if settings_key(old["settings"]) == settings_key(settings):
             state["structures"] = old.get("structures", {})
         else:
             log(f"{out}: other settings, searching afresh")
@@ -271,14 +331,9 @@ def merge(out: Path, sources: list[Path], log=lambda msg: None) -> dict:
     """Merge other runs' records (e.g. longer searches of some structures) into the record `out`: per
     structure, a run's best replaces the entry when its tolerance, measured by the same bisection (same
     tolerance samples and seed), is larger.  Every run compared is listed under the entry's "runs"."""
-    def load(path: Path) -> dict:
-        try:
-            return json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError) as e:
-            raise Mech2SpiceError(f"cannot read search record {path}: {e}")
-    state = load(out)
+    state = read_record(out)
     for src in sources:
-        other = load(src)
+        other = read_record(src)
         for key in ("tol_samples", "seed", "sigma", "samples"):
             if other["settings"][key] != state["settings"][key]:
                 raise Mech2SpiceError(f"{src}: {key} {other['settings'][key]} differs from {out}'s "
@@ -295,3 +350,33 @@ def merge(out: Path, sources: list[Path], log=lambda msg: None) -> dict:
                                          "runs": runs + [run_summary(rec, str(src))]}
     write_atomic(out, state)
     return state
+
+
+def install_block(rec: dict, target: Path, name: str = "robust") -> None:
+    """Install a structure's found block as the package's `target` (--params robust) only once the exact
+    file to be installed loads as --params does and its nominal gate works (worst margin > 0, best()'s
+    test); written beside it and renamed over it, so a failure leaves the installed block untouched."""
+    data = {**rec["block_file"], "name": name, "note": f"best of `mech2spice design` ({rec['structure']})"}
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(json.dumps(data, indent=1) + "\n")
+        margin = _nominal_margin(tmp, rec["structure"])
+        if not margin > 0:
+            raise Mech2SpiceError(f"--install-robust: the {rec['structure']} block fails its own check (nominal "
+                                  f"worst margin {margin:+.4f}): not installed")
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _nominal_margin(path: Path, structure: str) -> float:
+    """The worst margin over the valid input region of the block file at `path` without spread (read as
+    load_params reads a block file, named by its entry in messages)."""
+    from ..inputs import read_json
+    from ..physics.params import block_params
+    try:
+        s = tol.Sampler(block_params(read_json(path, "block file"), f"of the {structure} entry"), 1, 0)
+        return float(s.margins(s.model(0.0, None)).min())
+    except (Mech2SpiceError, np.linalg.LinAlgError, ValueError, IndexError) as err:    # as Objective.score
+        raise Mech2SpiceError(f"--install-robust: the {structure} block does not build ({err}): "
+                              "not installed") from None

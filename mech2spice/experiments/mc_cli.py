@@ -57,6 +57,17 @@ def add_sweep_arguments(s) -> None:
     s.add_argument("--json", action="store_true", help="machine-readable output")
 
 
+def check_out(args, read: dict) -> None:
+    """--out, before any work: none of the command's files (design or program, --stimulus, --params,
+    --spread), and if it exists a results file (resumed; its records are checked before any sample runs)."""
+    from . import montecarlo as mc
+    from .mc_run import RESULTS_KIND
+    if args.out:
+        read = {**read, "the --params file": inputs.params_file(args.params),
+                "the --spread file": mc.spread_file(args.spread)}
+        inputs.check_output_file(args.out, read, "results file", kind=RESULTS_KIND, remedy="give another --out")
+
+
 def vectors_of(args, netlist) -> list[dict[str, int]]:
     """The input vectors: --set (one), --stimulus (a list of sets) or every combination."""
     from ..synthesis.ports import pack_inputs
@@ -114,13 +125,12 @@ def cmd_montecarlo(args) -> int:
     """Run the sweep; print the summary (text or JSON); 0 if every sample passed, else 1."""
     import tempfile
     from ..cli import _log, _print_json
-    from . import mc_run
+    from . import mc_run, montecarlo as mc
+    check_out(args, {"the design": mc.design_path(args.design), "the --stimulus file": args.stimulus})
     job = job_of(args)
     log = _log(args)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out) if args.out else Path(tmp) / "results.jsonl"
-        if args.out:
-            inputs.check_output_file(out, [args.design], "results file")
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=not args.json and sys.stderr.isatty(), log=log)
     res.update({"design": job["design"], "backend": job["backend"], "spread": job["spread"], "seed": job["seed"],
@@ -184,11 +194,10 @@ def cmd_cpu_montecarlo(args) -> int:
     import tempfile
     from ..cli import _log, _print_json
     from . import mc_run
+    check_out(args, {"the program": args.program})
     job = cpu_job_of(args)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out) if args.out else Path(tmp) / "results.jsonl"
-        if args.out:
-            inputs.check_output_file(out, [args.program], "results file")
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=not args.json and sys.stderr.isatty(), log=_log(args))
     res.update({"program": job["program"], "cycles": job["cycles"], "backend": job["backend"],

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from ..backends._base import progress_bar
 from ..errors import Mech2SpiceError
+from ..inputs import first_json_line, is_int
 from . import montecarlo as mc
 
 IN_FLIGHT = 2                  # tasks submitted per worker at a time
@@ -57,22 +58,37 @@ def task(job: dict, indices: list[int]) -> list[dict]:
     return design_for(job).evaluate(indices)
 
 
+def is_results(path) -> bool:
+    """Whether `path` holds montecarlo results (its first line a results header)."""
+    first = first_json_line(path)
+    return isinstance(first, dict) and first.get("type") == "header" and isinstance(first.get("key"), str)
+
+
+RESULTS_KIND = ("a montecarlo results file", is_results)
+
+
 def read_results(path: Path, job: dict) -> dict[int, dict]:
-    """Records already in `path` by sample index (first one kept); checks the header matches `job`."""
+    """Records already in `path` by sample index (first one kept).  The whole file is checked first (a
+    header of this job, then whole records); only then is a torn last line (a killed run) cut off."""
     if not path.exists() or path.stat().st_size == 0:
         return {}
-    _cut_torn_line(path)
-    done, header = {}, None
-    with open(path, encoding="utf-8") as fh:
-        for n, line in enumerate(fh):
-            rec = json.loads(line)
-            if n == 0:
-                header = rec
-            elif rec.get("type") == "sample":
-                done.setdefault(int(rec["i"]), rec)
-    if header is None or header.get("key") != mc.job_key(job):
+    if not is_results(path):
+        raise Mech2SpiceError(f"{path} is not a montecarlo results file (its first line is no results header): "
+                              "give another --out")
+    if first_json_line(path)["key"] != mc.job_key(job):
         raise Mech2SpiceError(f"{path} holds results of another job (design, spread, seed, backend or "
                               "inputs differ): give another --out")
+    done, torn = {}, False
+    with open(path, "rb") as fh:
+        for n, raw in enumerate(fh, 1):
+            if not raw.endswith(b"\n"):
+                torn = True                 # the last line, cut off below
+            elif n > 1:
+                rec = _record(raw, n, path)
+                if rec.get("type") == "sample":
+                    done.setdefault(rec["i"], rec)
+    if torn:
+        _cut_torn_line(path)
     return done
 
 
@@ -82,6 +98,21 @@ def _cut_torn_line(path: Path) -> None:
     if data and not data.endswith(b"\n"):
         with open(path, "r+b") as fh:
             fh.truncate(data.rfind(b"\n") + 1)
+
+
+def _record(raw: bytes, n: int, path: Path) -> dict:
+    """Line n of a results file, checked for what the summary reads."""
+    try:
+        rec = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        rec = None
+    if not isinstance(rec, dict):
+        raise Mech2SpiceError(f"{path}, line {n}: damaged (not a JSON record): give another --out")
+    sample_ok = is_int(rec.get("i")) and rec["i"] >= 0 and isinstance(rec.get("pass"), bool)
+    if rec.get("type") == "sample" and not sample_ok:
+        raise Mech2SpiceError(f"{path}, line {n}: a sample record without its index 'i' or its verdict 'pass': "
+                              "give another --out")
+    return rec
 
 
 def _append(fh, records: list[dict]) -> None:

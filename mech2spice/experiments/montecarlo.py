@@ -102,7 +102,7 @@ def parse_spread(text: str) -> SpreadSpec:
         return spec_of(float(text))
     except ValueError:
         pass
-    if text.startswith("{"):
+    if spread_file(text) is None:
         try:
             obj = json.loads(text)
         except json.JSONDecodeError as e:
@@ -111,6 +111,16 @@ def parse_spread(text: str) -> SpreadSpec:
         from ..inputs import read_json
         obj = read_json(text, "spread spec")
     return spec_of(obj)
+
+
+def spread_file(text: str) -> str | None:
+    """The file a --spread value names, or None for a sigma or an inline JSON object."""
+    text = str(text).strip()
+    try:
+        float(text)
+        return None
+    except ValueError:
+        return None if text.startswith("{") else text
 
 
 def spec_of(obj) -> SpreadSpec:

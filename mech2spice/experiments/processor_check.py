@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cpu import run as cpu_run
+from ..inputs import write_text
 from ..cpu.machines import make_cpu
 
 
@@ -201,6 +202,11 @@ def main(argv=None) -> int:
                     "per-gate latency at TOL u_R (repeatable) against the carrier with full pauses and with idle "
                     "skipping alone")
     args = ap.parse_args(argv)
+    if args.out:                                   # refused before hours of integration, not after
+        from ..inputs import check_output_file
+        read = [("the checkpoint", args.checkpoint), ("the program", args.program), ("the --rows file", args.rows),
+                ("the --base file", args.base), *(("a --merge file", m) for m in args.merge or ())]
+        check_output_file(args.out, read, "comparison")
     if args.merge:
         base = json.loads(Path(args.base).read_text()) if args.base else None
         return _write(merge(args.merge, args.steps, base), args.out)
@@ -249,8 +255,7 @@ def _latency_check(args, program: str, carrier: dict) -> dict:
 def _write(res: dict, out: str | None) -> int:
     text = json.dumps(res, indent=2)
     if out:
-        with open(out, "w") as f:
-            f.write(text)
+        write_text(out, text)
     print(text)
     return 0
 

@@ -10,8 +10,10 @@ import contextlib
 import json
 import sys
 import time
+from pathlib import Path
 
 from ..errors import Mech2SpiceError
+from ..inputs import check_output_dir, check_output_file
 from . import REPORTS, module
 
 # Options a report's write() takes, as command-line flags: (flag, dest, argparse keywords).  Defaults are
@@ -89,6 +91,7 @@ def cmd_report(args) -> int:
         if unused:
             flags = ", ".join(f for f, d, _ in OPTIONS if d in unused)
             raise Mech2SpiceError(f"report {name} takes no {flags}")
+    _check_outputs(names, args.out, options)
     done = []
     for name in names:
         done.append(_write(name, args.out, options))
@@ -97,6 +100,17 @@ def cmd_report(args) -> int:
     if args.json:
         print(json.dumps({"reports": done}, indent=2))
     return 0
+
+
+def _check_outputs(names: list[str], directory: str, options: dict) -> None:
+    """Before hours of measuring, not after: the folder takes files, and no file a report writes there is one
+    of the files its options read (a trace, a program, the processor check)."""
+    check_output_dir(directory, "report directory", parents=True)
+    read = [(f"the {flag} file", options[dest]) for flag, dest, kw in OPTIONS
+            if kw.get("metavar") == "FILE" and dest != "checkpoint" and options.get(dest)]
+    for name in names:
+        for written in REPORTS[name].writes:
+            check_output_file(Path(directory) / written, read, f"report {name}'s file", parents=True)
 
 
 def _names(given: list[str]) -> list[str]:

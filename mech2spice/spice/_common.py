@@ -16,6 +16,16 @@ from ..physics.model import MechModel
 METHODS = ("trap", "gear")   # ngspice's integration methods
 
 
+def is_netlist(path) -> bool:
+    """Whether a file is a netlist or Verilog-A library mech2spice wrote: every one opens with a line naming
+    it ("* mech2spice: ...", "mech2spice: ...", "// mech2spice ..."), so `emit -o` may replace it."""
+    from ..inputs import head
+    return head(path, 256).split(b"\n", 1)[0].lstrip(b"*/ \t").startswith(b"mech2spice")
+
+
+NETLIST = ("a netlist mech2spice wrote", is_netlist)      # the kind of `emit -o` / `cpu emit -o` files
+
+
 def drive_schedule(model: MechModel, stimulus, b: int, d: int, t_end: float) -> tuple[tuple[float, float], ...]:
     """(time, amplitude) points where drive d of batch member b changes before t_end."""
     if stimulus is None:

@@ -54,9 +54,11 @@ class Verdict:
     fixed: dict = field(default_factory=dict)   # probe -> fixed-point amplitude (u_R)
 
     def to_json(self) -> dict:
-        """The JSON fields of a run's stability verdict."""
-        return {"stable": self.stable, "growth_rate": self.growth_rate,
-                "mode_period": self.mode.period, "mode_dofs": self.mode.dofs[:5],
+        """The JSON fields of a run's stability verdict (no mode where no fixed point was found: the network
+        was not near rest, so the spectrum at its state means nothing)."""
+        found = self.converged
+        return {"stable": self.stable, "growth_rate": self.growth_rate if found else None,
+                "mode_period": self.mode.period if found else None, "mode_dofs": self.mode.dofs[:5] if found else [],
                 "slowest_decay_periods": self.slowest_decay if np.isfinite(self.slowest_decay) else None,
                 "fixed_point_distance": self.distance, "fixed_point_found": self.converged}
 

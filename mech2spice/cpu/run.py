@@ -296,8 +296,10 @@ class TraceFile:
         row = {**dataclasses.asdict(rec), "registers": cpu.registers(), "unix_time": round(time.time(), 3)}
         amps = getattr(cpu, "amps", None)
         if isinstance(amps, dict):
-            row.update(period=cpu.period, simulated_periods=cpu.simulated, block_steps=cpu.block_steps,
+            row.update(period=cpu.period, simulated_periods=cpu.simulated,
                        amps={k: round(float(v), 6) for k, v in amps.items()})
+            if hasattr(cpu, "block_steps"):        # the oscillator-level engines (not the circuit)
+                row["block_steps"] = cpu.block_steps
         self.file.write(json.dumps(row) + "\n")
         self.file.flush()
 

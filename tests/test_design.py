@@ -42,9 +42,14 @@ def test_unknown_structure_is_one_line():
 
 
 def _record(tolerance, margin=0.02, budget=200.0, **settings):
+    """A search record as `mech2spice design` writes it (read_record checks every field the CLI reads)."""
+    from mech2spice import data
+    block = json.loads(data.path("blocks", "classic.json").read_text())
     rec = {"score": -5.0, "parameters": {}, "measured": {"nominal_margin": margin, "tolerance": tolerance,
-                                                        "tolerance_bracket": [tolerance, tolerance]},
-           "search": {"budget_s": budget, "generations": 1, "evaluations": 10, "wall_s": budget}}
+                                                        "tolerance_bracket": [tolerance, tolerance], "yield": 1.0,
+                                                        "margin_quantiles": {}, "dofs_per_gate": 6},
+           "search": {"budget_s": budget, "generations": 1, "evaluations": 10, "wall_s": budget},
+           "block_file": block}
     return {"settings": {**TINY, **settings}, "structures": {"classic": rec}}
 
 

@@ -199,9 +199,54 @@ def write_atomic(path: Path, data) -> None:
     os.replace(tmp, path)
 
 
+SETTINGS = ("sigma", "samples", "seed", "maxiter", "popsize", "budget_s", "tol_samples")
+_MEASURED = {"nominal_margin": "number", "yield": "number", "tolerance": "number|null",
+             "tolerance_bracket": "list", "margin_quantiles": "object", "dofs_per_gate": "integer"}
+
+
+def read_record(path: Path, what: str = "search record") -> dict:
+    """A search record (or checkpoint) read as data: every field that resume, merge, the summary and
+    --install-robust use has its type checked, and each entry's block file is validated as a block file
+    (physics/params.py); anything else is one Mech2SpiceError line."""
+    from ..inputs import read_json
+    state = read_json(path, what)
+
+    def bad(why: str):
+        raise Mech2SpiceError(f"{what} {path}: {why}; delete it to start afresh")
+    if not (isinstance(state, dict) and isinstance(state.get("settings"), dict)
+            and isinstance(state.get("structures"), dict)):
+        bad("expected an object with 'settings' and 'structures'")
+    if not all(_is(state["settings"].get(k), "number") for k in SETTINGS):
+        bad(f"'settings' must hold {', '.join(SETTINGS)} as numbers")
+    for name, rec in state["structures"].items():
+        if name not in grammar.STRUCTURES or not isinstance(rec, dict):
+            bad(f"{ascii(name)[:40]} is not a structure of the grammar")
+        _check_entry(name, rec, bad)
+    return state
+
+
+def _check_entry(name: str, rec: dict, bad) -> None:
+    from ..physics.params import block_params
+    m = rec.get("measured")
+    ok = (isinstance(rec.get("parameters"), dict) and all(_is(v, "number") for v in rec["parameters"].values())
+          and _is(rec.get("score"), "number") and isinstance(rec.get("search"), dict) and isinstance(m, dict)
+          and all(_is(m.get(k), t) for k, t in _MEASURED.items()) and isinstance(rec.get("block_file"), dict))
+    if not ok:
+        bad(f"entry {name}: parameters, score, search, measured ({', '.join(_MEASURED)}) or block_file "
+            "missing or of the wrong type")
+    block_params(rec["block_file"], f"{name}'s block_file")
+
+
+def _is(value, kind: str) -> bool:
+    from ..inputs import is_int, is_number
+    return any({"number": is_number, "integer": is_int, "null": lambda v: v is None,
+                "list": lambda v: isinstance(v, list), "object": lambda v: isinstance(v, dict)}[k](value)
+               for k in kind.split("|"))
+
+
 def settings_key(settings: dict) -> dict:
     """The settings a finished structure must share to be reused on resume."""
-    return {k: settings[k] for k in ("sigma", "samples", "seed", "maxiter", "popsize", "budget_s", "tol_samples")}
+    return {k: settings[k] for k in SETTINGS}
 
 
 def run(structures: list[str], out: Path, settings: dict, log=lambda msg: None, progress: bool = False) -> dict:
@@ -211,12 +256,8 @@ def run(structures: list[str], out: Path, settings: dict, log=lambda msg: None, 
         raise Mech2SpiceError(f"unknown structure(s) {', '.join(unknown)} (known: {', '.join(grammar.STRUCTURES)})")
     state = {"settings": settings, "structures": {}}
     if out.exists():
-        try:
-            old = json.loads(out.read_text())
-        except json.JSONDecodeError as e:
-            raise Mech2SpiceError(f"checkpoint {out} is not valid JSON ({e}); delete it to start afresh")
-        same = set(settings_key(settings)) <= set(old.get("settings", {})) and \
-            settings_key(old["settings"]) == settings_key(settings)
+        old = read_record(out, "checkpoint")
+        same = settings_key(old["settings"]) == settings_key(settings)
         if same:
             state["structures"] = old.get("structures", {})
         else:
@@ -271,14 +312,9 @@ def merge(out: Path, sources: list[Path], log=lambda msg: None) -> dict:
     """Merge other runs' records (e.g. longer searches of some structures) into the record `out`: per
     structure, a run's best replaces the entry when its tolerance, measured by the same bisection (same
     tolerance samples and seed), is larger.  Every run compared is listed under the entry's "runs"."""
-    def load(path: Path) -> dict:
-        try:
-            return json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError) as e:
-            raise Mech2SpiceError(f"cannot read search record {path}: {e}")
-    state = load(out)
+    state = read_record(out)
     for src in sources:
-        other = load(src)
+        other = read_record(src)
         for key in ("tol_samples", "seed", "sigma", "samples"):
             if other["settings"][key] != state["settings"][key]:
                 raise Mech2SpiceError(f"{src}: {key} {other['settings'][key]} differs from {out}'s "

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from ..backends._base import progress_bar
 from ..errors import Mech2SpiceError
+from ..inputs import is_int
 from . import montecarlo as mc
 
 IN_FLIGHT = 2                  # tasks submitted per worker at a time
@@ -63,17 +64,41 @@ def read_results(path: Path, job: dict) -> dict[int, dict]:
         return {}
     _cut_torn_line(path)
     done, header = {}, None
-    with open(path, encoding="utf-8") as fh:
+    with open(path, encoding="utf-8", errors="replace") as fh:
         for n, line in enumerate(fh):
-            rec = json.loads(line)
+            rec = _record(line, n, path)
             if n == 0:
                 header = rec
             elif rec.get("type") == "sample":
-                done.setdefault(int(rec["i"]), rec)
+                done.setdefault(rec["i"], rec)
     if header is None or header.get("key") != mc.job_key(job):
         raise Mech2SpiceError(f"{path} holds results of another job (design, spread, seed, backend or "
                               "inputs differ): give another --out")
     return done
+
+
+_SAMPLE = {"pass": lambda v: isinstance(v, bool),
+           "margin": lambda v: v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
+           "failing_bits": lambda v: isinstance(v, dict) and all(is_int(c) for c in v.values()),
+           "failing_gates": lambda v: isinstance(v, list) and all(isinstance(g, str) for g in v),
+           "reason": lambda v: isinstance(v, str)}
+
+
+def _record(line: str, n: int, path: Path) -> dict:
+    """One line of a results file, checked: an object; a sample has its index and the fields the summary
+    reads with their types (optional ones may be absent).  Anything else is one Mech2SpiceError line."""
+    try:
+        rec = json.loads(line)
+    except (ValueError, RecursionError) as err:
+        rec = err
+    ok = isinstance(rec, dict) and (n > 0 or rec.get("type") == "header")
+    if ok and rec.get("type") == "sample":
+        ok = is_int(rec.get("i")) and rec["i"] >= 0 and "pass" in rec and all(
+            check(rec[k]) for k, check in _SAMPLE.items() if k in rec)
+    if not ok:
+        raise Mech2SpiceError(f"{path}, line {n + 1}: not a Monte-Carlo results record (its header, then one "
+                              "sample per line): give another --out")
+    return rec
 
 
 def _cut_torn_line(path: Path) -> None:

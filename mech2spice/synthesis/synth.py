@@ -82,6 +82,9 @@ def combinational_view(g: nx.DiGraph) -> nx.DiGraph:
 def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -> Netlist:
     """Synthesize the Verilog file ``path`` into a clean Netlist of 2-input NOR gates (and latches)."""
     path = Path(path)
+    if '"' in str(path.resolve()) or not str(path.resolve()).isprintable():    # quoted in the Yosys script
+        raise Mech2SpiceError(f"Verilog file {ascii(str(path))}: its path has a quote or a control character, "
+                              "which the Yosys script cannot quote: rename it")
     source = _read_source(path)
     _check_source(path, source)
     if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
@@ -235,9 +238,6 @@ def _yosys_run(path: Path, top: str | None) -> tuple[str, dict]:
     with tempfile.TemporaryDirectory(prefix="mech2spice_yosys_") as tmp:
         # A relative path works for both yowasp (which maps /tmp elsewhere) and `include`s.
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
-        if '"' in rel or not rel.isprintable():      # it is quoted in the Yosys script: no way out of the quotes
-            raise Mech2SpiceError(f"Verilog file {ascii(str(path))}: its path has a quote or a control character, "
-                                  "which the Yosys script cannot quote: rename it")
         result = yosys.run_script(_flow(rel, top), tmp)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))

@@ -132,6 +132,15 @@ def test_netlist_unknowns_are_the_nodes_vacask_reports():
     assert netlist_unknowns(text, (lib,)) == {"n1", "n2", "x1:h", "x1:k"}
 
 
+def test_a_trace_whose_cycles_are_not_numbers_is_refused_on_resume(tmp_path, capsys):
+    """A resumed `cpu run --trace` keeps the lines before its checkpoint's cycle: each must say its cycle."""
+    ck, trace = tmp_path / "ck.json", tmp_path / "t.jsonl"
+    assert run(capsys, "cpu", "run", SIEVE, "--max-cycles", 3, "--checkpoint", ck, "--trace", trace)[0] == 1
+    trace.write_text('{"cycle": "0"}\n')
+    refused(capsys, "cpu", "run", SIEVE, "--max-cycles", 4, "--checkpoint", ck, "--resume", "--trace", trace,
+            needle="is not a cpu run trace")
+
+
 # ------------------------------------------------------------------ oscillator-level checkpoints
 
 def _probes() -> list[str]:

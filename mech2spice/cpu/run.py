@@ -284,10 +284,11 @@ class TraceFile:
         try:
             lines = self.path.read_text(encoding="utf-8").splitlines(keepends=True)
             for line in lines:
-                json.loads(line)["cycle"]
+                if not is_int(json.loads(line)["cycle"]):
+                    raise TypeError("a cycle that is not a whole number")
         except FileNotFoundError:
             return []
-        except (OSError, ValueError, KeyError, TypeError) as err:
+        except (OSError, ValueError, KeyError, TypeError, RecursionError) as err:
             raise Mech2SpiceError(f"trace {self.path} is not a cpu run trace (one JSON object per line): "
                                   f"{err}") from None
         return [line if line.endswith("\n") else line + "\n" for line in lines]

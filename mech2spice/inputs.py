@@ -135,6 +135,15 @@ def is_int(value) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
+MAX_NAME = 80          # a name a user's file gives (a design, a block): shown in reports and netlist comments
+
+
+def is_name(value) -> bool:
+    """Printable text of at most MAX_NAME characters (no newline or control character: names reach
+    netlist comments and one-line messages)."""
+    return isinstance(value, str) and 0 < len(value) <= MAX_NAME and value.isprintable()
+
+
 def is_number(value) -> bool:
     """A finite JSON number (integer or float, not true/false) that fits a float."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):

@@ -132,7 +132,7 @@ def test_a_segment_starts_at_its_first_cycles_sample_from_the_saved_state():
     from mech2spice.cpu.run import load_program
     prog = load_program("programs/sieve.asm")
     whole = circuit.emit_cpu(prog.image, 8)
-    seg = circuit.emit_cpu(prog.image, 3, first=5, state={"ar_x": 0.25, "xmr0:h": 5e-324})
+    seg = circuit.emit_cpu(prog.image, 3, first=5, state={"ar_g0_c": 0.25, "xmr0:h": 5e-324})
     s, w = seg.schedule, whole.schedule
     assert (s.first, s.cycles, s.offset) == (5, 3, w.sample_at(5)) and not s.resets
     assert np.allclose(s.samples(), w.samples()[5:9]) and s.stop == w.sample_at(8)
@@ -143,7 +143,7 @@ def test_a_segment_starts_at_its_first_cycles_sample_from_the_saved_state():
     delay = float(clk.split("delay=")[1].split()[0])
     ramp = circuit.VacaskEnvelopeOptions().RAMP_PERIODS * T
     assert delay == pytest.approx(circuit.SAMPLE_BEFORE * T - ramp / 2)
-    assert 'ic={"ar_x", 0.25, "xmr0:h", 0.0}' in text and 'store="end"' in text
+    assert 'ic={"ar_g0_c", 0.25, "xmr0:h", 0.0}' in text and 'store="end"' in text
     assert f'analysis {circuit.STATE} tran' in text and "save default" in text
     with pytest.raises(Mech2SpiceError):
         circuit.emit_cpu(prog.image, 3, first=5)          # a later segment needs the saved state

@@ -42,8 +42,11 @@ def test_unknown_structure_is_one_line():
 
 
 def _record(tolerance, margin=0.02, budget=200.0, **settings):
-    """A complete search record of one structure (every field the command reads: search.ENTRY_FIELDS)."""
-    rec = {"structure": "classic", "score": -5.0, "parameters": {}, "block_file": {},
+    """A complete search record of one structure as `mech2spice design` writes it (every field the command
+    reads: search.ENTRY_FIELDS; the block file a valid block, which read_record checks as --params does)."""
+    from mech2spice import data
+    block = json.loads(data.path("blocks", "classic.json").read_text())
+    rec = {"structure": "classic", "score": -5.0, "parameters": {}, "block_file": block,
            "measured": {"nominal_margin": margin, "tolerance": tolerance, "tolerance_bracket": [tolerance, tolerance],
                         "yield": 1.0, "margin_quantiles": {"1%": margin}, "dofs_per_gate": 6},
            "search": {"budget_s": budget, "generations": 1, "evaluations": 10, "wall_s": budget}}

@@ -29,12 +29,13 @@ import numpy as np
 
 from .. import simulation
 from ..errors import Mech2SpiceError
+from ..inputs import is_number
 from ..physics import network
 from ..physics.params import DEFAULT, NOMINAL0, NOMINAL1, band_of
 from ..spice import memory as vmem
 from ..spice._common import num
 from . import state_file
-from ..spice.vacask import ENVELOPE, OSDI, VacaskEnvelopeOptions, _Emitter, run_netlist_raws
+from ..spice.vacask import ENVELOPE, OSDI, VacaskEnvelopeOptions, _Emitter, netlist_unknowns, run_netlist_raws
 from .isa import MEM_SIZE, mnemonic
 from .iss import FETCH, Cycle
 from .memory import Memory
@@ -232,11 +233,8 @@ def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_st
     osdi = OSDI[ENVELOPE].replace(".osdi", ".va") if standalone else OSDI[ENVELOPE]
     mem_ref = vmem.FILE if standalone else vmem.FILE.replace(".va", ".osdi")
     span = sched.stop - sched.offset
-    # exact values (repr); subnormals are out of range for VACASK's parser: they are 0 to the circuit
-    ic = "" if state is None else " ic={" + ", ".join(f'"{n}", {v if abs(v) > 1e-300 else 0.0!r}'
-                                                      for n, v in state.items()) + "}"
     tran = [f"analysis tran1 tran stop={num(span * e.T)} step={num(max_step * e.T)} "
-            f"maxstep={num(max_step * e.T)} icmode=\"uic\"{ic}" + (' store="end"' if first is not None else "")]
+            f"maxstep={num(max_step * e.T)} icmode=\"uic\"" + (' store="end"' if first is not None else "")]
     if first is not None:      # every unknown at the end: the next segment's initial condition
         # its first point is the stored end state; one period, because a much shorter run fails Newton
         # at its second point (18k unknowns, steps of 1e-3 T: measured)
@@ -253,9 +251,34 @@ def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_st
         from ..spice import veriloga as va
         text += f'\nembed "{va.FILES[ENVELOPE]}" <<<FILE\n{va.library(DEFAULT)[va.FILES[ENVELOPE]]}>>>FILE\n'
         text += f'\nembed "{vmem.FILE}" <<<FILE\n{vmem.library(p)}>>>FILE\n'
+    if state is not None:            # the initial conditions go in last, once the circuit's nodes are known
+        text = text.replace(' icmode="uic"', f' icmode="uic"{_ic(state, unknowns(text))}', 1)
     vectors = e.probe_vectors() + rdata
     return CpuNetlist(text, sched, list(model.probes), vectors, rdata, 2 * np.pi / model.omega,
                       {"dofs": model.n, "nor_blocks": len(e.plan.gates)})
+
+
+def unknowns(text: str) -> set[str]:
+    """The node unknowns of a processor netlist (what its STATE analysis writes), lower case."""
+    from ..spice import veriloga as va
+    return netlist_unknowns(text, (va.library(DEFAULT)[va.FILES[ENVELOPE]], vmem.library(DEFAULT)))
+
+
+def check_state(state: dict, known: set[str], where: str = "the saved circuit state") -> None:
+    """Every name a node of the netlist (a name is pasted into it: anything else could add a statement)
+    and every value a finite number; one Mech2SpiceError line otherwise."""
+    for n, v in state.items():
+        if not (isinstance(n, str) and n in known):
+            raise Mech2SpiceError(f"{where}: {ascii(n)[:80]} is not a node of the processor's netlist")
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or not math.isfinite(v):
+            raise Mech2SpiceError(f"{where}: node {n} has the value {ascii(v)[:40]}, not a finite number")
+
+
+def _ic(state: dict, known: set[str]) -> str:
+    """The tran analysis' initial conditions: exact values (repr); subnormals are out of range for
+    VACASK's parser: they are 0 to the circuit."""
+    check_state(state, known)
+    return " ic={" + ", ".join(f'"{n}", {float(v) if abs(v) > 1e-300 else 0.0!r}' for n, v in state.items()) + "}"
 
 
 # --- running and decoding ---------------------------------------------------------------------------------
@@ -425,19 +448,41 @@ class CircuitCPU:
         """Restore the state save() wrote; with `sha256`, the file must be exactly the one saved."""
         state_file.read(path, sha256, "circuit state", lambda z: self._load_arrays(z, path))
 
-    def _load_arrays(self, z, path) -> None:
-        if str(z["backend"]) != NAME or list(z["probes"]) != self.net.probes:
+    def _load_arrays(self, z: state_file.Fields, path) -> None:
+        """Every field checked against this netlist before any of it is used (the names go into the next
+        segment's netlist: each must be one of its nodes, and all of them there)."""
+        if z.text("backend") != NAME or z.texts("probes") != self.net.probes:
             raise Mech2SpiceError(f"{path} holds the state of a different processor model or backend")
-        if json.loads(str(z["settings"])) != self.settings:
-            raise Mech2SpiceError(f"{path} was written with other circuit settings "
-                                  f"{json.loads(str(z['settings']))}: resume with those")
-        self.state = dict(zip(map(str, z["names"]), map(float, z["values"])))
-        self.state_cycle, self.period = int(z["state_cycle"]), float(z["period"])
+        settings = z.json("settings")
+        if settings != self.settings:
+            raise Mech2SpiceError(f"{path} was written with other circuit settings {ascii(settings)[:200]}: "
+                                  "resume with those")
+        names = z.texts("names")
+        values = z.array("values", float, (len(names),))
+        state = dict(zip(names, map(float, values)))
+        known = unknowns(self.net.text)
+        check_state(state, known, f"{path}")
+        if len(state) != len(names) or set(state) != known:
+            raise Mech2SpiceError(f"{path}: the saved circuit state does not hold each of the netlist's "
+                                  f"{len(known)} nodes once (it has {len(names)} names)")
+        pending = z.array("pending", np.int64, (None,))
+        if not (pending.size and np.all(np.diff(pending) > 0) and pending[0] >= 0):
+            raise Mech2SpiceError(f"{path}: 'pending' must list increasing cycles")
+        amps = z.array("amps", float, (pending.size, len(self.net.probes)))
+        levels = z.array("levels", float, (pending.size, vmem.BITS))
+        memory = z.array("memory", np.int64, (None,))
+        if memory.size not in (0, MEM_SIZE) or not np.all((memory >= 0) & (memory <= 255)):
+            raise Mech2SpiceError(f"{path}: 'memory' must be empty or {MEM_SIZE} bytes")
+        cost = z.json("cost")
+        if set(cost) != set(self.cost) or not all(is_number(v) and v >= 0 for v in cost.values()):
+            raise Mech2SpiceError(f"{path}: 'cost' must hold {', '.join(self.cost)} as numbers >= 0")
+        self.state = state
+        self.state_cycle, self.period = z.integer("state_cycle", 1), z.number("period")
         self.samples = {int(k): (dict(zip(self.net.probes, map(float, a))), lv)
-                        for k, a, lv in zip(z["pending"], z["amps"], z["levels"])}
-        self.cycle = int(z["pending"][0])
-        self.simulated, self.cost = float(z["simulated"]), json.loads(str(z["cost"]))
-        self.result = {**self.result, "memory": [int(v) for v in z["memory"]] or None}
+                        for k, a, lv in zip(pending, amps, levels)}
+        self.cycle = int(pending[0])
+        self.simulated, self.cost = z.number("simulated"), cost
+        self.result = {**self.result, "memory": [int(v) for v in memory] or None}
 
     def _port(self, k: int, port: str, what: str) -> int:
         amps = self._sample(k)[0]

@@ -10,6 +10,7 @@ The halt is the logic backend's: no register changed at the edge.
 """
 from __future__ import annotations
 
+import re
 
 import numpy as np
 
@@ -36,6 +37,12 @@ LATENCY = 0.1           # u_R: per-gate latency threshold (None: off; docs/laten
 CARRIER_LATENCY = 0.05  # u_R: the carrier's (docs/carrier.md: its cost against the carrier without it)
 OWN_LATENCY = "own"     # latency: the backend's own default (LATENCY, CARRIER_LATENCY; rk4 has none)
 EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability bound; docs/latency.md)
+
+
+def _no_inf(a: np.ndarray, key: str) -> np.ndarray:
+    if a.dtype.kind in "fc" and np.isinf(a).any():
+        raise ValueError(f"field '{key}' holds infinite values")
+    return a
 
 
 class PhysicalCPU:
@@ -156,15 +163,26 @@ class PhysicalCPU:
         """Restore the state save() wrote; with `sha256`, the file must be exactly the one saved."""
         state_file.read(path, sha256, "oscillator state", lambda z: self._load_arrays(z, path))
 
-    def _load_arrays(self, z, path) -> None:
-        if str(z["backend"]) != self.backend or list(z["probes"]) != self.probes:
+    def _load_arrays(self, z: state_file.Fields, path) -> None:
+        """Every array checked against what this engine's own state holds (count, dtype, shape) before the
+        compiled kernels see it: a foreign shape would make them read and write out of bounds."""
+        if z.text("backend") != self.backend or z.texts("probes") != self.probes:
             raise Mech2SpiceError(f"{path} holds the state of a different processor model or backend")
-        n = sum(1 for k in z.files if k.startswith("state"))
-        self.state = tuple(z[f"state{k}"] for k in range(n))
-        self.period, self.rdata = int(z["period"]), int(z["rdata"])
-        self.simulated = int(z["simulated"])
-        self.block_steps = int(z["block_steps"]) if "block_steps" in z.files else 0     # older files: not kept
-        self.amps = dict(zip(self.probes, map(float, z["amps"])))
+        fresh = self._fresh_state()
+        n = sum(1 for k in z.files if re.fullmatch(r"state\d+", k))
+        if n != len(fresh):
+            raise Mech2SpiceError(f"{path}: {n} state arrays, the {self.backend} engine keeps {len(fresh)}")
+        # arrays at rest are finite; the latency record's not-yet-recorded entries are NaN (never infinite)
+        self.state = tuple(_no_inf(z.array(f"state{k}", f.dtype, f.shape, finite=bool(np.isfinite(f).all())),
+                                   f"state{k}") for k, f in enumerate(fresh))
+        self.period, self.rdata = z.integer("period"), z.integer("rdata", 0, 255)
+        self.simulated = z.integer("simulated")
+        self.block_steps = z.integer("block_steps") if "block_steps" in z.files else 0     # older files: not kept
+        self.amps = dict(zip(self.probes, map(float, z.array("amps", float, (len(self.probes),)))))
+
+    def _fresh_state(self) -> tuple:
+        """The engine's state at rest, as it would continue from it (a run of no periods integrates nothing)."""
+        return tuple(np.asarray(a) for a in self.pulse_engine.run(self.model, 0).state)
 
     # --- one clock cycle --------------------------------------------------------------------
     def step(self) -> Cycle:

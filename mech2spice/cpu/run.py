@@ -284,10 +284,11 @@ def trace_lines(path) -> list[str]:
     try:
         lines = Path(path).read_text(encoding="utf-8").splitlines(keepends=True)
         for line in lines:
-            json.loads(line)["cycle"]
+            if not is_int(json.loads(line)["cycle"]):
+                raise TypeError("a cycle that is not a whole number")
     except FileNotFoundError:
         return []
-    except (OSError, ValueError, KeyError, TypeError) as err:
+    except (OSError, ValueError, KeyError, TypeError, RecursionError) as err:
         raise Mech2SpiceError(f"trace {path} is not a cpu run trace (one JSON object per line): {err}") from None
     return [line if line.endswith("\n") else line + "\n" for line in lines]
 
@@ -312,8 +313,10 @@ class TraceFile:
         row = {**dataclasses.asdict(rec), "registers": cpu.registers(), "unix_time": round(time.time(), 3)}
         amps = getattr(cpu, "amps", None)
         if isinstance(amps, dict):
-            row.update(period=cpu.period, simulated_periods=cpu.simulated, block_steps=cpu.block_steps,
+            row.update(period=cpu.period, simulated_periods=cpu.simulated,
                        amps={k: round(float(v), 6) for k, v in amps.items()})
+            if hasattr(cpu, "block_steps"):        # the oscillator-level engines (not the circuit)
+                row["block_steps"] = cpu.block_steps
         self.file.write(json.dumps(row) + "\n")
         self.file.flush()
 

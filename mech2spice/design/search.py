@@ -229,6 +229,7 @@ RECORD_KIND = ("a design search record", is_record)
 
 def read_record(path: Path) -> dict:
     """The design search record at `path`, every field the command reads checked (one line if not)."""
+    from ..physics.params import block_params
     try:
         state = json.loads(Path(path).read_bytes())
     except OSError as e:
@@ -243,9 +244,12 @@ def read_record(path: Path) -> dict:
         if not is_number(state["settings"].get(key)):
             raise Mech2SpiceError(f"search record {path}: settings '{key}' is missing or not a number")
     for name, rec in state["structures"].items():
+        if name not in grammar.STRUCTURES:
+            raise Mech2SpiceError(f"search record {path}: {ascii(name)[:40]} is not a structure of the grammar")
         for field, (ok, what) in ENTRY_FIELDS.items():
             if not ok(_field(rec, field)):
                 raise Mech2SpiceError(f"search record {path}: structure '{name}': '{field}' is missing or not {what}")
+        block_params(rec["block_file"], f"search record {path}: {name}'s block_file")   # checked as --params is
     return state
 
 

@@ -92,6 +92,30 @@ def read_results(path: Path, job: dict) -> dict[int, dict]:
     return done
 
 
+_SAMPLE = {"pass": lambda v: isinstance(v, bool),
+           "margin": lambda v: v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
+           "failing_bits": lambda v: isinstance(v, dict) and all(is_int(c) for c in v.values()),
+           "failing_gates": lambda v: isinstance(v, list) and all(isinstance(g, str) for g in v),
+           "reason": lambda v: isinstance(v, str)}
+
+
+def _record(line: str, n: int, path: Path) -> dict:
+    """One line of a results file, checked: an object; a sample has its index and the fields the summary
+    reads with their types (optional ones may be absent).  Anything else is one Mech2SpiceError line."""
+    try:
+        rec = json.loads(line)
+    except (ValueError, RecursionError) as err:
+        rec = err
+    ok = isinstance(rec, dict) and (n > 0 or rec.get("type") == "header")
+    if ok and rec.get("type") == "sample":
+        ok = is_int(rec.get("i")) and rec["i"] >= 0 and "pass" in rec and all(
+            check(rec[k]) for k, check in _SAMPLE.items() if k in rec)
+    if not ok:
+        raise Mech2SpiceError(f"{path}, line {n + 1}: not a Monte-Carlo results record (its header, then one "
+                              "sample per line): give another --out")
+    return rec
+
+
 def _cut_torn_line(path: Path) -> None:
     """Drop a last line without its newline (the run was killed while writing it)."""
     data = path.read_bytes()

@@ -14,11 +14,13 @@ the spec under "block" plus the gate-level fields f_r, u_r, omega: docs/design.m
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 from ..errors import Mech2SpiceError
 
 LINKS = ("spring", "dashpot")
+DOF_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,39}")   # model names are gate.DOF: no dots, spaces or newlines
 
 
 @dataclass(frozen=True)
@@ -134,7 +136,7 @@ class BlockSpec:
     @classmethod
     def from_dict(cls, data, where: str = "block") -> "BlockSpec":
         """Parse and validate the JSON form; every mistake is one Mech2SpiceError line."""
-        from ..inputs import is_number, type_name
+        from ..inputs import is_name, is_number, type_name, MAX_NAME
         if not isinstance(data, dict):
             raise Mech2SpiceError(f"{where}: must be a JSON object, not {type_name(data)}")
         allowed = {"name", "dofs", "springs", "dashpots", "quads", "source", "output", "inputs"}
@@ -149,11 +151,16 @@ class BlockSpec:
             raise Mech2SpiceError(f"{where}: 'dofs' must be an object of DOF name -> {{m, k, q[, slow]}}")
         dofs = []
         for name, d in dofs_in.items():
+            if not DOF_NAME.fullmatch(name):
+                raise Mech2SpiceError(f"{where}: DOF name {ascii(name)[:60]} must be a letter, then letters, digits "
+                                      "or _ (at most 40)")
             if not isinstance(d, dict) or set(d) - {"m", "k", "q", "slow"} or not {"m", "k", "q"} <= set(d):
                 raise Mech2SpiceError(f"{where}: DOF {name} must be an object with m, k, q (and optional slow)")
             if not all(is_number(d[x]) for x in ("m", "k", "q")):
                 raise Mech2SpiceError(f"{where}: DOF {name}: m, k, q must be finite numbers")
-            dofs.append(Dof(str(name), float(d["m"]), float(d["k"]), float(d["q"]), bool(d.get("slow", False))))
+            if not isinstance(d.get("slow", False), bool):
+                raise Mech2SpiceError(f"{where}: DOF {name}: slow must be true or false, not {type_name(d['slow'])}")
+            dofs.append(Dof(name, float(d["m"]), float(d["k"]), float(d["q"]), d.get("slow", False)))
 
         def triples(key: str) -> tuple:
             rows = data.get(key, [])
@@ -164,7 +171,8 @@ class BlockSpec:
             return tuple((a, b, float(v)) for a, b, v in rows)
 
         src = data["source"]
-        if not (isinstance(src, dict) and isinstance(src.get("dof"), str) and is_number(src.get("force"))):
+        if not (isinstance(src, dict) and set(src) == {"dof", "force"} and isinstance(src["dof"], str)
+                and is_number(src["force"])):
             raise Mech2SpiceError(f"{where}: 'source' must be {{\"dof\": NAME, \"force\": NUMBER}}")
         if not isinstance(data["output"], str):
             raise Mech2SpiceError(f"{where}: 'output' must be a DOF name")
@@ -181,7 +189,10 @@ class BlockSpec:
                     raise Mech2SpiceError(f"{where}: input link {a} may only have dof and link")
                 links.append(Attach(a["dof"], a.get("link", "spring")))
             inputs.append(tuple(links))
-        spec = cls(str(data.get("name", "block")), tuple(dofs), triples("springs"), triples("dashpots"),
+        name = data.get("name", "block")
+        if not is_name(name):
+            raise Mech2SpiceError(f"{where}: 'name' must be a string of at most {MAX_NAME} printable characters")
+        spec = cls(name, tuple(dofs), triples("springs"), triples("dashpots"),
                    triples("quads"), src["dof"], float(src["force"]), data["output"], tuple(inputs))
         spec.validate()
         return spec

@@ -130,7 +130,7 @@ EXTRA_KEYS = ("search", "measured", "note")   # a block file's record of how it 
 def load_params(spec: str | None) -> GateParams:
     """'default', 'printed', a shipped block ('robust', 'classic'), a JSON file with any subset of the
     fields (rest from default), or a block file (a "block" structure: physics/blocks.py)."""
-    from ..inputs import is_number, read_json, type_name
+    from ..inputs import MAX_NAME, is_name, is_number, read_json, type_name
     if spec is None or spec in PRESETS:
         return PRESETS[spec or "default"]
     if spec in BLOCK_PRESETS:
@@ -151,10 +151,10 @@ def load_params(spec: str | None) -> GateParams:
         raise Mech2SpiceError(f"parameter file {spec}: unknown field(s) {', '.join(sorted(unknown))} "
                               f"(known: {', '.join(sorted(known))})")
     for name, value in data.items():
-        ok = isinstance(value, str) if name == "name" else is_number(value)
+        ok = is_name(value) if name == "name" else is_number(value)
         if not ok:
-            raise Mech2SpiceError(f"parameter file {spec}: {name} must be "
-                                  f"{'a string' if name == 'name' else 'a finite number'}, not {type_name(value)}")
+            want = f"a string of at most {MAX_NAME} printable characters" if name == "name" else "a finite number"
+            raise Mech2SpiceError(f"parameter file {spec}: {name} must be {want}, not {type_name(value)}")
     p = replace(DEFAULT, **{"name": Path(spec).stem, **data})
     p.validate()
     return p
@@ -164,7 +164,7 @@ def block_params(data: dict, where: str = "block file") -> GateParams:
     """GateParams for a block file {"block": {...}, f_r, u_r, omega[, name, search...]}.  The classic
     fields (m_c, k_c, ...) are taken from the block's DOFs C, I, G1s and quads where it has them, so
     the library defaults of the SPICE emitters match a classic-shaped block."""
-    from ..inputs import is_number
+    from ..inputs import MAX_NAME, is_name, is_number
     unknown = set(data) - {"block", *GATE_FIELDS, *EXTRA_KEYS}
     if unknown:
         raise Mech2SpiceError(f"block file {where}: unknown key(s) {', '.join(sorted(unknown))} "
@@ -172,6 +172,8 @@ def block_params(data: dict, where: str = "block file") -> GateParams:
     for key in GATE_FIELDS[:3]:
         if key in data and not is_number(data[key]):
             raise Mech2SpiceError(f"block file {where}: {key} must be a finite number")
+    if "name" in data and not is_name(data["name"]):
+        raise Mech2SpiceError(f"block file {where}: name must be a string of at most {MAX_NAME} printable characters")
     spec = BlockSpec.from_dict(data["block"], f"block file {where}")
     roles = {}
     for dof, suffix in (("C", "c"), ("I", "i"), ("G1s", "g")):

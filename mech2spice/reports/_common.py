@@ -63,9 +63,17 @@ def write_json(path: Path, data, default=json_default) -> None:
 
 
 def read_json(path: Path, missing=None):
-    """The JSON in `path`, or `missing` where there is no such file."""
+    """The JSON in `path`, or `missing` where there is no such file; a file that is not JSON is one
+    Mech2SpiceError line (JSON is data: reading it runs nothing)."""
+    from ..errors import Mech2SpiceError
     path = Path(path)
-    return json.loads(path.read_text()) if path.exists() else missing
+    if not path.exists():
+        return missing
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError) as err:
+        raise Mech2SpiceError(f"{path} is not the JSON a report wrote ({str(err)[:120]}): delete it to measure "
+                              "again") from None
 
 
 def log(msg: str) -> None:

@@ -14,7 +14,6 @@ usage: mech2spice report envelope [--cache DIR [--render]]
 from __future__ import annotations
 
 import math
-import pickle
 import platform
 import time
 from pathlib import Path
@@ -27,6 +26,7 @@ from ..experiments import validate as V
 from ..experiments import scenes as S
 from ..backends import envelope
 from ..physics.params import DEFAULT
+from . import _datafile
 from ._common import SANDBOX, log, out_dir, pyplot, save_figure, shade_bands, timed
 
 plt = pyplot()
@@ -39,17 +39,33 @@ FREE = [6, 8, 10, 12, 16, 20, 21, 22, 23, 24, 26, 28, 32]   # adder, no bound ch
 STAB_AT = [0, 20, 100, 300, 1000, 2900, 2920, 3000, 3200, 3500, 4000, 5800]
 
 
-def cached(cache: Path | None, key: str, fn):
-    """fn()'s result, pickled as CACHE/KEY.pkl and read back from there later (no cache: just fn())."""
+def cached(cache: Path | None, key: str, fn, valid):
+    """fn()'s result, kept as CACHE/KEY.npz (a data file: _datafile.py) and read back from there later (no
+    cache: just fn()).  The cache may hold anyone's files: one that is not a results file, or whose content
+    fails `valid`, is refused in one line (delete it to measure again); a pickle there is never opened."""
     if cache is None:
         return fn()
-    f = cache / f"{key}.pkl"
+    f = cache / f"{key}.npz"
     if f.exists():
-        return pickle.loads(f.read_bytes())
+        out = _datafile.load(f)
+        if not valid(out):
+            raise Mech2SpiceError(f"{f} does not hold what `report envelope` keeps there: delete it to measure again")
+        return out
     out = fn()
     cache.mkdir(parents=True, exist_ok=True)
-    f.write_bytes(pickle.dumps(out))
+    _datafile.dump(f, out)
     return out
+
+
+def _is_run(r) -> bool:
+    """validate.run's result: amplitudes (periods, probes, batch) and times."""
+    return (isinstance(r, dict) and isinstance(r.get("amp"), np.ndarray) and r["amp"].ndim == 3
+            and isinstance(r.get("t"), np.ndarray) and isinstance(r.get("wall_s"), float))
+
+
+def _is_timed(r) -> bool:
+    """timed(latch_sequence): (its dict, wall seconds)."""
+    return isinstance(r, tuple) and len(r) == 2 and isinstance(r[0], dict) and isinstance(r[1], float)
 
 
 # --- measurements --------------------------------------------------------------------------------
@@ -62,8 +78,8 @@ def scenes() -> list[S.Scene]:
 def measure_scene(sc: S.Scene, cache) -> dict:
     """One scene on RK4 at 80 and 160 steps/period and on the envelope (steps, variants), compared."""
     log(f"{sc.name}: RK4 80 and 160 steps/period, {sc.periods} periods, batch {sc.stimulus.batch}")
-    r80 = cached(cache, f"{sc.name}_rk4_80", lambda: V.run(sc, "rk4", 80))
-    r160 = cached(cache, f"{sc.name}_rk4_160", lambda: V.run(sc, "rk4", 160))
+    r80 = cached(cache, f"{sc.name}_rk4_80", lambda: V.run(sc, "rk4", 80), _is_run)
+    r160 = cached(cache, f"{sc.name}_rk4_160", lambda: V.run(sc, "rk4", 160), _is_run)
     out = {"scene": sc.name, "description": sc.description, "oscillators": sc.model.n, "batch": sc.stimulus.batch,
            "periods": sc.periods, "bound": envelope.max_step_periods(sc.model),
            "wall_rk4_80": r80["wall_s"], "wall_rk4_160": r160["wall_s"],
@@ -92,7 +108,7 @@ def latch_official(cache) -> dict:
     """characterise.latch_sequence on both backends; if its envelope path fails, the identical model, schedule
     and decoding through scenes.latch_scene / characterise.latch_decode (checked equal on RK4), with the error recorded."""
     log("latch: characterise.latch_sequence on rk4 and envelope")
-    r = cached(cache, "latch_seq_rk4", lambda: timed(lambda: ch.latch_sequence(P, "rk4")))
+    r = cached(cache, "latch_seq_rk4", lambda: timed(lambda: ch.latch_sequence(P, "rk4")), _is_timed)
     error = None
     try:
         e = timed(lambda: ch.latch_sequence(P, "envelope"))
@@ -319,14 +335,13 @@ def variant_rows(results: list[dict]) -> str:
 
 def write(directory="reports", cache=None, render: bool = False) -> Path:
     """Measure every scene (RK4 runs kept in `cache` if given) and write envelope.md and its figures;
-    `render`: only re-render from CACHE/all.pkl."""
+    `render`: only re-render from CACHE/all.npz."""
     out = out_dir(directory)
     cache = Path(cache) if cache else None
     if render:
         if cache is None:
-            raise Mech2SpiceError("envelope: --render needs --cache DIR (it re-renders DIR/all.pkl)")
-        results, latch, sw = pickle.loads((cache / "all.pkl").read_bytes())
-        return _render(out, results, latch, sw, float(sw.get("total_s", 0.0)))
+            raise Mech2SpiceError("envelope: --render needs --cache DIR (it re-renders DIR/all.npz)")
+        return _render_stored(out, cache)
     t_start = time.perf_counter()
     results = [measure_scene(sc, cache) for sc in scenes()]
     by = {r["scene"]: r for r in results}
@@ -336,8 +351,29 @@ def write(directory="reports", cache=None, render: bool = False) -> Path:
     sw.update(worst_state(adder, sw))
     sw["total_s"] = time.perf_counter() - t_start
     if cache is not None:
-        (cache / "all.pkl").write_bytes(pickle.dumps((results, latch, sw)))
+        _datafile.dump(cache / "all.npz", (results, latch, sw))
     return _render(out, results, latch, sw, sw["total_s"])
+
+
+def _render_stored(out: Path, cache: Path) -> Path:
+    """--render: the report from CACHE/all.npz.  What the report reads is its schema: a file that lacks it
+    is refused in one line (like one that is no results file at all)."""
+    f = cache / "all.npz"
+    if not f.exists():
+        old = " (its all.pkl, a pickle of an older mech2spice, is never opened: code could run)" \
+            if (cache / "all.pkl").exists() else ""
+        raise Mech2SpiceError(f"envelope: no stored results {f}{old}: run `mech2spice report envelope --cache "
+                              f"{cache}` first")
+    stored = _datafile.load(f)
+    if not (isinstance(stored, tuple) and len(stored) == 3 and isinstance(stored[0], list)
+            and isinstance(stored[1], dict) and isinstance(stored[2], dict)):
+        raise Mech2SpiceError(f"{f} is not `report envelope`'s results (results, latch, sweep)")
+    results, latch, sw = stored
+    try:
+        return _render(out, results, latch, sw, float(sw.get("total_s", 0.0)))
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as err:
+        raise Mech2SpiceError(f"{f} lacks what `report envelope` renders ({type(err).__name__}: "
+                              f"{str(err)[:120]})") from None
 
 
 def worst_state(adder: S.Scene, sw: dict) -> dict:

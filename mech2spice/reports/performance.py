@@ -28,7 +28,6 @@ import cProfile
 import json
 import math
 import os
-import pickle
 import platform
 import pstats
 import resource
@@ -91,9 +90,10 @@ def _ngspice_with_peak_memory(tmp: Path) -> Path:
     return out
 
 
-def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, netlist_pickle: str | None = None) -> dict:
-    """One backend on nor.chain(p, gates), or on a synthesized design (netlist_pickle) with its drives at
-    their model amplitudes (inputs '0', clock low): the cost per period does not depend on the values."""
+def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, design: str | None = None) -> dict:
+    """One backend on nor.chain(p, gates), or on a synthesized design (a Verilog file of the package) with
+    its drives at their model amplitudes (inputs '0', clock low): the cost per period does not depend on the
+    values."""
     import numpy as np
     from ..backends import envelope
     from ..physics import network, nor
@@ -101,9 +101,10 @@ def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, netlis
     from ..physics.params import DEFAULT as p
     if backend.startswith("rk4"):
         _warm_rk4(backend == "rk4")
+    nl = _design(design) if design else None
     t0 = time.perf_counter()
-    if netlist_pickle:
-        model = network.build(pickle.loads(Path(netlist_pickle).read_bytes()), p)
+    if nl is not None:
+        model = network.build(nl, p)
         gates = model.n // 6
     else:
         model = nor.chain(p, gates)
@@ -146,12 +147,12 @@ def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, netlis
     return out
 
 
-def task_adder(backend: str, netlist_pickle: str) -> dict:
+def task_adder(backend: str, design: str) -> dict:
     """Worker task: the adder's 16 sums via run_physical on `backend`: wall, correct, margin, memory."""
     from .. import simulation
     from ..backends import logic, _rk4_kernel as rk4_kernel
     from ..physics.params import DEFAULT as p
-    nl = pickle.loads(Path(netlist_pickle).read_bytes())
+    nl = _design(design)
     values = list(ADDER_INPUTS)
     if backend == "rk4_numpy":
         rk4_kernel.AVAILABLE = False            # rk4.integrate then takes its numpy path
@@ -168,13 +169,13 @@ def task_adder(backend: str, netlist_pickle: str) -> dict:
             "amplitudes": [r["amplitudes"] for r in res]}
 
 
-def task_sqrt(backend: str, netlist_pickle: str, probe_periods: int = 0) -> dict:
+def task_sqrt(backend: str, design: str, probe_periods: int = 0) -> dict:
     """backend 'envelope': the whole run; 'rk4_probe': RK4 over the first `probe_periods` of the same schedule."""
     from .. import simulation
     from ..physics import network
     from ..backends import rk4
     from ..physics.params import DEFAULT as p
-    nl = pickle.loads(Path(netlist_pickle).read_bytes())
+    nl = _design(design)
     cycles = simulation.expand_steps(sqrt_steps())
     timing = simulation.clock_timing(nl)
     rss0 = _rss_mb()
@@ -370,10 +371,10 @@ def _fused_run():
     return run
 
 
-def task_logic(netlist_pickle: str, steps: list | None = None) -> dict:
+def task_logic(design: str, steps: list | None = None) -> dict:
     """Worker task: the sqrt schedule (or `steps`) through run_clocked_logic, mean wall over 20 runs."""
     from .. import simulation
-    nl = pickle.loads(Path(netlist_pickle).read_bytes())
+    nl = _design(design)
     cycles = simulation.expand_steps(steps or sqrt_steps())
     t0 = time.perf_counter()
     reps = 20
@@ -509,22 +510,20 @@ def fits(rows: list[dict]) -> dict:
     return out
 
 
-def _netlist_pickle(name: str, tmp: Path) -> str:
+def _design(name: str):
+    """The synthesized netlist of a Verilog file shipped with the package (a worker synthesizes it itself,
+    from the Yosys cache: only its name crosses the process boundary, never a serialized object)."""
     from ..synthesis import synth
-    nl = synth.synthesize(data.verilog(name))
-    f = tmp / (Path(name).stem + ".pkl")
-    f.write_bytes(pickle.dumps(nl))
-    return str(f)
+    return synth.synthesize(data.verilog(name))
 
 
-def section_adder(tmp: Path) -> dict:
+def section_adder() -> dict:
     """The adder section: the 16 sums on each backend, the envelope first and again last."""
-    nlp = _netlist_pickle("adder2.v", tmp)
     rows = {}
     # envelope first and last: the ratio to RK4 is taken against their mean (shared machine)
     for backend in ("envelope", "rk4", "rk4_numpy", "ngspice", "envelope"):
         log(f"adder, 16 inputs, run_physical on {backend}")
-        r = spawn("adder", backend=backend, netlist_pickle=nlp)
+        r = spawn("adder", backend=backend, design="adder2.v")
         if "failed" in r:
             log(f"  FAILED {r['failed']}")
         else:
@@ -534,32 +533,30 @@ def section_adder(tmp: Path) -> dict:
     return {"rows": rows}
 
 
-def section_sqrt(tmp: Path, full_rk4: bool) -> dict:
+def section_sqrt(full_rk4: bool) -> dict:
     """The sqrt section: envelope, RK4 over 400 periods (an estimate), logic; RK4 in full if asked."""
-    nlp = _netlist_pickle("sqrt.v", tmp)
     log("sqrt on the envelope backend (whole run)")
-    env = spawn("sqrt", backend="envelope", netlist_pickle=nlp)
+    env = spawn("sqrt", backend="envelope", design="sqrt.v")
     log(f"  {env.get('wall_s', float('nan')):.1f} s, roots {env.get('root_trace')}")
     log("sqrt on RK4: per-period cost over the first 400 periods")
-    probe = spawn("sqrt", backend="rk4_probe", netlist_pickle=nlp, probe_periods=400)
+    probe = spawn("sqrt", backend="rk4_probe", design="sqrt.v", probe_periods=400)
     log(f"  {probe.get('s_per_period', float('nan')) * 1e3:.1f} ms/period -> estimate "
         f"{probe.get('estimate_s', float('nan')) / 60:.1f} min for {probe.get('total_periods')} periods")
     out = {"envelope": env, "rk4_probe": probe}
     log("sqrt on the logic backend")
-    out["logic"] = spawn("logic", netlist_pickle=nlp)
+    out["logic"] = spawn("logic", design="sqrt.v")
     if full_rk4:
         log("sqrt on RK4 (whole run)")
-        out["rk4"] = spawn("sqrt", backend="rk4", netlist_pickle=nlp, timeout=3000)
+        out["rk4"] = spawn("sqrt", backend="rk4", design="sqrt.v", timeout=3000)
     return out
 
 
-def section_cpu(tmp: Path, quick: bool) -> dict:
+def section_cpu(quick: bool) -> dict:
     """Per-period cost of every backend on the real processor model (verilog/cpu.v), for the sieve estimate."""
     from ..physics import network
     from ..synthesis import synth
     from ..physics.params import DEFAULT as p
-    nlp = _netlist_pickle("cpu.v", tmp)
-    nl = pickle.loads(Path(nlp).read_bytes())
+    nl = _design("cpu.v")
     model = network.build(nl, p)
     from .. import simulation
     timing = simulation.clock_timing(nl)
@@ -572,9 +569,9 @@ def section_cpu(tmp: Path, quick: bool) -> dict:
             P = max(2, P // 5)
         for step in ((1.0,) if b.startswith("envelope") else (2.0,)):
             log(f"cpu.v ({model.n} oscillators) on {b}, {P} periods")
-            r = spawn("scale", backend=b, gates=0, periods=P, step=step, netlist_pickle=nlp)
+            r = spawn("scale", backend=b, gates=0, periods=P, step=step, design="cpu.v")
             if b == "ngspice" and "failed" not in r:
-                r2 = spawn("scale", backend=b, gates=0, periods=2 * P, step=step, netlist_pickle=nlp)
+                r2 = spawn("scale", backend=b, gates=0, periods=2 * P, step=step, design="cpu.v")
                 if "failed" not in r2:
                     slope = (r2["wall_s"] - r["wall_s"]) / P
                     r2["fixed_s"] = r["wall_s"] - P * slope if slope > 0 else None
@@ -587,7 +584,7 @@ def section_cpu(tmp: Path, quick: bool) -> dict:
                 log(f"  {r['s_per_period'] * 1e3:.1f} ms/period, peak {r['rss_peak_mb']:.0f} MB")
             out["rows"].append(r)
     log("cpu.v on the logic backend (run_clocked_logic, inputs 0, 50 cycles)")
-    out["logic"] = spawn("logic", netlist_pickle=nlp, steps=[{"set": {}, "cycles": 50}])
+    out["logic"] = spawn("logic", design="cpu.v", steps=[{"set": {}, "cycles": 50}])
     return out
 
 
@@ -756,14 +753,13 @@ def write(directory="reports", only=None, quick: bool = False, sqrt_rk4_full: bo
     res = read_json(jf, {})
     res["machine"] = MACHINE
     res["platform"] = {"python": platform.python_version(), "cpus": os.cpu_count(), "machine": platform.machine()}
-    with tempfile.TemporaryDirectory() as td:
-        for sec in sections or [""]:          # none: the sieve estimate and the report from the JSON
-            t0 = time.perf_counter()
-            if sec:
-                res.update(_section(sec, res, Path(td), quick, sqrt_rk4_full))
-                res.setdefault("section_wall_s", {})[sec] = time.perf_counter() - t0
-            res["sieve"] = sieve_estimate(res, out)
-            write_json(jf, res, default=float)
+    for sec in sections or [""]:          # none: the sieve estimate and the report from the JSON
+        t0 = time.perf_counter()
+        if sec:
+            res.update(_section(sec, res, quick, sqrt_rk4_full))
+            res.setdefault("section_wall_s", {})[sec] = time.perf_counter() - t0
+        res["sieve"] = sieve_estimate(res, out)
+        write_json(jf, res, default=float)
     made = charts(res, out)
     write_markdown(res, out, made)
     log(f"wrote {jf}, {out / 'performance.md'}")
@@ -780,20 +776,20 @@ def _sections(only) -> list[str]:
     return wanted
 
 
-def _section(sec: str, res: dict, tmp: Path, quick: bool, sqrt_rk4_full: bool) -> dict:
+def _section(sec: str, res: dict, quick: bool, sqrt_rk4_full: bool) -> dict:
     """One section's measurements, as the JSON keys they replace."""
     if sec == "scaling":
         return {"scaling": section_scaling(quick)}
     if sec == "adder":
-        return {"adder": section_adder(tmp)}
+        return {"adder": section_adder()}
     if sec == "sqrt":
-        return {"sqrt": section_sqrt(tmp, sqrt_rk4_full)}
+        return {"sqrt": section_sqrt(sqrt_rk4_full)}
     if sec == "profile":
         return {"profile": section_profile()}
     if sec == "cpu":
-        return {"cpu": section_cpu(tmp, quick)}
+        return {"cpu": section_cpu(quick)}
     log("sqrt on RK4 (whole run)")                 # sqrt_rk4
-    rk = spawn("sqrt", backend="rk4", netlist_pickle=_netlist_pickle("sqrt.v", tmp), timeout=2400)
+    rk = spawn("sqrt", backend="rk4", design="sqrt.v", timeout=2400)
     log(f"  {rk.get('wall_s', float('nan')) / 60:.1f} min")
     return {"sqrt": {**res.get("sqrt", {}), "rk4": rk}}
 

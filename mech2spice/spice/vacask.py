@@ -16,6 +16,7 @@ or a chain of series pulse sources, one ramp per change (VACASK has no PWL sourc
 """
 from __future__ import annotations
 
+import functools
 import math
 import re
 import tempfile
@@ -318,6 +319,39 @@ def emit(model: MechModel, periods: int, stimulus: Stimulus | None = None, batch
     if standalone:
         text += _embed(form)
     return Netlist(text, e.probe_vectors(), form)
+
+
+_INSTANCE = re.compile(r"^(\w+) \(([^()]*)\) (\w+)")
+_MODULE = re.compile(r"module\s+(\w+)\s*\(([^)]*)\);(.*?)endmodule", re.S)
+
+
+@functools.lru_cache(maxsize=8)
+def _internal_nodes(library: str) -> dict[str, tuple[str, ...]]:
+    """Verilog-A module -> its internal nodes (declared electrical, not ports), from a library's text."""
+    out = {}
+    for m in _MODULE.finditer(library):
+        ports = {p.strip() for p in m.group(2).split(",")}
+        nodes = {n.strip() for decl in re.findall(r"electrical\s+([^;]+);", m.group(3)) for n in decl.split(",")}
+        out[m.group(1)] = tuple(sorted(nodes - ports))
+    return out
+
+
+def netlist_unknowns(text: str, libraries: tuple[str, ...]) -> set[str]:
+    """The node unknowns VACASK reports for a netlist this module emitted (lower case, as its raw files name
+    them): every node an instance connects but ground, and `instance:node` for each internal node of the
+    Verilog-A module behind it (`libraries`: the .va texts it loads).  A saved state's names are checked
+    against this set before they go into the netlist's ic list."""
+    internal = {k: v for lib in libraries for k, v in _internal_nodes(lib).items()}
+    cards, out = {}, set()
+    for line in text.split("\ncontrol\n", 1)[0].splitlines():       # the circuit: before the control block
+        if line.startswith("model "):
+            _, card, module = line.split()[:3]
+            cards[card] = module
+        elif m := _INSTANCE.match(line):
+            inst, nodes, card = m.groups()
+            out |= set(nodes.split()) - {"0"}
+            out |= {f"{inst}:{n}" for n in internal.get(cards.get(card, ""), ())}
+    return {n.lower() for n in out}
 
 
 def _embed(form: str) -> str:

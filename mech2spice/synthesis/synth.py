@@ -82,6 +82,9 @@ def combinational_view(g: nx.DiGraph) -> nx.DiGraph:
 def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -> Netlist:
     """Synthesize the Verilog file ``path`` into a clean Netlist of 2-input NOR gates (and latches)."""
     path = Path(path)
+    if '"' in str(path.resolve()) or not str(path.resolve()).isprintable():    # quoted in the Yosys script
+        raise Mech2SpiceError(f"Verilog file {ascii(str(path))}: its path has a quote or a control character, "
+                              "which the Yosys script cannot quote: rename it")
     source = _read_source(path)
     _check_source(path, source)
     if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
@@ -185,13 +188,35 @@ def _cache_path(key: str) -> Path:
 
 
 def _cache_read(key: str | None) -> tuple[str, dict] | None:
+    """The cached (top, module); None (Yosys runs again and replaces the entry) when there is none or it is
+    not a Yosys JSON module in the shape build_netlist reads: the cache is rebuildable data, anyone's."""
     if key is None:
         return None
     try:
-        data = json.loads(_cache_path(key).read_text())
-        return data["top"], data["module"]
-    except (OSError, ValueError, KeyError, TypeError):
+        data = json.loads(_cache_path(key).read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
         return None
+    if not (isinstance(data, dict) and isinstance(data.get("top"), str) and _is_module(data.get("module"))):
+        return None
+    return data["top"], data["module"]
+
+
+def _is_module(module) -> bool:
+    """Ports, cells and net names with the fields and types build_netlist uses."""
+    def table(key: str, fields: dict) -> bool:
+        rows = module.get(key)
+        return isinstance(rows, dict) and all(
+            isinstance(name, str) and isinstance(row, dict) and all(ok(row.get(f)) for f, ok in fields.items())
+            for name, row in rows.items())
+
+    def bits(v) -> bool:
+        return isinstance(v, list) and all(isinstance(b, (int, str)) and not isinstance(b, bool) for b in v)
+
+    def pins(v) -> bool:
+        return isinstance(v, dict) and all(isinstance(p, str) and bits(b) and b for p, b in v.items())
+    return isinstance(module, dict) and table("ports", {"direction": lambda v: isinstance(v, str), "bits": bits}) \
+        and table("cells", {"type": lambda v: isinstance(v, str), "connections": pins}) \
+        and table("netnames", {"hide_name": lambda v: isinstance(v, int), "bits": bits})
 
 
 def _cache_write(key: str | None, name: str, module: dict) -> None:

@@ -320,12 +320,9 @@ def _reasons(records: list[dict]) -> dict:
 
 
 def design_path(path) -> Path:
-    """The Verilog file of a design argument (a path, or a shipped design's file name)."""
-    from .. import data
+    """The Verilog file of a design argument.  Only the path given: a shipped design of the same name is
+    never used in its place (that ran a different design than the one asked for)."""
     p = Path(path)
-    if p.exists():
-        return p
-    shipped = Path(data.verilog(p.name)) if p.suffix == ".v" else None
-    if shipped is not None and shipped.exists():
-        return shipped
-    raise Mech2SpiceError(f"no such design file: {path}")
+    if not p.exists():
+        raise Mech2SpiceError(f"no such file: {path} (the design to sample)")
+    return p

@@ -50,3 +50,22 @@ def test_montecarlo_on_a_missing_path_never_runs_the_shipped_design(tmp_path, ca
                 needle=f"no such file: {missing}")
     for command in (["synth"], ["simulate", "--backend", "logic"], ["emit", "-o", tmp_path / "x.cir"]):
         refused(capsys, command[0], "adder2.v", *command[1:], needle="adder2.v: No such file")
+
+
+# ------------------------------------------------------------------ the assembler's .tape
+
+def test_tape_over_the_programs_own_code_is_refused(tmp_path, capsys):
+    """A tape mapped over code used to assemble; the processor then fetched tape symbols and never halted."""
+    source = (ROOT / "programs/tm_increment.asm").read_text()
+    assert "        .equ MMR 255\n" in source
+    over = tmp_path / "over.asm"
+    over.write_text(source.replace(".equ MMR 255", ".equ MMR 3"))      # address 3: the loop's code
+    line = 1 + source.splitlines().index("        .tape MMR 0 21222")
+    err = refused(capsys, "cpu", "run", over, "--backend", "logic", "--max-cycles", "2000",
+                  needle=f"{over}: line {line}: .tape at address 3 lies over the program")
+    assert "line 11 puts a byte there" in err                           # LDNX_AB MMR: bytes 3, 4
+    twice = tmp_path / "twice.asm"
+    twice.write_text(source + "        .tape 254 0 1\n")
+    refused(capsys, "cpu", "run", twice, "--backend", "logic", needle="a second .tape")
+    rc, out, _ = run(capsys, "cpu", "run", ROOT / "programs/tm_increment.asm", "--backend", "logic")
+    assert rc == 0 and "tape at 255" in out

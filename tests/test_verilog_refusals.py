@@ -69,3 +69,166 @@ def test_tape_over_the_programs_own_code_is_refused(tmp_path, capsys):
     refused(capsys, "cpu", "run", twice, "--backend", "logic", needle="a second .tape")
     rc, out, _ = run(capsys, "cpu", "run", ROOT / "programs/tm_increment.asm", "--backend", "logic")
     assert rc == 0 and "tape at 255" in out
+
+
+# ------------------------------------------------------------------ Icarus Verilog, the reference
+
+def icarus(tmp_path, src: str, top: str, inputs: dict, outputs: dict, vectors: list[dict],
+           signed=()) -> list[dict]:
+    """Icarus's value of every output for each input vector: None where any bit is x or z.
+    `inputs`/`outputs`: port -> width; ports in `signed` are declared and read as signed."""
+    decl = lambda kind, p, w: f"  {kind} {'signed ' * (p in signed)}[{w - 1}:0] {p};"   # noqa: E731
+    steps = [" ".join(f"{p} = {v};" for p, v in vec.items()) + f' #1 $display("{" ".join(["%b"] * len(outputs))}", '
+             f"{', '.join(outputs)});" for vec in vectors]
+    tb = "\n".join(["module tb;", *(decl("reg", p, w) for p, w in inputs.items()),
+                    *(decl("wire", p, w) for p, w in outputs.items()),
+                    f"  {top} dut({', '.join(f'.{p}({p})' for p in [*inputs, *outputs])});",
+                    "  initial begin", *(f"    {s}" for s in steps), "  end", "endmodule", ""])
+    (tmp_path / "tb.v").write_text(tb)
+    sim = tmp_path / "tb.vvp"
+    subprocess.run(["iverilog", "-o", sim, src, tmp_path / "tb.v"], check=True, capture_output=True)
+    lines = subprocess.run(["vvp", "-n", sim], check=True, capture_output=True, text=True).stdout.split("\n")
+    return [{p: _value(b, p in signed) for p, b in zip(outputs, line.split())} for line in lines[:len(vectors)]]
+
+
+def _value(bits: str, signed: bool):
+    if set(bits) - {"0", "1"}:
+        return None
+    v = int(bits, 2)
+    return v - (1 << len(bits)) if signed and bits[0] == "1" else v
+
+
+def logic(capsys, src: str, vector: dict) -> dict:
+    """`simulate --backend logic --json` of one input vector: its output ports."""
+    sets = [x for p, v in vector.items() for x in ("--set", f"{p}={v}")]
+    rc, out, err = run(capsys, "simulate", src, "--backend", "logic", "--json", *sets)
+    assert rc == 0, err
+    return json.loads(out)["outputs"]
+
+
+# ------------------------------------------------------------------ multiple drivers
+
+TWO_ASSIGNS = "module two(input a, input b, output y);\n  assign y = a;\n  assign y = b;\nendmodule\n"
+
+
+@needs_icarus
+def test_icarus_reads_x_where_two_assignments_disagree(tmp_path):
+    src = verilog(tmp_path, TWO_ASSIGNS)
+    got = icarus(tmp_path, src, "two", {"a": 1, "b": 1}, {"y": 1},
+                 [{"a": 0, "b": 1}, {"a": 1, "b": 0}, {"a": 1, "b": 1}, {"a": 0, "b": 0}])
+    assert got == [{"y": None}, {"y": None}, {"y": 1}, {"y": 0}]
+
+
+@pytest.mark.parametrize("body, needle", [
+    ("  assign y = a;\n  assign y = b;\n", "line 3: 'y' has more than one driver (lines 2, 3)"),
+    # proc's opt_expr used to fold the NOT away, leaving w = a
+    ("  wire w;\n  assign w = a;\n  assign w = ~a;\n  assign y = w;\n", "line 4: 'w' has more than one driver (lines 3, 4)"),
+    ("  assign y = 1'b0;\n  assign y = 1'b1;\n", "line 3: 'y' has more than one driver (lines 2, 3)"),
+    ("  assign y = a;\n  assign y = 1'b0;\n", "line 3: 'y' has more than one driver (lines 2, 3)"),
+])
+def test_two_drivers_of_one_net_are_refused_with_their_lines(tmp_path, capsys, body, needle):
+    src = verilog(tmp_path, f"module two(input a, input b, output y);\n{body}endmodule\n")
+    refused(capsys, "synth", src, needle=f"{src}, {needle}")
+
+
+def test_two_registers_and_an_instance_beside_an_assign_are_refused(tmp_path, capsys):
+    src = verilog(tmp_path, "module t(input clk, input a, input b, output reg [1:0] y);\n"
+                            "  always @(posedge clk) y[0] <= a;\n  always @(posedge clk) y[0] <= b;\n"
+                            "  always @(posedge clk) y[1] <= a;\nendmodule\n")
+    refused(capsys, "synth", src, needle=f"{src}, line 3: 'y[0]' has more than one driver (lines 2, 3)")
+    src = verilog(tmp_path, "module inv(input a, output y);\n  assign y = ~a;\nendmodule\n"
+                            "module t(input a, input b, output y);\n  inv u(.a(a), .y(y));\n  assign y = b;\nendmodule\n")
+    refused(capsys, "synth", src, needle=f"{src}, line 6: 'y' has more than one driver (lines 5, 6)")
+
+
+def test_disjoint_bits_and_the_same_driver_twice_are_one_driver(tmp_path, capsys):
+    """Two assignments to different bits, or of one input to one net twice, are accepted (Icarus agrees)."""
+    src = verilog(tmp_path, "module t(input a, input b, input [0:3] c, output [1:0] y, output z, output [0:3] w);\n"
+                            "  assign y[0] = a;\n  assign y[1] = b;\n  assign z = a;\n  assign z = a;\n"
+                            "  assign w[0:1] = c[2:3];\n  assign w[2:3] = c[0:1];\nendmodule\n")
+    assert logic(capsys, src, {"a": 1, "b": 0, "c": 0b0110}) == {"y": 1, "z": 1, "w": 0b1001}
+
+
+# ------------------------------------------------------------------ which module is the top
+
+TWO_MODULES = ("module foo(input a, output y);\n  assign y = ~a;\nendmodule\n"
+               "module bar(input a, input b, output y);\n  assign y = a & b;\nendmodule\n")
+
+
+def test_two_unrelated_modules_without_top_are_refused(tmp_path, capsys):
+    src = verilog(tmp_path, TWO_MODULES)
+    refused(capsys, "synth", src, needle=f"{src}: several top-level modules: foo (line 1), bar (line 4); "
+                                         "choose one with --top")
+    for top, inputs in (("foo", {"a": 1}), ("bar", {"a": 1, "b": 1})):
+        rc, out, _ = run(capsys, "synth", src, "--top", top, "--json")
+        assert rc == 0 and json.loads(out)["top"] == top and json.loads(out)["inputs"] == inputs
+    marked = verilog(tmp_path, TWO_MODULES.replace("module bar", "(* top *) module bar"), "marked.v")
+    rc, out, _ = run(capsys, "synth", marked, "--json")
+    assert rc == 0 and json.loads(out)["top"] == "bar"          # chosen in the source
+
+
+def test_one_top_with_submodules_needs_no_top(tmp_path, capsys):
+    src = verilog(tmp_path, "module inv(input a, output y);\n  assign y = ~a;\nendmodule\n"
+                            "module pair(input [1:0] a, output [1:0] y);\n"
+                            "  inv u0(.a(a[0]), .y(y[0]));\n  inv u1(.a(a[1]), .y(y[1]));\nendmodule\n")
+    assert logic(capsys, src, {"a": 2}) == {"y": 1}
+
+
+@pytest.mark.parametrize("design", sorted(p.name for p in (ROOT / "verilog").glob("*.v")))
+def test_every_shipped_design_synthesises_as_before(capsys, design):
+    """The new checks refuse none of verilog/ (the four refused here were refused before, for their own reason)."""
+    rc, out, err = run(capsys, "synth", ROOT / "verilog" / design, "--json")
+    expected = {"async_reset.v": "asynchronous", "bad_syntax.v": "syntax error",
+                "inferred_latch.v": "level-sensitive latch", "loop.v": "combinational loop"}
+    if design in expected:
+        assert rc == 2 and expected[design] in err, err
+    else:
+        assert rc == 0, err
+
+
+# ------------------------------------------------------------------ non-edge always blocks
+
+def test_an_always_block_on_a_clock_without_an_edge_is_refused(tmp_path, capsys):
+    """`always @(clk) q <= d` is a register to a simulator (q changes only when clk does) and a wire to Yosys."""
+    src = verilog(tmp_path, "module t(input clk, input d, output reg q);\n  always @(clk)\n    q <= d;\nendmodule\n")
+    refused(capsys, "synth", src, needle=f"{src}, line 2: this always block reads 'd' but its sensitivity list "
+                                         "leaves it out")
+    if ICARUS:     # d rises while clk holds still: Icarus keeps q at 0, the wire Yosys builds would follow d
+        got = icarus(tmp_path, src, "t", {"clk": 1, "d": 1}, {"q": 1},
+                     [{"clk": 0, "d": 0}, {"clk": 1, "d": 0}, {"d": 1}, {"clk": 0}])
+        assert got == [{"q": 0}, {"q": 0}, {"q": 0}, {"q": 1}]
+
+
+def test_a_level_sensitive_latch_and_a_bare_always_are_refused_with_their_lines(tmp_path, capsys):
+    src = verilog(tmp_path, "module t(input clk, input d, output reg q);\n"
+                            "  always @(clk or d)\n    if (clk) q <= d;\nendmodule\n")
+    refused(capsys, "synth", src, needle=f"{src}, line 2: module t: Yosys inferred a level-sensitive latch")
+    src = verilog(tmp_path, "module t(input a, output reg q);\n  always q = a;\nendmodule\n")
+    refused(capsys, "synth", src, needle=f"{src}, line 2: an always block without an event control")
+    src = verilog(tmp_path, "module t(input a, output reg q);\n  always @* q = a;\nendmodule\n", "star.sv")
+    assert logic(capsys, src, {"a": 1}) == {"q": 1}
+
+
+COMPLETE_LIST = """module t(input clk, input [3:0] a, input [3:0] b, input [1:0] s, output reg [4:0] y, output reg g);
+  always @(a or b or s)
+    case (s)
+      2'd0: y = a & b;
+      2'd1: y = a | b;
+      2'd2: y = a ^ b;
+      default: y = a + b;
+    endcase
+  always @(clk or a) g = clk & a[0];   // a level-sensitive read of clk: combinational, both agree
+endmodule
+"""
+
+
+@needs_icarus
+def test_a_complete_sensitivity_list_is_combinational_and_matches_icarus(tmp_path, capsys):
+    import random
+    rng = random.Random(26)
+    src = verilog(tmp_path, COMPLETE_LIST)
+    widths = {"clk": 1, "a": 4, "b": 4, "s": 2}
+    vectors = [{p: rng.randrange(1 << w) for p, w in widths.items()} for _ in range(200)]
+    expected = icarus(tmp_path, src, "t", widths, {"y": 5, "g": 1}, vectors)
+    assert [logic(capsys, src, v) for v in vectors] == expected
+

@@ -232,3 +232,48 @@ def test_a_complete_sensitivity_list_is_combinational_and_matches_icarus(tmp_pat
     expected = icarus(tmp_path, src, "t", widths, {"y": 5, "g": 1}, vectors)
     assert [logic(capsys, src, v) for v in vectors] == expected
 
+
+
+# ------------------------------------------------------------------ signed ports
+
+SIGNED = """module sg(input signed [3:0] a, input signed [3:0] b, input [3:0] u,
+          output signed [4:0] sum, output signed [7:0] prod, output lt, output signed [3:0] sra,
+          output signed [4:0] mixed, output [3:0] raw);
+  assign sum = a + b;
+  assign prod = a * b;
+  assign lt = a < b;                  // a signed comparison
+  assign sra = a >>> 1;
+  assign mixed = $signed(u) - b;      // an unsigned port read as signed inside
+  assign raw = a;                     // a signed value on an unsigned port: its bit pattern
+endmodule
+"""
+SIGNED_IN, SIGNED_OUT = {"a": 4, "b": 4, "u": 4}, {"sum": 5, "prod": 8, "lt": 1, "sra": 4, "mixed": 5, "raw": 4}
+
+
+@needs_icarus
+def test_signed_ports_are_read_and_printed_as_icarus_does(tmp_path, capsys):
+    import random
+    rng = random.Random(2026)
+    src = verilog(tmp_path, SIGNED)
+    vectors = [{"a": rng.randrange(-8, 8), "b": rng.randrange(-8, 8), "u": rng.randrange(16)} for _ in range(200)]
+    expected = icarus(tmp_path, src, "sg", SIGNED_IN, SIGNED_OUT, vectors, signed={"a", "b", "sum", "prod", "sra",
+                                                                                     "mixed"})
+    assert any(e["sum"] < 0 for e in expected) and any(e["raw"] > 7 for e in expected)
+    assert [logic(capsys, src, v) for v in vectors] == expected
+
+
+def test_signed_ports_take_the_twos_complement_range(tmp_path, capsys):
+    from mech2spice.experiments import montecarlo as mc
+    from mech2spice.synthesis.synth import synthesize
+    src = verilog(tmp_path, SIGNED)
+    rc, out, _ = run(capsys, "synth", src, "--json")
+    assert rc == 0 and json.loads(out)["signed"] == ["a", "b", "sum", "prod", "sra", "mixed"]
+    assert logic(capsys, src, {"a": -8, "b": -1, "u": 15}) == {"sum": -9, "prod": 8, "lt": 1, "sra": -4,
+                                                               "mixed": 0, "raw": 8}
+    refused(capsys, "simulate", src, "--backend", "logic", "--set", "a=8",
+            needle="value 8 does not fit input 'a' (4 bits, signed, -8..7)")
+    refused(capsys, "simulate", src, "--backend", "logic", "--set", "u=-1",
+            needle="value -1 does not fit input 'u' (4 bits, 0..15)")
+    vectors = mc.all_vectors(synthesize(verilog(tmp_path, "module t(input signed [1:0] a, input b, output y);\n"
+                                                          "  assign y = a[0] ^ b;\nendmodule\n", "t.v")))
+    assert sorted({v["a"] for v in vectors}) == [-2, -1, 0, 1] and len(vectors) == 8

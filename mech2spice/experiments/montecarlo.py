@@ -42,7 +42,7 @@ from ..physics import network, spread
 from ..physics.noise import check_temperature
 from ..physics.params import GateParams, band_of, margin
 from ..physics.stimulus import Stimulus
-from ..synthesis.ports import output_bits
+from ..synthesis.ports import output_bits, port_range
 from ..synthesis.synth import Netlist
 from .tolerance import QUANTILES, wilson
 
@@ -132,7 +132,8 @@ def all_vectors(netlist: Netlist) -> list[dict[str, int]]:
     n = sum(w for _, w in ports)
     if 2 ** n > MAX_ALL_VECTORS:
         raise Mech2SpiceError(f"{netlist.top} has {2 ** n} input combinations: give the inputs with --set P=V")
-    return [dict(zip([p for p, _ in ports], combo)) for combo in itertools.product(*[range(2 ** w) for _, w in ports])]
+    spans = [port_range(netlist, p) for p, _ in ports]
+    return [dict(zip([p for p, _ in ports], combo)) for combo in itertools.product(*spans)]
 
 
 class DesignMC:

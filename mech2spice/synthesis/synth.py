@@ -48,6 +48,7 @@ class Netlist:
     inputs: dict[str, int]    # port name -> width, in declaration order
     outputs: dict[str, int]   # port name -> width, in declaration order
     clock: str | None = None  # the flip-flops' clock port, if any
+    signed: frozenset = frozenset()   # ports declared signed: their values are two's complement
 
     def gates(self) -> list[str]:
         """NOR gates in topological order (level by level, by gate number within a level); latch
@@ -115,7 +116,7 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
     remove_dead_gates(g)
     outputs = {p: w for p, w in netlist.outputs.items() if p in ports}
     clock = netlist.clock if any(d["kind"] == "latch" for _, d in g.nodes(data=True)) else None
-    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock)
+    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed)
 
 
 # --------------------------------------------------------------------------- running Yosys
@@ -355,7 +356,8 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
                                       "the mechanical clock only drives latches")
             g.remove_node(n)
         inputs = {p: w for p, w in inputs.items() if p != clock}
-    return Netlist(top, g, inputs, outputs, clock)
+    signed = frozenset(p for p, info in module["ports"].items() if info.get("signed") and p != clock)
+    return Netlist(top, g, inputs, outputs, clock, signed)
 
 
 def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict) -> str | None:

@@ -20,6 +20,9 @@ from pathlib import Path
 
 from ..errors import Mech2SpiceError
 
+#: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
+VERSION = 1
+
 
 def check(tmp: Path, path: Path, source: str, top: str | None) -> None:
     """Run every check on the files the flow wrote in `tmp` (`source`: the file's text)."""

@@ -176,10 +176,11 @@ def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict]:
 
 
 def _cache_key(source: str, top: str | None) -> str | None:
-    """A content key of (flow, source, Yosys build); None for a source with `include (other files take part)."""
+    """A content key of (flow, source, Yosys build, refusal checks); None for a source with `include (other
+    files take part)."""
     if "`include" in source:
         return None
-    text = json.dumps([_flow("SOURCE", top), source, yosys.identity()])
+    text = json.dumps([_flow("SOURCE", top), source, yosys.identity(), refusals.VERSION])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 

@@ -126,7 +126,8 @@ def cmd_synth(args) -> int:
     model = network.build(nl, load_params(args.params))
     out = {"top": nl.top, "gates": len(model.design.gates), "latches": len(nl.latches()), **model.counts(),
            "inputs": nl.inputs, "outputs": nl.outputs, "clock": nl.clock, "logic_gates": len(nl.gates()),
-           "logic_depth": network.logic_depth(nl)}
+           "logic_depth": network.logic_depth(nl),
+           "signed": [p for p in {**nl.inputs, **nl.outputs} if p in nl.signed]}     # two's complement ports
     if args.json:
         _print_json(out)
     else:
@@ -134,7 +135,8 @@ def cmd_synth(args) -> int:
               f"logic depth {out['logic_depth']}" + (f", clock '{nl.clock}'" if nl.clock else ""))
         print(f"  {out['oscillators']} oscillators, {out['linear_springs']} linear springs, "
               f"{out['nonlinear_springs']} nonlinear springs, {out['dashpots']} dashpots")
-        print(f"  inputs  {out['inputs']}\n  outputs {out['outputs']}")
+        print(f"  inputs  {out['inputs']}\n  outputs {out['outputs']}"
+              + (f"\n  signed  {', '.join(out['signed'])} (two's complement values)" if out["signed"] else ""))
     return 0
 
 

@@ -64,14 +64,30 @@ def assemble_program(text: str) -> Program:
         image[st.addr:st.addr + len(data)] = data
         end = max(end, st.addr + len(data))
         rows.append((st.addr, data, st.source))
-    tape = None
-    for st in statements:
-        if st.tape is not None:
-            addr, head, cells = st.tape
-            tape = TapeSpec(_value(addr, symbols, st.lineno), _value(head, symbols, st.lineno), cells)
+    tape = _tape(statements, symbols, rows)
     listing = "\n".join(f"{addr:3d}  {' '.join(f'{b:02X}' for b in data):<6} {src}" if data
                          else f"{'':11}{src}" for addr, data, src in rows)
     return Program(bytes(image[:end]), listing, symbols, tape, rows)
+
+
+def _tape(statements: list, symbols: dict[str, int], rows: list) -> TapeSpec | None:
+    """The one .tape, at an address no statement emits a byte to: the device answers every read there,
+    so code or data under it would be replaced by tape symbols (a program that then never halts)."""
+    tapes = [st for st in statements if st.tape is not None]
+    if len(tapes) > 1:
+        raise _err(tapes[1].lineno, f"a second .tape (the first is on line {tapes[0].lineno}): "
+                                    "the processor has one tape")
+    if not tapes:
+        return None
+    st = tapes[0]
+    addr, head, cells = st.tape
+    spec = TapeSpec(_value(addr, symbols, st.lineno), _value(head, symbols, st.lineno), cells)
+    for (start, data, _), other in zip(rows, statements):
+        if start <= spec.addr < start + len(data):
+            raise _err(st.lineno, f".tape at address {spec.addr} lies over the program (line {other.lineno} "
+                                  f"puts a byte there), which would read tape symbols instead: map the tape "
+                                  f"at an address the program does not use")
+    return spec
 
 
 @dataclass

@@ -42,7 +42,7 @@ from ..physics import network, spread
 from ..physics.noise import check_temperature
 from ..physics.params import GateParams, band_of, margin
 from ..physics.stimulus import Stimulus
-from ..synthesis.ports import output_bits
+from ..synthesis.ports import output_bits, port_range
 from ..synthesis.synth import Netlist
 from .tolerance import QUANTILES, wilson
 
@@ -142,7 +142,8 @@ def all_vectors(netlist: Netlist) -> list[dict[str, int]]:
     n = sum(w for _, w in ports)
     if 2 ** n > MAX_ALL_VECTORS:
         raise Mech2SpiceError(f"{netlist.top} has {2 ** n} input combinations: give the inputs with --set P=V")
-    return [dict(zip([p for p, _ in ports], combo)) for combo in itertools.product(*[range(2 ** w) for _, w in ports])]
+    spans = [port_range(netlist, p) for p, _ in ports]
+    return [dict(zip([p for p, _ in ports], combo)) for combo in itertools.product(*spans)]
 
 
 class DesignMC:
@@ -330,12 +331,9 @@ def _reasons(records: list[dict]) -> dict:
 
 
 def design_path(path) -> Path:
-    """The Verilog file of a design argument (a path, or a shipped design's file name)."""
-    from .. import data
+    """The Verilog file of a design argument.  Only the path given: a shipped design of the same name is
+    never used in its place (that ran a different design than the one asked for)."""
     p = Path(path)
-    if p.exists():
-        return p
-    shipped = Path(data.verilog(p.name)) if p.suffix == ".v" else None
-    if shipped is not None and shipped.exists():
-        return shipped
-    raise Mech2SpiceError(f"no such design file: {path}")
+    if not p.exists():
+        raise Mech2SpiceError(f"no such file: {path} (the design to sample)")
+    return p

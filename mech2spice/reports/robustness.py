@@ -43,7 +43,8 @@ RK4_NOISE = ("gate", NOISE_TS, 100)      # the gate's BER on RK4 too: design, te
 def design_file(name: str) -> Path:
     """The Verilog of a studied design (the gate and chain are written to CACHE)."""
     if name == "adder":
-        return mc.design_path("adder2.v").resolve()
+        from .. import data
+        return Path(data.verilog("adder2.v")).resolve()
     path = (CACHE / f"{name}.v").resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
     if not path.exists() or path.read_text() != VERILOG[name]:
@@ -97,7 +98,7 @@ def clocked_job(name: str, sigma: float, params: str = "default") -> dict:
     base = {"params": params, "backend": "envelope", "spread": mc.spec_of(sigma).describe(), "seed": SEED,
             "union": 1}
     if name == "sqrt":
-        return {"design": str(mc.design_path("sqrt.v").resolve()),
+        return {"design": str(Path(data.verilog("sqrt.v")).resolve()),
                 "steps": inputs.stimulus_steps(data.verilog("sqrt_2809.json"), {}, "envelope"), **base}
     prog = Path(data.program(CPU_PROGRAM)).resolve()
     return {"program": str(prog), "program_sha256": hashlib.sha256(prog.read_bytes()).hexdigest(),
@@ -222,9 +223,10 @@ def big_sweep(run_it: bool, log) -> dict | None:
 
 def cpu_gates() -> int:
     """NOR gates of the processor netlist (verilog/cpu.v)."""
+    from .. import data
     from ..physics import network
     from ..synthesis.synth import synthesize
-    return len(synthesize(mc.design_path("cpu.v"), max_fanout=network.MAX_FANOUT).gates())
+    return len(synthesize(data.verilog("cpu.v"), max_fanout=network.MAX_FANOUT).gates())
 
 
 def stored_scaling() -> list[dict]:

@@ -33,7 +33,7 @@ from pathlib import Path
 import networkx as nx
 
 from ..errors import Mech2SpiceError
-from . import yosys
+from . import refusals, yosys
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
@@ -48,6 +48,7 @@ class Netlist:
     inputs: dict[str, int]    # port name -> width, in declaration order
     outputs: dict[str, int]   # port name -> width, in declaration order
     clock: str | None = None  # the flip-flops' clock port, if any
+    signed: frozenset = frozenset()   # ports declared signed: their values are two's complement
 
     def gates(self) -> list[str]:
         """NOR gates in topological order (level by level, by gate number within a level); latch
@@ -90,7 +91,7 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
         raise Mech2SpiceError(f"invalid top module name {top!r}")
     name, module = _run_yosys(path, top, source)
-    return clean(build_netlist(name, module), max_fanout=max_fanout)
+    return clean(build_netlist(name, module, path), max_fanout=max_fanout)
 
 
 def clean(netlist: Netlist, *, max_fanout: int | None = None) -> Netlist:
@@ -118,7 +119,7 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
     remove_dead_gates(g)
     outputs = {p: w for p, w in netlist.outputs.items() if p in ports}
     clock = netlist.clock if any(d["kind"] == "latch" for _, d in g.nodes(data=True)) else None
-    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock)
+    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed)
 
 
 # --------------------------------------------------------------------------- running Yosys
@@ -146,10 +147,13 @@ def _check_source(path: Path, text: str) -> None:
 def _flow(source: str, top: str | None) -> str:
     """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python)."""
     read = "read_verilog -sv" if source.endswith(".sv") else "read_verilog"
-    return "\n".join([
-        f'{read} "{source}"',
+    return "\n".join([                             # ast.txt, *.il: for refusals.py
+        f'tee -o ast.txt {read} -dump_ast1 "{source}"',   # not -q: its errors must reach the log
+        "write_rtlil read.il",                      # before hierarchy drops the modules the top leaves unused
         f"hierarchy -check -top {top}" if top else "hierarchy -check -auto-top",
-        "proc",
+        "proc -noopt",                              # `proc` less its opt_expr, which can fold away one of
+        "write_rtlil drivers.il",                   # two conflicting drivers: the nets as written
+        "opt_expr -keepdc",                         # the rest of `proc`
         "tee -q -o init.txt select -list a:init",   # declaration initialisers (`reg q = 1`)
         "tee -q -o check.txt check",                # undriven nets, before synth folds them to constants
         "flatten",
@@ -175,10 +179,11 @@ def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict]:
 
 
 def _cache_key(source: str, top: str | None) -> str | None:
-    """A content key of (flow, source, Yosys build); None for a source with `include (other files take part)."""
+    """A content key of (flow, source, Yosys build, refusal checks); None for a source with `include (other
+    files take part)."""
     if "`include" in source:
         return None
-    text = json.dumps([_flow("SOURCE", top), source, yosys.identity()])
+    text = json.dumps([_flow("SOURCE", top), source, yosys.identity(), refusals.VERSION])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -243,6 +248,7 @@ def _yosys_run(path: Path, top: str | None) -> tuple[str, dict]:
             msg = yosys.error_line(result).replace(rel, str(path))
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
                                   else f"yosys error: {path}: {msg}")
+        refusals.check(Path(tmp), path, _read_source(path), top)
         _check_init_and_drivers(Path(tmp), path)
         tristate = (Path(tmp) / "tristate.txt").read_text().split()
         if tristate:
@@ -346,13 +352,13 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
                           "to NOR gates)")
 
 
-def build_netlist(top: str, module: dict) -> Netlist:
-    """Build the raw (pre-hygiene) graph from a Yosys JSON module."""
+def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
+    """Build the raw (pre-hygiene) graph from a Yosys JSON module (`path`: its Verilog, for messages)."""
     g = nx.DiGraph()
     inputs, outputs, driver = _add_inputs(g, top, module)
     if not outputs:
         raise Mech2SpiceError(f"module {top} has no output ports: nothing to synthesize")
-    cells = _add_cells(g, top, module, driver)
+    cells = _add_cells(g, top, module, driver, path)
     names = _net_names(module)
     clock = _clock_port(g, top, module, driver)
     for node, (pins, out_net) in cells.items():
@@ -376,7 +382,8 @@ def build_netlist(top: str, module: dict) -> Netlist:
                                       "the mechanical clock only drives latches")
             g.remove_node(n)
         inputs = {p: w for p, w in inputs.items() if p != clock}
-    return Netlist(top, g, inputs, outputs, clock)
+    signed = frozenset(p for p, info in module["ports"].items() if info.get("signed") and p != clock)
+    return Netlist(top, g, inputs, outputs, clock, signed)
 
 
 def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict) -> str | None:
@@ -415,11 +422,15 @@ def _add_inputs(g: nx.DiGraph, top: str, module: dict):
     return inputs, outputs, driver
 
 
-def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict) -> dict:
+def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path | None) -> dict:
     """One node per cell (named g<N>); returns node -> (input bits, output net)."""
     cells = {}
     for cell in module["cells"].values():
-        mapped = map_cell(cell["type"], top)
+        try:
+            mapped = map_cell(cell["type"], top)
+        except Mech2SpiceError as err:          # say where: the latch, async reset, ... came from
+            line = path and refusals.src_line(cell.get("attributes", {}).get("src"), path)
+            raise Mech2SpiceError(f"{path}, line {line}: {err}" if line else str(err)) from None
         if mapped is None:
             continue
         kind, pins, out_pin = mapped

@@ -73,7 +73,7 @@ def run_script(script: str, workdir: Path | str) -> YosysResult:
     return YosysResult(proc.returncode, proc.stdout, proc.stderr)
 
 
-_LINE_ERROR = re.compile(r"^(?P<file>\S+?):(?P<line>\d+)(?:\.\d+(?:-\d+\.\d+)?)?: ERROR: (?P<msg>.*)$")
+_LINE_ERROR = re.compile(r"^(?P<file>\S+?):(?P<line>\d+)(?:\.\d+(?:-\d+\.\d+)?)?: ERROR: ?(?P<msg>.*)$")
 
 
 _STACK = re.compile(r"call stack exhausted|stack overflow", re.I)

@@ -1,0 +1,354 @@
+"""Verilog that the NOR mapping cannot represent faithfully, refused with the file and line.
+
+Yosys accepts each of these and synthesises *something*, while a simulator (Icarus) or the hardware
+would do something else; every check reads a file the Yosys flow (synth._flow) writes beside its netlist:
+
+* ``read.il`` (RTLIL as read): several top-level modules and no --top (Yosys would pick one by itself).
+* ``drivers.il`` (after ``proc -noopt``, before anything merges or folds nets): a net with two drivers,
+  e.g. two continuous assignments (a simulator reads x where they disagree; Yosys keeps one, and proc's
+  own opt_expr can even delete one of them).
+* ``ast.txt`` (``read_verilog -dump_ast1``): a non-edge ``always`` whose sensitivity list leaves out a
+  signal it reads (Yosys builds it as ``@*``; a simulator runs it only when a listed signal changes, e.g.
+  ``always @(clk) q <= d``), or an ``always`` with no event control at all (a simulator loops forever).
+"""
+from __future__ import annotations
+
+import re
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import Mech2SpiceError
+
+#: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
+VERSION = 1
+
+
+def check(tmp: Path, path: Path, source: str, top: str | None) -> None:
+    """Run every check on the files the flow wrote in `tmp` (`source`: the file's text)."""
+    if top is None:
+        check_single_top((tmp / "read.il").read_text(), path)
+    check_sensitivity((tmp / "ast.txt").read_text(), path, source)
+    check_drivers((tmp / "drivers.il").read_text(), path, source)
+
+
+def src_line(src: str | None, path: Path) -> int | None:
+    """The first line of a Yosys src attribute ('FILE:L.C-L.C') when FILE is the design file."""
+    m = re.match(r"(.*?):(\d+)[.:]", src or "")
+    return int(m[2]) if m and Path(m[1]).name == path.name else None
+
+
+def _name(rtlil_id: str) -> str:
+    """RTLIL '\\foo' -> 'foo' (generated '$...' names stay as they are)."""
+    return rtlil_id[1:] if rtlil_id.startswith("\\") else rtlil_id
+
+
+# --------------------------------------------------------------------------- several top modules
+
+def check_single_top(rtlil: str, path: Path) -> None:
+    """Without --top, the file must hold one module that no other instantiates (or mark one (* top *))."""
+    modules, used, marked, attrs, current = {}, set(), False, {}, None
+    for line in rtlil.splitlines():
+        if m := re.match(r"attribute \\(\w+) (.*)$", line):
+            attrs[m[1]] = m[2]
+        elif m := re.match(r"module (\S+)$", line):
+            current = _name(m[1])
+            if attrs.get("blackbox", "0") == "0":
+                modules[current] = src_line(attrs.get("src", "").strip('"'), path)
+            marked |= attrs.get("top", "0") != "0"
+            attrs = {}
+        elif m := re.match(r"  cell (\\\S+) ", line):
+            used.add(_name(m[1]))
+    roots = [name for name in modules if name not in used]
+    if len(roots) > 1 and not marked:
+        listed = ", ".join(f"{r} (line {modules[r]})" if modules[r] else r for r in roots)
+        raise Mech2SpiceError(f"{path}: several top-level modules: {listed}; choose one with --top "
+                              "(synthesize(top=...) in the API)")
+
+
+# --------------------------------------------------------------------------- sensitivity lists
+
+@dataclass
+class _Ast:
+    kind: str
+    src: str
+    name: str | None
+    children: list = field(default_factory=list)
+
+
+_AST_LINE = re.compile(r"^( *)(AST_\w+|ATTR)\b(?: <([^>]*)>)?")
+_AST_STR = re.compile(r" str='(.*?)'")
+
+
+def read_ast(text: str) -> list[_Ast]:
+    """The AST_MODULE trees of a `read_verilog -dump_ast1` log (nesting by indentation)."""
+    roots, stack = [], []
+    for line in text.splitlines():
+        m = _AST_LINE.match(line)
+        if not m:
+            continue
+        name = _AST_STR.search(line)
+        node = _Ast(m[2], m[3] or "", _name(name[1]) if name else None)
+        depth = len(m[1])
+        while stack and stack[-1][0] >= depth:
+            stack.pop()
+        (stack[-1][1].children if stack else roots).append(node)
+        stack.append((depth, node))
+    return [n for n in roots if n.kind == "AST_MODULE"]
+
+
+def _nodes(node: _Ast, skip=()):
+    """Every node under `node` (itself included), not entering subtrees whose kind is in `skip`."""
+    stack = [node]
+    while stack:
+        node = stack.pop()
+        yield node
+        stack.extend(c for c in reversed(node.children) if c.kind not in skip)
+
+
+_EVENTS = ("AST_EDGE", "AST_POSEDGE", "AST_NEGEDGE")
+_ASSIGN = ("AST_ASSIGN_EQ", "AST_ASSIGN_LE")
+
+
+def _reads(node: _Ast, reads: set, written: set) -> None:
+    """Names `node` reads and names it assigns or declares (an lvalue's indices are reads)."""
+    if node.kind in _ASSIGN:
+        _lvalue(node.children[0], reads, written)
+        for child in node.children[1:]:
+            _reads(child, reads, written)
+        return
+    if node.kind in ("AST_WIRE", "AST_MEMORY"):        # a local declaration in a named block
+        written.add(node.name)
+        return
+    if node.kind == "AST_IDENTIFIER":
+        reads.add(node.name)
+    for child in node.children:
+        _reads(child, reads, written)
+
+
+def _lvalue(node: _Ast, reads: set, written: set) -> None:
+    if node.kind == "AST_IDENTIFIER":
+        written.add(node.name)
+        for child in node.children:
+            _reads(child, reads, written)
+    else:
+        for child in node.children:
+            _lvalue(child, reads, written)
+
+
+def check_sensitivity(ast_text: str, path: Path, source: str) -> None:
+    """Refuse non-edge always blocks that a simulator runs differently from the gates Yosys builds."""
+    for module in read_ast(ast_text):
+        signals = {n.name for n in _nodes(module, ("AST_FUNCTION", "AST_TASK"))
+                   if n.kind in ("AST_WIRE", "AST_MEMORY")}
+        for block in (n for n in _nodes(module) if n.kind == "AST_ALWAYS"):
+            events = [c for c in block.children if c.kind in _EVENTS]
+            if any(c.kind != "AST_EDGE" for c in events):
+                continue                                 # posedge/negedge: a register, mapped as one
+            where = f"{path}, line {src_line(block.src, path)}" if src_line(block.src, path) else str(path)
+            if not events:
+                _check_event_control(block, where, path, source)
+                continue
+            listed = {n.name for c in events for n in _nodes(c) if n.kind == "AST_IDENTIFIER"}
+            reads, written = set(), set()
+            for child in block.children:
+                if child.kind not in _EVENTS:
+                    _reads(child, reads, written)
+            missing = sorted((reads & signals) - written - listed)
+            if missing:
+                names = ", ".join(f"'{m}'" for m in missing)
+                raise Mech2SpiceError(
+                    f"{where}: this always block reads {names} but its sensitivity list leaves "
+                    f"{'it' if len(missing) == 1 else 'them'} out: a simulator runs the block only when a listed "
+                    "signal changes, the gates compute it all the time; list every signal it reads (or write "
+                    "@*), or write posedge for a register")
+
+
+def _check_event_control(block: _Ast, where: str, path: Path, source: str) -> None:
+    """`always @*` and `always_comb` are combinational; a bare `always` (or `always #d`) is not."""
+    start = _offset(source, block.src, path)
+    body = [c for c in block.children if c.kind != "ATTR"]
+    end = _offset(source, body[0].src, path) if body else None
+    if start is None or end is None:
+        return
+    head = source[start:end]
+    if re.match(r"always\b", head) and "@" not in head:
+        raise Mech2SpiceError(f"{where}: an always block without an event control (@(...) or @*): a simulator "
+                              "runs it in an endless loop, synthesis would make it combinational; write "
+                              "always @* or always @(posedge clk)")
+
+
+def _offset(source: str, src: str, path: Path) -> int | None:
+    """The character offset of a src attribute's start in `source` (the design file only)."""
+    m = re.match(r"(.*?):(\d+)\.(\d+)", src or "")
+    if not m or Path(m[1]).name != path.name:
+        return None
+    lines = source.split("\n")
+    line, col = int(m[2]), int(m[3])
+    return sum(len(x) + 1 for x in lines[:line - 1]) + col - 1 if line <= len(lines) else None
+
+
+# --------------------------------------------------------------------------- multiple drivers
+
+@dataclass
+class _Module:
+    wires: dict = field(default_factory=dict)      # name -> (width, offset, upto, direction, src)
+    cells: list = field(default_factory=list)      # (type, name, {port: bits}, src)
+    connects: list = field(default_factory=list)   # (lhs bits, rhs bits)
+
+
+def read_rtlil(text: str) -> dict[str, _Module]:
+    """The wires, cells and module-level connections of each module in a `write_rtlil` dump.
+    A bit is (wire, position) with position 0 the LSB, or ('', '0'|'1'|'x'|'z') for a constant."""
+    modules, mod, cell, src = {}, None, None, None
+    for line in text.splitlines():
+        words = line.split()
+        if not words:
+            continue
+        if words[0] == "attribute" and words[1] == "\\src":
+            src = line.split('"')[1] if '"' in line else None
+        elif words[0] == "module":
+            mod = modules[_name(words[1])] = _Module()
+        elif words[0] == "wire":
+            mod.wires[words[-1]] = _wire(words[1:-1], src)
+        elif words[0] == "cell":
+            cell = (words[1], words[2], {}, src)
+            mod.cells.append(cell)
+        elif words[0] == "connect" and cell is not None:
+            cell[2][words[1]] = _sig(words[2:], mod.wires)
+        elif words[0] == "connect":
+            lhs, rest = _sig_prefix(words[1:], mod.wires)
+            mod.connects.append((lhs, _sig(rest, mod.wires)))
+        elif words[0] == "end":
+            cell = None
+        if words[0] != "attribute":
+            src = None
+    return modules
+
+
+def _wire(words: list[str], src: str | None) -> tuple:
+    opts = dict(zip(words, words[1:]))
+    direction = next((d for d in ("input", "output", "inout") if d in words), None)
+    return int(opts.get("width", 1)), int(opts.get("offset", 0)), "upto" in words, direction, src
+
+
+def _sig(words: list[str], wires: dict) -> list:
+    bits, rest = _sig_prefix(words, wires)
+    if rest:
+        raise ValueError(f"unexpected RTLIL after a signal: {' '.join(rest)}")
+    return bits
+
+
+def _sig_prefix(words: list[str], wires: dict) -> tuple[list, list[str]]:
+    """One RTLIL signal from the front of `words` as bits LSB first; the words after it."""
+    word = words[0]
+    if word == "{":
+        parts, rest = [], words[1:]
+        while rest[0] != "}":
+            part, rest = _sig_prefix(rest, wires)
+            parts.append(part)
+        return [b for part in reversed(parts) for b in part], rest[1:]      # written MSB part first
+    if m := re.fullmatch(r"(\d+)'([01xzm-]*)", word):
+        return [("", c) for c in reversed(m[2])], words[1:]
+    if re.fullmatch(r"-?\d+", word):
+        return [("", c) for c in reversed(format(int(word) & 0xFFFFFFFF, "032b"))], words[1:]
+    if len(words) > 1 and (m := re.fullmatch(r"\[(\d+)(?::(\d+))?\]", words[1])):
+        hi, lo = int(m[1]), int(m[2] if m[2] is not None else m[1])
+        step = 1 if hi >= lo else -1
+        return [(word, i) for i in range(lo, hi + step, step)], words[2:]
+    return [(word, i) for i in range(wires[word][0])], words[1:]
+
+
+class _Nets:
+    """Union-find over wire bits: the bits `connect` joins are one net."""
+
+    def __init__(self):
+        self.parent = {}
+
+    def find(self, bit):
+        self.parent.setdefault(bit, bit)
+        while self.parent[bit] != bit:
+            self.parent[bit] = self.parent[self.parent[bit]]
+            bit = self.parent[bit]
+        return bit
+
+    def union(self, a, b) -> None:
+        self.parent[self.find(a)] = self.find(b)
+
+
+def _outputs(ctype: str, modules: dict) -> set[str]:
+    """The output ports of a cell.  Of Yosys's own cells, those the Verilog front end and `proc` create:
+    Y (logic), Q (flip-flops, latches), RD_DATA ($mem) and DATA of a memory read (a write's is an input);
+    a user module's from its port declarations."""
+    if ctype.startswith("$") and _name(ctype) not in modules:
+        return {"\\DATA"} if ctype.startswith("$memrd") else {"\\Y", "\\Q", "\\RD_DATA"}
+    wires = modules[_name(ctype)].wires if _name(ctype) in modules else {}
+    return {w for w, info in wires.items() if info[3] == "output"}
+
+
+def check_drivers(rtlil: str, path: Path, source: str) -> None:
+    """Refuse a net driven from two places: ports, cell outputs and constants each count as a driver."""
+    modules = read_rtlil(rtlil)
+    for name, mod in modules.items():
+        nets, drivers, written = _Nets(), [], defaultdict(int)
+        for wire, (width, _, _, direction, src) in mod.wires.items():
+            if direction == "input":
+                drivers += [((wire, i), ("input", wire, i), None) for i in range(width)]
+        for ctype, cname, conns, src in mod.cells:
+            outputs = _outputs(ctype, modules)
+            for port, bits in conns.items():
+                if port in outputs:
+                    drivers += [(b, (cname, port, k), src) for k, b in enumerate(bits) if b[0]]
+        for lhs, rhs in mod.connects:
+            for a, b in zip(lhs, rhs):
+                if a[0] and b[0]:
+                    nets.union(a, b)
+                    written[a] += 1
+                elif a[0] or b[0]:                      # a wire tied to a constant
+                    drivers.append((a if a[0] else b, ("const", (b if a[0] else a)[1]), None))
+        by_net = defaultdict(dict)
+        for bit, who, src in drivers:
+            written[bit] += 1
+            by_net[nets.find(bit)].setdefault(who, src)
+        for net, who in by_net.items():
+            if len(who) > 1:
+                _refuse_drivers(name, mod, nets, net, who, written, path, source)
+
+
+def _refuse_drivers(module: str, mod: _Module, nets: _Nets, net, who: dict, written: dict, path: Path,
+                    source: str) -> None:
+    """Name the bit where two drivers meet (the most writes: own drivers plus `assign`s into it) and the
+    lines that drive it."""
+    bits = [b for b in nets.parent if nets.find(b) == net] or [net]
+    bit = max(bits, key=lambda b: (written[b], b[0].startswith("\\"), mod.wires[b[0]][3] != "input"))
+    lines = {src_line(src, path) for src in who.values()} | set(_assign_lines(source, module, _name(bit[0])))
+    lines = sorted(x for x in lines if x)
+    where = f"{path}, line {lines[-1]}" if lines else f"{path}, module {module}"
+    also = f" (lines {', '.join(map(str, lines))})" if len(lines) > 1 else ""
+    raise Mech2SpiceError(f"{where}: '{_bit_label(mod, bit)}' has more than one driver{also}: a simulator reads "
+                          "x where they disagree, synthesis would keep one of them; drive each net from one "
+                          "place (combine the values with logic or a multiplexer)")
+
+
+def _bit_label(mod: _Module, bit) -> str:
+    """'y' for a 1-bit wire, else 'y[HDL index]'."""
+    wire, pos = bit
+    width, offset, upto = mod.wires[wire][:3]
+    return _name(wire) if width == 1 else f"{_name(wire)}[{offset + (width - 1 - pos if upto else pos)}]"
+
+
+_BLANK = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
+
+
+def _assign_lines(source: str, module: str, name: str) -> list[int]:
+    """Lines of `assign` statements (and `wire w = ...` declarations) in `module` that write `name`."""
+    text = _BLANK.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), source)
+    base = module.split("\\")[1] if module.startswith("$paramod") else module
+    m = re.search(rf"\bmodule\s+{re.escape(base)}\b(.*?)\bendmodule\b", text, re.S)
+    start, end = (m.start(1), m.end(1)) if m else (0, len(text))
+    found = []
+    for st in re.finditer(r"\b(assign|wire)\b([^;]*?)(?<![=!<>])=(?!=)", text[start:end]):
+        written = set(re.findall(r"[A-Za-z_][\w$]*", re.sub(r"\[[^\]]*\]", "", st[2])))
+        if name in written:
+            found.append(text.count("\n", 0, start + st.start()) + 1)
+    return found

@@ -99,23 +99,6 @@ _SAMPLE = {"pass": lambda v: isinstance(v, bool),
            "reason": lambda v: isinstance(v, str)}
 
 
-def _record(line: str, n: int, path: Path) -> dict:
-    """One line of a results file, checked: an object; a sample has its index and the fields the summary
-    reads with their types (optional ones may be absent).  Anything else is one Mech2SpiceError line."""
-    try:
-        rec = json.loads(line)
-    except (ValueError, RecursionError) as err:
-        rec = err
-    ok = isinstance(rec, dict) and (n > 0 or rec.get("type") == "header")
-    if ok and rec.get("type") == "sample":
-        ok = is_int(rec.get("i")) and rec["i"] >= 0 and "pass" in rec and all(
-            check(rec[k]) for k, check in _SAMPLE.items() if k in rec)
-    if not ok:
-        raise Mech2SpiceError(f"{path}, line {n + 1}: not a Monte-Carlo results record (its header, then one "
-                              "sample per line): give another --out")
-    return rec
-
-
 def _cut_torn_line(path: Path) -> None:
     """Drop a last line without its newline (the run was killed while writing it)."""
     data = path.read_bytes()
@@ -132,10 +115,11 @@ def _record(raw: bytes, n: int, path: Path) -> dict:
         rec = None
     if not isinstance(rec, dict):
         raise Mech2SpiceError(f"{path}, line {n}: damaged (not a JSON record): give another --out")
-    sample_ok = is_int(rec.get("i")) and rec["i"] >= 0 and isinstance(rec.get("pass"), bool)
+    sample_ok = is_int(rec.get("i")) and rec["i"] >= 0 and isinstance(rec.get("pass"), bool) and all(
+        check(rec[k]) for k, check in _SAMPLE.items() if k in rec)
     if rec.get("type") == "sample" and not sample_ok:
-        raise Mech2SpiceError(f"{path}, line {n}: a sample record without its index 'i' or its verdict 'pass': "
-                              "give another --out")
+        raise Mech2SpiceError(f"{path}, line {n}: not a Monte-Carlo results record (a sample without its index "
+                              "'i' or its verdict 'pass', or a field of the wrong type): give another --out")
     return rec
 
 

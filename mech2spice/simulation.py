@@ -136,11 +136,15 @@ def _reference_judged(model: MechModel, stim, outs: list[str], budget: int) -> l
     return _run_until_settled(make_engine("envelope"), model, stim, outs, budget, False, fixed=False)[2]
 
 
-def _run_until_settled(engine, model, stim, probes: list[str], budget: int, progress: bool, fixed: bool):
-    """CHUNK periods at a time, each continuing from the last state, until the outputs settle: the cheap rule
-    (_settled: nothing moved much over a window) first, then the verdict's (verdict.settled: stable, and
-    less than verdict.SETTLED_BW band widths still to come).  While an output is still moving, the next
-    verdict waits for the slowest mode to close the gap.  Returns (amplitudes, periods, [(verdict, settled)])."""
+def _run_until_settled(engine, model, stim, probes: list[str], budget: int, progress: bool, fixed: bool,
+                       watch: list[int] | None = None):
+    """CHUNK periods at a time, each continuing from the last state, until the watched probes (rows `watch`
+    of `probes`, default all) settle: the cheap rule (_settled: nothing moved much over a window) first, then
+    the verdict's (verdict.settled: stable, and less than verdict.SETTLED_BW band widths still to come).
+    While an output is still moving, the next verdict waits for the slowest mode to close the gap.
+    Returns (every probe's final amplitudes, periods, [(verdict, settled)] per batch member)."""
+    rows = list(range(len(probes))) if watch is None else list(watch)
+    names = [probes[k] for k in rows]
     state, done, history, judged, next_check = None, 0, [], None, 0
     bar = progress_bar(budget, progress)
     while done < budget:
@@ -151,15 +155,16 @@ def _run_until_settled(engine, model, stim, probes: list[str], budget: int, prog
         history.append(_chunk_summary(run, probes, model.amplitude_unit))
         bar.update(n)
         judged = None
-        if not fixed and done >= next_check and _settled(history):
-            judged = _judge(engine, model, run, stim, probes, done, history)
-            wait = _periods_to_settle(judged, history, probes)
+        watched = [tuple(x[rows] for x in h) for h in history[-3:]]
+        if not fixed and done >= next_check and _settled([tuple(x[rows] for x in h) for h in history[-2:]]):
+            judged = _judge(engine, model, run, stim, names, done, watched)
+            wait = _periods_to_settle(judged, watched, names)
             if wait == 0:
                 break
             next_check = done + wait
     bar.close()
     if judged is None:
-        judged = _judge(engine, model, run, stim, probes, done, history)
+        judged = _judge(engine, model, run, stim, names, done, [tuple(x[rows] for x in h) for h in history[-3:]])
     return history[-1][0], done, judged
 
 

@@ -201,9 +201,11 @@ class DesignMC:
         return out
 
     def amplitudes(self, idx: list[int]) -> tuple[np.ndarray, int]:
-        """Final amplitudes (u_R) of samples idx run as one model: (samples, outputs + gates, vectors), periods."""
+        """Final amplitudes (u_R) of samples idx run as one model: (samples, outputs + gates, vectors), periods.
+        The positions in idx of samples found unstable (verdict.py) are left in `self.unstable`."""
         model, stim, probes = self._joined([self.sample(i) for i in idx])
-        amps, used = self._integrate(model, stim, probes, self.engine_for(idx[0]))
+        amps, used, judged = self._integrate(model, stim, probes, self.engine_for(idx[0]))
+        self.unstable = _unstable_samples(judged, len(idx))
         return amps.reshape(len(idx), len(self.outs) + len(self.gates), -1), used
 
     def _run_group(self, idx: list[int]) -> list[dict]:
@@ -213,7 +215,7 @@ class DesignMC:
             if len(idx) > 1:                 # find the sample that failed: run them one by one
                 return [r for i in idx for r in self._run_group([i])]
             return [{"i": idx[0], "pass": False, "margin": -math.inf, "reason": str(e).splitlines()[0]}]
-        return [self._record(i, amps[s], len(self.outs), used) for s, i in enumerate(idx)]
+        return [self._record(i, amps[s], len(self.outs), used, s not in self.unstable) for s, i in enumerate(idx)]
 
     def _joined(self, pairs):
         """One model (the union of the samples) and stimulus, and the probes: outputs then gate channels."""
@@ -234,25 +236,19 @@ class DesignMC:
         return big, Stimulus(self.stim.times, amps), probes
 
     def _integrate(self, model, stim, probes, engine):
-        """Amplitudes of every probe at the end; engines with a state stop once the outputs have settled
-        (simulation's settle rule on the output probes only, so a nominal sample matches `simulate`)."""
+        """Amplitudes of every probe at the end and the stability verdicts (None without a state); engines
+        with a state stop once the outputs have settled (simulation's settle rule on the output probes only,
+        so a nominal sample matches `simulate`)."""
         if not engine.capabilities.state:
             run = engine.run(model, self.budget, stim, probes=probes)
-            return run.final_amplitudes(probes, model.amplitude_unit), self.budget
+            return run.final_amplitudes(probes, model.amplitude_unit), self.budget, None
         n_o, n_g = len(self.outs), len(self.gates)
         rows = [k for k in range(len(probes)) if k % (n_o + n_g) < n_o]
-        state, done, history = None, 0, []
-        while done < self.budget:
-            n = min(simulation.CHUNK, self.budget - done)
-            run = engine.run(model, n, stim, state=state, start_period=done, probes=probes)
-            state, done = run.state, done + n
-            history.append(run.final_amplitudes(probes, model.amplitude_unit))
-            if not self.fixed and simulation._settled([h[rows] for h in history]):
-                break
-        return history[-1], done
+        return simulation._run_until_settled(engine, model, stim, probes, self.budget, False, self.fixed, watch=rows)
 
-    def _record(self, i: int, a: np.ndarray, n_o: int, used: int) -> dict:
-        """Pass/fail, margins, wrong output bits and root gate failures of one sample from its amplitudes."""
+    def _record(self, i: int, a: np.ndarray, n_o: int, used: int, stable: bool = True) -> dict:
+        """Pass/fail, margins, wrong output bits and root gate failures of one sample from its amplitudes; a
+        sample whose network has a self-oscillating mode (`stable` False) fails whatever its bits read."""
         ao, ag = a[:n_o], a[n_o:]
         got_o = np.vectorize(lambda x: -1 if band_of(x) is None else band_of(x))(ao) if ao.size else ao
         m_o = np.vectorize(margin)(ao, self.want_out) if ao.size else np.zeros((0, 1))
@@ -264,11 +260,25 @@ class DesignMC:
             if np.any(bad_g[g] & up_ok):
                 roots.add(self.gates[g])
         wrong = {o: int(np.sum(got_o[k] != self.want_out[k])) for k, o in enumerate(self.outs)}
-        return {"i": i, "pass": not any(wrong.values()), "margin": float(m_o.min()) if m_o.size else None,
+        return {"i": i, "pass": stable and not any(wrong.values()), "stable": stable,
+                "margin": float(m_o.min()) if m_o.size else None,
                 "gate_margin": float(m_g.min()) if m_g.size else None,
                 "failing_bits": {o: c for o, c in wrong.items() if c}, "failing_gates": sorted(roots),
                 "worst_gate": self.gates[int(np.argmin(m_g.min(axis=1)))] if m_g.size else None,
                 "periods": int(used)}
+
+
+def _unstable_samples(judged, n: int) -> set[int]:
+    """Positions of the samples (DOF prefix "s{k}/" in a union of n samples) that carry a growing mode in any
+    input vector's verdict; a lone sample is position 0."""
+    bad = set()
+    for v, _ in judged or []:
+        if v.stable:
+            continue
+        if n == 1 or not v.converged:
+            return set(range(n)) if not v.converged else {0}
+        bad |= {int(d.split("/")[0][1:]) for m in v.modes if m.growth > 0 for d in m.dofs if "/" in d}
+    return bad
 
 
 def noise_seed(seed: int, i: int) -> int:

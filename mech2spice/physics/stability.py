@@ -52,6 +52,7 @@ class Verdict:
     distance: float           # largest |A_run - A_fixed| over the watched channels, u_R
     converged: bool           # Newton found a fixed point near the run's state
     fixed: dict = field(default_factory=dict)   # probe -> fixed-point amplitude (u_R)
+    modes: list = field(default_factory=list)   # the leading modes, least stable first
 
     def to_json(self) -> dict:
         """The JSON fields of a run's stability verdict (no mode where no fixed point was found: the network
@@ -187,4 +188,4 @@ def verdict(model, A: np.ndarray, s: np.ndarray, F: np.ndarray, watch: dict[str,
     rows = {name: pos[d] for name, d in watch.items() if pos[d] >= 0}
     fixed = {name: float(abs(Af[r]) / u) for name, r in rows.items()}
     dist = max((abs(abs(A[r]) - abs(Af[r])) / u for r in rows.values()), default=0.0)
-    return Verdict(stable, lead.growth, lead, slowest, float(dist), ok, fixed)
+    return Verdict(stable, lead.growth, lead, slowest, float(dist), ok, fixed, modes)

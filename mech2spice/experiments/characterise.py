@@ -241,6 +241,36 @@ def convergence(p: GateParams, periods: int = 1500, steps: int = rk4.DEFAULT_STE
     return float(np.abs(a1 - a2).max())
 
 
+def stability(p: GateParams, per_band: int = 8, periods: int = 3000) -> dict:
+    """The block's least damped mode (issue #25, docs/stability.md): over every valid input pair of the
+    single gate (its steady states' linearisation), and in the 3-gate chain at the four nominal input pairs
+    (an envelope run settled, then the network's verdict).  Growth per drive period: < 0 decays."""
+    from ..backends import make_engine
+    from ..physics import stability as stab
+    levels = np.concatenate([np.linspace(*BAND0, per_band), np.linspace(*BAND1, per_band)])
+    worst = {"growth_rate": -math.inf}
+    x1, x2 = (g.ravel() for g in np.meshgrid(levels, levels, indexing="ij"))
+    env, F, ch = gate_forcing(p, x1, x2)
+    T = env.model.period
+    for k in range(F.shape[1]):
+        for st in steady.steady_states(env, F[:, k]) if env.slow.size == 1 and env.diagonal else []:
+            mode = stab.leading_modes(env, st.A, st.s, k=1)[0]
+            if mode.growth > worst["growth_rate"]:
+                worst = {"growth_rate": mode.growth, "mode_period": mode.period,
+                         "at_inputs": [float(x1[k]), float(x2[k])]}
+    chain = []
+    for a, b in PAIRS:
+        m = nor.chain(p, 3, LEVEL[a], LEVEL[b])
+        run = make_engine("envelope").run(m, periods)
+        v = stab.verdict(m, run.state[0][:, 0], run.state[1][:, 0],
+                         Envelope.of(m).forcing(np.array([[d.amplitude] for d in m.drives]))[:, 0])
+        chain.append({"inputs": [a, b], **v.to_json()})
+    lead = max(c["growth_rate"] if c["growth_rate"] is not None else math.inf for c in chain)
+    return {"single_gate": worst, "chain": chain,
+            "stable": worst["growth_rate"] < stab.STABLE_MARGIN and all(c["stable"] for c in chain),
+            "worst_growth_rate": max(worst["growth_rate"], lead)}
+
+
 def characterise(p: GateParams, quick: bool = False, log=lambda msg: None) -> dict:
     """Everything `mech2spice gate` reports.  quick=True shortens runs (tests)."""
     t0 = time.time()
@@ -287,6 +317,8 @@ def characterise(p: GateParams, quick: bool = False, log=lambda msg: None) -> di
     log("history independence")
     tr = transient(p, hold=int(1200 * scale))
     out["history_spread"] = tr["revisit_spread"]
+    log("stability (the least damped mode)")
+    out["stability"] = stability(p, per_band=4 if quick else 8)
     out["requirements"] = requirements(out, vm, fo, ph, cas, tr, spectrum_purity(run, p))
     out["wall_s"] = time.time() - t0
     out["_figures"] = {"transient": tr, "cascade": cas}

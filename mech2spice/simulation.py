@@ -176,7 +176,7 @@ def _chunk_summary(run, probes: list[str], unit: float) -> tuple[np.ndarray, np.
 
 def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int, history: list) -> list | None:
     """(verdict, settled) of each batch member at the run's final state (None: the engine returns no state)."""
-    ph = engine.phasors(model, run)
+    ph = engine.phasors(model, run.state, run.t)
     if ph is None:
         return None
     A, s = ph

@@ -90,9 +90,10 @@ class Engine(ABC):
         """The step (drive periods) that stimulus changes must fall on, for engines with whole-period steps."""
         return None
 
-    def phasors(self, model: MechModel, run: Run) -> tuple[np.ndarray, np.ndarray] | None:
-        """The run's final state as envelope phasors: (A (n_fast, B) complex, s (n_slow, B)), what the
-        stability verdict linearises at (physics/stability.py); None where the engine returns no state."""
+    def phasors(self, model: MechModel, state, t: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """A state this engine returned (Run.state, at time t) as envelope phasors: (A (n_fast, B) complex,
+        s (n_slow, B)), what the stability verdict linearises at (physics/stability.py); None where the
+        engine returns no state."""
         return None
 
 

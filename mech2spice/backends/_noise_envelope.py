@@ -135,9 +135,9 @@ class NoisyEnvelopeEngine(Engine):
         """The step (periods): the set one, else the longest of 1, 1/2, 1/4 ... within the stability bound."""
         return self.options.step_periods or det.default_step(model, cap=DEFAULT_NOISE_STEP)
 
-    def phasors(self, model, run):
+    def phasors(self, model, state, t):
         """The envelope state itself: (A, s)."""
-        return run.state[0], run.state[1]
+        return state[0], state[1]
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """The noisy envelope equations over `periods` drive periods (see `integrate`)."""

@@ -345,9 +345,9 @@ class CarrierEngine(Engine):
         """Stimulus changes must fall on whole drive periods."""
         return 1.0
 
-    def phasors(self, model, run):
-        """The final displacements and velocities as phasors (_base.oscillator_phasors)."""
-        return oscillator_phasors(model, run.state[0], run.state[1], run.t)
+    def phasors(self, model, state, t):
+        """The displacements and velocities as phasors (_base.oscillator_phasors)."""
+        return oscillator_phasors(model, state[0], state[1], t)
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """Lawson RK4 over `periods` drive periods (see `integrate`)."""

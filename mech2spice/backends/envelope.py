@@ -304,9 +304,9 @@ class EnvelopeEngine(Engine):
         """The step this engine takes on `model`, in drive periods."""
         return self.options.step_periods or default_step(model, exponential=self.options.exponential)
 
-    def phasors(self, model, run):
+    def phasors(self, model, state, t):
         """The envelope state itself: (A, s)."""
-        return run.state[0], run.state[1]
+        return state[0], state[1]
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """The envelope equations over `periods` drive periods (see `integrate`)."""

@@ -251,9 +251,9 @@ class RK4Engine(Engine):
         """Wall time from the measured oscillator-step rate."""
         return model.n * batch * periods * self.options.steps_per_period / OSCILLATOR_STEPS_PER_S
 
-    def phasors(self, model, run):
-        """The final displacements and velocities as phasors (_base.oscillator_phasors)."""
-        return oscillator_phasors(model, run.state[0], run.state[1], run.t)
+    def phasors(self, model, state, t):
+        """The displacements and velocities as phasors (_base.oscillator_phasors)."""
+        return oscillator_phasors(model, state[0], state[1], t)
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """RK4 over `periods` drive periods (see `integrate`)."""

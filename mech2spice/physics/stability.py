@@ -27,6 +27,9 @@ import scipy.sparse.linalg as spla
 from .envelope import Envelope
 
 DENSE_LIMIT = 1500        # real unknowns up to which the whole spectrum is computed densely (exact, < 1 s)
+# Beyond it, ARPACK on the Cayley transform: ~0.5-2 s on s344 (3744 unknowns), but 50-130 s on the processor
+# (12972), whose ~1000 lightly damped insulator modes cluster near |mu| = 1.  Restricting the search to the
+# least damped gates' neighbourhoods was tried and missed s344's mode, which is collective (docs/stability.md).
 MODES = 6                 # leading eigenvalues the sparse (Cayley) search returns
 NEWTON_TOL = 1e-10        # relative residual at which Newton's iterate is the fixed point
 NEWTON_MAX = 30

@@ -109,14 +109,26 @@ VARIANTS = {"envelope": envelope.Envelope, "+2w": Envelope2w, "+A''": EnvelopeA2
 
 
 # --- comparing -------------------------------------------------------------------------------
+GRAZE = 5.0    # periods: a series back across MID within this has touched the threshold, not switched
+
+
 def crossings(a: np.ndarray, t: np.ndarray, start: float, stop: float) -> list[float]:
-    """Times (periods after `start`) at which the series a(t) crosses MID within (start, stop]."""
+    """Times (periods after `start`) at which the series a(t) crosses MID within (start, stop]; a pair of
+    crossings less than GRAZE apart (the series grazing the threshold) counts as none, so that a graze in
+    one engine that the other just misses is not a disagreement."""
     keep = (t > start) & (t <= stop) & np.isfinite(a)
     a, t = a[keep] - MID, t[keep]
     if a.size < 2:
         return []
     k = np.flatnonzero(np.sign(a[:-1]) * np.sign(a[1:]) < 0)
-    return [float(t[i] + (t[i + 1] - t[i]) * a[i] / (a[i] - a[i + 1]) - start) for i in k]
+    times = [float(t[i] + (t[i + 1] - t[i]) * a[i] / (a[i] - a[i + 1]) - start) for i in k]
+    out: list[float] = []
+    for x in times:
+        if out and x - out[-1] < GRAZE:
+            out.pop()
+        else:
+            out.append(x)
+    return out
 
 
 def settled(a: np.ndarray, t: np.ndarray, end: float) -> np.ndarray:

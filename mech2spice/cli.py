@@ -355,7 +355,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--top", help="top module (default: the only/auto-detected top)")
         sp.add_argument("--params", default="default", help="gate parameters: default, printed, robust, classic "
                         "or a JSON file (fields, or a block file: docs/design.md)")
-        sp.add_argument("--max-fanout", type=inputs.integer(2, 10 ** 6), default=MAX_FANOUT,
+        sp.add_argument("--max-fanout", type=inputs.integer(2, inputs.MAX_FANOUT_LIMIT), default=MAX_FANOUT,
                         help="insert NOR-pair buffers so no gate drives more loads (default 12, the largest "
                              "fan-out measured to work)")
         sp.add_argument("--observe", action="append", metavar="PORT",

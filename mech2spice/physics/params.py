@@ -14,6 +14,7 @@ Two sets ship with the package:
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
@@ -130,7 +131,11 @@ EXTRA_KEYS = ("search", "measured", "note")   # a block file's record of how it 
 def load_params(spec: str | None) -> GateParams:
     """'default', 'printed', a shipped block ('robust', 'classic'), a JSON file with any subset of the
     fields (rest from default), or a block file (a "block" structure: physics/blocks.py)."""
-    from ..inputs import is_number, read_json, type_name
+    from ..inputs import is_number, read_json, type_name, value_kind
+    if spec is not None and not isinstance(spec, (str, os.PathLike)):
+        raise Mech2SpiceError(f"params must be a preset ({', '.join((*PRESETS, *BLOCK_PRESETS))}) or a JSON file "
+                              f"path, not {value_kind(spec)}")
+    spec = None if spec is None else os.fspath(spec)
     if spec is None or spec in PRESETS:
         return PRESETS[spec or "default"]
     if spec in BLOCK_PRESETS:

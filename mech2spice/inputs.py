@@ -7,6 +7,7 @@ Each check raises Mech2SpiceError with one line naming the option or file and wh
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import numbers
@@ -233,6 +234,25 @@ def port_values(values, what: str = "inputs") -> dict[str, int]:
         if not is_integral(v):
             raise Mech2SpiceError(f"{what} must map port names to integers: {port!r} -> {value_kind(v)}")
     return {port: int(v) for port, v in values.items()}
+
+
+_KINDS = {"int": ("a whole number", is_integral), "bool": ("True or False", lambda v: isinstance(v, bool)),
+          "float": ("a number", lambda v: isinstance(v, numbers.Real) and not isinstance(v, bool)),
+          "str": ("a string", lambda v: isinstance(v, str)), "None": ("None", lambda v: v is None)}
+
+
+def check_fields(options) -> None:
+    """Each field of an engine's Options dataclass of the type its annotation names (int, float, bool, str,
+    `| None`): a wrong type fails at construction, not deep inside a run or as a TypeError in validate.
+    Ranges (NaN and inf included) are each validate's, with messages that say what the value means."""
+    for f in dataclasses.fields(options):
+        kinds = [k.strip() for k in (f.type if isinstance(f.type, str) else f.type.__name__).split("|")]
+        if not all(k in _KINDS for k in kinds):
+            continue                            # a type this check does not know: the Options' validate's
+        value = getattr(options, f.name)
+        if not any(_KINDS[k][1](value) for k in kinds):
+            raise Mech2SpiceError(f"{type(options).__name__}.{f.name} = {value!r}: must be "
+                                  f"{' or '.join(_KINDS[k][0] for k in kinds)}")
 
 
 # --------------------------------------------------------------------------- files written

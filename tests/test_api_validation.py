@@ -1,5 +1,6 @@
 """The Python API checks its arguments like the command line: the same caps, and only Mech2SpiceError (one
 line) for a wrong type or value, before any work (issue #26)."""
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -174,3 +175,50 @@ def test_load_params_takes_a_path_object(tmp_path):
     f = tmp_path / "q.json"
     f.write_text('{"q_g": 150}')
     assert m2s.load_params(f).q_g == 150
+
+
+# --- every engine's Options: checked at construction ------------------------------------------------
+def _bad_values(field) -> list:
+    """Values the field's annotation refuses: the wrong type always; NaN, inf and -1 for numbers."""
+    kinds = {k.strip() for k in str(field.type).split("|")}
+    bad = [object(), [1]] + (["1"] if "str" not in kinds else [3])
+    if kinds & {"int", "float"}:
+        bad += [math.nan, math.inf, -1, True]
+    if "bool" in kinds:
+        bad += [1, "yes"]
+    return bad
+
+
+OPTION_CASES = [(name, f.name, v) for name, engine in m2s.BACKENDS.items()
+                for f in dataclasses.fields(engine.Options) for v in _bad_values(f)]
+
+
+@pytest.mark.parametrize("backend, field, value", OPTION_CASES,
+                         ids=[f"{b}.{f}={v!r}"[:50] for b, f, v in OPTION_CASES])
+def test_engine_options_refuse_bad_values_at_construction(backend, field, value):
+    """Every registered engine's Options: a wrong type, NaN, inf or a negative number fails where it is set
+    (not later, inside a run) with one line naming the field's class."""
+    refused(lambda: m2s.BACKENDS[backend].Options(**{field: value}), "")
+
+
+def test_every_engine_has_checked_options():
+    """The table above covers every registered engine that has settings (logic has none to get wrong)."""
+    with_fields = {b for b, _, _ in OPTION_CASES}
+    assert with_fields == {b for b, e in m2s.BACKENDS.items() if dataclasses.fields(e.Options)}
+    assert {"rk4", "carrier", "envelope", "ngspice", "vacask"} <= with_fields
+    assert dataclasses.fields(m2s.BACKENDS["logic"].Options) == ()
+
+
+@pytest.mark.parametrize("make, needle", [
+    (lambda: RK4Options(steps_per_period=2), "at least 4 steps"),
+    (lambda: RK4Options(steps_per_period=80.0), "RK4Options.steps_per_period = 80.0: must be a whole number"),
+    (lambda: EnvelopeOptions(step_periods=0.0), "must be a positive number"),
+    (lambda: EnvelopeOptions(compiled="no"), "EnvelopeOptions.compiled = 'no': must be True or False"),
+    (lambda: m2s.BACKENDS["ngspice"].Options(method="euler"), "method 'euler' unknown"),
+    (lambda: m2s.BACKENDS["ngspice"].Options(noise_seed=-1), "noise_seed -1: must be an integer >= 0"),
+    (lambda: m2s.BACKENDS["vacask"].Options(relref="global-ish"), "relref 'global-ish' unknown"),
+    (lambda: m2s.BACKENDS["carrier"].Options(threads=2, latency=0.01), "choose latency or threads"),
+    (lambda: dataclasses.replace(RK4Options(), settle_tol=-0.1), "settle tolerance -0.1"),
+])
+def test_options_fail_where_they_are_set(make, needle):
+    refused(make, needle)

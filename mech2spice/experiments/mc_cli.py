@@ -48,13 +48,23 @@ def add_sweep_arguments(s) -> None:
                         "1 MHz silicon scaling); a Langevin force on every dashpot, each sample its own seed; "
                         "default 0 (none)")
     s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, metavar="S")
-    s.add_argument("--scheduler", default="local", metavar="local|inline|ADDRESS",
+    s.add_argument("--scheduler", default="local", metavar="local|inline|ADDRESS", type=_scheduler,
                    help="local: a LocalCluster, one worker per core (default); inline: no Dask; or a "
                         "Dask scheduler address (tcp://host:8786)")
     s.add_argument("--workers", type=inputs.integer(1, 4096), default=None, help="LocalCluster workers")
     s.add_argument("--out", metavar="RESULTS.jsonl",
                    help="results file, appended and resumed (default: a temporary file, removed after)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
+
+
+def _scheduler(text: str) -> str:
+    """An argparse type: mc_run.check_scheduler, its refusal as a usage error (before any work)."""
+    import argparse
+    from .mc_run import check_scheduler
+    try:
+        return check_scheduler(text)
+    except Mech2SpiceError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def vectors_of(args, netlist) -> list[dict[str, int]]:

@@ -325,11 +325,22 @@ def _backends_help() -> str:
         f"{name}: {(cls.__doc__ or '').strip().splitlines()[0].rstrip('.')}" for name, cls in BACKENDS.items())
 
 
+def version() -> str:
+    """The installed distribution's version, else (a source tree run in place) the package's own."""
+    from importlib import metadata
+    try:
+        return metadata.version("mech2spice")
+    except metadata.PackageNotFoundError:
+        from . import __version__
+        return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The `mech2spice` argument parser with every subcommand."""
     ap = _Parser(
         prog="mech2spice",
         description="Verilog -> networks of nonlinear mechanical NOR gates -> RK4 / envelope / ngspice.")
+    ap.add_argument("--version", action="version", version=f"mech2spice {version()}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     g = sub.add_parser("gate", help="characterise the NOR gate against the paper's six requirements",

@@ -36,8 +36,9 @@ def add_parser(subparsers) -> None:
 
 def add_sweep_arguments(s) -> None:
     """The options every Monte-Carlo command shares: parameters, samples, spread, noise, seed, Dask, results."""
+    from ..physics.params import PRESETS
     s.add_argument("--params", default="default",
-                   help="gate parameters: default, printed, robust, or a JSON file (fields or a block)")
+                   help=f"gate parameters: {', '.join(PRESETS)}, or a JSON file (fields or a block)")
     s.add_argument("--samples", type=inputs.integer(1, 10_000_000), required=True, metavar="N")
     s.add_argument("--spread", required=True, metavar="SIGMA|JSON",
                    help='relative sigma on every element, or {"local": SIGMA|{KIND: SIGMA}, "wafer": '
@@ -147,8 +148,15 @@ def cmd_montecarlo(args) -> int:
 def _print(res: dict) -> None:
     lo, hi = res["yield_ci95"]
     print(f"{res['samples']} samples, {res['failures']} failures: yield {res['yield']:.4f} (95 % CI {lo:.4f} - {hi:.4f})")
+    n, counted = res["samples"], res["margin_samples"]
     if res["margin_quantiles"]:
-        print("margin quantiles (band widths): " + ", ".join(f"{q} {v:+.3f}" for q, v in res["margin_quantiles"].items()))
+        print("margin quantiles (band widths): " + ", ".join(f"{q} {v:+.3f}" for q, v in res["margin_quantiles"].items())
+              + ("" if counted == n else f" (over the {counted} samples with a margin)"))
+    if counted < n:
+        print(f"no margin: {n - counted} samples (diverged or did not run; reasons below)" if counted
+              else "margin quantiles: none (no sample ran to a margin: every one diverged or did not run; reasons below)")
+    for reason, k in sorted(res.get("reasons", {}).items(), key=lambda kv: -kv[1])[:5]:
+        print(f"  {k} x {reason}")
     if res["failing_bits"]:
         print("failing bits (samples): " + ", ".join(f"{b} {n}" for b, n in res["failing_bits"].items()))
     if res["gate_failure_rate"] is not None:

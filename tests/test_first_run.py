@@ -1,0 +1,81 @@
+"""First-run frictions (issue #26): --version, the preset list, a changed parameter set's name, a Monte-Carlo
+sweep where every sample fails, progress on a redirected stderr, and `make setup` waiting for apt's lock."""
+import json
+import re
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+import mech2spice as m2s
+from mech2spice.cli import main
+from mech2spice.experiments import montecarlo as mc
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def test_version_prints_and_exits_0(capsys):
+    assert main(["--version"]) == 0
+    out = capsys.readouterr().out
+    assert re.fullmatch(r"mech2spice \d+\.\d+\.\d+\S*\n", out)
+
+
+def test_the_package_version_is_the_distribution_version():
+    """`--version` falls back to __version__ in a source tree: both must name the same release."""
+    text = (REPO / "pyproject.toml").read_text()
+    assert re.search(r'^version = "([^"]+)"', text, re.M).group(1) == m2s.__version__
+
+
+def test_presets_list_every_name_params_takes():
+    assert list(m2s.PRESETS) == ["default", "printed", "robust", "classic"]
+    for name in m2s.PRESETS:
+        p = m2s.load_params(name)
+        assert p.name == name and m2s.PRESETS[name] == p
+    assert "robust" in m2s.PRESETS and "nope" not in m2s.PRESETS and len(m2s.PRESETS) == 4
+    with pytest.raises(KeyError):
+        m2s.PRESETS["nope"]
+
+
+def test_a_changed_parameter_set_does_not_call_itself_default():
+    assert m2s.GateParams().name == "default" == m2s.DEFAULT.name
+    assert m2s.GateParams(q_g=150.0).name == "custom"
+    assert replace(m2s.DEFAULT, omega=50.0).name == "custom"
+    assert m2s.GateParams(q_g=150.0, name="mine").name == "mine"
+    assert m2s.GateParams(q_g=200.0).name == "default"          # the default value is the default set
+    assert m2s.PRINTED.name == "printed"
+    assert m2s.GateParams(**m2s.DEFAULT.to_dict()) == m2s.DEFAULT
+
+
+# --- montecarlo: every sample fails -----------------------------------------------------------------
+def _rec(i, margin, ok=False, reason=None):
+    return {"i": i, "pass": ok, "margin": margin, **({"reason": reason} if reason else {})}
+
+
+def test_summary_quantiles_skip_diverged_samples_without_warnings():
+    recs = [_rec(0, -float("inf"), reason="diverged"), _rec(1, -0.4), _rec(2, 0.2, ok=True), _rec(3, -0.1)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = mc.summary(recs, 3)
+        none = mc.summary([_rec(i, -float("inf"), reason="diverged") for i in range(3)], 3)
+    assert res["margin_samples"] == 3 and res["margin_quantiles"]["1%"] == pytest.approx(-0.394)
+    assert res["margin_quantiles"]["99%"] == pytest.approx(0.194)
+    assert none["margin_samples"] == 0 and none["margin_quantiles"] == {} and none["reasons"] == {"diverged": 3}
+
+
+def test_montecarlo_where_every_sample_diverges(tmp_path, capfd):
+    """Damping so low that every sample's channel goes negative: every sample fails before it has a margin.
+    The quantiles were null (NaN from -inf) with numpy's RuntimeWarning on stderr."""
+    params = tmp_path / "unstable.json"
+    params.write_text(json.dumps({"q_c": 1e6, "gamma_ic": 1e6}))
+    argv = ["montecarlo", str(REPO / "verilog/adder2.v"), "--samples", "2", "--spread", "0.01", "--set", "a=1",
+            "--scheduler", "inline", "--params", str(params)]
+    assert main(argv + ["--json"]) == 1
+    out, err = capfd.readouterr()
+    res = json.loads(out)
+    assert res["failures"] == 2 and res["margin_quantiles"] == {} and res["margin_samples"] == 0
+    assert "Warning" not in err and err == ""
+    assert main(argv) == 1
+    out, err = capfd.readouterr()
+    assert "margin quantiles: none (no sample ran to a margin" in out and "total damping" in out
+    assert "Warning" not in err

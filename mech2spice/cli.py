@@ -40,6 +40,14 @@ def _print_json(data) -> None:
     print(json.dumps(_jsonable(data), indent=2))
 
 
+def _progress(args):
+    """Progress of long steps on stderr: a bar on a terminal; redirected, a timestamped line every
+    backends._base.PROGRESS_EVERY_S (a log file still shows the run moving); nothing with --json."""
+    if getattr(args, "json", False):
+        return False
+    return True if sys.stderr.isatty() else _log(args)
+
+
 def _log(args):
     quiet = getattr(args, "json", False)
     t0 = time.time()
@@ -167,7 +175,7 @@ def cmd_simulate_clocked(args, nl) -> int:
         p = load_params(args.params)
         timing = simulation.clock_timing(nl, args.pulse, args.pause, p)
         res = simulation.run_clocked_physical(nl, p, cycles, args.backend, timing,
-                                            progress=not args.json and sys.stderr.isatty(),
+                                            progress=_progress(args),
                                             options=_engine_options(args), log=_log(args),
                                             noise=(args.noise, args.noise_seed))
     if args.json:
@@ -196,7 +204,7 @@ def cmd_simulate(args) -> int:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --clock/--cycles/--stimulus apply to clocked designs")
     values = _parse_sets(args.set)
     res = simulation.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
-                                progress=not args.json and sys.stderr.isatty(), options=_engine_options(args),
+                                progress=_progress(args), options=_engine_options(args),
                                 log=_log(args), noise=(args.noise, args.noise_seed))[0]
     res["inputs"] = values
     if args.json:

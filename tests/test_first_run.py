@@ -79,3 +79,28 @@ def test_montecarlo_where_every_sample_diverges(tmp_path, capfd):
     out, err = capfd.readouterr()
     assert "margin quantiles: none (no sample ran to a margin" in out and "total damping" in out
     assert "Warning" not in err
+
+
+# --- progress on a redirected stderr -----------------------------------------------------------------
+def test_redirected_stderr_gets_timestamped_progress_lines(capsys, monkeypatch):
+    """Without a terminal there is no bar (it was simply off): a line every PROGRESS_EVERY_S instead, so a long
+    step in a log file shows it moves.  The interval is 0 here, so every cycle gives one."""
+    from mech2spice.backends import _base
+    monkeypatch.setattr(_base, "PROGRESS_EVERY_S", 0.0)
+    sieve = str(REPO / "programs/sieve.asm")
+    assert main(["cpu", "run", sieve, "--backend", "logic", "--max-cycles", "30"]) == 1
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 30 and lines[-1].endswith("] 30/30 cycles (100%), at most 0 s to go")
+    assert all(re.fullmatch(r"\[ *\d+\.\ds\] \d+/30 cycles \(\d+%\)(, at most \d+ s to go)?", x) for x in lines)
+    assert main(["cpu", "run", sieve, "--backend", "logic", "--max-cycles", "30", "--json"]) == 1
+    assert capsys.readouterr().err == ""
+
+
+def test_progress_lines_count_from_a_resumed_start(monkeypatch):
+    from mech2spice.backends import _base
+    monkeypatch.setattr(_base, "PROGRESS_EVERY_S", 0.0)
+    got = []
+    bar = _base.progress_bar(10, got.append, unit="sample", initial=6)
+    bar.update(2)
+    bar.close()
+    assert got == [got[0]] and got[0].startswith("8/10 samples (80%)")

@@ -1,7 +1,6 @@
 """`mech2spice montecarlo DESIGN.v`: yield of a design under element spread, on Dask, resumable."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from .. import inputs
@@ -124,7 +123,7 @@ def _clocked_job(args, nl, path) -> dict:
 def cmd_montecarlo(args) -> int:
     """Run the sweep; print the summary (text or JSON); 0 if every sample passed, else 1."""
     import tempfile
-    from ..cli import _log, _print_json
+    from ..cli import _log, _print_json, _progress
     from . import mc_run
     job = job_of(args)
     log = _log(args)
@@ -133,7 +132,7 @@ def cmd_montecarlo(args) -> int:
         if args.out:
             inputs.check_output_file(out, [args.design], "results file")
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
-                         progress=not args.json and sys.stderr.isatty(), log=log)
+                         progress=_progress(args), log=log)
     res.update({"design": job["design"], "backend": job["backend"], "spread": job["spread"], "seed": job["seed"],
                 "noise": job.get("noise", 0.0)})
     if not args.out:
@@ -200,7 +199,7 @@ def cpu_job_of(args) -> dict:
 def cmd_cpu_montecarlo(args) -> int:
     """Run the processor sweep; print the summary; 0 if every sample passed, else 1."""
     import tempfile
-    from ..cli import _log, _print_json
+    from ..cli import _log, _print_json, _progress
     from . import mc_run
     job = cpu_job_of(args)
     with tempfile.TemporaryDirectory() as tmp:
@@ -208,7 +207,7 @@ def cmd_cpu_montecarlo(args) -> int:
         if args.out:
             inputs.check_output_file(out, [args.program], "results file")
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
-                         progress=not args.json and sys.stderr.isatty(), log=_log(args))
+                         progress=_progress(args), log=_log(args))
     res.update({"program": job["program"], "cycles": job["cycles"], "backend": job["backend"],
                 "spread": job["spread"], "seed": job["seed"], "noise": job.get("noise", 0.0)})
     if not args.out:

@@ -212,7 +212,5 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def _bar(total: int, initial: int, enabled: bool):
-    bar = progress_bar(total, enabled, unit="sample")
-    bar.update(initial)
-    return bar
+def _bar(total: int, initial: int, enabled):
+    return progress_bar(total, enabled, unit="sample", initial=initial)

@@ -1,7 +1,9 @@
 """First-run frictions (issue #26): --version, the preset list, a changed parameter set's name, a Monte-Carlo
 sweep where every sample fails, progress on a redirected stderr, and `make setup` waiting for apt's lock."""
 import json
+import os
 import re
+import subprocess
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -104,3 +106,55 @@ def test_progress_lines_count_from_a_resumed_start(monkeypatch):
     bar.update(2)
     bar.close()
     assert got == [got[0]] and got[0].startswith("8/10 samples (80%)")
+
+
+# --- make setup: apt waits for another apt --------------------------------------------------------------
+FAKE_APT = """#!/bin/sh
+# apt-get as another apt leaves it: `update` finds the lists' lock held until the third try
+echo "$*" >> "$CALLS"
+case "$*" in *" update")
+    n=$(grep -c " update" "$CALLS")
+    if [ "$n" -lt 3 ]; then
+        echo "E: Could not get lock $FAIL. It is held by process 99 (apt-get)" >&2
+        echo "E: Unable to lock directory /var/lib/apt/lists/" >&2
+        exit 100
+    fi;;
+esac
+"""
+
+
+def _fake_apt(tmp_path, fail: str) -> dict:
+    bin_ = tmp_path / "bin"
+    bin_.mkdir()
+    for name, text in (("apt-get", FAKE_APT), ("sleep", "#!/bin/sh\n")):
+        (bin_ / name).write_text(text)
+        (bin_ / name).chmod(0o755)
+    return {**os.environ, "PATH": f"{bin_}:{os.environ['PATH']}", "CALLS": str(tmp_path / "calls"), "FAIL": fail}
+
+
+def test_setup_apt_waits_for_the_package_lists_lock(tmp_path):
+    """`apt-get update` failed at once when another apt held /var/lib/apt/lists/lock (DPkg::Lock::Timeout does
+    not cover it): it is retried; install waits for the dpkg lock itself (DPkg::Lock::Timeout)."""
+    env = _fake_apt(tmp_path, "/var/lib/apt/lists/lock")
+    r = subprocess.run(["sh", str(REPO / "scripts/apt_install.sh"), "ngspice", "libngspice0"], env=env,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    calls = (tmp_path / "calls").read_text().splitlines()
+    assert calls == ["-q -o DPkg::Lock::Timeout=600 update"] * 3 + \
+        ["-q -o DPkg::Lock::Timeout=600 install -y ngspice libngspice0"]
+    assert r.stdout.count("Could not get lock /var/lib/apt/lists/lock. It is held by process 99 (apt-get); waiting") == 2
+
+
+def test_setup_apt_gives_up_at_once_on_other_failures(tmp_path):
+    env = _fake_apt(tmp_path, "unused")
+    (tmp_path / "bin" / "apt-get").write_text("#!/bin/sh\necho \"$*\" >> \"$CALLS\"\n"
+                                             "echo 'E: Failed to fetch http://deb.debian.org' >&2\nexit 100\n")
+    r = subprocess.run(["sh", str(REPO / "scripts/apt_install.sh"), "ngspice"], env=env, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 1 and "Failed to fetch" in r.stderr
+    assert len((tmp_path / "calls").read_text().splitlines()) == 1
+
+
+def test_make_setup_uses_the_waiting_install():
+    text = (REPO / "Makefile").read_text()
+    assert "|| sh scripts/apt_install.sh ngspice libngspice0" in text and "apt-get update -qq" not in text

@@ -79,7 +79,8 @@ def test_montecarlo_where_every_sample_diverges(tmp_path, capfd):
     assert "Warning" not in err and err == ""
     assert main(argv) == 1
     out, err = capfd.readouterr()
-    assert "margin quantiles: none (no sample ran to a margin" in out and "total damping" in out
+    assert "margin quantiles: none (every sample diverged or did not run)" in out
+    assert "2 samples stopped early: 1 x DOF 'g0.C': total damping" in out
     assert "Warning" not in err
 
 

@@ -147,15 +147,15 @@ def cmd_montecarlo(args) -> int:
 def _print(res: dict) -> None:
     lo, hi = res["yield_ci95"]
     print(f"{res['samples']} samples, {res['failures']} failures: yield {res['yield']:.4f} (95 % CI {lo:.4f} - {hi:.4f})")
-    n, counted = res["samples"], res["margin_samples"]
+    stopped = sum(res["reasons"].values())       # samples that diverged or did not run: they have no margin
     if res["margin_quantiles"]:
         print("margin quantiles (band widths): " + ", ".join(f"{q} {v:+.3f}" for q, v in res["margin_quantiles"].items())
-              + ("" if counted == n else f" (over the {counted} samples with a margin)"))
-    if counted < n:
-        print(f"no margin: {n - counted} samples (diverged or did not run; reasons below)" if counted
-              else "margin quantiles: none (no sample ran to a margin: every one diverged or did not run; reasons below)")
-    for reason, k in sorted(res.get("reasons", {}).items(), key=lambda kv: -kv[1])[:5]:
-        print(f"  {k} x {reason}")
+              + (f" (over the {res['margin_samples']} samples with a margin)" if stopped else ""))
+    elif stopped:
+        print("margin quantiles: none (every sample diverged or did not run)")
+    if stopped:
+        print(f"{stopped} samples stopped early: " + "; ".join(
+            f"{k} x {reason}" for reason, k in sorted(res["reasons"].items(), key=lambda kv: -kv[1])[:5]))
     if res["failing_bits"]:
         print("failing bits (samples): " + ", ".join(f"{b} {n}" for b, n in res["failing_bits"].items()))
     if res["gate_failure_rate"] is not None:

@@ -134,7 +134,8 @@ BLOCK_PRESETS = ("robust", "classic")        # block files shipped under mech2sp
 
 
 class _Presets(Mapping):
-    """Every name `--params` takes: the built-in sets, then the shipped blocks (each read when first asked for)."""
+    """Every name `--params` takes: the built-in sets, then the shipped blocks (each read from its file when
+    asked for: `mech2spice design` may install a better 'robust')."""
 
     def __getitem__(self, name: str) -> GateParams:
         if name in BUILTIN:
@@ -165,6 +166,8 @@ def _block_preset(name: str) -> GateParams:
     if not path.is_file():
         raise Mech2SpiceError(f"the '{name}' block is not installed ({path}): run `mech2spice design` first")
     return load_params(str(path))
+
+
 GATE_FIELDS = ("f_r", "u_r", "omega", "name")   # what a block file may set beside its "block"
 EXTRA_KEYS = ("search", "measured", "note")   # a block file's record of how it was found (not read)
 

@@ -11,7 +11,7 @@ from . import simulation
 from .backends import BACKENDS, engine_options
 from .errors import Mech2SpiceError
 from .physics import network
-from .physics.params import GateParams, load_params
+from .physics.params import PRESETS, GateParams, load_params
 from .synthesis import synth
 from .synthesis.ports import pack_inputs
 from .synthesis.synth import Netlist, observe
@@ -101,7 +101,7 @@ def emit(design, inputs: dict[str, int] | None = None, *, params="default", peri
     options = engine_options("ngspice", options)
     values, periods, p = check.port_values(inputs), _periods(periods), _params(params)
     if path is not None:
-        sources = [x for x in (design, params) if isinstance(x, (str, os.PathLike))]
+        sources = [x for x in (design, params) if isinstance(x, (str, os.PathLike)) and x not in PRESETS]
         path = check.check_output_file(check.path_value(path, "path"), sources, "netlist file")
     nl = _netlist(design)
     pack_inputs(nl, values)

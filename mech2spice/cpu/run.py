@@ -325,7 +325,7 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     state = read_checkpoint(checkpoint, program, backend) if resume else None
     t0 = time.perf_counter()                       # wall_s includes building the model and power-up
     cost = _Cost(state)
-    if progress and backend in PHYSICAL:
+    if progress is True and backend in PHYSICAL:           # a terminal (a log gets the cycle lines only)
         print(f"[{backend}] building the processor's oscillator model ...", file=sys.stderr, flush=True)
     if backend in CIRCUIT and checkpoint is not None:    # one simulator process per checkpoint interval
         physical.setdefault("segment", checkpoint_every)

@@ -4,8 +4,8 @@ PY ?= python3
 .PHONY: setup demo test test-all reports subckts
 
 setup:  ## install ngspice and Icarus Verilog (Debian) and the package with its Python dependencies
-	@dpkg -s ngspice libngspice0 iverilog >/dev/null 2>&1 || \
-	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq ngspice libngspice0 iverilog)
+	@dpkg -s ngspice libngspice0 iverilog >/dev/null 2>&1 || sh scripts/apt_install.sh ngspice libngspice0 iverilog
+	@echo "make setup: pip install -e '.[test,vacask,mc]' (quiet: prints nothing until it ends)"
 	$(PY) -m pip install -q --root-user-action=ignore -e '.[test,vacask,mc]'
 
 demo: setup  ## the main job end to end: gate, adder from Verilog on RK4, sqrt(2809), the sieve on 6486 oscillators

@@ -6,11 +6,11 @@
 
 The pipeline and how to add an engine: docs/architecture.md.
 """
-from .api import emit, simulate
+from .api import emit, simulate, synthesize
 from .backends import BACKENDS
 from .errors import Mech2SpiceError
 from .physics.params import DEFAULT, PRESETS, PRINTED, GateParams, load_params
-from .synthesis.synth import Netlist, synthesize
+from .synthesis.synth import Netlist
 
 __version__ = "0.2.0"
 __all__ = ["BACKENDS", "DEFAULT", "GateParams", "Mech2SpiceError", "Netlist", "PRESETS", "PRINTED", "emit",

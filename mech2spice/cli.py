@@ -40,6 +40,14 @@ def _print_json(data) -> None:
     print(json.dumps(_jsonable(data), indent=2))
 
 
+def _progress(args):
+    """Progress of long steps on stderr: a bar on a terminal; redirected, a timestamped line every
+    backends._base.PROGRESS_EVERY_S (a log file still shows the run moving); nothing with --json."""
+    if getattr(args, "json", False):
+        return False
+    return True if sys.stderr.isatty() else _log(args)
+
+
 def _log(args):
     quiet = getattr(args, "json", False)
     t0 = time.time()
@@ -169,7 +177,7 @@ def cmd_simulate_clocked(args, nl) -> int:
         p = load_params(args.params)
         timing = simulation.clock_timing(nl, args.pulse, args.pause, p)
         res = simulation.run_clocked_physical(nl, p, cycles, args.backend, timing,
-                                            progress=not args.json and sys.stderr.isatty(),
+                                            progress=_progress(args),
                                             options=_engine_options(args), log=_log(args),
                                             noise=(args.noise, args.noise_seed))
     if args.json:
@@ -198,7 +206,7 @@ def cmd_simulate(args) -> int:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --clock/--cycles/--stimulus apply to clocked designs")
     values = _parse_sets(args.set)
     res = simulation.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
-                                progress=not args.json and sys.stderr.isatty(), options=_engine_options(args),
+                                progress=_progress(args), options=_engine_options(args),
                                 log=_log(args), noise=(args.noise, args.noise_seed))[0]
     res["inputs"] = values
     if args.json:
@@ -327,11 +335,22 @@ def _backends_help() -> str:
         f"{name}: {(cls.__doc__ or '').strip().splitlines()[0].rstrip('.')}" for name, cls in BACKENDS.items())
 
 
+def version() -> str:
+    """The installed distribution's version, else (a source tree run in place) the package's own."""
+    from importlib import metadata
+    try:
+        return metadata.version("mech2spice")
+    except metadata.PackageNotFoundError:
+        from . import __version__
+        return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The `mech2spice` argument parser with every subcommand."""
     ap = _Parser(
         prog="mech2spice",
         description="Verilog -> networks of nonlinear mechanical NOR gates -> RK4 / envelope / ngspice.")
+    ap.add_argument("--version", action="version", version=f"mech2spice {version()}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     g = sub.add_parser("gate", help="characterise the NOR gate against the paper's six requirements",
@@ -357,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--top", help="top module (default: the only/auto-detected top)")
         sp.add_argument("--params", default="default", help="gate parameters: default, printed, robust, classic "
                         "or a JSON file (fields, or a block file: docs/design.md)")
-        sp.add_argument("--max-fanout", type=inputs.integer(2, 10 ** 6), default=MAX_FANOUT,
+        sp.add_argument("--max-fanout", type=inputs.integer(2, inputs.MAX_FANOUT_LIMIT), default=MAX_FANOUT,
                         help="insert NOR-pair buffers so no gate drives more loads (default 12, the largest "
                              "fan-out measured to work)")
         sp.add_argument("--observe", action="append", metavar="PORT",

@@ -7,10 +7,13 @@ Each check raises Mech2SpiceError with one line naming the option or file and wh
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
+import numbers
 import os
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 
 from .errors import Mech2SpiceError
@@ -22,6 +25,7 @@ MAX_PHYSICAL_CYCLES = 10_000
 MAX_PERIODS = 10_000_000          # drive periods of one run (memory grows ~16 B per period and probe)
 MAX_STEPS = 100_000               # steps per drive period
 MAX_CPU_CYCLES = 1_000_000_000    # `cpu run --max-cycles`: no per-cycle memory, only time
+MAX_FANOUT_LIMIT = 10 ** 6        # `--max-fanout`: beyond it, no buffer is ever inserted
 
 
 # --------------------------------------------------------------------------- numbers (argparse types)
@@ -35,10 +39,14 @@ def integer(lo: int, hi: int):
             raise argparse.ArgumentTypeError(f"expected a whole number from {lo} to {hi:,}, got {text!r}") \
                 from None
         if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"must be from {lo} to {hi:,}, got {value}")
+            raise argparse.ArgumentTypeError(_out_of_range(lo, hi, value))
         return value
     parse.__name__ = "integer"
     return parse
+
+
+def _out_of_range(lo: int, hi: int, value) -> str:
+    return f"must be from {lo} to {hi:,}, got {value}"
 
 
 def number(lo: float, hi: float = math.inf, *, lo_open: bool = True):
@@ -156,8 +164,11 @@ def is_number(value) -> bool:
 
 def stimulus_steps(path, base: dict[str, int], backend: str) -> list[dict]:
     """A --stimulus file checked: [{"set": {PORT: INT}, "cycles": N}, ...], the --set values under each step's."""
-    data = read_json(path, "stimulus file")
-    where = f"stimulus file {path}"
+    return check_steps(read_json(path, "stimulus file"), base, backend, f"stimulus file {path}")
+
+
+def check_steps(data, base: dict[str, int], backend: str, where: str = "stimulus") -> list[dict]:
+    """A stimulus (a file's content, or the API's list) checked: shape, types, the cycle cap."""
     if not isinstance(data, list):
         raise Mech2SpiceError(f"{where} must hold a list of steps "
                               f"([{{\"set\": {{\"PORT\": INT}}, \"cycles\": N}}, ...]), not {type_name(data)}")
@@ -166,16 +177,14 @@ def stimulus_steps(path, base: dict[str, int], backend: str) -> list[dict]:
         if not isinstance(step, dict):
             raise Mech2SpiceError(f"{where}, step {k}: expected an object {{\"set\": ..., \"cycles\": N}}, "
                                   f"not {type_name(step)}")
-        extra = sorted(set(step) - {"set", "cycles"})
+        extra = sorted(set(step) - {"set", "cycles"}, key=str)
         if extra:
             raise Mech2SpiceError(f"{where}, step {k}: unknown field(s) {', '.join(map(repr, extra))} "
                                   "(a step has 'set' and 'cycles')")
-        sets, cycles = step.get("set", {}), step.get("cycles", 1)
-        if not isinstance(sets, dict) or not all(is_int(v) for v in sets.values()):
-            raise Mech2SpiceError(f"{where}, step {k}: 'set' must map port names to integers")
-        if not is_int(cycles) or cycles < 0:
+        sets, cycles = port_values(step.get("set", {}), f"{where}, step {k}: 'set'"), step.get("cycles", 1)
+        if not is_integral(cycles) or cycles < 0:
             raise Mech2SpiceError(f"{where}, step {k}: 'cycles' must be a whole number >= 0, got {cycles!r}")
-        steps.append({"set": {**base, **sets}, "cycles": cycles})
+        steps.append({"set": {**base, **sets}, "cycles": int(cycles)})
     check_cycles(sum(s["cycles"] for s in steps), backend, f"{where} asks for")
     return steps
 
@@ -188,6 +197,72 @@ def check_cycles(total: int, backend: str, what: str = "--cycles asks for") -> N
                               "per run (memory grows with every cycle): split the stimulus into shorter runs")
     if total < 1:
         raise Mech2SpiceError(f"{what} no clock cycles")
+
+
+# --------------------------------------------------------------------------- values given in Python (the API)
+# The API's counterparts of the argparse types above: the same caps, a Mech2SpiceError for anything else.
+
+def is_integral(value) -> bool:
+    """A Python or numpy integer (true/false are not numbers here)."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def value_kind(value) -> str:
+    """type_name for a value given in Python (None is None there, not null)."""
+    return "None" if value is None else type_name(value)
+
+
+def whole_number(value, what: str, lo: int, hi: int) -> int:
+    """`value` as an int in [lo, hi] (`integer`'s caps for a value given in Python)."""
+    if not is_integral(value):
+        raise Mech2SpiceError(f"{what} must be a whole number from {lo} to {hi:,}, not {value_kind(value)}")
+    if not lo <= value <= hi:
+        raise Mech2SpiceError(f"{what} {_out_of_range(lo, hi, value)}")
+    return int(value)
+
+
+def path_value(value, what: str) -> Path:
+    """A file path given as str or os.PathLike (not empty)."""
+    text = os.fspath(value) if isinstance(value, (str, os.PathLike)) else None
+    if not isinstance(text, str):
+        raise Mech2SpiceError(f"{what} must be a file path (str or os.PathLike), not {value_kind(value)}")
+    if not text:
+        raise Mech2SpiceError(f"the {what} path is empty")
+    return Path(text)
+
+
+def port_values(values, what: str = "inputs") -> dict[str, int]:
+    """{port: int} given in Python (the API's inputs, a stimulus step's 'set'): string names, integer values.
+    Which ports exist and their widths are the design's to check (synthesis.ports.pack_inputs)."""
+    if values is None:
+        return {}
+    if not isinstance(values, Mapping):
+        raise Mech2SpiceError(f"{what} must map port names to integers, not {value_kind(values)}")
+    for port, v in values.items():
+        if not isinstance(port, str):
+            raise Mech2SpiceError(f"{what} must map port names to integers: the name {port!r} is not a string")
+        if not is_integral(v):
+            raise Mech2SpiceError(f"{what} must map port names to integers: {port!r} -> {value_kind(v)}")
+    return {port: int(v) for port, v in values.items()}
+
+
+_KINDS = {"int": ("a whole number", is_integral), "bool": ("True or False", lambda v: isinstance(v, bool)),
+          "float": ("a number", lambda v: isinstance(v, numbers.Real) and not isinstance(v, bool)),
+          "str": ("a string", lambda v: isinstance(v, str)), "None": ("None", lambda v: v is None)}
+
+
+def check_fields(options) -> None:
+    """Each field of an engine's Options dataclass of the type its annotation names (int, float, bool, str,
+    `| None`): a wrong type fails at construction, not deep inside a run or as a TypeError in validate.
+    Ranges (NaN and inf included) are each validate's, with messages that say what the value means."""
+    for f in dataclasses.fields(options):
+        kinds = [k.strip() for k in (f.type if isinstance(f.type, str) else f.type.__name__).split("|")]
+        if not all(k in _KINDS for k in kinds):
+            continue                            # a type this check does not know: the Options' validate's
+        value = getattr(options, f.name)
+        if not any(_KINDS[k][1](value) for k in kinds):
+            raise Mech2SpiceError(f"{type(options).__name__}.{f.name} = {value!r}: must be "
+                                  f"{' or '.join(_KINDS[k][0] for k in kinds)}")
 
 
 # --------------------------------------------------------------------------- files written
@@ -253,11 +328,11 @@ def first_json_line(path, limit: int = 64 << 20):
 def params_file(spec):
     """The file a --params value reads (the package's file for a shipped block; None for a preset)."""
     from .physics.params import BLOCK_PRESETS, PRESETS
-    if spec is None or spec in PRESETS:
-        return None
-    if spec in BLOCK_PRESETS:
+    if spec in BLOCK_PRESETS:                     # shipped blocks are files (PRESETS names them too)
         from . import data
         return data.path("blocks", f"{spec}.json")
+    if spec is None or spec in PRESETS:
+        return None
     return spec
 
 

@@ -177,6 +177,26 @@ def test_cli_summary_fields(tmp_path, nor_v, capsys):
     assert json.loads(capsys.readouterr().out)["ran"] == 0
 
 
+@pytest.mark.parametrize("address", ["foo", "tcp://", "host:port", "tcp://host", "host:0", "host:70000",
+                                     "tcp://host:8786/x", "", "local "])
+@pytest.mark.parametrize("command", [["montecarlo", str(ADDER)], ["cpu", "montecarlo", "programs/sieve.asm"]])
+def test_scheduler_that_is_not_an_address_is_one_line_before_work(command, address, capsys, tmp_path):
+    """It reached dask.distributed.Client, which failed with a ValueError traceback after the synthesis."""
+    out = tmp_path / "r.jsonl"
+    assert main([*command, "--samples", "1", "--spread", "0.01", "--scheduler", address, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "argument --scheduler: scheduler" in err and "HOST:PORT" in err and err.count("\n") == 1
+    with pytest.raises(Mech2SpiceError, match="expected local, inline"):
+        mc_run.run({"design": "x"}, 1, out, scheduler=address)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("address", ["local", "inline", "host:8786", "tcp://10.0.0.5:8786", "[::1]:8786",
+                                     "tls://sched.example.org:8786"])
+def test_scheduler_addresses_are_taken(address):
+    assert mc_run.check_scheduler(address) == address
+
+
 def test_cli_errors_are_one_line(nor_v, capsys):
     assert main(["montecarlo", str(nor_v), "--samples", "2", "--spread", '{"local": {"x": 1}}']) == 2
     err = capsys.readouterr().err.strip()

@@ -173,3 +173,21 @@ def test_cli_bad_robustness_input(argv, msg, capsys):
     assert cli.main(argv) == 2
     err = capsys.readouterr().err
     assert msg in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("fields, mode, msg", [
+    ({"k_c": 1e300}, "--sens", "failed numerically (FloatingPointError: overflow"),
+    ({"q_g": 1e300}, "--sens", "no stable steady state at inputs 00, 10, 01, 11"),
+    ({"omega": 1e300}, "--spread", "failed numerically (OverflowError"),
+    ({"u_r": 1e-300}, "--spread", "failed numerically (FloatingPointError: overflow"),
+    ({"m_c": 1e-300}, "--sens", "the steady-state scan overflowed"),
+])
+def test_cli_extreme_finite_parameters_are_one_line(fields, mode, msg, tmp_path, capsys):
+    """Parameters valid by type and sign but far outside the gate's range: one line, exit 2, no traceback
+    and no numpy warning (they gave IndexError, LinAlgError, OverflowError tracebacks)."""
+    f = tmp_path / "extreme.json"
+    f.write_text(json.dumps(fields))
+    argv = ["gate", "--params", str(f), mode] + (["0.01", "--samples", "2"] if mode == "--spread" else []) + ["--json"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert msg in err and err.count("\n") == 1 and err.startswith("mech2spice: error: ")

@@ -16,15 +16,27 @@ BACKENDS: dict[str, type] = {e.name: e for e in _ENGINES}
 
 def engine_class(name: str) -> type:
     """The engine class registered under `name`."""
-    try:
-        return BACKENDS[name]
-    except KeyError:
-        raise Mech2SpiceError(f"unknown backend '{name}' (choose from {', '.join(BACKENDS)})") from None
+    if not isinstance(name, str) or name not in BACKENDS:
+        raise Mech2SpiceError(f"unknown backend {name!r} (choose from {', '.join(BACKENDS)})")
+    return BACKENDS[name]
+
+
+def engine_options(name: str, options=None):
+    """`options` for the engine `name` checked: its own Options class (another engine's would be misread),
+    validated; None gives the defaults."""
+    cls = engine_class(name).Options
+    if options is None:
+        return cls()
+    if type(options) is not cls:
+        raise Mech2SpiceError(f"options for the {name} backend must be {cls.__name__} "
+                              f"(BACKENDS[{name!r}].Options), not {type(options).__name__}")
+    options.validate()
+    return options
 
 
 def make_engine(name: str, options=None):
     """An engine by name, with its options (validated) or its defaults."""
-    return engine_class(name)(options)
+    return engine_class(name)(engine_options(name, options))
 
 
-__all__ = ["BACKENDS", "Capabilities", "Engine", "Run", "engine_class", "make_engine"]
+__all__ = ["BACKENDS", "Capabilities", "Engine", "Run", "engine_class", "engine_options", "make_engine"]

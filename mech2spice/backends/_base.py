@@ -10,6 +10,7 @@ names to them.  Adding one: a module with an `Engine` subclass and one registry 
 from __future__ import annotations
 
 import math
+import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -137,12 +138,40 @@ class _NoBar:
         """Do nothing (the progress bar is off)."""
 
 
-def progress_bar(total: int, enabled: bool, unit: str = "period"):
-    """A tqdm bar with an ETA when enabled (callers enable it on a terminal only), else a no-op."""
+PROGRESS_EVERY_S = 15.0     # a progress line this often when stderr is not a terminal
+
+
+class _LineBar:
+    """Progress as a line through `log` every PROGRESS_EVERY_S seconds: a redirected stderr (a log file, a
+    pipe) has no bar to redraw, but a long run still shows that it moves and when it should end."""
+
+    def __init__(self, total: int, unit: str, log, initial: int = 0):
+        self.total, self.unit, self.log, self.n, self.n0 = total, unit, log, initial, initial
+        self.t0 = self.last = time.monotonic()
+
+    def update(self, n):
+        """Count n more; a line once PROGRESS_EVERY_S has passed since the last one."""
+        self.n += n
+        now = time.monotonic()
+        if now - self.last >= PROGRESS_EVERY_S:
+            self.last = now
+            rate = (self.n - self.n0) / max(now - self.t0, 1e-9)
+            eta = f", at most {(self.total - self.n) / rate:.0f} s to go" if rate > 0 else ""
+            self.log(f"{self.n:,}/{self.total:,} {self.unit}s ({self.n / max(self.total, 1):.0%}){eta}")
+
+    def close(self):
+        """Nothing to clear (lines stay)."""
+
+
+def progress_bar(total: int, enabled, unit: str = "period", initial: int = 0):
+    """A tqdm bar with an ETA when `enabled` is True (callers enable it on a terminal only); a line every
+    PROGRESS_EVERY_S through `enabled` when it is a callable (the CLI's log, on a redirected stderr); else a no-op."""
+    if callable(enabled):
+        return _LineBar(total, unit, enabled, initial)
     if not enabled:
         return _NoBar()
     from tqdm import tqdm
-    return tqdm(total=total, unit=unit, leave=False)
+    return tqdm(total=total, initial=initial, unit=unit, leave=False)
 
 
 def probe_dofs(model: MechModel, names: list[str]) -> np.ndarray:

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import Mech2SpiceError
+from ..inputs import check_fields
 from ..physics import noise as thermal
 from ..physics.envelope import Envelope
 from ..physics.model import MechModel
@@ -111,8 +112,12 @@ class NoisyEnvelopeOptions:
     noise_seed: int = 0
     step_periods: float | None = None     # None: the longest of 1, 1/2, ... periods within the stability bound
 
+    def __post_init__(self):
+        self.validate()              # a bad value fails where it is set, not later inside a run
+
     def validate(self) -> None:
         """Refuse temperatures, seeds and steps that are not usable."""
+        check_fields(self)
         thermal.check_temperature(self.noise_temperature)
         if isinstance(self.noise_seed, bool) or not isinstance(self.noise_seed, (int, np.integer)) or self.noise_seed < 0:
             raise Mech2SpiceError(f"noise seed {self.noise_seed!r}: must be an integer >= 0")

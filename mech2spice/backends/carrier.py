@@ -31,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import Mech2SpiceError
+from ..inputs import check_fields
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import _carrier_kernel as kernel
@@ -311,8 +312,12 @@ class CarrierOptions:
     threads: int = 1                     # >1: each pass's DOFs split over numba's thread pool
     latency: float | None = None         # u_R; None: integrate every gate at every step (_carrier_latency.py)
 
+    def __post_init__(self):
+        self.validate()              # a bad value fails where it is set, not later inside a run
+
     def validate(self) -> None:
         """Refuse steps, tolerances and thread counts the engine cannot take."""
+        check_fields(self)
         if isinstance(self.steps_per_period, bool) or int(self.steps_per_period) != self.steps_per_period \
                 or self.steps_per_period < 4:
             raise Mech2SpiceError("the carrier engine needs a whole number of at least 4 steps per drive period")

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import Mech2SpiceError
+from ..inputs import check_fields
 from ..physics.envelope import Envelope, gershgorin_rate, spectral_rate
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
@@ -263,8 +264,12 @@ class EnvelopeOptions:
     parallel: bool = False               # the compiled loop's rates on all cores (without latency)
     exponential: bool = False            # the insulators stepped exactly: lifts the stability bound
 
+    def __post_init__(self):
+        self.validate()              # a bad value fails where it is set, not later inside a run
+
     def validate(self) -> None:
         """Refuse steps and tolerances that are not positive numbers."""
+        check_fields(self)
         if self.step_periods is not None:
             if not (np.isfinite(self.step_periods) and self.step_periods > 0):
                 raise Mech2SpiceError(f"envelope step {self.step_periods!r} periods: must be a positive number")

@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import Mech2SpiceError
+from ..inputs import check_fields
 from ..physics import noise as thermal
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
@@ -224,8 +225,12 @@ class RK4Options:
     noise_seed: int = 0                  # the Langevin forces' seed (with the period index)
     settle_tol: float | None = None      # u_R; None: integrate every period (no idle skipping)
 
+    def __post_init__(self):
+        self.validate()              # a bad value fails where it is set, not later inside a run
+
     def validate(self) -> None:
         """Refuse steps the scheme cannot take and temperatures that are not numbers >= 0."""
+        check_fields(self)
         if int(self.steps_per_period) != self.steps_per_period or self.steps_per_period < 4:
             raise Mech2SpiceError("RK4 needs a whole number of at least 4 steps per drive period")
         thermal.check_temperature(self.noise_temperature)

@@ -214,8 +214,9 @@ def cmd_run(args) -> int:
         raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
     if args.trace is not None and args.resume and not Path(args.trace).exists():
         raise Mech2SpiceError(f"--resume with --trace {args.trace}: the trace to continue does not exist")
+    from ..cli import _progress
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
-                      resume=args.resume, progress=not args.json and sys.stderr.isatty(),
+                      resume=args.resume, progress=_progress(args),
                       checkpoint_every=args.checkpoint_every, trace=args.trace, force=args.force, **physical)
     if args.json:
         print(json.dumps(res, indent=2))

@@ -271,6 +271,9 @@ class _NoBar:
 
 def _cycle_bar(enabled: bool, done: int, total: int, backend: str):
     """A progress bar over cycles with rate and ETA (to --max-cycles: a halt comes sooner)."""
+    if callable(enabled):                      # a redirected stderr: a line now and then (backends._base)
+        from ..backends._base import progress_bar
+        return progress_bar(total, enabled, "cycle", initial=done)
     if not enabled:
         return _NoBar()
     from tqdm import tqdm
@@ -341,7 +344,7 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     state = read_checkpoint(checkpoint, program, backend) if resume else None
     t0 = time.perf_counter()                       # wall_s includes building the model and power-up
     cost = _Cost(state)
-    if progress and backend in PHYSICAL:
+    if progress is True and backend in PHYSICAL:           # a terminal (a log gets the cycle lines only)
         print(f"[{backend}] building the processor's oscillator model ...", file=sys.stderr, flush=True)
     if backend in CIRCUIT and checkpoint is not None:    # one simulator process per checkpoint interval
         physical.setdefault("segment", checkpoint_every)
@@ -350,7 +353,7 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         _restore(cpu, state, checkpoint)
     if trace is not None and not callable(trace):
         trace = TraceFile(trace, cpu.cycle if resume else None)
-    bar = _cycle_bar(progress and backend != "iss", cpu.cycle, max_cycles, backend)
+    bar = _cycle_bar(progress if backend != "iss" else False, cpu.cycle, max_cycles, backend)
     while not cpu.halted and cpu.cycle < max_cycles:
         rec = cpu.step()
         bar.update(1)

@@ -1,7 +1,6 @@
 """`mech2spice design`: the block-structure search (design/search.py), resumable from its checkpoint."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from .. import inputs
@@ -63,7 +62,7 @@ def _check_files(args) -> None:
 
 def cmd_design(args) -> int:
     """Run (or resume) the search; print per structure its best parameters, tolerance, margin, DOFs."""
-    from ..cli import _log, _print_json
+    from ..cli import _log, _print_json, _progress
     from . import search
     settings = {"sigma": args.sigma, "samples": args.samples, "seed": args.seed, "maxiter": args.maxiter,
                 "popsize": args.popsize, "budget_s": args.budget_s, "tol_samples": args.tol_samples}
@@ -74,7 +73,7 @@ def cmd_design(args) -> int:
         settings = state["settings"]
     else:
         state = search.run(structures, Path(args.out), settings, _log(args),
-                           progress=not args.json and sys.stderr.isatty())
+                           progress=_progress(args))
     out = search.summary(state)
     if args.install_robust:
         if not out["best"]:

@@ -1,7 +1,6 @@
 """`mech2spice montecarlo DESIGN.v`: yield of a design under element spread, on Dask, resumable."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from .. import inputs
@@ -36,8 +35,9 @@ def add_parser(subparsers) -> None:
 
 def add_sweep_arguments(s) -> None:
     """The options every Monte-Carlo command shares: parameters, samples, spread, noise, seed, Dask, results."""
+    from ..physics.params import PRESETS
     s.add_argument("--params", default="default",
-                   help="gate parameters: default, printed, robust, or a JSON file (fields or a block)")
+                   help=f"gate parameters: {', '.join(PRESETS)}, or a JSON file (fields or a block)")
     s.add_argument("--samples", type=inputs.integer(1, 10_000_000), required=True, metavar="N")
     s.add_argument("--spread", required=True, metavar="SIGMA|JSON",
                    help='relative sigma on every element, or {"local": SIGMA|{KIND: SIGMA}, "wafer": '
@@ -48,7 +48,7 @@ def add_sweep_arguments(s) -> None:
                         "1 MHz silicon scaling); a Langevin force on every dashpot, each sample its own seed; "
                         "default 0 (none)")
     s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, metavar="S")
-    s.add_argument("--scheduler", default="local", metavar="local|inline|ADDRESS",
+    s.add_argument("--scheduler", default="local", metavar="local|inline|ADDRESS", type=_scheduler,
                    help="local: a LocalCluster, one worker per core (default); inline: no Dask; or a "
                         "Dask scheduler address (tcp://host:8786)")
     s.add_argument("--workers", type=inputs.integer(1, 4096), default=None, help="LocalCluster workers")
@@ -66,6 +66,16 @@ def check_out(args, read: dict) -> None:
         read = {**read, "the --params file": inputs.params_file(args.params),
                 "the --spread file": mc.spread_file(args.spread)}
         inputs.check_output_file(args.out, read, "results file", kind=RESULTS_KIND, remedy="give another --out")
+
+
+def _scheduler(text: str) -> str:
+    """An argparse type: mc_run.check_scheduler, its refusal as a usage error (before any work)."""
+    import argparse
+    from .mc_run import check_scheduler
+    try:
+        return check_scheduler(text)
+    except Mech2SpiceError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def vectors_of(args, netlist) -> list[dict[str, int]]:
@@ -124,7 +134,7 @@ def _clocked_job(args, nl, path) -> dict:
 def cmd_montecarlo(args) -> int:
     """Run the sweep; print the summary (text or JSON); 0 if every sample passed, else 1."""
     import tempfile
-    from ..cli import _log, _print_json
+    from ..cli import _log, _print_json, _progress
     from . import mc_run, montecarlo as mc
     check_out(args, {"the design": mc.design_path(args.design), "the --stimulus file": args.stimulus})
     job = job_of(args)
@@ -132,7 +142,7 @@ def cmd_montecarlo(args) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out) if args.out else Path(tmp) / "results.jsonl"
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
-                         progress=not args.json and sys.stderr.isatty(), log=log)
+                         progress=_progress(args), log=log)
     res.update({"design": job["design"], "backend": job["backend"], "spread": job["spread"], "seed": job["seed"],
                 "noise": job.get("noise", 0.0)})
     if not args.out:
@@ -147,8 +157,15 @@ def cmd_montecarlo(args) -> int:
 def _print(res: dict) -> None:
     lo, hi = res["yield_ci95"]
     print(f"{res['samples']} samples, {res['failures']} failures: yield {res['yield']:.4f} (95 % CI {lo:.4f} - {hi:.4f})")
+    stopped = sum(res["reasons"].values())       # samples that diverged or did not run: they have no margin
     if res["margin_quantiles"]:
-        print("margin quantiles (band widths): " + ", ".join(f"{q} {v:+.3f}" for q, v in res["margin_quantiles"].items()))
+        print("margin quantiles (band widths): " + ", ".join(f"{q} {v:+.3f}" for q, v in res["margin_quantiles"].items())
+              + (f" (over the {res['margin_samples']} samples with a margin)" if stopped else ""))
+    elif stopped:
+        print("margin quantiles: none (every sample diverged or did not run)")
+    if stopped:
+        print(f"{stopped} samples stopped early: " + "; ".join(
+            f"{k} x {reason}" for reason, k in sorted(res["reasons"].items(), key=lambda kv: -kv[1])[:5]))
     if res["failing_bits"]:
         print("failing bits (samples): " + ", ".join(f"{b} {n}" for b, n in res["failing_bits"].items()))
     if res["gate_failure_rate"] is not None:
@@ -192,14 +209,14 @@ def cpu_job_of(args) -> dict:
 def cmd_cpu_montecarlo(args) -> int:
     """Run the processor sweep; print the summary; 0 if every sample passed, else 1."""
     import tempfile
-    from ..cli import _log, _print_json
+    from ..cli import _log, _print_json, _progress
     from . import mc_run
     check_out(args, {"the program": args.program})
     job = cpu_job_of(args)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out) if args.out else Path(tmp) / "results.jsonl"
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
-                         progress=not args.json and sys.stderr.isatty(), log=_log(args))
+                         progress=_progress(args), log=_log(args))
     res.update({"program": job["program"], "cycles": job["cycles"], "backend": job["backend"],
                 "spread": job["spread"], "seed": job["seed"], "noise": job.get("noise", 0.0)})
     if not args.out:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import time
 from pathlib import Path
@@ -138,9 +139,24 @@ def tasks_of(todo: list[int], size: int) -> list[list[int]]:
     return [todo[k:k + size] for k in range(0, len(todo), size)]
 
 
+_ADDRESS = re.compile(r"(?:(?:tcp|tls)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):([0-9]{1,5})")
+SCHEDULERS = "local, inline, or a Dask scheduler address HOST:PORT or tcp://HOST:PORT (e.g. tcp://10.0.0.5:8786)"
+
+
+def check_scheduler(text) -> str:
+    """local, inline or a scheduler address: checked before any work (Dask itself fails late, with a traceback)."""
+    if text in ("local", "inline"):
+        return text
+    m = _ADDRESS.fullmatch(text) if isinstance(text, str) else None
+    if m is None or not 1 <= int(m.group(2)) <= 65535:
+        raise Mech2SpiceError(f"scheduler {text!r}: expected {SCHEDULERS}")
+    return text
+
+
 def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: int | None = None,
         progress: bool = False, stop_after: int | None = None, log=lambda msg: None) -> dict:
     """Evaluate samples 0..samples-1 of `job` (those not yet in `out`), appending to `out`; the summary."""
+    check_scheduler(scheduler)
     t0 = time.time()
     out = Path(out)
     done = read_results(out, job)
@@ -235,7 +251,5 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def _bar(total: int, initial: int, enabled: bool):
-    bar = progress_bar(total, enabled, unit="sample")
-    bar.update(initial)
-    return bar
+def _bar(total: int, initial: int, enabled):
+    return progress_bar(total, enabled, unit="sample", initial=initial)

@@ -300,9 +300,9 @@ def job_key(job: dict) -> str:
     Parameters named by a file or a shipped block ('robust' changes when `mech2spice design` installs a
     better one) enter by their values, so a results file never resumes under other values; the built-in
     presets enter by name, which keeps the keys of results files written before blocks were data."""
-    from ..physics.params import PRESETS, load_params
+    from ..physics.params import BUILTIN, load_params
     keyed = dict(job)
-    if job.get("params") not in PRESETS:
+    if job.get("params") not in BUILTIN:
         keyed["params_values"] = load_params(job["params"]).to_dict()
     return hashlib.sha256(json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
@@ -312,7 +312,7 @@ def summary(records: list[dict], n_gates: int) -> dict:
     n = len(records)
     passed = sum(bool(r["pass"]) for r in records)
     margins = np.array([r["margin"] if r.get("margin") is not None else np.nan for r in records], float)
-    finite = margins[~np.isnan(margins)]
+    finite = margins[np.isfinite(margins)]       # a diverged sample's -inf has no place in a quantile
     bits, gates = {}, {}
     for r in records:
         for b, c in r.get("failing_bits", {}).items():
@@ -325,6 +325,7 @@ def summary(records: list[dict], n_gates: int) -> dict:
     return {"samples": n, "failures": n - passed, "yield": passed / n if n else None,
             "yield_ci95": list(wilson(passed, n)),
             "margin_quantiles": {f"{q}%": float(np.percentile(finite, q)) for q in QUANTILES} if finite.size else {},
+            "margin_samples": int(finite.size),   # the samples the quantiles are over (0: none has a margin)
             "failing_bits": dict(sorted(bits.items(), key=lambda kv: -kv[1])),
             "gate_failure_rate": rate if n_gates else None,          # None: gates not checked (clocked runs)
             "gate_failure_rate_ci95": [lo, hi], "gates": n_gates,

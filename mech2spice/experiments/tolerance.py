@@ -195,6 +195,11 @@ def sensitivity_report(p: GateParams, log=lambda msg: None) -> dict:
     t0 = time.time()
     log("sensitivities (implicit-function theorem on the loaded gate)")
     s = sensitivity.gate_sensitivity(p)
+    unstable = [case for case, a in s["amplitudes"].items() if not np.isfinite(a)]
+    if unstable:                         # no steady state to differentiate: the table would be NaN
+        raise Mech2SpiceError(f"parameters '{p.name}': the loaded gate has no stable steady state at inputs "
+                              f"{', '.join(unstable)}, so its sensitivities are undefined (it does not work as "
+                              "a NOR gate there: `mech2spice gate` shows its truth table)")
     table = {}
     for k, name in enumerate(s["elements"]):
         row = {case: float(v[k]) for case, v in s["outputs"].items()}
@@ -238,14 +243,26 @@ def fd_check(p: GateParams, s: dict, top: int = 6, h: float = 1e-6) -> dict:
     return {"elements_checked": 2 * top, "step": h, "max_relative_error": worst}
 
 
+# what extreme but finite parameters raise inside the linear algebra (a matrix overflowing to inf, a float
+# power beyond the double range; numpy's overflow, 0/0 and x/0, raised instead of warned: the shipped blocks
+# and spreads up to sigma 1 raise none): bad input, reported as such, not a bug
+NUMERIC_FAILURES = (np.linalg.LinAlgError, OverflowError, FloatingPointError, ZeroDivisionError)
+
+
 def robustness(p: GateParams, sens: bool, sigma: float | None, samples: int, seed: int,
                log=lambda msg: None) -> dict:
     """What `mech2spice gate --sens` and/or `--spread SIGMA` print."""
     out: dict = {"params": p.to_dict()}
-    if sens:
-        out.update(sensitivity_report(p, log))
-    if sigma is not None:
-        out.update(study(p, sigma, samples, seed, log=log))
+    try:
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            if sens:
+                out.update(sensitivity_report(p, log))
+            if sigma is not None:
+                out.update(study(p, sigma, samples, seed, log=log))
+    except NUMERIC_FAILURES as err:
+        raise Mech2SpiceError(f"parameters '{p.name}': the steady-state analysis failed numerically "
+                              f"({type(err).__name__}: {err}); a parameter is far outside the range the gate "
+                              "model can be computed in") from None
     return out
 
 

@@ -15,6 +15,8 @@ Two sets ship with the package:
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
@@ -51,6 +53,12 @@ class GateParams:
     name: str = "default"
     # the block structure (physics/blocks.py); None: the classic block built from the fields above
     block: BlockSpec | None = field(default=None, repr=False)
+
+    def __post_init__(self):
+        # "default" names the default values only: GateParams(q_g=150.0) or replace(DEFAULT, ...) would
+        # otherwise call itself default in every result, report and JSON file
+        if self.name == "default" and any(getattr(self, f.name) != f.default for f in fields(self)):
+            object.__setattr__(self, "name", "custom")
 
     # --- derived quantities -------------------------------------------------
     @property
@@ -124,8 +132,45 @@ PRINTED = GateParams(
     omega=math.sqrt(14311.8 / 6.0), name="printed")
 DEFAULT = GateParams()
 
-PRESETS = {"default": DEFAULT, "printed": PRINTED}
+BUILTIN = {"default": DEFAULT, "printed": PRINTED}
 BLOCK_PRESETS = ("robust", "classic")        # block files shipped under mech2spice/data/blocks/
+
+
+class _Presets(Mapping):
+    """Every name `--params` takes: the built-in sets, then the shipped blocks (each read from its file when
+    asked for: `mech2spice design` may install a better 'robust')."""
+
+    def __getitem__(self, name: str) -> GateParams:
+        if name in BUILTIN:
+            return BUILTIN[name]
+        if name in BLOCK_PRESETS:
+            return _block_preset(name)
+        raise KeyError(name)
+
+    def __contains__(self, name) -> bool:          # without reading a block file
+        return name in BUILTIN or name in BLOCK_PRESETS
+
+    def __iter__(self):
+        return iter((*BUILTIN, *BLOCK_PRESETS))
+
+    def __len__(self) -> int:
+        return len(BUILTIN) + len(BLOCK_PRESETS)
+
+    def __repr__(self) -> str:
+        return f"PRESETS({', '.join(self)})"
+
+
+PRESETS = _Presets()
+
+
+def _block_preset(name: str) -> GateParams:
+    from .. import data as pkg_data
+    path = pkg_data.path("blocks", f"{name}.json")
+    if not path.is_file():
+        raise Mech2SpiceError(f"the '{name}' block is not installed ({path}): run `mech2spice design` first")
+    return load_params(str(path))
+
+
 GATE_FIELDS = ("f_r", "u_r", "omega", "name")   # what a block file may set beside its "block"
 EXTRA_KEYS = ("search", "measured", "note")   # a block file's record of how it was found (not read)
 
@@ -133,15 +178,13 @@ EXTRA_KEYS = ("search", "measured", "note")   # a block file's record of how it 
 def load_params(spec: str | None) -> GateParams:
     """'default', 'printed', a shipped block ('robust', 'classic'), a JSON file with any subset of the
     fields (rest from default), or a block file (a "block" structure: physics/blocks.py)."""
-    from ..inputs import MAX_NAME, is_name, is_number, read_json, type_name
+    from ..inputs import MAX_NAME, is_name, is_number, read_json, type_name, value_kind
+    if spec is not None and not isinstance(spec, (str, os.PathLike)):
+        raise Mech2SpiceError(f"params must be a preset ({', '.join(PRESETS)}) or a JSON file "
+                              f"path, not {value_kind(spec)}")
+    spec = None if spec is None else os.fspath(spec)
     if spec is None or spec in PRESETS:
         return PRESETS[spec or "default"]
-    if spec in BLOCK_PRESETS:
-        from .. import data as pkg_data
-        path = pkg_data.path("blocks", f"{spec}.json")
-        if not path.is_file():
-            raise Mech2SpiceError(f"the '{spec}' block is not installed ({path}): run `mech2spice design` first")
-        return load_params(str(path))
     data = read_json(spec, "parameter file")
     if not isinstance(data, dict):
         raise Mech2SpiceError(f"parameter file {spec} must hold a JSON object of fields "

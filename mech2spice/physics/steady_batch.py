@@ -120,13 +120,21 @@ def roots(st: Stack, b: int, levels: np.ndarray, n_grid: int = N_GRID) -> Roots:
     return _states(st, b, levels, pts, r0)
 
 
+OVERFLOW = ("the steady-state scan overflowed: a gate parameter is too large or too small for double precision "
+            "(the insulator's range is not a finite number)")
+
+
 def root_range(st: Stack, b: int, amax: np.ndarray) -> tuple[float, float]:
     """Interval of s that can hold a root for any input point with |a_g| <= amax (coarse scan)."""
     L = _wide_bound(st, b, amax)
+    if not np.isfinite(L):
+        raise Mech2SpiceError(OVERFLOW)
     s = np.linspace(-L, L, max(int(min(2 * L / WIDE_STEP, 40000)), 3) | 1)
     W = w_matrix(st, b, responses(st, b, s))
     bound = 0.5 * BOUND_SAFETY * np.einsum("sgh,g,h->s", np.abs(W), amax, amax)
     ok = np.flatnonzero(abs(st.ks[b]) * np.abs(s) <= bound)
+    if not ok.size:                      # even s = 0 fails: the bound is NaN (inf - inf in the responses)
+        raise Mech2SpiceError(OVERFLOW)
     step = s[1] - s[0]
     return float(s[ok[0]] - 2 * step), float(s[ok[-1]] + 2 * step)
 

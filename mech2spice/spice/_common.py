@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DivergenceError, Mech2SpiceError
+from ..inputs import check_fields
 from ..physics.model import MechModel
 
 METHODS = ("trap", "gear")   # ngspice's integration methods
@@ -90,7 +91,7 @@ def check_transient(o, simulator: str) -> None:
     if not (isinstance(o.max_step_periods, (int, float)) and 0 < o.max_step_periods <= o.MAX_STEP_LIMIT):
         raise Mech2SpiceError(f"max_step_periods must be in (0, {o.MAX_STEP_LIMIT:g}] drive periods")
     for name in ("reltol", "abstol", "chgtol", "vntol"):
-        if not getattr(o, name) > 0:
+        if not (math.isfinite(getattr(o, name)) and getattr(o, name) > 0):
             raise Mech2SpiceError(f"{type(o).__name__}.{name} must be positive")
     if o.timeout_s is not None and not (math.isfinite(o.timeout_s) and o.timeout_s > 0):
         raise Mech2SpiceError(f"the {simulator} timeout must be a positive number of seconds")
@@ -117,8 +118,12 @@ class NgspiceSettings:
     timeout_s: float | None = None    # one ngspice process's time limit; None: DEFAULT_TIMEOUT_S
     MAX_STEP_LIMIT = 1000.0           # longest max step a form accepts, in drive periods
 
+    def __post_init__(self):
+        self.validate()              # a bad value fails where it is set, not later inside a run
+
     def validate(self) -> None:
         """Refuse settings ngspice would reject or misread."""
+        check_fields(self)
         check_transient(self, "ngspice")
         if not 1 <= self.maxord <= 6:
             raise Mech2SpiceError("maxord must be 1..6")

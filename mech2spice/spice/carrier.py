@@ -34,10 +34,12 @@ class SpiceOptions(NgspiceSettings):
     def validate(self) -> None:
         """Refuse settings ngspice would reject or misread."""
         super().validate()
-        if self.trtol is not None and not self.trtol > 0:
+        if self.trtol is not None and not (math.isfinite(self.trtol) and self.trtol > 0):
             raise Mech2SpiceError("SpiceOptions.trtol must be positive")
         from ..physics.noise import check_temperature
         check_temperature(self.noise_temperature)
+        if self.noise_seed < 0:
+            raise Mech2SpiceError(f"SpiceOptions.noise_seed {self.noise_seed}: must be an integer >= 0")
 
     @property
     def fixed_step(self) -> bool:

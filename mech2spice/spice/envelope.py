@@ -35,7 +35,7 @@ class EnvelopeSpiceOptions(NgspiceSettings):
     def validate(self) -> None:
         """Refuse settings ngspice would reject or misread."""
         super().validate()
-        if not self.trtol > 0:
+        if not (np.isfinite(self.trtol) and self.trtol > 0):
             raise Mech2SpiceError("EnvelopeSpiceOptions.trtol must be positive")
 
 

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DivergenceError, Mech2SpiceError, ToolMissingError
+from ..inputs import check_fields
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
@@ -62,12 +63,16 @@ class VacaskOptions:
     MAX_STEP_LIMIT = 0.25
     RAMP_PERIODS = 1e-3               # a drive-amplitude change ramps over this many periods
 
+    def __post_init__(self):
+        self.validate()              # a bad value fails where it is set, not later inside a run
+
     def validate(self) -> None:
         """Refuse settings VACASK would reject or misread."""
+        check_fields(self)
         check_transient(self, "VACASK")
         if self.relref not in RELREFS:
             raise Mech2SpiceError(f"VACASK relref '{self.relref}' unknown (use {', '.join(RELREFS)})")
-        if not self.lteratio > 1:
+        if not (math.isfinite(self.lteratio) and self.lteratio > 1):
             raise Mech2SpiceError(f"{type(self).__name__}.lteratio must be > 1")
 
     @property

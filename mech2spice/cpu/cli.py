@@ -87,6 +87,10 @@ def add_parser(subparsers) -> None:
     r.add_argument("--trace", metavar="FILE", help="write one JSON line per cycle to FILE: the cycle's record, the "
                    "registers after it and (envelope, carrier, rk4) every probed amplitude in u_R")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
+    r.add_argument("--stability", choices=("off", "end"), default="off",
+                   help="end: the oscillator-level machine's stability verdict at its halt (envelope, carrier, "
+                        "rk4; adds `stable` and `stability` to the JSON; 1-2 min on the processor; "
+                        "docs/stability.md)")
     force_arg(r, "--checkpoint or --trace")
     circuit_args(r)
     r.add_argument("--json", action="store_true", help="machine-readable output")
@@ -214,15 +218,19 @@ def cmd_run(args) -> int:
         raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
     if args.trace is not None and args.resume and not Path(args.trace).exists():
         raise Mech2SpiceError(f"--resume with --trace {args.trace}: the trace to continue does not exist")
+    if args.stability == "end" and args.backend not in ("envelope", "carrier", "rk4"):
+        raise Mech2SpiceError(f"--stability end judges an oscillator-level machine (envelope, carrier, rk4), "
+                              f"not --backend {args.backend}")
     from ..cli import _progress
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=_progress(args),
-                      checkpoint_every=args.checkpoint_every, trace=args.trace, force=args.force, **physical)
+                      checkpoint_every=args.checkpoint_every, trace=args.trace, force=args.force,
+                      stability=args.stability == "end", **physical)
     if args.json:
         print(json.dumps(res, indent=2))
     else:
         _print_run(res)
-    return 0 if res["halted"] else 1
+    return 0 if res["halted"] and res.get("stable", True) else 1
 
 
 def _print_run(res: dict) -> None:
@@ -230,6 +238,10 @@ def _print_run(res: dict) -> None:
     state = "halted" if res["halted"] else "did not halt"
     print(f"{state} after {res['cycles']} cycles ({res['backend']}, {res['wall_s']:.2f} s)")
     print("registers: " + " ".join(f"{k}={v}" for k, v in regs.items()))
+    if "stability" in res:
+        st = res["stability"]
+        print(f"stable: {res['stable']} (least stable mode: growth {st['growth_rate']} per drive period, "
+              f"period {st['mode_period']}, in {', '.join(st['mode_dofs'][:3])})")
     mem = res["memory"]
     print("memory (hex, row = 16 addresses):")
     for row in range(16):

@@ -184,6 +184,17 @@ class PhysicalCPU:
         """The engine's state at rest, as it would continue from it (a run of no periods integrates nothing)."""
         return tuple(np.asarray(a) for a in self.pulse_engine.run(self.model, 0).state)
 
+    def stability(self):
+        """The stability verdict (physics/stability.py) of the machine as it stands, after its last pause:
+        the fixed point nearest its state under the inputs it holds, and the least stable mode there."""
+        from ..physics import stability
+        from ..physics.envelope import Envelope
+        A, s = self.pause_engine.phasors(self.model, self.state, self.period * self.model.period)
+        stim = network.stimulus(self.model, self.netlist, self.p, [(0, [{"rdata": self.rdata}])], clock=[[0]])
+        F = Envelope.of(self.model).forcing(stim.at(0))[:, 0]
+        watch = {f"{g.name}.C": g.channel for g in self.model.design.gates}
+        return stability.verdict(self.model, A[:, 0], s[:, 0], F, watch)
+
     # --- one clock cycle --------------------------------------------------------------------
     def step(self) -> Cycle:
         """One clock cycle: read, settle the datapath, pulse the clock, commit the write, settle again."""

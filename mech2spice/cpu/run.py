@@ -329,7 +329,7 @@ class TraceFile:
 
 def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpoint=None,
                 resume: bool = False, progress: bool = False, checkpoint_every: int | None = None,
-                trace=None, force: bool = False, **physical) -> dict:
+                trace=None, force: bool = False, stability: bool = False, **physical) -> dict:
     """Run until halted or ``max_cycles`` (total) and return the result dict.  Checkpoints are written
     every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level and circuit backends).  ``trace``:
     a callable(record, cpu) called after each cycle, or a path for a TraceFile.  Neither file may be the
@@ -372,6 +372,10 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     if backend in PHYSICAL:
         result.update(periods=cpu.period, simulated_periods=cpu.simulated, step=cpu.step_periods,
                       settle=cpu.settle, latency=cpu.latency, block_steps=cpu.block_steps)
+        if stability:
+            t1 = time.perf_counter()
+            v = cpu.stability()
+            result.update(stable=v.stable, stability={**v.to_json(), "wall_s": time.perf_counter() - t1})
     if hasattr(cpu, "extra"):                      # the circuit backend: simulator cost, the circuit's memory
         result.update(cpu.extra())
     for addr, dev in cpu.mem.devices.items():

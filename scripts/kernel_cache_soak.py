@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -46,9 +47,16 @@ def run_once(clone: Path, command: list[str], stats_file: Path, with_stats: bool
     if with_stats and stats_file.exists() and stats_file.stat().st_size:
         compiled = json.loads(stats_file.read_text())["compiled"]
     size, files = cache_size(clone)
-    error = p.stderr.strip().splitlines()[-1] if p.returncode and p.stderr.strip() else None
+    error = _error(p.stderr) if p.returncode else None
     return {"rc": p.returncode, "wall_s": round(wall, 3), "compiled": compiled, "cache_bytes": size,
             "cache_files": files, "error": error}
+
+
+def _error(stderr: str) -> str | None:
+    """The exception a traceback ended in (the CLI's last line follows it), else stderr's last line."""
+    lines = stderr.strip().splitlines()
+    found = [ln for ln in lines if re.match(r"[A-Za-z_][\w.]*(Error|Exception): ", ln)]
+    return (found or lines or [None])[-1]
 
 
 def summary(runs: list[dict], before: tuple[int, int]) -> dict:

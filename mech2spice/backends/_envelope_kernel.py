@@ -127,7 +127,7 @@ def _lu_solve(L, U, perm_c, work, work2, Ad, b):
 def _rates(parallel, A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Ad, sdd, work, work2, Binv):
     """_rhs_parallel or _rhs, chosen by a flag: a compiled function passed as an argument would put its
     dispatcher in run_steps' signature, which numba's on-disk cache never matches in another process
-    (every run recompiled and appended an entry until loading the index failed: numba issue 2956)."""
+    (every run recompiled and appended an entry until saving the index failed: numba issue 2956)."""
     if parallel:
         _rhs_parallel(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Ad, sdd, work, work2, Binv)
     else:

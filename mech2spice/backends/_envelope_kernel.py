@@ -124,12 +124,24 @@ def _lu_solve(L, U, perm_c, work, work2, Ad, b):
 
 
 @njit(cache=True, fastmath=FAST)
+def _rates(parallel, A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Ad, sdd, work, work2, Binv):
+    """_rhs_parallel or _rhs, chosen by a flag: a compiled function passed as an argument would put its
+    dispatcher in run_steps' signature, which numba's on-disk cache never matches in another process
+    (every run recompiled and appended an entry until saving the index failed: numba issue 2956)."""
+    if parallel:
+        _rhs_parallel(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Ad, sdd, work, work2, Binv)
+    else:
+        _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Ad, sdd, work, work2, Binv)
+
+
+@njit(cache=True, fastmath=FAST)
 def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Binv, prow,
-              amp, bound, settle_tol, watch, check_every, settle_from, rhs):
+              amp, bound, settle_tol, watch, check_every, settle_from, parallel):
     """Advance up to nsteps RK4 steps of h (sub steps span `per` periods), writing A[prow] for each
     period into amp.  Returns (steps done, DONE | SETTLED | DIVERGED).  With settle_tol > 0 the loop
     stops, from step settle_from on, once two windows of check_every steps in a row each saw every
-    watched amplitude (the channels) stay within a range of settle_tol.  `rhs`: _rhs or _rhs_parallel."""
+    watched amplitude (the channels) stay within a range of settle_tol.  parallel: the rates by
+    _rhs_parallel, else _rhs (_rates)."""
     nf, B = A.shape
     ns = s.shape[0]
     a1 = np.empty_like(A)
@@ -152,7 +164,7 @@ def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, p
     hi = np.zeros((watch.size, B))
     quiet = 0
     for n in range(nsteps):
-        rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a1, c1, work, work2, Binv)
+        _rates(parallel, A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a1, c1, work, work2, Binv)
         if settle_tol > 0.0 and n % check_every == 0:
             if n >= settle_from + check_every:         # a whole window since the last reset
                 worst = 0.0
@@ -172,7 +184,7 @@ def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, p
             for b in range(B):
                 st[j, b] = s[j, b] + 0.5 * h * sd[j, b]
                 v2[j, b] = sd[j, b] + 0.5 * h * c1[j, b]
-        rhs(At, st, v2, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a2, c2, work, work2, Binv)
+        _rates(parallel, At, st, v2, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a2, c2, work, work2, Binv)
         for f in range(nf):
             for b in range(B):
                 At[f, b] = A[f, b] + 0.5 * h * a2[f, b]
@@ -180,7 +192,7 @@ def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, p
             for b in range(B):
                 st[j, b] = s[j, b] + 0.5 * h * v2[j, b]
                 v3[j, b] = sd[j, b] + 0.5 * h * c2[j, b]
-        rhs(At, st, v3, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a3, c3, work, work2, Binv)
+        _rates(parallel, At, st, v3, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a3, c3, work, work2, Binv)
         for f in range(nf):
             for b in range(B):
                 At[f, b] = A[f, b] + h * a3[f, b]
@@ -188,7 +200,7 @@ def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, p
             for b in range(B):
                 st[j, b] = s[j, b] + h * v3[j, b]
                 v4[j, b] = sd[j, b] + h * c3[j, b]
-        rhs(At, st, v4, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a4, c4, work, work2, Binv)
+        _rates(parallel, At, st, v4, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, a4, c4, work, work2, Binv)
         for f in range(nf):
             for b in range(B):
                 A[f, b] += (h / 6.0) * (a1[f, b] + 2.0 * a2[f, b] + 2.0 * a3[f, b] + a4[f, b])
@@ -246,12 +258,12 @@ class Kernel:
             parallel=False):
         """nchunks chunks of `sub` steps spanning `per` periods; returns (amp, steps done, status).
         parallel: the rates on all cores (with the block inverse; else serial)."""
-        rhs = _rhs_parallel if parallel and self.Binv[0].size > 1 else _rhs
+        parallel = bool(parallel and self.Binv[0].size > 1)
         amp = np.empty((nchunks * per, prow.size, A.shape[1]), complex)
         done, status = run_steps(A, s, sd, nchunks * sub, sub, per, h, np.ascontiguousarray(F, complex), self.Z, self.G,
                                  self.H, self.Ks, self.Cs, self.inv_ms, self.L, self.U, self.perm_r,
                                  self.perm_c, self.Binv, prow.astype(np.int64), amp, bound, settle_tol,
-                                 self.watch, check_every, settle_from, rhs)
+                                 self.watch, check_every, settle_from, parallel)
         return amp, int(done), int(status)
 
     def propagators(self, env, h):

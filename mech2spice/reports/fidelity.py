@@ -183,7 +183,11 @@ def clocked() -> list[dict]:
                          "engine_cpu_s": sum(c for _, c in runs),
                          "cycles": len(cycles), "trace_equals_logic": got == want, "max_amp_diff": diff,
                          "min_margin": r["min_margin"], "periods": r["periods"],
-                         "simulated": r["simulated_periods"], "wall_s": wall})
+                         "simulated": r["simulated_periods"], "wall_s": wall, "valid": r["valid"],
+                         "stable": r.get("stable"), "settled": r.get("settled"),
+                         "reintegrated": r.get("cycles_reintegrated", 0),
+                         "worst_growth": max(e["stability"]["growth_rate"] for e in r["trace"]
+                                             if e.get("stability", {}).get("growth_rate") is not None)})
             print(rows[-1], flush=True)
     return rows
 
@@ -331,14 +335,22 @@ def markdown(d: dict) -> str:
         L += ["## Clocked designs (`simulation.run_clocked_physical`)", "",
               "Against the envelope at step 1 with full pauses, which reports/sequential.md and "
               "reports/envelope.md validate against RK4. *trace = logic*: every cycle's decoded outputs equal "
-              "the logic backend's.", "",
+              "the logic backend's. *stable / settled*: every read's stability verdict (docs/stability.md: a "
+              "stable fixed point; within 0.005 band widths of it), with the number of cycles whose held state "
+              "had not settled and were integrated again, and the least stable mode's growth per drive "
+              "period over all reads.", "",
               "| design | setting | trace = logic | max amplitude difference at reads (u_R) | min margin | "
-              "integrated / simulated periods | engine run (s) | wall (s) |", "|---|---|---|---|---|---|---|---|"]
+              "stable / settled (cycles again) | worst growth | integrated / simulated periods | engine run (s) | "
+              "wall (s) |", "|---|---|---|---|---|---|---|---|---|---|"]
         for r in d["clocked"]:
             eng = f"{r['engine_s']:.2f}" if "engine_s" in r else "-"
             eng += f" ({r['engine_cpu_s']:.2f})" if "engine_cpu_s" in r else ""
+            verdict = (f"{r['stable']} / {r['settled']} ({r['reintegrated']})" if r.get("stable") is not None
+                       else "-")
+            growth = f"{r['worst_growth']:.1e}" if r.get("worst_growth") is not None else "-"
             L.append(f"| {r['design']} | {r['setting']} (step {r['step']:g}) | {r['trace_equals_logic']} | {r['max_amp_diff']:.4f} | "
-                     f"{r['min_margin']:+.3f} | {r['simulated']:,} / {r['periods']:,} | {eng} | {r['wall_s']:.1f} |")
+                     f"{r['min_margin']:+.3f} | {verdict} | {growth} | {r['simulated']:,} / {r['periods']:,} | {eng} | "
+                     f"{r['wall_s']:.1f} |")
         L += ["", "*engine run*: the integration alone (`EnvelopeEngine.run` after `EnvelopeEngine.prepare`: the "
               "model and its cached operators -- envelope operator, compiled arrays, stability bound -- are built "
               "before it), "

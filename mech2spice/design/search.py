@@ -368,9 +368,22 @@ def install_block(rec: dict, target: Path, name: str = "robust") -> None:
         if not margin > 0:
             raise Mech2SpiceError(f"--install-robust: the {rec['structure']} block fails its own check (nominal "
                                   f"worst margin {margin:+.4f}): not installed")
+        _check_stable(tmp, rec["structure"])
         os.replace(tmp, target)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def _check_stable(path: Path, structure: str) -> None:
+    """Refuse a block with a growing mode over its valid inputs or in the 3-gate chain (the block-level part
+    of the stability verdict, experiments/characterise.stability; docs/stability.md)."""
+    from ..experiments.characterise import stability
+    from ..inputs import read_json
+    from ..physics.params import block_params
+    st = stability(block_params(read_json(path, "block file"), f"of the {structure} entry"))
+    if not st["stable"]:
+        raise Mech2SpiceError(f"--install-robust: the {structure} block has a growing mode (growth "
+                              f"{st['worst_growth_rate']:+.2e} per drive period): not installed")
 
 
 def _nominal_margin(path: Path, structure: str) -> float:

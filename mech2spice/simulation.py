@@ -185,7 +185,7 @@ def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int,
     for b in range(A.shape[1]):
         v = verdict.judge(model, A[:, b], s[:, b], F[:, b], outs)
         a, swing, step = _recent(history, outs, b)
-        out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.capabilities.averaged)))
+        out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.rests_on_fixed_point())))
     return out
 
 

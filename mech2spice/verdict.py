@@ -58,15 +58,16 @@ def still_to_come(v: stability.Verdict, amplitudes: dict[str, float], swing: dic
 
 
 def settled(v: stability.Verdict, amplitudes: dict[str, float], swing: dict[str, float], step: dict[str, float],
-            lag: float, averaged: bool) -> bool:
-    """Stable, and less than SETTLED_BW band widths still to come on every output.  An engine that integrates
-    the envelope equations themselves (`averaged`) rests exactly on their fixed point, so its distance from
-    it is what is still to come (and a run that held a snapshot of a moving network is far from it); an
-    oscillator-level run's steady state differs from the envelope's fixed point by the averaging error
-    (~2e-3 u_R), so for it the trend of its own amplitudes is used."""
+            lag: float, on_fixed_point: bool) -> bool:
+    """Stable, and less than SETTLED_BW band widths still to come on every output.  An engine that rests
+    exactly on the envelope equations' fixed points (`on_fixed_point`: their RK4 steps) is as far from
+    settled as its distance from the fixed point (and a run that held a snapshot of a moving network is far
+    from it); an oscillator-level run's steady state differs from that fixed point by the averaging error
+    (~2e-3 u_R), and an exponential step's by its local error, so for those the trend of their own
+    amplitudes is used."""
     if not v.stable:
         return False
-    if averaged:
+    if on_fixed_point:
         return drift(v, amplitudes) <= SETTLED_BW
     return still_to_come(v, amplitudes, swing, step, lag) <= SETTLED_BW
 

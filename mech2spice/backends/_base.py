@@ -91,6 +91,11 @@ class Engine(ABC):
         """The step (drive periods) that stimulus changes must fall on, for engines with whole-period steps."""
         return None
 
+    def rests_on_fixed_point(self) -> bool:
+        """Whether this engine, as configured, settles exactly onto the envelope equations' fixed points (so
+        its distance from one is what is still to come); else the verdict trusts only its own trend."""
+        return self.capabilities.averaged
+
     def phasors(self, model: MechModel, state, t: float) -> tuple[np.ndarray, np.ndarray] | None:
         """A state this engine returned (Run.state, at time t) as envelope phasors: (A (n_fast, B) complex,
         s (n_slow, B)), what the stability verdict linearises at (physics/stability.py); None where the

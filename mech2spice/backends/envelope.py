@@ -313,6 +313,11 @@ class EnvelopeEngine(Engine):
         """The envelope state itself: (A, s)."""
         return state[0], state[1]
 
+    def rests_on_fixed_point(self) -> bool:
+        """RK4 steps rest exactly on the equations' fixed points; the exponential (Lawson) step's rest point
+        is off by its local error (~4e-3 u_R at step 16: reports/fidelity.md)."""
+        return not self.options.exponential
+
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):
         """The envelope equations over `periods` drive periods (see `integrate`)."""
         return integrate(model, periods, step_periods=self.step(model), stimulus=stimulus, state=state,

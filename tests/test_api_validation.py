@@ -150,7 +150,7 @@ def test_emit_refuses_wrong_types_and_values(kwargs, needle):
 def test_emit_never_overwrites_its_design(tmp_path):
     design = tmp_path / "adder2.v"
     design.write_text(Path(ADDER).read_text())
-    refused(lambda: m2s.emit(design, {"a": 1}, path=str(design)), "is the input")
+    refused(lambda: m2s.emit(design, {"a": 1}, path=str(design)), "is the design")
     assert design.read_text() == Path(ADDER).read_text()
 
 

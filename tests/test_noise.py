@@ -23,9 +23,11 @@ T_GATE = 1e-4        # channel rms ~1e-3 / 0.0182 = 0.05 u_R: linear about the '
 
 
 def test_rk4_zero_noise_is_bit_identical_to_the_deterministic_scheme():
-    """T = 0 runs the arithmetic of the pre-noise RK4 (commit 43d3ebf) exactly: reference saved from it."""
+    """T = 0 runs the arithmetic of the pre-noise RK4 (commit 43d3ebf) exactly: reference saved from it (with
+    the block of then, insulator Q 1.5)."""
+    from dataclasses import replace
     ref = np.load(Path(__file__).parent / "data" / "rk4_chain2_before_noise.npz")
-    m = nor.chain(params.DEFAULT, 2, x1=1.0)
+    m = nor.chain(replace(params.DEFAULT, q_i=1.5), 2, x1=1.0)
     eng = rk4.RK4Engine(rk4.RK4Options(noise_temperature=0.0, noise_seed=5))
     r = eng.run(m, 30)
     assert np.array_equal(r.amp, ref["amp"]) and np.array_equal(r.x, ref["x"]) and np.array_equal(r.v, ref["v"])

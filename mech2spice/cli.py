@@ -246,10 +246,18 @@ def cmd_emit(args) -> int:
     stim = network.stimulus(model, nl, p, [(0, [values])])
     periods = args.periods or simulation.period_budget(nl)
     title = f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}"
+    from .spice.readout import about as about_line
+    about = about_line(args.design, nl.top, values)
     if args.format == "ngspice":
         from .spice import carrier as spice
         opts = _engine_options(args, "ngspice")
-        text, run_with = spice.emit(model, periods, stim, options=opts, title=title), f"ngspice -b {args.output}"
+        text = spice.emit(model, periods, stim, options=opts, title=title, about=about)
+        run_with = f"ngspice -b {args.output} (it prints each output bit and port it reads)"
+    elif args.format == "ngspice-envelope":
+        from .spice import envelope
+        opts = _engine_options(args, "ngspice-envelope")
+        text = envelope.emit_envelope(model, stim, periods, opts, title=title, about=about)
+        run_with = f"ngspice -b {args.output} (it prints each output bit and port it reads)"
     else:                                          # vacask | vacask-envelope: Verilog-A embedded, one file
         from dataclasses import replace
         from .spice import vacask
@@ -443,13 +451,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
     s.add_argument("-o", "--output", required=True, help="netlist file to write")
     inputs.force_arg(s, "-o")
-    s.add_argument("--format", choices=["ngspice", "vacask", "vacask-envelope", "veriloga"], default="ngspice",
-                   help="netlist for ngspice (default) or VACASK (carrier or envelope level), or the Verilog-A library")
+    s.add_argument("--format", choices=["ngspice", "ngspice-envelope", "vacask", "vacask-envelope", "veriloga"],
+                   default="ngspice", help="netlist for ngspice or VACASK (carrier level, the default, or the "
+                                           "envelope equations), or the Verilog-A library")
     s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
                    help="simulated drive periods (default: settle budget)")
     s.add_argument("--method", choices=["trap", "gear"], help="integration method (default trap)")
     s.add_argument("--max-step", type=inputs.number(0), help="max step in drive periods (default 1/40; "
-                                                            "vacask-envelope: 2)")
+                                                            "the envelope forms: 2)")
     s.set_defaults(func=cmd_emit)
 
     from .cpu.cli import add_parser as add_cpu_parser

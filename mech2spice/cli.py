@@ -265,7 +265,8 @@ def cmd_emit(args) -> int:
         opts = (vacask.VacaskEnvelopeOptions if form == vacask.ENVELOPE else vacask.VacaskOptions)()
         opts = replace(opts, **{k: v for k, v in (("method", args.method), ("max_step_periods", args.max_step))
                                 if v is not None})
-        text = vacask.emit(model, periods, stim, options=opts, form=form, title=title, standalone=True).text
+        text = vacask.emit(model, periods, stim, options=opts, form=form, title=title, standalone=True,
+                           about=about).text
         run_with = f"vacask {args.output} (in its folder: it writes the .va and tran1.raw there)"
     inputs.write_text(args.output, text, encoding="ascii")    # the path was checked before the work
     info = {"netlist": args.output, "format": args.format, "periods": periods, "oscillators": model.n,

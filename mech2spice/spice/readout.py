@@ -77,7 +77,7 @@ def header(model: MechModel, nodes: list[str], what: str, about_line: str, print
     out.append(f"run: {run_with}")
     if prints:
         out.append("it prints per bit 'NAME[i] = A u_R -> 0|1|invalid', then per port 'NAME = N (valid)' or "
-                   "'NAME = invalid'")
+                   "'NAME = invalid'; exit status 0 when every bit is in a band, 1 otherwise")
     return out
 
 
@@ -174,7 +174,11 @@ def control_block(model: MechModel, amplitude, what: str, setup: list[str] = ())
         out += amplitude(k, b.probe) + _decode_bit(k, _label(b.name))
     for j, port in enumerate(ports):
         out += _print_port(j, port, bits)
-    return out + [".endc"]
+    # the exit status says whether every bit was in a band, as `simulate` does (ngspice's own would be 1:
+    # batch mode finds no .print line to run)
+    bad = [f"m2s_b{k} lt 0" for k, b in enumerate(bits) if b.probe is not None]
+    out += ["let m2s_valid = 1"] + [x for c in bad for x in (f"if {c}", "  let m2s_valid = 0", "end")]
+    return out + ["if m2s_valid eq 0", "  quit 1", "end", "quit 0", ".endc"]
 
 
 def period_window(periods: int, T: float) -> tuple[float, float]:

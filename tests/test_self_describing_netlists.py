@@ -70,8 +70,8 @@ def test_carrier_adder_prints_its_sum(tmp_path, a, b):
     adder_sum(tmp_path, a, b, "--periods", str(CARRIER_PERIODS))
 
 
-@pytest.mark.slow
-def test_carrier_adder_all_16_inputs(tmp_path):
+@pytest.mark.slow          # 163 s measured (two ngspice at a time, loaded 2-core machine); the envelope form below
+def test_carrier_adder_all_16_inputs(tmp_path):     # runs all 16 in the normal tier (10 s)
     all_pairs(tmp_path, [(a, b) for a in range(4) for b in range(4)], "--periods", str(CARRIER_PERIODS))
 
 
@@ -122,3 +122,20 @@ def test_emit_json_keeps_its_fields(tmp_path, capsys):
     info = json.loads(capsys.readouterr().out)
     assert set(info) == {"netlist", "format", "periods", "oscillators", "probes", "options"}
     assert info["probes"] == ["s[0]", "s[1]", "s[2]"] and info["periods"] == 5
+
+
+@pytest.mark.parametrize("form", ["vacask", "vacask-envelope"])
+def test_vacask_header_maps_nodes_and_says_what_it_cannot(tmp_path, form):
+    text = emit(tmp_path, ADDER, {"a": 1, "b": 1}, "--format", form, "--periods", "5").read_text()
+    head = text.split("// DOF -> nodes:")[0]
+    nodes = r"v\((\w+)\) v\((\w+)\)" if form.endswith("envelope") else r"v\((\w+)\)"
+    mapped = re.findall(rf"^//   {nodes} -> (s\[\d\])$", head, re.M)
+    assert [m[-1] for m in mapped] == ["s[0]", "s[1]", "s[2]"]
+    assert "VACASK cannot decode by itself" in head and "u_R = 0.0182" in head
+
+
+def test_cpu_emit_header_maps_port_bits():
+    from mech2spice.cpu.circuit import emit_cpu
+    text = emit_cpu([0] * 4, 1).text
+    head = text.split("// DOF -> nodes:")[0]
+    assert re.search(r"^//   v\(ar_\w+\) v\(ai_\w+\) -> raddr\[0\]$", head, re.M) and "bands: '0' 0.365" in head

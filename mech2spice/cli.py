@@ -445,8 +445,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("emit", help="write a self-contained ngspice or VACASK netlist of a design, or the Verilog-A library",
                        description="Write DESIGN as a hierarchical netlist: ngspice (library .subckts inlined, "
-                                   "stimulus, .tran, .options, .save of the output probes; `ngspice -b OUT.cir` "
-                                   "runs it), vacask / vacask-envelope (the Verilog-A devices embedded; `vacask "
+                                   "stimulus, .tran, .options, .save of the output probes and a .control block: "
+                                   "`ngspice -b OUT.cir` runs it and prints each output bit and port it reads), vacask / vacask-envelope (the Verilog-A devices embedded; `vacask "
                                    "OUT.sim` runs it), or veriloga (the device library, defaults from --params).")
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")

@@ -97,9 +97,11 @@ def _steps(values: dict, backend: str, cycles, stimulus) -> list[dict] | None:
 def emit(design, inputs: dict[str, int] | None = None, *, params="default", periods: int | None = None,
          options=None, path=None, force: bool = False) -> str:
     """The carrier-level ngspice netlist of a combinational design with these inputs (also written to `path`:
-    never the design or parameter file, nor an existing file that is not a netlist unless `force`)."""
+    never the design or parameter file, nor an existing file that is not a netlist unless `force`).  It reads
+    its own result: `ngspice -b FILE` prints each output bit and port (docs/spice.md)."""
     from .spice._common import NETLIST
     from .spice.carrier import emit as emit_netlist
+    from .spice.readout import about
     options = engine_options("ngspice", options)
     values, periods, p = check.port_values(inputs), _periods(periods), _params(params)
     if path is not None:                          # the command line's rule, before any work
@@ -112,7 +114,9 @@ def emit(design, inputs: dict[str, int] | None = None, *, params="default", peri
     model = network.build(nl, p)
     stim = network.stimulus(model, nl, p, [(0, [values])])
     title = f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}"
-    text = emit_netlist(model, periods or simulation.period_budget(nl), stim, options=options, title=title)
+    source = os.fspath(design) if isinstance(design, (str, os.PathLike)) else "(a Netlist)"
+    text = emit_netlist(model, periods or simulation.period_budget(nl), stim, options=options, title=title,
+                        about=about(source, nl.top, values))
     if path is not None:
         check.write_text(path, text, encoding="ascii")
     return text

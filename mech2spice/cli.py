@@ -246,10 +246,18 @@ def cmd_emit(args) -> int:
     stim = network.stimulus(model, nl, p, [(0, [values])])
     periods = args.periods or simulation.period_budget(nl)
     title = f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}"
+    from .spice.readout import about as about_line
+    about = about_line(args.design, nl.top, values)
     if args.format == "ngspice":
         from .spice import carrier as spice
         opts = _engine_options(args, "ngspice")
-        text, run_with = spice.emit(model, periods, stim, options=opts, title=title), f"ngspice -b {args.output}"
+        text = spice.emit(model, periods, stim, options=opts, title=title, about=about)
+        run_with = f"ngspice -b {args.output} (it prints each output bit and port it reads)"
+    elif args.format == "ngspice-envelope":
+        from .spice import envelope
+        opts = _engine_options(args, "ngspice-envelope")
+        text = envelope.emit_envelope(model, stim, periods, opts, title=title, about=about)
+        run_with = f"ngspice -b {args.output} (it prints each output bit and port it reads)"
     else:                                          # vacask | vacask-envelope: Verilog-A embedded, one file
         from dataclasses import replace
         from .spice import vacask
@@ -257,7 +265,8 @@ def cmd_emit(args) -> int:
         opts = (vacask.VacaskEnvelopeOptions if form == vacask.ENVELOPE else vacask.VacaskOptions)()
         opts = replace(opts, **{k: v for k, v in (("method", args.method), ("max_step_periods", args.max_step))
                                 if v is not None})
-        text = vacask.emit(model, periods, stim, options=opts, form=form, title=title, standalone=True).text
+        text = vacask.emit(model, periods, stim, options=opts, form=form, title=title, standalone=True,
+                           about=about).text
         run_with = f"vacask {args.output} (in its folder: it writes the .va and tran1.raw there)"
     inputs.write_text(args.output, text, encoding="ascii")    # the path was checked before the work
     info = {"netlist": args.output, "format": args.format, "periods": periods, "oscillators": model.n,
@@ -436,20 +445,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("emit", help="write a self-contained ngspice or VACASK netlist of a design, or the Verilog-A library",
                        description="Write DESIGN as a hierarchical netlist: ngspice (library .subckts inlined, "
-                                   "stimulus, .tran, .options, .save of the output probes; `ngspice -b OUT.cir` "
-                                   "runs it), vacask / vacask-envelope (the Verilog-A devices embedded; `vacask "
+                                   "stimulus, .tran, .options, .save of the output probes and a .control block: "
+                                   "`ngspice -b OUT.cir` runs it and prints each output bit and port it reads), vacask / vacask-envelope (the Verilog-A devices embedded; `vacask "
                                    "OUT.sim` runs it), or veriloga (the device library, defaults from --params).")
     design_args(s)
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
     s.add_argument("-o", "--output", required=True, help="netlist file to write")
     inputs.force_arg(s, "-o")
-    s.add_argument("--format", choices=["ngspice", "vacask", "vacask-envelope", "veriloga"], default="ngspice",
-                   help="netlist for ngspice (default) or VACASK (carrier or envelope level), or the Verilog-A library")
+    s.add_argument("--format", choices=["ngspice", "ngspice-envelope", "vacask", "vacask-envelope", "veriloga"],
+                   default="ngspice", help="netlist for ngspice or VACASK (carrier level, the default, or the "
+                                           "envelope equations), or the Verilog-A library")
     s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
                    help="simulated drive periods (default: settle budget)")
     s.add_argument("--method", choices=["trap", "gear"], help="integration method (default trap)")
     s.add_argument("--max-step", type=inputs.number(0), help="max step in drive periods (default 1/40; "
-                                                            "vacask-envelope: 2)")
+                                                            "the envelope forms: 2)")
     s.set_defaults(func=cmd_emit)
 
     from .cpu.cli import add_parser as add_cpu_parser

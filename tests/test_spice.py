@@ -105,13 +105,12 @@ def test_library_example_runs_and_is_a_logical_one(tmp_path):
                          ids=["single_gate", "chain3", "fanout2"])
 def test_netlist_runs_standalone(tmp_path, build):
     model = build()
-    text, vecs = emit_with_probes(model, 30, title="standalone check")
-    (tmp_path / "c.cir").write_text(text)
+    (tmp_path / "c.cir").write_text(emit(model, 30, title="standalone check"))
     proc = subprocess.run(["ngspice", "-b", "c.cir"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    # the .four lines make a bare batch run print each probe's component at the drive frequency
-    for vec in vecs:
-        assert f"Fourier analysis for {vec}:" in proc.stdout
+    assert proc.returncode in (0, 1), proc.stdout + proc.stderr      # 1: some probe in no band (30 periods)
+    # the .control block makes a bare batch run print each probe's amplitude at omega, in u_R, and its band
+    for name in model.probes:
+        assert re.search(rf"^{re.escape(name)} = [0-9.e+-]+ u_R -> (0|1|invalid)$", proc.stdout, re.M), name
     assert "error" not in proc.stderr.lower()
 
 

@@ -207,7 +207,7 @@ def failures(quick: bool) -> dict:
     for ms, rt in ((2, 1e-5), (0.5, 1e-5), (2, 1e-4)):
         opts = se.EnvelopeSpiceOptions(max_step_periods=ms, reltol=rt)
         for b in members:
-            text = se.emit_envelope(sc.model, sc.stimulus, sc.periods, opts, batch_index=b)
+            text = se.emit_envelope_with_probes(sc.model, sc.stimulus, sc.periods, opts, batch_index=b)[0]
             for form, t in (("tanh (used)", text), ("PWL, ramp 1e-3 T", pwl_variant(text, P.period))):
                 r = run_text(t, STALL_TIMEOUT)
                 out["pwl_stall"].append({"member": sc.members[b], "max_step": ms, "reltol": rt, "form": form, **r})
@@ -241,7 +241,7 @@ def acct(model, periods: int, opts, drop_b: bool = False) -> dict:
     """ngspice's own accounting (.options acct) of one run: where its time goes.  drop_b: the same netlist
     without its B sources (a linear circuit, physically meaningless: a cost probe only)."""
     from ..spice.runner import run_netlist
-    text = se.emit_envelope(model, None, periods, opts).replace(".options ", ".options acct ", 1)
+    text = se.emit_envelope_with_probes(model, None, periods, opts)[0].replace(".options ", ".options acct ", 1)
     if drop_b:
         text = "\n".join(ln for ln in text.splitlines() if not ln.startswith("B")) + "\n"
     t0 = time.perf_counter()

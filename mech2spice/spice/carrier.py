@@ -14,6 +14,7 @@ from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
+from . import readout
 from ._common import NgspiceSettings, Namer, comment_text, drive_schedule, num, prewarp_scale
 
 @dataclass(frozen=True)
@@ -456,17 +457,33 @@ class _Emitter:
         tstop = (self.periods + 0.25) * self.T
         out = [opts, f".tran {num(self.h)} {num(tstop)} 0 {num(self.h)} uic"]
         nodes = [f"v({self.probe_node(i)})" for i in self.m.probes.values()]
-        # .four gives a standalone `ngspice -b` run its output (amplitude at the drive frequency over
-        # the last period, printed); with -r ngspice ignores it and writes the raw file instead
-        freq = num(self.m.omega / (2 * math.pi))
-        for k in range(0, len(nodes), 8):
-            out.append(f".four {freq} " + " ".join(nodes[k:k + 8]))
         for k in range(0, len(nodes), 8):
             out.append(".save " + " ".join(nodes[k:k + 8]))
         return out
 
-    def netlist(self, title: str) -> str:
-        """Emit every element and return the whole netlist text."""
+    READING = "|A| / u_R, A the phasor at omega of the probed displacement over the last drive period"
+
+    def readout(self) -> list[str]:
+        """The .control block a standalone `ngspice -b` run prints its decoded result with (not with -r:
+        batch mode would run the circuit twice, once for the raw file)."""
+        t0, t1 = readout.period_window(self.periods, self.T)
+        nodes = [self.probe_node(i) for i in self.m.probes.values()]
+        # noise breakpoints shorten steps (see __init__): then the grid is not uniform
+        uniform = self.opt.fixed_step and not self.opt.noise_temperature
+        return readout.control_block(self.m, lambda k, i: readout.carrier_amplitude(
+            k, nodes[i], self.m.omega, t0, t1, self.m.amplitude_unit, uniform), self.READING,
+            readout.period_mask(t0, t1))
+
+    def reading_head(self, about: str) -> list[str]:
+        """The header's explanation of the result: probed node -> port bit, u_R, bands, how to run it."""
+        t0, t1 = readout.period_window(self.periods, self.T)
+        nodes = [f"v({self.probe_node(i)})" for i in self.m.probes.values()]
+        what = f"{self.READING}, t = {num(t0)}..{num(t1)}"
+        return [f"* {s}" for s in readout.header(self.m, nodes, what, about, True, "ngspice -b THIS_FILE")]
+
+    def netlist(self, title: str, reading: bool = False, about: str = "") -> str:
+        """Emit every element and return the whole netlist text (`reading`: with the header and .control
+        block that print the decoded result)."""
         m, o = self.m, self.opt
         for g in self.plan.gates:
             self.gate(g)
@@ -480,25 +497,31 @@ class _Emitter:
                 f"{num(self.warp)}",
                 "* DOF -> displacement node:"]
         head += [f"*   {comment_text(n)} -> {self.probe_node(i)}" for i, n in enumerate(m.names)]
+        if reading:
+            head = head[:2] + self.reading_head(about) + head[2:]
         body = [params_text(param_values(self.p, m.omega, self.warp), "parameters").rstrip("\n")]
         body += [t.rstrip("\n") for t in SUBCKTS.values()]
-        body += ["* --- circuit", *self.lines, "* --- drive amplitudes", *self.amp_lines, *self.analysis(), ".end"]
+        body += ["* --- circuit", *self.lines, "* --- drive amplitudes", *self.amp_lines, *self.analysis()]
+        body += [*(self.readout() if reading else []), ".end"]
         return "\n".join(head + body) + "\n"
 
 
 def emit(model: MechModel, periods: int, stimulus: Stimulus | None = None, batch_index: int = 0,
-         options: SpiceOptions = SpiceOptions(), title: str = "") -> str:
-    """A self-contained netlist: `ngspice -b file.cir` runs it (add `-r out.raw` for the data)."""
-    return emit_with_probes(model, periods, stimulus, batch_index, options, title)[0]
+         options: SpiceOptions = SpiceOptions(), title: str = "", about: str = "") -> str:
+    """A self-contained netlist that reads its own result: `ngspice -b file.cir` runs it and prints each
+    output bit's amplitude and value and each port's integer (readout.py); `about` names design and inputs."""
+    return emit_with_probes(model, periods, stimulus, batch_index, options, title, reading=True, about=about)[0]
 
 
 def emit_with_probes(model: MechModel, periods: int, stimulus: Stimulus | None = None, batch_index: int = 0,
-                     options: SpiceOptions = SpiceOptions(), title: str = "") -> tuple[str, list[str]]:
-    """The netlist and the raw-file vector name of each probe (model.probes order)."""
+                     options: SpiceOptions = SpiceOptions(), title: str = "", reading: bool = False,
+                     about: str = "") -> tuple[str, list[str]]:
+    """The netlist and the raw-file vector name of each probe (model.probes order); without `reading`
+    it is the form `ngspice -b -r out.raw` runs (no .control block)."""
     model.check()
     options.validate()
     if periods < 1:
         raise Mech2SpiceError("periods must be at least 1")
     e = _Emitter(model, periods, stimulus, batch_index, options)
-    text = e.netlist(title)
+    text = e.netlist(title, reading, about)
     return text, [f"v({e.probe_node(i)})".lower() for i in model.probes.values()]

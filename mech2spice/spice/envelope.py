@@ -14,6 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..physics.envelope import Envelope
+from . import readout
 from ..errors import Mech2SpiceError, ToolMissingError
 from ..physics.model import MechModel
 from ._common import (NgspiceSettings, Namer, check_samples, comment_text, drive_schedule, failure, map_batch, num,
@@ -222,16 +223,24 @@ class _EnvEmitter:
         nodes = [f"v({n(j)})" for j in rows for n in (self.ar, self.ai)]
         for k in range(0, len(nodes), 8):
             out.append(".save " + " ".join(nodes[k:k + 8]))
-        # a standalone `ngspice -b` run prints each probe's final amplitude (u_R); with -r ngspice skips
-        # .meas (it says so) and writes the raw file instead
-        tstop = num(self.periods * self.T)
-        for j in dict.fromkeys(rows):
-            for n, part in ((self.ar, "re"), (self.ai, "im")):
-                out.append(f".meas tran {part}_{n(j)[3:]} FIND v({n(j)}) AT={tstop}")
         return out
 
-    def netlist(self, title: str) -> tuple[str, list[str]]:
-        """Emit every element; return the netlist text and the probes' raw-file vectors."""
+    READING = "|A| / u_R at the end of the run, A = V(ar) + i V(ai) (the nodes hold A in u_R)"
+
+    def readout(self, rows: list[int]) -> list[str]:
+        """The .control block a standalone `ngspice -b` run prints its decoded result with (not with -r)."""
+        return readout.control_block(self.m, lambda k, i: readout.envelope_amplitude(
+            k, self.ar(rows[i]), self.ai(rows[i])), self.READING)
+
+    def reading_head(self, rows: list[int], about: str) -> list[str]:
+        """The header's explanation of the result: probed nodes -> port bit, u_R, bands, how to run it."""
+        nodes = [f"v({self.ar(j)}) v({self.ai(j)})" for j in rows]
+        what = f"{self.READING}, t = {num(self.periods * self.T)}"
+        return [f"* {s}" for s in readout.header(self.m, nodes, what, about, True, "ngspice -b THIS_FILE")]
+
+    def netlist(self, title: str, reading: bool = False, about: str = "") -> tuple[str, list[str]]:
+        """Emit every element; return the netlist text and the probes' raw-file vectors (`reading`: with the
+        header and .control block that print the decoded result)."""
         self.fast()
         self.slow()
         rows = self.probe_rows()
@@ -243,23 +252,28 @@ class _EnvEmitter:
                 f"{num(o.max_step_periods)} T.  See docs/spice.md for the circuit form.",
                 "* probe -> amplitude nodes:"]
         head += [f"*   {comment_text(n)} -> {self.ar(j)} {self.ai(j)}" for n, j in zip(m.probes, rows)]
+        if reading:
+            head = head[:3] + self.reading_head(rows, about) + head[3:]
         body = ["* --- circuit", *self.lines, "* --- drive amplitudes", *self.amp_lines,
-                *self.analysis(rows), ".end"]
+                *self.analysis(rows), *(self.readout(rows) if reading else []), ".end"]
         vecs = [f"v({n(j)})".lower() for j in rows for n in (self.ar, self.ai)]
         return "\n".join(head + body) + "\n", vecs
 
 
 def emit_envelope_with_probes(model: MechModel, stimulus: Stimulus | None = None, periods: int = 1000,
                               opts: EnvelopeSpiceOptions = EnvelopeSpiceOptions(), batch_index: int = 0,
-                              title: str = "") -> tuple[str, list[str]]:
-    """The netlist and the raw-file vectors (Re, Im per probe, model.probes order)."""
-    return _EnvEmitter(model, stimulus, periods, opts, batch_index).netlist(title)
+                              title: str = "", reading: bool = False, about: str = "") -> tuple[str, list[str]]:
+    """The netlist and the raw-file vectors (Re, Im per probe, model.probes order); without `reading` it is
+    the form `ngspice -b -r out.raw` runs (no .control block)."""
+    return _EnvEmitter(model, stimulus, periods, opts, batch_index).netlist(title, reading, about)
 
 
 def emit_envelope(model: MechModel, stimulus: Stimulus | None = None, periods: int = 1000,
-                  opts: EnvelopeSpiceOptions = EnvelopeSpiceOptions(), batch_index: int = 0, title: str = "") -> str:
-    """A self-contained netlist of the envelope equations: `ngspice -b -r out.raw file.cir` runs it."""
-    return emit_envelope_with_probes(model, stimulus, periods, opts, batch_index, title)[0]
+                  opts: EnvelopeSpiceOptions = EnvelopeSpiceOptions(), batch_index: int = 0, title: str = "",
+                  about: str = "") -> str:
+    """A self-contained netlist of the envelope equations that reads its own result: `ngspice -b file.cir`
+    prints each output bit's amplitude and value and each port's integer (readout.py)."""
+    return emit_envelope_with_probes(model, stimulus, periods, opts, batch_index, title, True, about)[0]
 
 
 # --- running ---------------------------------------------------------------------------------------

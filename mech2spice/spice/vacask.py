@@ -33,6 +33,7 @@ from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
 from ._common import (check_samples, check_transient, comment_text, DEFAULT_TIMEOUT_S, drive_schedule,
                       map_batch, Namer, num, prewarp_scale, probe_dof_names)
+from . import readout
 from .carrier import (Incidence, coupling_links, coupling_overrides, drive_split, gate_overrides,
                       gate_plan)
 
@@ -290,14 +291,35 @@ class _Emitter:
         self.oscillators()
         self.drives()
 
-    def text(self, title: str, osdi: str, analysis: list[str], extra_head: list[str] = ()) -> str:
-        """The whole netlist: header, models, circuit, analysis and save lines."""
+    def reading(self) -> str:
+        """How an output bit's amplitude is read from this netlist's raw file (the header says it)."""
+        if self.env:
+            return (f"|A| / u_R = sqrt(v(ar)^2 + v(ai)^2) at t = {num(self.periods * self.T)}, the run's end "
+                    "(the nodes hold A in u_R)")
+        t0, t1 = readout.period_window(self.periods, self.T)
+        return (f"|A| / u_R, A the phasor at omega of the probed displacement over the last drive period, "
+                f"t = {num(t0)}..{num(t1)}")
+
+    def reading_head(self, about: str) -> list[str]:
+        """The header's explanation of the result: probed node -> port bit, u_R, bands, and what VACASK
+        cannot do (its control block has no command that evaluates results; `postprocess` runs Python)."""
+        pairs = [self.nodes(d) for d in self.m.probes.values()]
+        nodes = [f"v({a}) v({b})" if self.env else f"v({a})" for a, b in pairs]
+        run = f"vacask THIS_FILE (in its folder); it writes {TRAN}.raw with the probed nodes"
+        lines = readout.header(self.m, nodes, self.reading(), about, False, run)
+        lines += ["VACASK cannot decode by itself: its control block evaluates no results (only `postprocess`,",
+                  "which runs Python).  Read the amplitudes from the raw file as above, or emit for ngspice,",
+                  "whose netlist prints them (--format ngspice or ngspice-envelope)."]
+        return [f"// {s}" for s in lines]      # names in them are comment_text already
+
+    def text(self, title: str, osdi: str, analysis: list[str], extra_head: list[str] = (), about: str = "") -> str:
+        """The whole netlist: header (with how to read the result), models, circuit, analysis and save lines."""
         m, o = self.m, self.opt
         vecs = self.probe_vectors()
         head = [comment_text(title or "mech2spice VACASK netlist"),
                 f"// mech2spice ({self.form} level): {m.n} DOFs, {len(self.plan.gates)} NOR blocks, "
                 f"{self.periods} periods of T = {num(self.T)}; method {o.method}, max step {num(o.max_step_periods)} T",
-                "// DOF -> nodes:"]
+                *self.reading_head(about), "// DOF -> nodes:"]
         head += [f"//   {comment_text(n)} -> {' '.join(self.nodes(i))}" for i, n in enumerate(m.names)]
         body = ["", "ground 0", *self.models(osdi), "", "// --- circuit", *self.lines, "// --- drive amplitudes",
                 *self.amp_lines, "", "control", f"  {self.options_line()}", *[f"  {s}" for s in extra_head]]
@@ -314,13 +336,14 @@ def _osdi_ref(form: str, standalone: bool) -> str:
 
 def emit(model: MechModel, periods: int, stimulus: Stimulus | None = None, batch_index: int = 0,
          options: VacaskOptions | None = None, form: str = CARRIER, title: str = "",
-         standalone: bool = False) -> Netlist:
-    """A VACASK transient netlist of `model` (standalone: loads the .va from its own directory, embedded)."""
+         standalone: bool = False, about: str = "") -> Netlist:
+    """A VACASK transient netlist of `model` (standalone: loads the .va from its own directory, embedded);
+    `about` (design, inputs) goes into the header that says how to read the result."""
     options = options or (VacaskEnvelopeOptions() if form == ENVELOPE else VacaskOptions())
     e = _Emitter(model, periods, stimulus, batch_index, options, form)
     e.circuit()
     ref = _osdi_ref(form, standalone)
-    text = e.text(title, ref, e.tran())
+    text = e.text(title, ref, e.tran(), about=about)
     if standalone:
         text += _embed(form)
     return Netlist(text, e.probe_vectors(), form)

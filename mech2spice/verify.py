@@ -108,7 +108,7 @@ def _read_source(path: Path, rel: str, top: str) -> list[str]:
             f"rename {top} {PREFIX}gold"]
 
 
-def _script(path: Path, rel: str, netlist: Netlist, regs: list, sequential: bool) -> str:
+def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
     """Read source and network, expose the matched registers on both, build the miter and prove it."""
     lines = _read_source(path, rel, netlist.top)
     if regs:
@@ -119,11 +119,10 @@ def _script(path: Path, rel: str, netlist: Netlist, regs: list, sequential: bool
     lines += ["read_verilog gate.v", "proc", "opt_clean",
               f"miter -equiv -flatten -make_assert -ignore_gold_x {PREFIX}gold {PREFIX}gate {PREFIX}miter",
               f"hierarchy -top {PREFIX}miter", "opt_clean"]
-    if sequential:
-        lines.append(f"sat -verify -prove-asserts -tempinduct -set-init-zero -maxsteps {INDUCTION_STEPS} "
-                     f"-show-inputs {PREFIX}miter")
-    else:
-        lines.append(f"sat -verify -prove-asserts -show-inputs {PREFIX}miter")
+    # Induction even for a combinational network: the source may keep registers that synthesis folded
+    # away (`q <= q` is a constant 0), which a plain SAT proof cannot model.  It closes at step 1 otherwise.
+    lines.append(f"sat -verify -prove-asserts -tempinduct -set-init-zero -maxsteps {INDUCTION_STEPS} "
+                 f"-show-inputs {PREFIX}miter")
     return "\n".join(lines + [""])
 
 
@@ -133,15 +132,15 @@ def equivalence(path, netlist: Netlist) -> dict:
     t0 = time.time()
     sequential = bool(netlist.latches())
     regs = register_names(netlist) if sequential else []
-    res = _prove(Path(path), netlist, regs, sequential)
-    if sequential and regs and res["status"] != "proved":
+    res = _prove(Path(path), netlist, regs)
+    if regs and res["status"] != "proved":
         # The strengthened miter also compares the matched registers: a failure there may be a wrong
         # match, not a wrong output; only the plain miter's verdict stands.
-        res = _prove(Path(path), netlist, [], sequential)
+        res = _prove(Path(path), netlist, [])
     matched = f", {len(res['regs'])} matched registers" if res["regs"] else ""
     method = (f"yosys miter + sat -tempinduct from the all-zero state (depth <= {INDUCTION_STEPS}{matched})"
-              if sequential else "yosys miter + sat (all input vectors)")
-    if res["cex"] and not sequential:
+              if sequential else "yosys miter + sat (all input vectors; -tempinduct, closing at step 1)")
+    if res["cex"] and "cycle" not in res["cex"][0]:
         _explain(path, netlist, res["cex"][0])
     return {"status": res["status"], "method": method, "counterexample": res["cex"], "detail": res["detail"],
             "wall_s": time.time() - t0}
@@ -158,13 +157,13 @@ def _explain(path, netlist: Netlist, step: dict) -> None:
                        for p, v in evaluate(netlist, step["inputs"]).items()}
 
 
-def _prove(path: Path, netlist: Netlist, regs: list, sequential: bool) -> dict:
+def _prove(path: Path, netlist: Netlist, regs: list) -> dict:
     with tempfile.TemporaryDirectory(prefix="mech2spice_verify_") as tmp:
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
         expose = [(f"{PREFIX}r{k}", q) for k, (q, _, _) in enumerate(regs)]
         (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", expose))
-        result = yosys.run_script(_script(path, rel, netlist, regs, sequential), tmp)
-    return {"regs": regs, **_verdict(result, netlist, sequential, bool(regs))}
+        result = yosys.run_script(_script(path, rel, netlist, regs), tmp)
+    return {"regs": regs, **_verdict(result, netlist, bool(regs))}
 
 
 # sat's final lines (Yosys 0.3x-0.70): a proof, a counterexample, the induction giving up.
@@ -173,17 +172,17 @@ _FAILED = re.compile(r"^SAT (?:temporal induction )?proof finished - model found
 _GAVE_UP = re.compile(r"^Reached maximum number of time steps", re.M)
 
 
-def _verdict(result, netlist: Netlist, sequential: bool, strengthened: bool) -> dict:
+def _verdict(result, netlist: Netlist, strengthened: bool) -> dict:
     """status / cex / detail from a sat run's log."""
     log = result.stdout + "\n" + result.stderr
     if result.returncode == 0 and _PROVED.search(log):
         return {"status": "proved", "cex": None, "detail": "no input (sequence) makes an output differ"}
     failed = _FAILED.search(log)
     if failed:
-        cex = _counterexample(log[failed.end():], netlist, sequential)
+        cex = _counterexample(log[failed.end():], netlist)
         if cex is not None:
             return {"status": "counterexample", "cex": cex, "detail": "the outputs differ on this input" +
-                    (f" (sequence), read after {len(cex) - 1} clock edges" if sequential else "")}
+                    (f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else "")}
     if _GAVE_UP.search(log):
         return {"status": "unknown", "cex": None,
                 "detail": f"no counterexample within {INDUCTION_STEPS} cycles from the all-zero state, but the "
@@ -196,7 +195,7 @@ def _verdict(result, netlist: Netlist, sequential: bool, strengthened: bool) -> 
 _ROW = re.compile(r"^\s*(?:(\d+)\s+)?\\in_(\S+)\s+(\S+)\s+(\S+)\s+([01xz]+)\s*$")
 
 
-def _counterexample(log: str, netlist: Netlist, sequential: bool) -> list[dict] | None:
+def _counterexample(log: str, netlist: Netlist) -> list[dict] | None:
     """The failing inputs from sat's -show-inputs table (the log after the FAIL line): [{"cycle": k, "inputs":
     {port: int}}], cycle 0 the first from the zero state, the outputs differing in the last one (after its
     cycle's predecessors' clock edges, with its inputs applied); a combinational design: one entry."""
@@ -212,7 +211,7 @@ def _counterexample(log: str, netlist: Netlist, sequential: bool) -> list[dict] 
     out = []
     for step in sorted(rows):
         ins = {p: _signed(netlist, p, rows[step].get(p, 0)) for p in netlist.inputs}
-        out.append({"cycle": step - 1, "inputs": ins} if sequential else {"inputs": ins})
+        out.append({"cycle": step - 1, "inputs": ins} if len(rows) > 1 or netlist.latches() else {"inputs": ins})
     return out
 
 
@@ -560,8 +559,12 @@ def cmd_verify(args) -> int:
     nl = synthesize(args.design, top=args.top)
     if nl.clock is None and args.cycles:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --cycles applies to clocked designs (use --vectors)")
-    if nl.clock is not None and args.vectors:
-        raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N, not --vectors")
+    if nl.clock is not None and (args.vectors or args.exhaustive):
+        raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N, not --vectors/--exhaustive")
+    if nl.clock is None and args.reset:
+        raise Mech2SpiceError(f"{nl.top} has no flip-flops: --reset applies to clocked designs")
+    if nl.clock is not None:
+        reset_port(nl, args.reset)                 # checked before the work starts
     params = load_params(args.params) if args.backend != "logic" else None
     res = verify(args.design, backend=args.backend, vectors=args.cycles or args.vectors, exhaustive=args.exhaustive,
                  seed=args.seed, params=params, progress=_progress(args), log=_log(args), netlist=nl,

@@ -86,7 +86,7 @@ def _port_bit(widths: dict, bit: str) -> str:
     return bit if widths[port] > 1 else port
 
 
-_NET = re.compile(r"([A-Za-z_][A-Za-z0-9_$]*)(?:\[(\d+)\])?")
+_NET = re.compile(r"([A-Za-z_][A-Za-z0-9_$.]*)(?:\[(\d+)\])?")
 
 
 def register_names(netlist: Netlist) -> list[tuple[str, str, str]]:

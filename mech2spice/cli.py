@@ -467,6 +467,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .reports.cli import add_parser as add_report_parser; add_report_parser(sub)  # noqa: E702
     from .experiments.mc_cli import add_parser as add_mc_parser; add_mc_parser(sub)  # noqa: E702
     from .design.cli import add_parser as add_design_parser; add_design_parser(sub)  # noqa: E702
+    from .verify import add_parser as add_verify_parser; add_verify_parser(sub)  # noqa: E702
 
     s = sub.add_parser("subckts", help="regenerate the .subckt library (checked in under subckts/)")
     s.add_argument("-o", "--output", default="subckts", help="directory (default subckts/)")

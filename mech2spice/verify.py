@@ -1,0 +1,578 @@
+"""`mech2spice verify`: is the NOR network the same logic as the Verilog, and does the physics compute it?
+
+Two independent checks of one synthesised design:
+
+* equivalence -- the NOR netlist is written back as structural Verilog and proved equal to the source by
+  Yosys (a miter, SAT; temporal induction from the all-zero register state for clocked designs, the
+  state the mapping's latches start in).  See docs/verify.md for what is and is not proved.
+* co-simulation -- the source runs on Icarus Verilog (an independent simulator), the network on a
+  backend, on the same vectors (clocked: a reset cycle, then random inputs per cycle); every
+  differing output bit is listed.
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+from xml.sax.saxutils import quoteattr, escape
+
+import numpy as np
+
+from . import inputs
+from .backends import BACKENDS
+from .errors import Mech2SpiceError, ToolMissingError
+from .synthesis import yosys
+from .synthesis.ports import input_bits, output_bits
+
+if TYPE_CHECKING:
+    from .synthesis.synth import Netlist
+
+INDUCTION_STEPS = 20          # sat -tempinduct -maxsteps: base case (BMC) and induction depth
+MAX_EXHAUSTIVE_BITS = 20      # --exhaustive refuses wider inputs (2^20 vectors)
+ICARUS_TIMEOUT_S = 600
+RESET_HIGH = ("rst", "reset")
+RESET_LOW = ("rst_n", "rstn", "reset_n", "resetn")
+RESET_AGAIN = 1 / 16          # after the first cycle a reset port is asserted this often (resets mid-run)
+PREFIX = "m2s__"              # internal net names of the written-back network
+
+
+# --------------------------------------------------------------------------- the network as Verilog
+
+def _ident(node: str) -> str:
+    """A netlist node as a Verilog expression: port bits stay `p[i]`, gates/latches get a prefix."""
+    if node == "const0":
+        return "1'b0"
+    if node == "const1":
+        return "1'b1"
+    return node if "[" in node else PREFIX + node
+
+
+def _decl(width: int) -> str:
+    return f"[{width - 1}:0] " if width > 1 else ""
+
+
+def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] = ()) -> str:
+    """The netlist as structural Verilog: one `assign` per NOR, one posedge register per latch (starting
+    wherever the simulator starts it; the proofs fix it at 0 like the logic backend).  `expose`: (port name,
+    latch) pairs made extra 1-bit outputs, for the register-correspondence proof."""
+    g = netlist.graph
+    ports = ([f"input {netlist.clock}"] if netlist.clock else []) \
+        + [f"input {_decl(w)}{p}" for p, w in netlist.inputs.items()] \
+        + [f"output {_decl(w)}{p}" for p, w in netlist.outputs.items()] \
+        + [f"output {name}" for name, _ in expose]
+    lines = [f"module {module}({', '.join(ports)});"]
+    lines += [f"  reg {_ident(q)};" for q in netlist.latches()]
+    for gate in netlist.gates():
+        a, b = (_ident(u) for u, _, _ in sorted(g.in_edges(gate, data="pin"), key=lambda e: e[2]))
+        lines.append(f"  wire {_ident(gate)} = ~({a} | {b});")
+    for q in netlist.latches():
+        (d,) = g.predecessors(q)
+        lines.append(f"  always @(posedge {netlist.clock}) {_ident(q)} <= {_ident(d)};")
+    for out in output_bits(netlist):
+        (src,) = g.predecessors(out)
+        lines.append(f"  assign {_port_bit(netlist.outputs, out)} = {_ident(src)};")
+    lines += [f"  assign {name} = {_ident(q)};" for name, q in expose]
+    return "\n".join(lines + ["endmodule", ""])
+
+
+def _port_bit(widths: dict, bit: str) -> str:
+    """`p[i]` for a multi-bit port, `p` for a 1-bit one (declared without a range)."""
+    port = bit[:bit.rindex("[")]
+    return bit if widths[port] > 1 else port
+
+
+_NET = re.compile(r"([A-Za-z_][A-Za-z0-9_$.]*)(?:\[(\d+)\])?")
+
+
+def register_names(netlist: Netlist) -> list[tuple[str, str, str]]:
+    """(latch, source wire, bit) for every latch whose Q net kept a user name: the source's register it
+    implements, to be exposed on both sides of the miter so that induction sees the hidden state."""
+    out = []
+    for q in netlist.latches():
+        m = _NET.fullmatch(netlist.graph.nodes[q].get("net", "$"))
+        if m:
+            out.append((q, m.group(1), m.group(2) or "0"))
+    return out
+
+
+# --------------------------------------------------------------------------- equivalence (Yosys)
+
+def _read_source(path: Path, rel: str, top: str) -> list[str]:
+    read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
+    return [f'{read} "{rel}"', f"hierarchy -check -top {top}", "proc", "flatten", "opt_clean",
+            f"rename {top} {PREFIX}gold"]
+
+
+def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
+    """Read source and network, expose the matched registers on both, build the miter and prove it."""
+    lines = _read_source(path, rel, netlist.top)
+    if regs:
+        lines.append(f"cd {PREFIX}gold")
+        for k, (_, wire, bit) in enumerate(regs):
+            lines += [f"add -output {PREFIX}r{k} 1", f"connect -set {PREFIX}r{k} {wire}[{bit}]"]
+        lines.append("cd ..")
+    lines += ["read_verilog gate.v", "proc", "opt_clean",
+              f"miter -equiv -flatten -make_assert -ignore_gold_x {PREFIX}gold {PREFIX}gate {PREFIX}miter",
+              f"hierarchy -top {PREFIX}miter", "opt_clean"]
+    # Induction even for a combinational network: the source may keep registers that synthesis folded
+    # away (`q <= q` is a constant 0), which a plain SAT proof cannot model.  It closes at step 1 otherwise.
+    lines.append(f"sat -verify -prove-asserts -tempinduct -set-init-zero -maxsteps {INDUCTION_STEPS} "
+                 f"-show-inputs {PREFIX}miter")
+    return "\n".join(lines + [""])
+
+
+def equivalence(path, netlist: Netlist) -> dict:
+    """Prove the network equal to the source: {status: proved | counterexample | unknown, method,
+    counterexample (input ports per cycle) or None, detail, wall_s}."""
+    t0 = time.time()
+    sequential = bool(netlist.latches())
+    regs = register_names(netlist) if sequential else []
+    res = _prove(Path(path), netlist, regs)
+    if regs and res["status"] != "proved":
+        # The strengthened miter also compares the matched registers: a failure there may be a wrong
+        # match, not a wrong output; only the plain miter's verdict stands.
+        res = _prove(Path(path), netlist, [])
+    matched = f", {len(res['regs'])} matched registers" if res["regs"] else ""
+    method = (f"yosys miter + sat -tempinduct from the all-zero state (depth <= {INDUCTION_STEPS}{matched})"
+              if sequential else "yosys miter + sat (all input vectors; -tempinduct, closing at step 1)")
+    if res["cex"] and "cycle" not in res["cex"][0]:
+        _explain(path, netlist, res["cex"][0])
+    return {"status": res["status"], "method": method, "counterexample": res["cex"], "detail": res["detail"],
+            "wall_s": time.time() - t0}
+
+
+def _explain(path, netlist: Netlist, step: dict) -> None:
+    """Add what the source (on Icarus) and the network (logic) output on a combinational counterexample."""
+    from .backends.logic import evaluate
+    from .synthesis.ports import pack_inputs
+    bits = pack_inputs(netlist, step["inputs"])
+    ref = icarus(path, netlist, np.array([[bits[b] for b in input_bits(netlist)]], bool), clocked=False)[0]
+    step["source"] = {p: "".join(ref[f"{p}[{i}]"] for i in reversed(range(w))) for p, w in netlist.outputs.items()}
+    step["network"] = {p: format(v % (1 << netlist.outputs[p]), f"0{netlist.outputs[p]}b")
+                       for p, v in evaluate(netlist, step["inputs"]).items()}
+
+
+def _prove(path: Path, netlist: Netlist, regs: list) -> dict:
+    with tempfile.TemporaryDirectory(prefix="mech2spice_verify_") as tmp:
+        rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
+        expose = [(f"{PREFIX}r{k}", q) for k, (q, _, _) in enumerate(regs)]
+        (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", expose))
+        result = yosys.run_script(_script(path, rel, netlist, regs), tmp)
+    return {"regs": regs, **_verdict(result, netlist, bool(regs))}
+
+
+# sat's final lines (Yosys 0.3x-0.70): a proof, a counterexample, the induction giving up.
+_PROVED = re.compile(r"^(?:SAT proof finished - no model found: SUCCESS|Induction step proven: SUCCESS)", re.M)
+_FAILED = re.compile(r"^SAT (?:temporal induction )?proof finished - model found(?: for base case)?: FAIL", re.M)
+_GAVE_UP = re.compile(r"^Reached maximum number of time steps", re.M)
+
+
+def _verdict(result, netlist: Netlist, strengthened: bool) -> dict:
+    """status / cex / detail from a sat run's log."""
+    log = result.stdout + "\n" + result.stderr
+    if result.returncode == 0 and _PROVED.search(log):
+        return {"status": "proved", "cex": None, "detail": "no input (sequence) makes an output differ"}
+    failed = _FAILED.search(log)
+    if failed:
+        cex = _counterexample(log[failed.end():], netlist)
+        if cex is not None:
+            return {"status": "counterexample", "cex": cex, "detail": "the outputs differ on this input" +
+                    (f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else "")}
+    if _GAVE_UP.search(log):
+        return {"status": "unknown", "cex": None,
+                "detail": f"no counterexample within {INDUCTION_STEPS} cycles from the all-zero state, but the "
+                          f"induction did not close within {INDUCTION_STEPS} steps"}
+    if strengthened:       # e.g. a register name the source does not have: the plain miter decides
+        return {"status": "unknown", "cex": None, "detail": f"yosys: {yosys.error_line(result)}"}
+    raise Mech2SpiceError(f"yosys equivalence check failed: {yosys.error_line(result)}")
+
+
+_ROW = re.compile(r"^\s*(?:(\d+)\s+)?\\in_(\S+)\s+(\S+)\s+(\S+)\s+([01xz]+)\s*$")
+
+
+def _counterexample(log: str, netlist: Netlist) -> list[dict] | None:
+    """The failing inputs from sat's -show-inputs table (the log after the FAIL line): [{"cycle": k, "inputs":
+    {port: int}}], cycle 0 the first from the zero state, the outputs differing in the last one (after its
+    cycle's predecessors' clock edges, with its inputs applied); a combinational design: one entry."""
+    rows: dict[int, dict] = {}
+    for line in log.splitlines():
+        m = _ROW.match(line)
+        if m:
+            step = int(m.group(1) or 1)
+            value = int(m.group(5).replace("x", "0").replace("z", "0"), 2)
+            rows.setdefault(step, {})[m.group(2)] = value
+    if not rows:
+        return None
+    out = []
+    for step in sorted(rows):
+        ins = {p: _signed(netlist, p, rows[step].get(p, 0)) for p in netlist.inputs}
+        out.append({"cycle": step - 1, "inputs": ins} if len(rows) > 1 or netlist.latches() else {"inputs": ins})
+    return out
+
+
+def _signed(netlist: Netlist, port: str, value: int) -> int:
+    w = netlist.inputs[port]
+    return value - (1 << w) if port in netlist.signed and value >> (w - 1) & 1 else value
+
+
+# --------------------------------------------------------------------------- Icarus Verilog
+
+def _icarus_tools() -> tuple[str, str]:
+    iverilog, vvp = shutil.which("iverilog"), shutil.which("vvp")
+    if not (iverilog and vvp):
+        raise ToolMissingError("Icarus Verilog not found (iverilog, vvp): install it, e.g. `apt install iverilog`")
+    return iverilog, vvp
+
+
+def _testbench(netlist: Netlist, n: int, clocked: bool) -> str:
+    """Apply vectors.txt (one line of input bits per vector / cycle, ports in declaration order with the
+    first port leftmost) and $display the outputs.  Clocked: the inputs of cycle k are on before edge k;
+    one time unit after it cycle k+1's are applied and the outputs read, as simulation.run_clocked_logic."""
+    ins, outs = list(netlist.inputs), list(netlist.outputs)
+    width = max(1, sum(netlist.inputs.values()))
+    lines = ["`timescale 1ns/1ns", f"module {PREFIX}tb;"]
+    lines += [f"  reg {_decl(w)}{p};" for p, w in netlist.inputs.items()]
+    lines += [f"  wire {_decl(w)}{p};" for p, w in netlist.outputs.items()]
+    conns = [f".{p}({p})" for p in ins + outs]
+    if clocked:
+        lines.append(f"  reg {netlist.clock} = 0;")
+        conns.insert(0, f".{netlist.clock}({netlist.clock})")
+    lines += [f"  {netlist.top} dut({', '.join(conns)});",
+              f"  reg [{width - 1}:0] mem [0:{n - 1}];", "  integer k;"]
+    apply = f"{{{', '.join(ins)}}} = mem[%s];" if ins else ""
+    show = '$display("' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
+    lines += ["  initial begin", '    $readmemb("vectors.txt", mem);']
+    if clocked:
+        lines += [f"    {apply % '0'}", f"    for (k = 0; k < {n}; k = k + 1) begin",
+                  f"      #5 {netlist.clock} = 1;",
+                  f"      #1 {apply % f'(k + 1 < {n} ? k + 1 : k)'}",
+                  f"      #1 {show}", f"      #3 {netlist.clock} = 0;", "    end"]
+    else:
+        lines += [f"    for (k = 0; k < {n}; k = k + 1) begin",
+                  f"      {apply % 'k'}", f"      #1 {show}", "    end"]
+    return "\n".join(lines + ["    $finish;", "  end", "endmodule", ""])
+
+
+def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool) -> list[dict[str, str]]:
+    """Run the source on Icarus: per vector (or cycle), output bit -> '0', '1', 'x' or 'z'."""
+    iverilog, vvp = _icarus_tools()
+    path = Path(path).resolve()
+    order = input_bits(netlist)
+    with tempfile.TemporaryDirectory(prefix="mech2spice_icarus_") as tmp:
+        tb = Path(tmp) / "tb.v"
+        tb.write_text(_testbench(netlist, len(vectors), clocked))
+        (Path(tmp) / "vectors.txt").write_text("".join(_vector_line(netlist, order, v) for v in vectors))
+        std = ["-g2012"] if path.suffix == ".sv" else ["-g2005"]
+        cmd = [iverilog, *std, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), str(path), "tb.v"]
+        _run_tool(cmd, tmp, "iverilog")
+        out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp")
+    rows = [ln.split() for ln in out.splitlines() if ln.strip() and not ln.startswith(("VCD", "WARNING"))]
+    rows = [r for r in rows if len(r) == len(netlist.outputs) and all(re.fullmatch(r"[01xzXZ]+", s) for s in r)]
+    if len(rows) != len(vectors):
+        raise Mech2SpiceError(f"Icarus printed {len(rows)} result lines for {len(vectors)} vectors")
+    return [_bits_of(netlist, r) for r in rows]
+
+
+def _vector_line(netlist: Netlist, order: list[str], v) -> str:
+    """One vector as the bits of {port0, port1, ...}: port0's MSB first."""
+    bits = dict(zip(order, v))
+    line = "".join(str(int(bits[f"{p}[{i}]"])) for p, w in netlist.inputs.items() for i in reversed(range(w)))
+    return (line or "0") + "\n"
+
+
+def _bits_of(netlist: Netlist, row: list[str]) -> dict[str, str]:
+    out = {}
+    for (port, width), text in zip(netlist.outputs.items(), row):
+        text = text.lower().rjust(width, "0")[-width:]
+        out.update({f"{port}[{i}]": text[width - 1 - i] for i in range(width)})
+    return out
+
+
+def _run_tool(cmd: list[str], cwd: str, name: str) -> str:
+    try:
+        proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=ICARUS_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        raise Mech2SpiceError(f"{name} did not finish within {ICARUS_TIMEOUT_S} s") from None
+    if proc.returncode != 0:
+        first = next((ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()), "")
+        raise Mech2SpiceError(f"{name} failed on the source design: {first.strip()}")
+    return proc.stdout
+
+
+# --------------------------------------------------------------------------- vectors
+
+def reset_port(netlist: Netlist, name: str | None = None) -> tuple[str, int] | None:
+    """(port, asserted level) of the design's synchronous reset: `name` (level 0 if it ends in _n/n), or an
+    input called rst/reset (1) or rst_n/rstn/reset_n/resetn (0); None when there is none."""
+    if name == "none":
+        return None
+    if name is not None:
+        if netlist.inputs.get(name) != 1:
+            raise Mech2SpiceError(f"--reset {name}: {netlist.top} has no 1-bit input '{name}' "
+                                  f"(inputs: {', '.join(netlist.inputs) or 'none'})")
+        return name, 0 if name.lower() in RESET_LOW else 1
+    for port, w in netlist.inputs.items():
+        if w == 1 and port.lower() in RESET_HIGH + RESET_LOW:
+            return port, 0 if port.lower() in RESET_LOW else 1
+    return None
+
+
+def make_vectors(netlist: Netlist, n: int | None, exhaustive: bool, seed: int) -> tuple[np.ndarray, bool]:
+    """(B, input bits) bool: every vector when asked or when there are no more than n, else n random ones."""
+    nbits = len(input_bits(netlist))
+    if exhaustive and nbits > MAX_EXHAUSTIVE_BITS:
+        raise Mech2SpiceError(f"--exhaustive: {netlist.top} has {nbits} input bits ({2 ** nbits:,} vectors); "
+                              f"at most {MAX_EXHAUSTIVE_BITS} bits: give --vectors N instead")
+    if exhaustive or (nbits <= MAX_EXHAUSTIVE_BITS and 2 ** nbits <= n):
+        k = np.arange(2 ** nbits)
+        return ((k[:, None] >> np.arange(nbits)) & 1).astype(bool), True
+    return np.random.default_rng(seed).integers(0, 2, (n, nbits)).astype(bool), False
+
+
+def make_cycles(netlist: Netlist, n: int, seed: int, reset: tuple[str, int] | None) -> np.ndarray:
+    """(n, input bits) bool: random inputs per cycle; the reset asserted in cycle 0, and now and then later."""
+    order = input_bits(netlist)
+    rng = np.random.default_rng(seed)
+    x = rng.integers(0, 2, (n, len(order))).astype(bool)
+    if reset is not None:
+        j, level = order.index(f"{reset[0]}[0]"), reset[1]
+        again = rng.random(n) < RESET_AGAIN
+        x[:, j] = np.where(again, level, 1 - level).astype(bool)
+        x[0, j] = bool(level)
+    return x
+
+
+def _as_ports(netlist: Netlist, v) -> dict[str, int]:
+    bits = dict(zip(input_bits(netlist), (int(b) for b in v)))
+    vals = {p: sum(bits[f"{p}[{i}]"] << i for i in range(w)) for p, w in netlist.inputs.items()}
+    return {p: _signed(netlist, p, x) for p, x in vals.items()}
+
+
+# --------------------------------------------------------------------------- co-simulation
+
+def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, params, progress) -> list[dict]:
+    """Per vector / cycle: {bits, valid, stable, min_margin, amplitudes} of the network on the backend."""
+    from . import simulation
+    from .backends._base import progress_bar
+    from .backends.logic import evaluate_batch
+    if backend == "logic" and not clocked:
+        bar = progress_bar(len(x), progress, unit="vector")
+        out = []
+        for start in range(0, len(x), 4096):
+            chunk = evaluate_batch(netlist, x[start:start + 4096])
+            out += [{"bits": dict(zip(output_bits(netlist), map(int, row))), "valid": True} for row in chunk]
+            bar.update(len(chunk))
+        bar.close()
+        return out
+    cycles = [_as_ports(netlist, v) for v in x]
+    if clocked and backend == "logic":
+        return simulation.run_clocked_logic(netlist, cycles)["trace"]
+    if clocked:
+        timing = simulation.clock_timing(netlist, p=params)
+        return simulation.run_clocked_physical(netlist, params, cycles, backend, timing, progress=progress)["trace"]
+    return simulation.run_physical(netlist, params, cycles, backend, progress=progress)
+
+
+def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], clocked: bool) -> list[dict]:
+    """Every output bit where Icarus and the backend differ (x/z from Icarus and invalid bits included)."""
+    from .physics.params import band_of, margin
+    mismatches = []
+    for k, (r, g) in enumerate(zip(ref, got)):
+        for bit in output_bits(netlist):
+            want, have = r[bit], g["bits"].get(bit)
+            if want in "01" and have is not None and int(want) == have:
+                continue
+            amp = g.get("amplitudes", {}).get(bit)
+            m = {("cycle" if clocked else "vector"): k, "inputs": _as_ports(netlist, x[k]), "bit": bit,
+                 "icarus": want, "backend": have, "amplitude": amp,
+                 "margin": None if amp is None else float(margin(amp, have if have is not None else band_of(amp)))}
+            mismatches.append(m)
+    return mismatches
+
+
+def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool, seed: int, params=None,
+          progress=False, reset: str | None = None) -> dict:
+    """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches."""
+    t0 = time.time()
+    clocked = netlist.clock is not None
+    physical = backend != "logic"
+    n = n or (16 if physical and not clocked else 8 if physical else 2000 if not clocked else 1000)
+    rst = reset_port(netlist, reset) if clocked else None
+    if clocked:
+        if exhaustive:
+            raise Mech2SpiceError(f"--exhaustive applies to combinational designs; {netlist.top} is clocked: "
+                                  "give --cycles N")
+        x, complete = make_cycles(netlist, n, seed, rst), False
+    else:
+        x, complete = make_vectors(netlist, n, exhaustive, seed)
+        if physical and not exhaustive and len(x) > n:
+            x = x[np.random.default_rng(seed).permutation(len(x))[:n]]
+            complete = False
+    ref = icarus(path, netlist, x, clocked)
+    got = run_backend(netlist, x, clocked, backend, params, progress)
+    mismatches = compare(netlist, x, ref, got, clocked)
+    out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
+           "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0}
+    if clocked:
+        out["reset"] = None if rst is None else {"port": rst[0], "level": rst[1]}
+    if physical:
+        margins = [g["min_margin"] for g in got if g.get("min_margin") is not None]
+        out.update(valid=all(g["valid"] for g in got), stable=all(g.get("stable", True) for g in got),
+                   min_margin=min(margins) if margins else None)
+        out["agree"] = out["agree"] and out["valid"]
+    return out
+
+
+# --------------------------------------------------------------------------- the command
+
+def verify(path, top: str | None = None, backend: str = "logic", vectors: int | None = None,
+           exhaustive: bool = False, seed: int = 0, params=None, progress=False, log=None,
+           netlist: Netlist | None = None, reset: str | None = None, equivalence_check: bool = True) -> dict:
+    """Equivalence and co-simulation of one design; `netlist` replaces the synthesised one (tests)."""
+    t0 = time.time()
+    from .synthesis.synth import synthesize
+    log = log or (lambda msg: None)
+    nl = netlist if netlist is not None else synthesize(path, top=top)
+    out = {"design": str(path), "top": nl.top, "clocked": nl.clock is not None,
+           "gates": len(nl.gates()), "latches": len(nl.latches())}
+    if equivalence_check:
+        log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source (yosys)")
+        out["equivalence"] = equivalence(path, nl)
+        log(f"equivalence: {out['equivalence']['status']} ({out['equivalence']['wall_s']:.1f} s)")
+    log(f"co-simulation against Icarus on {backend}")
+    out["cosim"] = cosim(path, nl, backend, vectors, exhaustive, seed, params, progress, reset)
+    eq = out.get("equivalence", {}).get("status", "proved")
+    out["verdict"] = "pass" if eq == "proved" and out["cosim"]["agree"] else \
+        "fail" if eq == "counterexample" or not out["cosim"]["agree"] else "unknown"
+    out["wall_s"] = time.time() - t0
+    return out
+
+
+def exit_code(result: dict) -> int:
+    """0 when everything agrees and equivalence is proved; 1 otherwise (mismatch, counterexample, unknown)."""
+    return 0 if result["verdict"] == "pass" else 1
+
+
+def junit_xml(result: dict) -> str:
+    """One testsuite: testcases `equivalence` and `cosim:<backend>`, a <failure> listing what differs."""
+    cases = []
+    eq = result.get("equivalence")
+    if eq is not None:
+        fail = None if eq["status"] == "proved" else (
+            eq["status"], f"{eq['detail']}; counterexample: {eq['counterexample']}")
+        cases.append(("equivalence", eq["wall_s"], fail))
+    co = result["cosim"]
+    fail = None if co["agree"] else (
+        f"{len(co['mismatches'])} mismatches" + ("" if co.get("valid", True) else ", invalid outputs"),
+        "\n".join(_mismatch_text(m) for m in co["mismatches"][:1000]))
+    cases.append((f"cosim:{co['backend']}", co["wall_s"], fail))
+    body = []
+    for name, secs, failure in cases:
+        body.append(f'  <testcase classname={quoteattr("mech2spice.verify." + result["top"])} '
+                    f'name={quoteattr(name)} time="{secs:.3f}"' + (">" if failure else "/>"))
+        if failure:
+            body += [f"    <failure message={quoteattr(failure[0])}>{escape(failure[1])}</failure>", "  </testcase>"]
+    nfail = sum(1 for *_, f in cases if f)
+    return "\n".join(['<?xml version="1.0" encoding="UTF-8"?>',
+                      f'<testsuite name={quoteattr("verify " + result["top"])} tests="{len(cases)}" '
+                      f'failures="{nfail}" errors="0" time="{result["wall_s"]:.3f}">', *body, "</testsuite>", ""])
+
+
+def _mismatch_text(m: dict) -> str:
+    where = f"cycle {m['cycle']}" if "cycle" in m else f"vector {m['vector']}"
+    amp = "" if m["amplitude"] is None else f", amplitude {m['amplitude']:.4f} u_R, margin {m['margin']:+.3f}"
+    got = "invalid" if m["backend"] is None else m["backend"]
+    return f"{where} {m['inputs']}: {m['bit']} Icarus {m['icarus']}, network {got}{amp}"
+
+
+def text(result: dict) -> str:
+    """The human-readable report."""
+    lines = [f"{result['top']}: {result['gates']} NOR gates, {result['latches']} latches"]
+    eq = result.get("equivalence")
+    if eq is not None:
+        lines.append(f"equivalence: {eq['status']} ({eq['method']}, {eq['wall_s']:.1f} s)")
+        if eq["status"] != "proved":
+            lines.append(f"  {eq['detail']}")
+        for step in eq["counterexample"] or []:
+            lines.append(f"  counterexample{' cycle ' + str(step['cycle']) if 'cycle' in step else ''}: "
+                         f"{step['inputs']}" + (f" -> source {step['source']}, network {step['network']}"
+                                                if "source" in step else ""))
+    co = result["cosim"]
+    n = co.get("vectors", co.get("cycles"))
+    what = "cycles" if "cycles" in co else ("vectors (exhaustive)" if co["exhaustive"] else "random vectors")
+    lines.append(f"co-simulation vs Icarus on {co['backend']}: {n} {what}, "
+                 f"{len(co['mismatches'])} mismatches ({co['wall_s']:.1f} s)"
+                 + (f"; valid {co['valid']}, stable {co['stable']}, min margin {co['min_margin']:+.3f}"
+                    if "valid" in co and co["min_margin"] is not None else ""))
+    lines += ["  " + _mismatch_text(m) for m in co["mismatches"][:20]]
+    if len(co["mismatches"]) > 20:
+        lines.append(f"  ... {len(co['mismatches']) - 20} more (--json lists all)")
+    lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)")
+    return "\n".join(lines)
+
+
+def add_parser(subparsers) -> None:
+    """Register the `verify` command."""
+    s = subparsers.add_parser(
+        "verify", help="prove the NOR network equal to the Verilog and co-simulate it against Icarus",
+        description="1. Formal equivalence of the mapped NOR network (written back as Verilog) and the source, "
+                    "with Yosys (miter + SAT; temporal induction from the all-zero state for clocked designs). "
+                    "2. Co-simulation of the source on Icarus Verilog against a backend on the same vectors "
+                    "(clocked: a reset cycle, then random inputs per cycle). Exit 0 when proved and every bit "
+                    "agrees, 1 on a counterexample, a mismatch, an invalid output or an unproved equivalence.")
+    s.add_argument("design", help="Verilog file")
+    s.add_argument("--top", help="top module (default: the only/auto-detected top)")
+    s.add_argument("--backend", default="logic", choices=list(BACKENDS),
+                   help="the network's engine for the co-simulation (default logic; a physical one runs a sample)")
+    s.add_argument("--vectors", type=inputs.integer(1, 10_000_000), metavar="N",
+                   help="random input vectors (default 2000 on logic, 16 on a physical backend; all of them when "
+                        "there are no more)")
+    s.add_argument("--exhaustive", action="store_true", help="every input vector (combinational designs)")
+    s.add_argument("--cycles", type=inputs.integer(1, inputs.MAX_CYCLES), metavar="N",
+                   help="clock cycles after the reset cycle's start (default 1000 on logic, 8 on a physical backend)")
+    s.add_argument("--reset", metavar="PORT", help="the synchronous reset asserted in cycle 0 (default: an input "
+                   "named rst/reset, or rst_n/rstn/reset_n/resetn active low; 'none': no reset)")
+    s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, help="random seed (default 0)")
+    s.add_argument("--params", default="default", help="gate parameters of a physical backend")
+    s.add_argument("--no-equivalence", action="store_true", help="co-simulation only")
+    s.add_argument("--junit", metavar="FILE", help="also write a JUnit XML report")
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.set_defaults(func=cmd_verify)
+
+
+def cmd_verify(args) -> int:
+    """`mech2spice verify`: print the report (text or JSON), write --junit; 0 pass, 1 otherwise."""
+    from .cli import _log, _print_json, _progress
+    from .physics.params import load_params
+    from .synthesis.synth import synthesize
+    if args.vectors is not None and args.exhaustive:
+        raise Mech2SpiceError("give --vectors N or --exhaustive, not both")
+    if args.junit:
+        inputs.check_output_file(args.junit, {"the design": args.design}, "JUnit file")
+    if not Path(args.design).is_file():
+        raise Mech2SpiceError(f"cannot read Verilog file {args.design}: no such file")
+    nl = synthesize(args.design, top=args.top)
+    if nl.clock is None and args.cycles:
+        raise Mech2SpiceError(f"{nl.top} has no flip-flops: --cycles applies to clocked designs (use --vectors)")
+    if nl.clock is not None and (args.vectors or args.exhaustive):
+        raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N, not --vectors/--exhaustive")
+    if nl.clock is None and args.reset:
+        raise Mech2SpiceError(f"{nl.top} has no flip-flops: --reset applies to clocked designs")
+    if nl.clock is not None:
+        reset_port(nl, args.reset)                 # checked before the work starts
+    params = load_params(args.params) if args.backend != "logic" else None
+    res = verify(args.design, backend=args.backend, vectors=args.cycles or args.vectors, exhaustive=args.exhaustive,
+                 seed=args.seed, params=params, progress=_progress(args), log=_log(args), netlist=nl,
+                 reset=args.reset, equivalence_check=not args.no_equivalence)
+    if args.junit:
+        inputs.write_text(args.junit, junit_xml(res))
+    if args.json:
+        _print_json(res)
+    else:
+        print(text(res))
+    return exit_code(res)

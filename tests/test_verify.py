@@ -1,0 +1,172 @@
+"""`mech2spice verify`: Yosys equivalence and Icarus co-simulation of the shipped designs, a broken
+mapping caught, the JUnit/JSON output and the exit-code contract."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from mech2spice import cli, verify as V
+from mech2spice.synthesis.synth import synthesize
+
+ROOT = Path(__file__).resolve().parents[1]
+VERILOG = ROOT / "verilog"
+COMBINATIONAL = ["adder2", "comparator4", "mult2", "mux4", "parity8"]
+CLOCKED = ["counter4", "dff", "fsm", "sqrt"]
+
+pytestmark = pytest.mark.skipif(not (shutil.which("iverilog") and shutil.which("vvp")),
+                                reason="Icarus Verilog (iverilog, vvp) not installed")
+
+
+def _run(capsys, *argv) -> tuple[int, str, str]:
+    code = cli.main(["verify", *map(str, argv)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize("design", COMBINATIONAL + CLOCKED)
+def test_shipped_design_proved_and_agrees_with_icarus(design, capsys):
+    code, out, err = _run(capsys, VERILOG / f"{design}.v", "--json", "--cycles" if design in CLOCKED else
+                          "--vectors", 300)
+    res = json.loads(out)
+    assert code == 0, out
+    assert res["equivalence"]["status"] == "proved"
+    assert res["cosim"]["agree"] and res["cosim"]["mismatches"] == []
+    assert res["cosim"]["backend"] == "logic"
+    if design in CLOCKED:
+        assert res["cosim"]["cycles"] == 300
+    assert res["verdict"] == "pass"
+
+
+def _flip_gate_input(nl):
+    """Rewire pin 0 of the middle gate to const1: a wrong mapping (the gate now always outputs 0)."""
+    g = nl.graph
+    gate = nl.gates()[len(nl.gates()) // 2]
+    (src,) = [u for u, _, pin in g.in_edges(gate, data="pin") if pin == 0]
+    g.remove_edge(src, gate)
+    g.add_node("const1", kind="const")
+    g.add_edge("const1", gate, pin=0)
+    nl.__dict__.pop("_order_cache", None)
+    return nl
+
+
+def _swap_outputs(nl, a: str, b: str):
+    g = nl.graph
+    (sa,), (sb,) = g.predecessors(a), g.predecessors(b)
+    g.remove_edges_from([(sa, a), (sb, b)])
+    g.add_edges_from([(sb, a), (sa, b)])
+    return nl
+
+
+def test_broken_combinational_mapping_gives_the_counterexample():
+    nl = _swap_outputs(synthesize(VERILOG / "mult2.v"), "p[0]", "p[1]")
+    res = V.verify(VERILOG / "mult2.v", netlist=nl)
+    eq = res["equivalence"]
+    assert eq["status"] == "counterexample"
+    (step,) = eq["counterexample"]
+    a, b = step["inputs"]["a"], step["inputs"]["b"]
+    product = format(a * b, "04b")
+    assert step["source"]["p"] == product and step["network"]["p"] != product
+    assert product[2] != product[3]            # the swapped bits differ on the counterexample
+    assert res["cosim"]["mismatches"] and V.exit_code(res) == 1
+    assert {m["bit"] for m in res["cosim"]["mismatches"]} == {"p[0]", "p[1]"}
+
+
+def test_broken_clocked_mapping_gives_a_counterexample_sequence():
+    nl = _flip_gate_input(synthesize(VERILOG / "counter4.v"))
+    res = V.verify(VERILOG / "counter4.v", netlist=nl, vectors=200)
+    eq = res["equivalence"]
+    assert eq["status"] == "counterexample"
+    assert [s["cycle"] for s in eq["counterexample"]] == list(range(len(eq["counterexample"])))
+    assert not res["cosim"]["agree"] and res["verdict"] == "fail"
+
+
+def test_broken_mapping_through_the_cli_exit_1_and_junit_failure(tmp_path, monkeypatch, capsys):
+    import mech2spice.synthesis.synth as synth
+    real = synth.synthesize
+    monkeypatch.setattr(synth, "synthesize", lambda *a, **k: _swap_outputs(real(*a, **k), "s[0]", "s[2]"))
+    junit = tmp_path / "verify.xml"
+    code, out, err = _run(capsys, VERILOG / "adder2.v", "--junit", junit)
+    assert code == 1, err
+    assert "counterexample" in out and "mismatches" in out
+    suite = ET.parse(junit).getroot()
+    assert suite.tag == "testsuite" and suite.get("failures") == "2"
+    cases = {c.get("name"): c for c in suite.iter("testcase")}
+    assert set(cases) == {"equivalence", "cosim:logic"}
+    assert "counterexample" in cases["equivalence"].find("failure").text
+    assert "s[0]" in cases["cosim:logic"].find("failure").text
+
+
+def test_junit_of_a_passing_design_has_no_failure(tmp_path, capsys):
+    junit = tmp_path / "ok.xml"
+    code, _, _ = _run(capsys, VERILOG / "fsm.v", "--cycles", 50, "--junit", junit)
+    suite = ET.parse(junit).getroot()
+    assert code == 0 and suite.get("failures") == "0" and suite.find("testcase/failure") is None
+
+
+def test_icarus_x_is_a_mismatch(tmp_path):
+    """A register Icarus never defines (no reset) reads x there: every such bit is listed."""
+    src = tmp_path / "toggle.v"
+    src.write_text("module toggle(input clk, input d, output reg q);\n"
+                   "  always @(posedge clk) q <= q ^ d;\nendmodule\n")
+    res = V.verify(src, vectors=5)
+    assert res["equivalence"]["status"] == "proved"          # equal from the zero state
+    assert len(res["cosim"]["mismatches"]) == 5 and {m["icarus"] for m in res["cosim"]["mismatches"]} == {"x"}
+    assert res["verdict"] == "fail"
+
+
+def test_source_register_folded_away_by_synthesis(tmp_path):
+    """`q <= q` synthesises to a constant 0 and no flip-flop: the proof still models the source's register."""
+    src = tmp_path / "hold.v"
+    src.write_text("module hold(input clk, input d, output reg q);\n  always @(posedge clk) q <= q;\nendmodule\n")
+    nl = synthesize(src)
+    assert not nl.latches()
+    assert V.equivalence(src, nl)["status"] == "proved"
+
+
+def test_hidden_state_proved_with_register_correspondence():
+    """sqrt's step counter is not an output: induction closes once the registers are matched by name."""
+    nl = synthesize(VERILOG / "sqrt.v")
+    assert {w for _, w, _ in V.register_names(nl)} == {"step", "root"}
+    assert V.equivalence(VERILOG / "sqrt.v", nl)["status"] == "proved"
+
+
+def test_envelope_sample_agrees_with_icarus(capsys):
+    code, out, err = _run(capsys, VERILOG / "adder2.v", "--backend", "envelope", "--vectors", 3, "--json")
+    co = json.loads(out)["cosim"]
+    assert code == 0, out + err
+    assert co["vectors"] == 3 and co["agree"] and co["valid"] and co["min_margin"] > 0
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["/nonexistent/x.v"], "cannot read"),
+    ([VERILOG / "adder2.v", "--vectors", "0"], "--vectors"),
+    ([VERILOG / "adder2.v", "--backend", "nonsense"], "--backend"),
+    ([VERILOG / "adder2.v", "--cycles", "5"], "no flip-flops"),
+    ([VERILOG / "counter4.v", "--exhaustive"], "--cycles N"),
+    ([VERILOG / "counter4.v", "--reset", "zz"], "--reset zz"),
+    ([VERILOG / "bad_syntax.v"], "line 5"),
+])
+def test_bad_input_exit_2_one_line(argv, words, capsys):
+    code, out, err = _run(capsys, *argv)
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and words in err and "Traceback" not in err
+
+
+BENCH = os.environ.get("MECH2SPICE_BENCHMARKS")
+
+
+@pytest.mark.skipif(not BENCH, reason="set MECH2SPICE_BENCHMARKS to a folder with ISCAS-85 c17.v / c880.v "
+                                      "(docs/verify.md says where they come from)")
+@pytest.mark.parametrize("name", ["c17", "c880"])
+def test_public_benchmark_agrees_with_icarus(name, capsys):
+    path = Path(BENCH) / f"{name}.v"
+    if not path.exists():
+        pytest.skip(f"{path} not there")
+    code, out, _ = _run(capsys, path, "--vectors", 2000, "--json")
+    res = json.loads(out)
+    assert code == 0 and res["equivalence"]["status"] == "proved" and res["cosim"]["agree"]

@@ -228,3 +228,27 @@ def test_install_refuses_a_block_with_a_growing_mode(tmp_path):
     with pytest.raises(Mech2SpiceError, match="not installed"):
         search.install_block({"block_file": block, "structure": "classic"}, target)
     assert target.read_text() == "{}"
+
+
+S344 = ROOT.parent / "shared/reference/cases"
+
+
+@pytest.mark.skipif(not (S344 / "s344_reset.v").is_file(), reason="../shared/reference/cases not beside the repo")
+def test_s344_verdict(capsys):
+    """ISCAS-89 s344 (issue #25): with the reference set's insulator Q (1.5) the reachable state of cycle 1
+    oscillates by itself (growth +1.5e-4 per period, period 83) and the envelope says so (exit 1); with the
+    default block it is valid, stable and settled, CNTVCO2 a '0' with margin ~0.078 (RK4 and the carrier
+    agree to 1e-4 band widths: docs/stability.md)."""
+    import tempfile
+    args = ["simulate", S344 / "s344_reset.v", "--top", "s344", "--stimulus", S344 / "s344_two_cycles.json",
+            "--backend", "envelope"]
+    rc, res, err = _simulate(capsys, *args)
+    assert rc == 0 and res["valid"] and res["stable"] and res["settled"], err
+    assert res["outputs"]["CNTVCO2"] == 0 and res["min_margin"] == pytest.approx(0.078, abs=0.003)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "q15.json"
+        path.write_text(json.dumps({"q_i": 1.5, "name": "q15"}))
+        rc, res, err = _simulate(capsys, *args, "--params", path)
+    assert rc == 1 and not res["valid"] and not res["stable"]
+    cycle1 = res["trace"][1]["stability"]
+    assert cycle1["growth_rate"] == pytest.approx(1.52e-4, rel=0.05) and 80 < cycle1["mode_period"] < 86

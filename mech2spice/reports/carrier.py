@@ -879,7 +879,7 @@ def processor_md(p: dict, r: dict, eq: dict | None, conv: dict | None = None) ->
 def roofline_md(roof: dict, chart: str | None, heading: str = "##") -> list[str]:
     pk = roof["peaks"]
     L = [f"{heading} Roofline: the kernels against this machine's measured peaks", "",
-         f"Peaks by numba microbenchmarks (`reports/carrier.py`, best of 3): independent FMA chains (four "
+         f"Peaks by numba microbenchmarks (`mech2spice/reports/carrier.py`, best of 3): independent FMA chains (four "
          f"dependent FMAs per element per pass over {pk.get('fma_width', 64)} doubles held in L1), and the triad a = b + s c (24 bytes per element: write-allocate not counted) at "
          f"each working set. {_measured_on(', load %g' % roof['load'])}; lscpu: " +
          ", ".join(f"{k} {v}" for k, v in roof.get("lscpu", {}).items()) + ".", "",

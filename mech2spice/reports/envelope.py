@@ -5,7 +5,7 @@ Writes reports/envelope.md and reports/envelope_*.png (~6 min on a 2-core machin
 Scenes (mech2spice/experiments/scenes.py): single gate (4 nominal inputs; 16 band-edge input pairs), the 3-gate
 chain with its 00 -> 10 -> 00 switching transient and band-edge members (characterise.cascade), fan-out
 2 and 3 (characterise.fanout_test), the 2-bit adder (all 16 inputs after 2900 periods at 0, as in
-reports/adder.py) and the latch pulse sequence (characterise.latch_sequence).  Each runs on RK4 at 80
+mech2spice/reports/adder.py) and the latch pulse sequence (characterise.latch_sequence).  Each runs on RK4 at 80
 steps/period (the reference the issue names), on RK4 at 160 (to measure the reference's own error) and
 on the envelope model; variants of the envelope equations (validate.VARIANTS) apportion what is left.
 
@@ -512,7 +512,7 @@ no criterion. Settled = mean of the {V.AVG} periods before each input change and
 Scenes: gate_nominal = the 4 nominal input pairs; gate_edge = all 16 pairs of band-edge levels (0.365, 0.67,
 0.92, 1.025 F_R); chain3 = `characterise.cascade` (member 0: inputs 00 -> 10 -> 00 at 1500-period holds;
 members 1-7: band-edge inputs held); fanoutN = `characterise.fanout_test` (driver 00/10, loads' second input
-0/1); adder2 = `reports/adder.py` (16 members: inputs 0 for 2900 periods, then (a, b)); latch = the model and
+0/1); adder2 = `mech2spice/reports/adder.py` (16 members: inputs 0 for 2900 periods, then (a, b)); latch = the model and
 schedule of `characterise.latch_sequence` (its 'settled' windows include the ends of the two 800-period store
 pulses, where the output is mid-flight; every other window is settled).
 
@@ -548,7 +548,7 @@ numba kernel pays nothing per step. At {E:g} periods (same accuracy, table) it i
 
 ## Why they differ: what the averaging drops, measured
 
-`mech2spice/validate.py` puts back, one at a time, what `envelope.py`'s derivation drops, and runs the same
+`mech2spice/experiments/validate.py` puts back, one at a time, what `envelope.py`'s derivation drops, and runs the same
 scenes against RK4-160 (the converged reference; RK4-80 differs from it by up to {rk_self:.3f} u_R along
 trajectories and {100 * rk_self_t:.1f} % in crossing times, comparable to the envelope's own differences):
 

@@ -17,7 +17,7 @@ summary reports/speed_accuracy.md):
   forms      the electrical analogy itself: the package's mobility form against two alternatives emitted
              by this module (impedance/force-voltage analogy; mobility with inductor springs), same
              ngspice options, wall time and error against the RK4 reference.
-  envelope_spice  ngspice on the envelope equations (reports/envelope_spice.py: its sections accuracy,
+  envelope_spice  ngspice on the envelope equations (mech2spice/reports/envelope_spice.py: its sections accuracy,
              failures, scaling, also one at a time as envelope_spice.NAME), in envelope_spice.json and the
              last section of the .md.  This module is the only writer of speed_accuracy.md.
 

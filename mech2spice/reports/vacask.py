@@ -3,7 +3,7 @@ against the steady-state solver, and scaling of the envelope form against ngspic
 
 Not a report of its own: it measures into reports/vacask.json (`python -m mech2spice.reports.vacask [DIR]
 [--only SECTION,...]`, ~15 min on the shared 2-core sandbox); speed_accuracy.md, written by
-reports/speed_accuracy.py alone, renders this section from it (`block`).  Every ngspice/VACASK pair runs one process at a time in the same run, so their
+mech2spice/reports/speed_accuracy.py alone, renders this section from it (`block`).  Every ngspice/VACASK pair runs one process at a time in the same run, so their
 wall-time ratios are measured under the same load.
 """
 from __future__ import annotations

@@ -79,15 +79,29 @@ def _real_block(Z: sp.spmatrix) -> sp.csr_matrix:
 def linearise(env: Envelope, A: np.ndarray, s: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """(E, J) with E y' = J y the envelope equations linearised at (A, s) with s' = 0, y = (a, b, ds, ds')."""
     nf, ns = env.fast.size, env.slow.size
-    Zs = (env.Z0 + sp.diags(env.G @ s)).tocsr()
-    P = sp.diags(A) @ env.G                              # d[(G s) * A] / ds
-    W = env.H @ sp.diags(A.real), env.H @ sp.diags(A.imag)   # d[H |A|^2 / 2] / (a, b)
-    I_s, Z_s = sp.identity(ns, format="csr"), sp.csr_matrix((ns, ns))
-    J = sp.bmat([[-_real_block(Zs), sp.vstack([-sp.csr_matrix(P.real), -sp.csr_matrix(P.imag)]), None],
-                 [sp.csr_matrix((ns, 2 * nf)), Z_s, I_s],
-                 [-sp.hstack([W[0], W[1]]), -env.Ks, -env.Cs]], format="csr")
+    fast, Ws = _fast_rows(env, A, s), _slow_force_rows(env, A)
+    I_s = sp.identity(ns, format="csr")
+    J = sp.vstack([sp.hstack([fast, sp.csr_matrix((2 * nf, ns))]),
+                   sp.hstack([sp.csr_matrix((ns, 2 * nf + ns)), I_s]),
+                   sp.hstack([Ws, -env.Cs])], format="csr")
     E = sp.block_diag([_real_block(env.Bop), I_s, sp.diags(env.ms)], format="csc")
     return E, J
+
+
+def _fast_rows(env: Envelope, A, s) -> sp.csr_matrix:
+    """d(F - Z(s) A) / d(a, b, ds): the fast equations' rows.  -Re-block(Z0) is built once per model."""
+    Z0 = env.model.derived.get("stability_z0")
+    if Z0 is None:
+        Z0 = env.model.derived["stability_z0"] = -_real_block(env.Z0)
+    g = env.G @ s
+    P = sp.diags(A) @ env.G                              # d[(G s) * A] / ds
+    return sp.bmat([[Z0 - sp.diags(np.concatenate([g, g])), sp.vstack([-sp.csr_matrix(P.real),
+                                                                        -sp.csr_matrix(P.imag)])]], format="csr")
+
+
+def _slow_force_rows(env: Envelope, A) -> sp.csr_matrix:
+    """d(-H |A|^2 / 2 - K_s s) / d(a, b, ds)."""
+    return sp.hstack([-(env.H @ sp.diags(A.real)), -(env.H @ sp.diags(A.imag)), -env.Ks], format="csr")
 
 
 # --- the fixed point nearest a state -----------------------------------------------------------
@@ -108,10 +122,7 @@ def operating_point(env: Envelope, A0: np.ndarray, s0: np.ndarray, F: np.ndarray
     for _ in range(NEWTON_MAX):
         if np.abs(r).max() < NEWTON_TOL * scale:
             return A, s, True
-        _, J = linearise(env, A, s)
-        keep = np.r_[0:2 * nf + ns]                      # drop the s' unknowns and the s' = ds' rows
-        rows = np.r_[0:2 * nf, 2 * nf + ns:2 * nf + 2 * ns]
-        Jss = J[rows][:, keep].tocsc()
+        Jss = sp.vstack([_fast_rows(env, A, s), _slow_force_rows(env, A)], format="csc")   # no s' terms
         try:
             dy = spla.splu(Jss).solve(-r)
         except RuntimeError:                              # singular: a fold exactly here
@@ -154,6 +165,7 @@ def _cayley(E, J, sigma: float, k: int):
     K = (J + sigma * E).tocsr()
     op = spla.LinearOperator(J.shape, matvec=lambda x: lu.solve(K @ x), dtype=float)
     mu, vec = spla.eigs(op, k=min(k, J.shape[0] - 2), which="LM", tol=1e-8, maxiter=20 * J.shape[0],
+                        ncv=min(J.shape[0] - 1, max(4 * k, 40)),  # room for clustered, repeated modes
                         v0=np.ones(J.shape[0]))
     return sigma * (mu + 1) / (mu - 1), vec
 

@@ -174,7 +174,8 @@ def _chunk_summary(run, probes: list[str], unit: float) -> tuple[np.ndarray, np.
     return a[-1], a.mean(axis=0), a.max(axis=0) - a.min(axis=0)
 
 
-def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int, history: list) -> list | None:
+def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int, history: list,
+           held: bool = False) -> list | None:
     """(verdict, settled) of each batch member at the run's final state (None: the engine returns no state)."""
     ph = engine.phasors(model, run.state, run.t)
     if ph is None:
@@ -185,7 +186,7 @@ def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int,
     for b in range(A.shape[1]):
         v = verdict.judge(model, A[:, b], s[:, b], F[:, b], outs)
         a, swing, step = _recent(history, outs, b)
-        out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.rests_on_fixed_point())))
+        out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.rests_on_fixed_point(), held)))
     return out
 
 
@@ -349,7 +350,7 @@ def _judge_read(engine, model: MechModel, part, stim, outs: list[str], t_periods
     a = np.abs(part.amp[-2 * CHUNK:, [part.probe(n) for n in outs], :]) / model.amplitude_unit
     history = [(a[CHUNK - 1], a[:CHUNK].mean(axis=0), np.ptp(a[:CHUNK], axis=0)),
                (a[-1], a[CHUNK:].mean(axis=0), np.ptp(a[CHUNK:], axis=0))]
-    judged = _judge(engine, model, part, stim, outs, t_periods, history)
+    judged = _judge(engine, model, part, stim, outs, t_periods, history, held=part.settled_periods > 0)
     return judged[0] if judged else None
 
 

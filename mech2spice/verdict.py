@@ -22,6 +22,9 @@ from .physics.params import BAND0, BAND1, band_of, margin
 
 SETTLED_BW = 0.005     # band widths: an output with less than this still to come has settled (its margin
                        # is then within this of the long run's)
+AVERAGING_ERROR = 2.5e-3   # u_R: how far an oscillator-level steady state may lie from the envelope's fixed
+                           # point (1.8e-3 at the steepest inputs, docs/vacask.md; 0.9-2.3e-3 measured on the
+                           # 3-input majority)
 
 
 def band_width(x: float) -> float:
@@ -58,17 +61,21 @@ def still_to_come(v: stability.Verdict, amplitudes: dict[str, float], swing: dic
 
 
 def settled(v: stability.Verdict, amplitudes: dict[str, float], swing: dict[str, float], step: dict[str, float],
-            lag: float, on_fixed_point: bool) -> bool:
+            lag: float, on_fixed_point: bool, held: bool = False) -> bool:
     """Stable, and less than SETTLED_BW band widths still to come on every output.  An engine that rests
     exactly on the envelope equations' fixed points (`on_fixed_point`: their RK4 steps) is as far from
     settled as its distance from the fixed point (and a run that held a snapshot of a moving network is far
     from it); an oscillator-level run's steady state differs from that fixed point by the averaging error
     (~2e-3 u_R), and an exponential step's by its local error, so for those the trend of their own
-    amplitudes is used."""
+    amplitudes is used, unless idle skipping `held` the state (a held state's trend is flat whatever it is):
+    then it must lie within the averaging error of the fixed point."""
     if not v.stable:
         return False
     if on_fixed_point:
         return drift(v, amplitudes) <= SETTLED_BW
+    if held:          # idle skipping held the state: its flat trend says nothing, so how far it is from rest
+        return all(abs(a - v.fixed[n]) <= SETTLED_BW * band_width(a) + AVERAGING_ERROR
+                   for n, a in amplitudes.items() if n in v.fixed)
     return still_to_come(v, amplitudes, swing, step, lag) <= SETTLED_BW
 
 

@@ -69,3 +69,23 @@ def test_s27_random_cycles_logic_icarus_envelope_stable(capsys, tmp_path):
     for e in env["trace"]:
         assert e["valid"] and e["stable"] and e["settled"], e["cycle"]
         assert e["stability"]["growth_rate"] < 0, e["cycle"]
+
+
+def test_s386_q15_block_flagged_default_stable(capsys, tmp_path):
+    """The sweep's smallest circuit with a q_i=1.5 instability: s386 (1446 oscillators), reset then one seeded
+    random cycle. With the old insulator Q the state after edge 1 sits at a fixed point with a growing mode
+    (+9.6e-5/period in the sweep): the verdict flags it and the exit code is 1. The default block (q_i=1.0)
+    is stable and valid there and decodes the logic outputs."""
+    path, top = DATA / "reset" / "s386_reset.v", "s386"
+    stim = sweep.random_stimulus(["RST", "v6", "v5", "v4", "v3", "v2", "v1", "v0"], 1, seed=1)
+    q15 = tmp_path / "q15.json"
+    q15.write_text(json.dumps(sweep.Q15))
+    rc, logic = _simulate(capsys, path, top, stim, "logic", tmp_path)
+    rc_old, old = _simulate(capsys, path, top, stim, "envelope", tmp_path, params=q15)
+    assert rc_old == 1 and not old["valid"] and not old["stable"]
+    last = old["trace"][1]
+    assert last["stable"] is False and not last["valid"] and last["stability"]["growth_rate"] > 0
+    rc_new, new = _simulate(capsys, path, top, stim, "envelope", tmp_path)
+    assert rc_new == 0 and new["valid"] and new["stable"]
+    assert all(e["stable"] and e["stability"]["growth_rate"] < 0 for e in new["trace"])
+    assert [e["outputs"] for e in new["trace"]] == [e["outputs"] for e in logic["trace"]]

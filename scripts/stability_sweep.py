@@ -35,6 +35,7 @@ CIRCUITS = [
     ("s386", "s386_reset.v", 12, {"envelope": None}),
     ("s400", "s400_tied_reset.v", 12, {"envelope": None}),
     ("s344", "s344_reset.v", 12, {"envelope": None}),
+    ("s349", "s349_reset.v", 12, {"envelope": None}),
     ("s510", "s510_reset.v", 12, {"envelope": None}),
 ]
 REFUSAL_PROBES = {"s400": "s400_reset.v"}   # the faithful netlist, refused by the mapping (recorded, not run)

@@ -37,6 +37,7 @@ CIRCUITS = [
     ("s344", "s344_reset.v", 12, {"envelope": None}),
     ("s349", "s349_reset.v", 12, {"envelope": None}),
     ("s510", "s510_reset.v", 12, {"envelope": None}),
+    ("s820", "s820_reset.v", 12, {"envelope": None}),
 ]
 REFUSAL_PROBES = {"s400": "s400_reset.v"}   # the faithful netlist, refused by the mapping (recorded, not run)
 TIMEOUT_S = 1800

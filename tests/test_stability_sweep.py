@@ -39,7 +39,8 @@ def _simulate(capsys, path, top, stim, backend, tmp_path, params=None):
 
 @pytest.mark.parametrize("src,tie", [("s27.bench", False), ("s349.bench", False), ("s386.bench", False),
                                      ("s400.bench", False),
-                                     ("s400.bench", True), ("s344.v", False), ("s510.v", False)])
+                                     ("s400.bench", True), ("s344.v", False), ("s510.v", False),
+                                     ("s820.v", False)])
 def test_reset_netlists_are_the_scripts_output(src, tie):
     """The checked-in *_reset.v files are exactly what scripts/iscas89_reset.py makes of the public netlists."""
     stem = src.split(".")[0] + ("_tied" if tie else "")

@@ -178,6 +178,10 @@ def _fmt(x, spec=".2e"):
     return "-" if x is None else format(x, spec)
 
 
+def _diff(got: dict, want: dict) -> str:
+    return ", ".join(f"{k} {got.get(k)} vs {v}" for k, v in want.items() if got.get(k) != v)
+
+
 def _least_damped(results: list[dict], block: str) -> str:
     """One line per block: cycles judged, unstable ones, and the least damped mode seen (where)."""
     cyc = [(c["growth_rate"], r["circuit"], r["seed"], run["backend"], c["cycle"], c["stable"])
@@ -225,6 +229,12 @@ def markdown(results: list[dict], metas: list[dict]) -> str:
                  c["mode_dofs"])
                 for r in results for run in r.get("runs", []) for c in run["cycles"] if c["stable"] is False]
     lines += ["", "## Findings", ""] + notes + [_least_damped(results, b) for b in ("default", "q15")]
+    wrong = [f"- {r['circuit']} seed {r['seed']} {run['backend']} {run['block']} cycle {c['cycle']}: "
+             f"{_diff(c['outputs'], r['logic']['trace'][c['cycle']])} (valid {c['valid']}, stable {c['stable']}, "
+             f"min_margin {_fmt(c['min_margin'], '.3f')})"
+             for r in results for run in r.get("runs", []) for c in run["cycles"] if c["equals_logic"] is False]
+    lines += ["", "Cycles whose decoded outputs differ from logic (engine, got vs logic; a valid one is a silent "
+              "error):", ""] + (wrong or ["- none"])
     lines += ["", "Unstable cycles (circuit, engine, block, cycle, growth_rate, mode DOFs):", ""]
     lines += [f"- {u[0]} {u[1]} {u[2]} cycle {u[3]}: {u[4]:+.2e}/period, {', '.join(u[5] or [])}" for u in unstable]
     if not unstable:

@@ -47,6 +47,9 @@ SUBPACKAGES = tuple(sorted(p.name for p in (ROOT / "mech2spice").iterdir()
 GENERATED = {
     # numba's on-disk kernel cache, created beside the kernels on the first run (README, docs/latency.md)
     "mech2spice/backends/__pycache__",
+    # scripts/stability_sweep.py --out STEM writes STEM.json and STEM.md (the commands in its reports)
+    "reports/stability_sweep", "reports/stability_sweep_carrier", "reports/stability_sweep_carrier6",
+    "reports/stability_sweep_long", "reports/stability_sweep_long2",
 }
 
 _CHAR = r"[A-Za-z0-9_.\-/{}<>*]"

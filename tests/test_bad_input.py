@@ -11,32 +11,17 @@ from pathlib import Path
 import pytest
 
 from mech2spice.cli import main
+from cli_helpers import run, refused, verilog
 
 ROOT = Path(__file__).resolve().parents[1]
 ADDER, COUNTER = str(ROOT / "verilog/adder2.v"), str(ROOT / "verilog/counter4.v")
 SIEVE = str(ROOT / "programs/sieve.asm")
 
 
-def run(capsys, *argv):
-    """(exit code, stdout, stderr) of one in-process command."""
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
-def refused(capsys, *argv, needle: str) -> str:
-    """Assert the command exits 2 with one line on stderr containing `needle`; returns that line."""
-    rc, out, err = run(capsys, *argv)
-    assert rc == 2, (rc, out, err)
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    assert needle in err, err
-    return err
 
 
-def verilog(tmp_path, text: str, name: str = "d.v") -> str:
-    path = tmp_path / name
-    path.write_text(text)
-    return str(path)
 
 
 # ------------------------------------------------------------------ silent wrong answers

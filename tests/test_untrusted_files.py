@@ -13,27 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mech2spice.cli import main
+from cli_helpers import run, refused
 
 ROOT = Path(__file__).resolve().parents[1]
 SIEVE = str(ROOT / "programs/sieve.asm")
 PACKAGE = ROOT / "mech2spice"
 
 
-def run(capsys, *argv):
-    """(exit code, stdout, stderr) of one in-process command."""
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
-def refused(capsys, *argv, needle: str) -> str:
-    """Assert the command exits 2 with one line on stderr containing `needle`; returns that line."""
-    rc, out, err = run(capsys, *argv)
-    assert rc == 2, (rc, out, err[-3000:])
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    assert needle in err, err
-    return err
 
 
 def _npz(**arrays) -> bytes:

@@ -155,17 +155,21 @@ def _run_until_settled(engine, model, stim, probes: list[str], budget: int, prog
         history.append(_chunk_summary(run, probes, model.amplitude_unit))
         bar.update(n)
         judged = None
-        watched = [tuple(x[rows] for x in h) for h in history[-3:]]
-        if not fixed and done >= next_check and _settled([tuple(x[rows] for x in h) for h in history[-2:]]):
-            judged = _judge(engine, model, run, stim, names, done, watched)
-            wait = _periods_to_settle(judged, watched, names)
+        if not fixed and done >= next_check and _settled(_rows(history[-2:], rows)):
+            judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows))
+            wait = _periods_to_settle(judged, _rows(history[-3:], rows), names)
             if wait == 0:
                 break
             next_check = done + wait
     bar.close()
     if judged is None:
-        judged = _judge(engine, model, run, stim, names, done, [tuple(x[rows] for x in h) for h in history[-3:]])
+        judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows))
     return history[-1][0], done, judged
+
+
+def _rows(summaries: list, rows: list[int]) -> list:
+    """Chunk summaries (last, mean, swing) cut down to the watched probes' rows."""
+    return [tuple(x[rows] for x in h) for h in summaries]
 
 
 def _chunk_summary(run, probes: list[str], unit: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

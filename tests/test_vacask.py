@@ -19,7 +19,7 @@ import pytest
 from mech2spice import cli
 from mech2spice.backends import rk4
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
-from mech2spice.experiments import scenes
+from mech2spice.experiments import clocking, scenes
 from mech2spice.physics import network, nor
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
@@ -89,7 +89,7 @@ def adder():
     nl = synth.synthesize(str(ROOT / "verilog" / "adder2.v"))
     m = network.build(nl, P)
     st = network.stimulus(m, nl, P, [(0, list(scenes.ADDER_INPUTS))])
-    periods = simulation.period_budget(nl)
+    periods = clocking.period_budget(nl)
     return nl, m, st, periods, rk4.integrate(m, periods, steps_per_period=80, stimulus=st)
 
 

@@ -33,7 +33,8 @@ from ..physics.envelope import Envelope
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import envelope as det
-from ._base import Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar
+from ..run_result import Run, blowup_bound, check_divergence
+from ._base import Capabilities, Engine, probe_dofs, progress_bar
 
 DEFAULT_NOISE_STEP = 1.0      # periods, at most: the linear-mode variance bias is O((lambda h)^2), lambda h ~ 0.02
 

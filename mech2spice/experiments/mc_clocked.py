@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 
 from .. import simulation
-from ..backends._base import DivergenceError
+from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
 from . import clocking
 from ..physics import network, spread

@@ -36,7 +36,7 @@ import numpy as np
 
 from .. import simulation
 from ..backends import logic, make_engine
-from ..backends._base import DivergenceError
+from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
 from ..physics import network, spread
 from ..physics.noise import check_temperature

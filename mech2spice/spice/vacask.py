@@ -31,6 +31,7 @@ from ..inputs import check_fields
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
+from ..run_result import Run
 from ._common import (check_samples, check_transient, comment_text, DEFAULT_TIMEOUT_S, drive_schedule,
                       map_batch, Namer, num, prewarp_scale, probe_dof_names)
 from . import readout
@@ -495,7 +496,6 @@ def run(model: MechModel, periods: int, stimulus: Stimulus | None = None, option
         batch_index: int = 0, keep_netlist: str | Path | None = None):
     """One batch member under VACASK (carrier level): a Run with per-period phasors."""
     from .runner import demodulate
-    from ..backends._base import Run
     options = options or VacaskOptions()
     t0 = time.perf_counter()
     net = emit(model, periods, stimulus, batch_index, options)
@@ -558,7 +558,6 @@ def run_envelope(model: MechModel, periods: int, stimulus: Stimulus | None = Non
 def run_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
               options: VacaskOptions | None = None, workers: int | None = None):
     """Every batch member as its own VACASK process (carrier level), stacked along the batch axis."""
-    from ..backends._base import Run
     B = stimulus.batch if stimulus is not None else 1
     runs = map_batch(lambda b: run(model, periods, stimulus, options, b), B, workers)
     first = runs[0]
@@ -575,7 +574,6 @@ def run_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
 def run_envelope_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
                        options: VacaskEnvelopeOptions | None = None, workers: int | None = None):
     """Every batch member of the envelope netlist as its own VACASK process; amplitudes at period ends."""
-    from ..backends._base import Run
     options = options or VacaskEnvelopeOptions()
     B = stimulus.batch if stimulus is not None else 1
     parts = map_batch(lambda b: run_envelope(model, periods, stimulus, options, b), B, workers)

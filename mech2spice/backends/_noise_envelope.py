@@ -168,6 +168,6 @@ def noisy_engine(backend: str, options, temperature: float, seed: int):
     if not hasattr(base, "noise_temperature"):
         raise Mech2SpiceError(f"the {backend} backend has no thermal noise (rk4, envelope and ngspice do)")
     if backend == "ngspice":
-        from ..spice.carrier import noisy_options
+        from ..spice.oscillator_netlist import noisy_options
         return make_engine(backend, noisy_options(base, T, int(seed)))
     return make_engine(backend, replace(base, noise_temperature=T, noise_seed=int(seed)))

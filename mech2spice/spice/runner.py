@@ -27,7 +27,7 @@ from ..errors import Mech2SpiceError, ToolMissingError
 from ..physics.model import MechModel
 from ..run_result import Run
 from ._common import DEFAULT_TIMEOUT_S, check_samples, failure, map_batch, probe_dof_names
-from .carrier import SpiceOptions, emit_with_probes
+from .oscillator_netlist import SpiceOptions, emit_with_probes
 from ..physics.stimulus import Stimulus
 
 MISSING = "ngspice not found: apt-get install -y ngspice libngspice0"

@@ -2,10 +2,10 @@
 
 Two libraries of the same equations (physics/model.py):
 
-* carrier level (``m2s_carrier.va``): the mobility analogy of spice/carrier.py, one module per element.
+* carrier level (``m2s_carrier.va``): the mobility analogy of spice/oscillator_netlist.py, one module per element.
   Each oscillating DOF has a displacement node x and a velocity node v; force balance is the current
   balance at v:  I(v) <+ ddt(m w V(v)) + c V(v) + k V(x) + couplings - drives,  and  I(x) <+ ddt(w V(x)) - V(v)
-  makes V(x) the integral of V(v).  w is the trapezoidal prewarp of spice/carrier.py (a model parameter:
+  makes V(x) the integral of V(v).  w is the trapezoidal prewarp of spice/oscillator_netlist.py (a model parameter:
   one value per circuit; slow DOFs use a model with w = 1).  Drives read $abstime, which VACASK's
   transient and harmonic-balance analyses both supply.
 * envelope level (``m2s_envelope.va``): physics/envelope.py's equations in real time.  An oscillating DOF

@@ -249,12 +249,12 @@ def cmd_emit(args) -> int:
     from .spice.readout import about as about_line
     about = about_line(args.design, nl.top, values)
     if args.format == "ngspice":
-        from .spice import carrier as spice
+        from .spice import oscillator_netlist as spice
         opts = _engine_options(args, "ngspice")
         text = spice.emit(model, periods, stim, options=opts, title=title, about=about)
         run_with = f"ngspice -b {args.output} (it prints each output bit and port it reads)"
     elif args.format == "ngspice-envelope":
-        from .spice import envelope
+        from .spice import envelope_netlist as envelope
         opts = _engine_options(args, "ngspice-envelope")
         text = envelope.emit_envelope(model, stim, periods, opts, title=title, about=about)
         run_with = f"ngspice -b {args.output} (it prints each output bit and port it reads)"
@@ -319,7 +319,7 @@ def _engine_options(args, backend: str | None = None):
 def cmd_subckts(args) -> int:
     """`mech2spice subckts`: write the ngspice .subckt library for --params and list its files."""
     from .physics.params import load_params
-    from .spice.carrier import write_subckt_library
+    from .spice.oscillator_netlist import write_subckt_library
     paths = write_subckt_library(args.output, load_params(args.params))
     if args.json:
         _print_json({"files": [str(x) for x in paths]})

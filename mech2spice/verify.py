@@ -359,6 +359,7 @@ def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, pa
     """Per vector / cycle: {bits, valid, stable, min_margin, amplitudes} of the network on the backend."""
     from . import simulation
     from .backends._base import progress_bar
+    from .experiments import clocking
     from .backends.logic import evaluate_batch
     if backend == "logic" and not clocked:
         bar = progress_bar(len(x), progress, unit="vector")
@@ -373,7 +374,7 @@ def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, pa
     if clocked and backend == "logic":
         return simulation.run_clocked_logic(netlist, cycles)["trace"]
     if clocked:
-        timing = simulation.clock_timing(netlist, p=params)
+        timing = clocking.clock_timing(netlist, p=params)
         return simulation.run_clocked_physical(netlist, params, cycles, backend, timing, progress=progress)["trace"]
     return simulation.run_physical(netlist, params, cycles, backend, progress=progress)
 

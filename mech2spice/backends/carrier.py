@@ -36,8 +36,8 @@ from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import _carrier_kernel as kernel
 from . import _carrier_latency as latent
-from ._base import (Capabilities, Engine, Run, oscillator_phasors, blowup_bound, check_divergence, probe_dofs, progress_bar,
-                    watched_dofs)
+from ..run_result import Run, blowup_bound, check_divergence
+from ._base import Capabilities, Engine, oscillator_phasors, probe_dofs, progress_bar, watched_dofs
 from .envelope import SETTLE_MIN, SETTLE_WINDOW
 
 DEFAULT_STEPS_PER_PERIOD = 12    # as accurate as RK4 at 160 steps on a switching gate; within 4e-4 u_R of it on

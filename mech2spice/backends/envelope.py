@@ -21,7 +21,8 @@ from ..physics.envelope import Envelope, gershgorin_rate, spectral_rate
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import _envelope_kernel
-from ._base import Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar
+from ..run_result import Run, blowup_bound, check_divergence
+from ._base import Capabilities, Engine, probe_dofs, progress_bar
 
 RK4_STABILITY = 2.5          # |lambda h| RK4 keeps stable (its region reaches ~2.8 on both axes)
 RATE_SAFETY = 1.5            # x the largest |eigenvalue| at rest: along switching trajectories it moved by

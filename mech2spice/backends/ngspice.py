@@ -1,13 +1,13 @@
 """ngspice as two engines: the carrier-level electrical analogy and the envelope equations as a circuit.
 
-The netlists come from spice.carrier and spice.envelope; spice.runner runs ngspice.  ngspice has no
+The netlists come from spice.oscillator_netlist and spice.envelope_netlist; spice.runner runs ngspice.  ngspice has no
 cheap restart, so neither engine continues from a state: a run always starts from rest.
 """
 from __future__ import annotations
 
 from ..spice import runner
-from ..spice.carrier import SpiceOptions
-from ..spice.envelope import EnvelopeSpiceOptions, run_envelope_spice
+from ..spice.oscillator_netlist import SpiceOptions
+from ..spice.envelope_netlist import EnvelopeSpiceOptions, run_envelope_spice
 from ._base import Capabilities, Engine, require_rest
 
 

@@ -32,8 +32,9 @@ from ..inputs import check_fields
 from ..physics import noise as thermal
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
-from ._base import (Capabilities, Engine, Run, oscillator_phasors, SettleWatch, blowup_bound, check_divergence, probe_dofs,
-                    progress_bar, watched_dofs)
+from ..run_result import Run, blowup_bound, check_divergence
+from ._base import (Capabilities, Engine, oscillator_phasors, SettleWatch, probe_dofs, progress_bar,
+                    watched_dofs)
 from .envelope import SETTLE_MIN, SETTLE_WINDOW
 
 DEFAULT_STEPS_PER_PERIOD = 80   # 40 (the paper's 0.025 periods) leaves a 1e-3 u_R error; see reports/gate.md

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .. import simulation
 from ..errors import Mech2SpiceError
+from ..experiments import clocking
 from ..inputs import is_number
 from ..physics import network
 from ..physics.params import DEFAULT, NOMINAL0, NOMINAL1, band_of
@@ -104,10 +104,10 @@ class Schedule:
 
 
 def default_schedule(netlist, cycles: int, settle: int | None = None, p=DEFAULT) -> Schedule:
-    """simulation.clock_timing's pulse and pause; each cycle settles one pause (derived for the longest NOR
+    """clocking.clock_timing's pulse and pause; each cycle settles one pause (derived for the longest NOR
     path, 44 gates: the path latch -> raddr -> memory -> rdata -> latch is 5 + 30, `memory_path`, and the
     memory adds ~5 periods, its read stage's time constants, to a pause of 11575)."""
-    t = simulation.clock_timing(netlist, p=p)
+    t = clocking.clock_timing(netlist, p=p)
     return Schedule(t["pulse"], t["pause"], settle or t["pause"], cycles)
 
 

@@ -16,9 +16,9 @@ import numpy as np
 
 from dataclasses import replace
 
-from .. import simulation
 from ..backends import make_engine
 from ..errors import Mech2SpiceError
+from ..experiments import clocking
 from ..physics import network
 from ..physics.params import DEFAULT, band_of
 from . import state_file
@@ -72,7 +72,7 @@ class PhysicalCPU:
         if noise and noise[0]:          # thermal noise (k_B T, seed): the noisy engine, never settled or frozen
             from ..backends._noise_envelope import noisy_engine
             self.pulse_engine = self.pause_engine = noisy_engine(backend, self.pulse_engine.options, *noise)
-        t = simulation.clock_timing(self.netlist, p=p)
+        t = clocking.clock_timing(self.netlist, p=p)
         whole = max(1, int(round(step))) if backend == "envelope" else 1   # changes fall on step boundaries
         self.pulse, self.pause = -(-t["pulse"] // whole) * whole, -(-t["pause"] // whole) * whole
         self.backend, self.p, self.mem = backend, p, memory

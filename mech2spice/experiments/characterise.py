@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..backends import make_engine, rk4
-from ..backends._base import Run
+from ..run_result import Run
 from ..backends.envelope import EnvelopeOptions
 from ..errors import DivergenceError
 from ..physics import nor, steady

@@ -16,8 +16,9 @@ from __future__ import annotations
 import math
 
 from .. import simulation
-from ..backends._base import DivergenceError
+from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
+from . import clocking
 from ..physics import network, spread
 from ..physics.noise import check_temperature
 from ..synthesis.ports import output_bits
@@ -56,7 +57,7 @@ class ClockedMC:
         self.netlist, self.p, self.backend, self.spec, self.seed = netlist, p, backend, spec, seed
         self.options, self.noise = options, check_temperature(noise)
         self.cycles = simulation.expand_steps(steps)
-        self.timing = simulation.clock_timing(netlist, p=p)
+        self.timing = clocking.clock_timing(netlist, p=p)
         self.want = simulation.run_clocked_logic(netlist, self.cycles)["trace"]
         self.model = network.build(netlist, p)
         self.elems = spread.elements(self.model)

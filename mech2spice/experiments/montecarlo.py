@@ -36,7 +36,7 @@ import numpy as np
 
 from .. import simulation
 from ..backends import logic, make_engine
-from ..backends._base import DivergenceError
+from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
 from ..physics import network, spread
 from ..physics.noise import check_temperature
@@ -44,6 +44,7 @@ from ..physics.params import GateParams, band_of, margin
 from ..physics.stimulus import Stimulus
 from ..synthesis.ports import output_bits, port_range
 from ..synthesis.synth import Netlist
+from . import clocking
 from .tolerance import QUANTILES, wilson
 
 KINDS = ("k", "m", "c", "spring", "dashpot", "gamma", "drive")
@@ -162,7 +163,7 @@ class DesignMC:
         self.model = network.build(netlist, p)
         self.stim = network.stimulus(self.model, netlist, p, [(0, vectors)])
         self.elems = spread.elements(self.model)
-        self.budget = periods or simulation.period_budget(netlist)
+        self.budget = periods or clocking.period_budget(netlist)
         self.fixed = periods is not None
         self.outs = [b for b in output_bits(netlist) if b in self.model.probes]
         self.gates = list(self.model.design.blocks)

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import data, simulation
+from .. import data
 from ..inputs import read_json
 from ..physics import network, nor
 from ..physics.model import MechModel
@@ -28,6 +28,7 @@ CASCADE_EDGES = [(0.365, 0.365), (0.67, 0.365), (0.67, 0.67), (0.92, 0.365), (1.
                  (0.92, 0.92)]                             # constant inputs at band edges: level restoration
 FANOUT_CASES = [(0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1)]   # (driver x1, driver x2, every load's x2)
 ADDER_INPUTS = [{"a": a, "b": b} for a in range(4) for b in range(4)]   # all 16 sums of the 2-bit adder
+ADDER_HOLD = 2900   # adder2.v's clocking.period_budget (logic depth 7), a constant so scenes need not import it
 COUNTER_STEPS = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, "cycles": 3},
                  {"set": {"en": 0}, "cycles": 2}, {"set": {"en": 1}, "cycles": 2}, {"set": {"rst": 1}, "cycles": 1}]
 FSM_X = [1, 1, 0, 1, 1, 0, 1, 0]                           # verilog/fsm.v's input sequence, one bit per cycle
@@ -122,11 +123,10 @@ def fanout_scene(p: GateParams = DEFAULT, n_loads: int = 2, periods: int = 2500)
                  f"one driver feeding {n_loads} loads, {periods} periods from rest")
 
 
-def adder_scene(p: GateParams = DEFAULT, hold: int | None = None) -> Scene:
+def adder_scene(p: GateParams = DEFAULT, hold: int = ADDER_HOLD) -> Scene:
     """verilog/adder2.v: inputs 0 for `hold` periods (default: its period budget), then each of the 16 (a, b)."""
     nl = synth.synthesize(data.verilog("adder2.v"))
     m = network.build(nl, p)
-    hold = hold or simulation.period_budget(nl)
     st = network.stimulus(m, nl, p, [(0, [{}] * len(ADDER_INPUTS)), (hold, ADDER_INPUTS)])
     probes = [b for b in output_bits(nl) if b in m.probes]
     return Scene("adder2", m, st, 2 * hold, probes, [f"a={v['a']} b={v['b']}" for v in ADDER_INPUTS], [0, hold],

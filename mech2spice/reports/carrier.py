@@ -144,7 +144,7 @@ def _ngspice_rows(sc, ref, quick: bool) -> list[dict]:
     import shutil
     if quick or not shutil.which("ngspice"):
         return []
-    from ..spice.carrier import SpiceOptions
+    from ..spice.oscillator_netlist import SpiceOptions
     from . import speed_accuracy
     rows = []
     for ms in NG_STEPS:

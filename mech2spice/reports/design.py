@@ -49,7 +49,8 @@ def blocks(search: dict) -> dict:
 def block_figures(name: str, p, rec: dict | None, log) -> dict:
     """Tolerance, margin, energy, delay and the limiting elements of one block."""
     from ..design.search import measure
-    from ..physics import energy, sensitivity
+    from ..experiments import energy
+    from ..physics import sensitivity
     t0 = time.time()
     m = rec["measured"] if rec else measure(p, SIGMA, 200, TOL_SAMPLES, 0, log)
     e = energy.gate_energy(p)

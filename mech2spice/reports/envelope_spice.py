@@ -1,4 +1,4 @@
-"""ngspice on the envelope equations (mech2spice/spice/envelope.py): speed vs accuracy, failure points, scaling.
+"""ngspice on the envelope equations (mech2spice/spice/envelope_netlist.py): speed vs accuracy, failure points, scaling.
 
 Not a report of its own: the envelope-spice sections of `mech2spice report speed_accuracy`, which is the one
 writer of speed_accuracy.md and puts `block()` at its end.  Sections (written to envelope_spice.json and the
@@ -11,7 +11,7 @@ chart speed_accuracy_envelope_spice.png beside the report):
             at 160 steps/period for the gate.  Scenes and error measures: experiments/scenes.py,
             experiments/validate.py.
   failures  what breaks: very large max steps (ngspice's own truncation-error control takes over), and the
-            stall ngspice fell into right after a PWL breakpoint (the drive form spice/envelope.py avoids).
+            stall ngspice fell into right after a PWL breakpoint (the drive form spice/envelope_netlist.py avoids).
   scaling   arrays of independent NOR gates up to 4200 oscillators: ngspice-envelope and the Python envelope
             for 50 and 2500 periods; ngspice carrier-level from reports/speed_accuracy.json ('scaling', 50
             periods; its 2500-period cost extrapolated linearly, as its step is pinned).
@@ -40,7 +40,7 @@ from ..physics import nor
 from ..backends import envelope
 from ..physics.params import DEFAULT, NOMINAL0
 from ..physics.stimulus import Stimulus
-from ..spice import envelope as se
+from ..spice import envelope_netlist as se
 from ._common import SANDBOX, log, pyplot, read_json, save_figure, write_json
 
 MACHINE = f"{SANDBOX}, shared"
@@ -160,7 +160,7 @@ _TERM = re.compile(r"([-0-9.e+]+)\*\(1 \+ tanh\(\(time - ([-0-9.e+]+)\)/[-0-9.e+
 
 def pwl_variant(text: str, T: float, ramp_periods: float = 1e-3) -> str:
     """The netlist with its smooth drive steps written as PWL voltage sources (ramp centred on each
-    change, as spice/carrier.py writes the carrier-level drives): the form spice/envelope.py does not use."""
+    change, as spice/oscillator_netlist.py writes the carrier-level drives): the form spice/envelope_netlist.py does not use."""
     def sub(m):
         name, node, expr = m.groups()
         a = float(expr.split(" + ", 1)[0])
@@ -374,7 +374,7 @@ def render(res: dict) -> str:
             if res.get("rerun_sections") else "") + ". Raw numbers: "
          "`reports/envelope_spice.json`; chart: `reports/speed_accuracy_envelope_spice.png`.", "",
          "### Circuit form", "",
-         "`mech2spice/spice/envelope.py` writes the envelope equations (2iwM + C) A' = F - Z0 A - (G s) A and "
+         "`mech2spice/spice/envelope_netlist.py` writes the envelope equations (2iwM + C) A' = F - Z0 A - (G s) A and "
          "M_s s'' = -K_s s - C_s s' - H |A|^2 / 2 as a circuit in real time: two nodes per oscillating DOF "
          "(V = Re A, Im A in u_R), each row divided by its diagonal b_j = 2iw m_j + c_jj so that the left side "
          "is a 1 F capacitor per node (2iwM alone would couple Re and Im through the *derivatives*, which no "
@@ -441,7 +441,7 @@ def render(res: dict) -> str:
                     f"{bad[0].get('stall_from_period', float('nan')):.5f} on every step was "
                     f"{bad[0].get('last_step_periods', float('nan')):.1e} T; the steps into it, in T: "
                     + ", ".join(f"{x:.1e}" for x in bad[0].get("steps_into_stall_periods", [])) + ")" if bad else "")
-                 + f". The same runs with the smooth tanh steps that spice/envelope.py writes: {len(good)} of "
+                 + f". The same runs with the smooth tanh steps that spice/envelope_netlist.py writes: {len(good)} of "
                    f"{sum(s['form'].startswith('tanh') for s in stalls)} finished. At t ~ 2900 T = 374 s, delmin "
                    "(0.6 to 2.6 ps for max steps 0.5 to 2 T) is only 10 to 50 ulps of t: a step that small is "
                    "rounded by up to 10 %, the drive is evaluated at the rounded time, and the truncation-error "

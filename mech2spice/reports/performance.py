@@ -825,7 +825,7 @@ def markdown(res: dict, charts_made: list[str]) -> str:
               "constant drives. Periods measured per point are listed: fewer at large sizes so that each point "
               "takes seconds, never minutes. RK4 is timed after a warm-up period on the same model (numba kernel "
               "loaded from its cache); the envelope likewise after a warm-up call that builds and caches its "
-              "`Envelope`, compiled kernel and step bound (that setup is `setup_s` in the JSON); ngspice's time is `ngspice.run` end to end (emit netlist, run, read raw "
+              "`Envelope`, compiled kernel and step bound (that setup is `setup_s` in the JSON); ngspice's time is `runner.run` end to end (emit netlist, run, read raw "
               "file).", "",
               "| backend | oscillators | periods | wall per period | periods/s | oscillator-periods/s | "
               "oscillator-steps/s | peak RSS, python [MB] (above baseline) | ngspice process peak [MB] |",
@@ -869,7 +869,7 @@ def _dur_ms(s: float) -> str:
 
 
 ADDER_LABEL = {"rk4": "RK4, numba kernel (80 steps/T)", "rk4_numpy": "RK4, numpy (80 steps/T)",
-               "envelope": "envelope (default step: `simulation.envelope_step`, 4 T here)",
+               "envelope": "envelope (default step: `backends/envelope.default_step`, 4 T here)",
                "envelope_again": "envelope, run again after the others",
                "envelope_step4": "what-if: envelope with ENVELOPE_STEP = 4",
                "envelope_step4_cached": "what-if: ENVELOPE_STEP = 4 and one Envelope per run (not per chunk)",
@@ -1109,7 +1109,7 @@ def SUMMARY_HOOK(res):
                      f"builds a negated copy of the matrix on every call: {k_as * 1e6:.0f} us against "
                      f"{k_fix * 1e6:.0f} us for `-(self.Ks @ s)`, out of {e0['whole rhs'] * 1e6:.0f} us per right-hand "
                      f"side at {pf['envelope'][0]['oscillators']} oscillators (~{100 * (k_as - k_fix) / e0['whole rhs']:.0f} %). "
-                     "One pair of brackets in `envelope.rhs` (or storing the slow block's diagonal, which is all it has "
+                     "One pair of brackets in `Envelope.rhs` (or storing the slow block's diagonal, which is all it has "
                      "in every network built here) removes it.")
     if pf.get("rk4"):
         sp = [r["fused_speedup"] for r in pf["rk4"]]

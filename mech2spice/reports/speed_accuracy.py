@@ -49,7 +49,7 @@ from ..physics.params import DEFAULT, NOMINAL0, NOMINAL1
 from ..physics.stimulus import Stimulus
 from ..spice import runner as ngspice
 from ..spice import num
-from ..spice.carrier import SpiceOptions, emit_with_probes
+from ..spice.oscillator_netlist import SpiceOptions, emit_with_probes
 from ..synthesis import synth
 from . import carrier as carrier_report, envelope_spice, vacask
 from ._common import SANDBOX, out_dir, pyplot, read_json, save_figure, timed, write_json
@@ -78,7 +78,7 @@ SECOND_RELTOL_STEPS = [1 / 10, 1 / 40, 1 / 160]    # plain trap / gear at reltol
 SCALING_GATES = [1, 10, 50, 170, 350, 700]
 SCALING_PERIODS = 50
 SCALING_RK4_STEPS = 40       # the same step as ngspice's default
-PAIRS = [(NOMINAL0, NOMINAL0), (NOMINAL1, NOMINAL0), (NOMINAL0, NOMINAL1), (NOMINAL1, NOMINAL1)]
+LEVEL_PAIRS = [(NOMINAL0, NOMINAL0), (NOMINAL1, NOMINAL0), (NOMINAL0, NOMINAL1), (NOMINAL1, NOMINAL1)]  # F_R
 SKIP = 10          # trajectory error ignores the first periods (start-up from rest)
 # the adder (102 oscillators): ngspice at fine steps is slow on 2 cores, so fewer points, reltol 1e-5 only
 ADDER_SWEEP = {"rk4": [20, 25, 30, 40, 80],
@@ -91,11 +91,11 @@ ADDER_SWEEP = {"rk4": [20, 25, 30, 40, 80],
 def gate_design():
     """The lone NOR gate with its 4 nominal input pairs as one batch: (model, stimulus)."""
     m = nor.single_gate(P)
-    lv = np.array(PAIRS) * P.f_r
+    lv = np.array(LEVEL_PAIRS) * P.f_r
     ch = {}
     for k, (ds, dd) in enumerate(m.design.input_drives):
         ch[ds] = ch[dd] = lv[:, k]
-    return m, Stimulus.from_levels(m, [(0.0, ch)], batch=len(PAIRS))
+    return m, Stimulus.from_levels(m, [(0.0, ch)], batch=len(LEVEL_PAIRS))
 
 
 def adder_design():
@@ -412,7 +412,7 @@ def _form_amplitudes(model: MechModel, periods: int, st: Stimulus | None, b: int
 
 
 def emit_mobility(model, periods, st, b, o):
-    """The package's form (mech2spice.spice.carrier): velocity node with C = m, conductance c_local and a VCCS
+    """The package's form (mech2spice.spice.oscillator_netlist): velocity node with C = m, conductance c_local and a VCCS
     k_local V(x) to ground; displacement node x = 1 F capacitor fed by the VCCS V(v); coupling springs
     VCCS k (V(x_i) - V(x_j)), dashpots conductances, quadratic couplings and drives B current sources."""
     text, vecs = emit_with_probes(model, periods, st, b, o)

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..experiments import characterise
 from ..physics import network, nor
-from ..spice import runner as ngspice, carrier as spice
+from ..spice import runner as ngspice, oscillator_netlist as spice
 from ..backends import rk4
 from ..synthesis import synth
 from ..physics.params import DEFAULT

@@ -22,7 +22,7 @@ from ..experiments.characterise import gate_forcing
 from ..physics import network, nor, steady
 from ..physics.params import BAND0, BAND1, DEFAULT as P, NOMINAL0, NOMINAL1
 from ..physics.stimulus import Stimulus
-from ..spice import envelope as se
+from ..spice import envelope_netlist as se
 from ..spice import runner as ng
 from ..spice import vacask as vc
 from ..synthesis import synth

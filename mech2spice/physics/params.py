@@ -175,6 +175,16 @@ GATE_FIELDS = ("f_r", "u_r", "omega", "name")   # what a block file may set besi
 EXTRA_KEYS = ("search", "measured", "note")   # a block file's record of how it was found (not read)
 
 
+def params_file(spec):
+    """The file a --params value reads (the package's file for a shipped block; None for a preset)."""
+    if spec in BLOCK_PRESETS:                     # shipped blocks are files (PRESETS names them too)
+        from .. import data
+        return data.path("blocks", f"{spec}.json")
+    if spec is None or spec in PRESETS:
+        return None
+    return spec
+
+
 def load_params(spec: str | None) -> GateParams:
     """'default', 'printed', a shipped block ('robust', 'classic'), a JSON file with any subset of the
     fields (rest from default), or a block file (a "block" structure: physics/blocks.py)."""

@@ -12,11 +12,12 @@ from pathlib import Path
 
 from ..errors import Mech2SpiceError
 from ..inputs import (MAX_CPU_CYCLES, check_output_file, envelope_speed_args, force_arg, head, integer, number,
-                      params_file, write_bytes, write_text)
-from .physical import PROCESSOR_STEP, SETTLE_TOL
-from .machines import BACKENDS
-from .isa import MEM_SIZE
-from .run import check_run_outputs, load_program, run_program
+                      write_bytes, write_text)
+from ..cpu.physical import PROCESSOR_STEP, SETTLE_TOL
+from ..cpu.machines import BACKENDS
+from ..cpu.isa import MEM_SIZE
+from ..physics.params import params_file
+from ..cpu.run import check_run_outputs, load_program, run_program
 
 MAX_CIRCUIT_CYCLES = 2000    # one VACASK process; the sieve needs 457
 
@@ -96,13 +97,13 @@ def add_parser(subparsers) -> None:
     r.add_argument("--json", action="store_true", help="machine-readable output")
     r.set_defaults(func=cmd_run)
 
-    from ..experiments.mc_cli import add_cpu_parser
+    from .montecarlo import add_cpu_parser
     add_cpu_parser(sub)                     # `cpu montecarlo`
 
 
 def circuit_args(parser) -> None:
     """Options of the circuit netlist (`cpu emit`, `cpu run --backend vacask-envelope`)."""
-    from .circuit import MAX_STEP
+    from ..cpu.circuit import MAX_STEP
     parser.add_argument("--max-step", type=number(0), default=None, metavar="PERIODS",
                         help=f"vacask-envelope: VACASK's largest time step in drive periods (default {MAX_STEP:g})")
     parser.add_argument("--reltol", type=number(0), default=None, metavar="TOL",
@@ -126,7 +127,7 @@ def _circuit_options(args) -> dict:
 
 def cmd_emit(args) -> int:
     """`cpu emit`: write the processor with PROG in its memory as one VACASK netlist; returns 0."""
-    from .circuit import emit_cpu
+    from ..cpu.circuit import emit_cpu
     if args.cycles > MAX_CIRCUIT_CYCLES:
         raise Mech2SpiceError(f"--cycles {args.cycles}: at most {MAX_CIRCUIT_CYCLES} cycles in one netlist")
     from ..spice._common import NETLIST
@@ -221,7 +222,7 @@ def cmd_run(args) -> int:
     if args.stability == "end" and args.backend not in ("envelope", "carrier", "rk4"):
         raise Mech2SpiceError(f"--stability end judges an oscillator-level machine (envelope, carrier, rk4), "
                               f"not --backend {args.backend}")
-    from ..cli import _progress
+    from ._output import progress as _progress
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=_progress(args),
                       checkpoint_every=args.checkpoint_every, trace=args.trace, force=args.force,

@@ -87,7 +87,7 @@ def add_parsers(sub) -> None:
     s.add_argument("--set", action="append", metavar="PORT=INT", help="input value (repeatable)")
     s.add_argument("-o", "--output", required=True, help="netlist file to write")
     inputs.force_arg(s, "-o")
-    s.add_argument("--format", choices=["ngspice", "ngspice-envelope", "vacask", "vacask-envelope", "veriloga"],
+    s.add_argument("--format", choices=[*_circuit_engines(), "veriloga"],
                    default="ngspice", help="netlist for ngspice or VACASK (carrier level, the default, or the "
                                            "envelope equations), or the Verilog-A library")
     s.add_argument("--periods", type=inputs.integer(1, inputs.MAX_PERIODS), default=None,
@@ -105,6 +105,11 @@ def add_subckts_parser(sub) -> None:
     s.add_argument("--params", default="default", help="gate parameters")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_subckts)
+
+
+def _circuit_engines() -> list[str]:
+    """The engines that run a circuit simulator: their names are `emit`'s netlist formats."""
+    return [name for name, cls in BACKENDS.items() if cls.capabilities.simulator]
 
 
 def _backends_help() -> str:
@@ -165,7 +170,7 @@ def cmd_simulate_clocked(args, nl) -> int:
     if args.clock and args.clock != nl.clock:
         raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by '{nl.clock}'")
     cycles = simulation.expand_steps(_clocked_steps(args, nl))
-    if args.backend == "logic":
+    if not BACKENDS[args.backend].capabilities.physical:       # the logic oracle
         res = simulation.run_clocked_logic(nl, cycles)
     else:
         p = load_params(args.params)
@@ -242,23 +247,18 @@ def cmd_emit(args) -> int:
     title = f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}"
     from ..spice.readout import about as about_line
     about = about_line(args.design, nl.top, values)
+    opts = _engine_options(args, args.format)      # the netlist formats are the circuit engines' names
     if args.format == "ngspice":
         from ..spice import carrier as spice
-        opts = _engine_options(args, "ngspice")
         text = spice.emit(model, periods, stim, options=opts, title=title, about=about)
         run_with = f"ngspice -b {args.output} (it prints each output bit and port it reads)"
     elif args.format == "ngspice-envelope":
         from ..spice import envelope
-        opts = _engine_options(args, "ngspice-envelope")
         text = envelope.emit_envelope(model, stim, periods, opts, title=title, about=about)
         run_with = f"ngspice -b {args.output} (it prints each output bit and port it reads)"
     else:                                          # vacask | vacask-envelope: Verilog-A embedded, one file
-        from dataclasses import replace
         from ..spice import vacask
         form = vacask.ENVELOPE if args.format == "vacask-envelope" else vacask.CARRIER
-        opts = (vacask.VacaskEnvelopeOptions if form == vacask.ENVELOPE else vacask.VacaskOptions)()
-        opts = replace(opts, **{k: v for k, v in (("method", args.method), ("max_step_periods", args.max_step))
-                                if v is not None})
         text = vacask.emit(model, periods, stim, options=opts, form=form, title=title, standalone=True,
                            about=about).text
         run_with = f"vacask {args.output} (in its folder: it writes the .va and tran1.raw there)"
@@ -272,42 +272,11 @@ def cmd_emit(args) -> int:
     return 0
 
 
-def _envelope_speed_options(args, name: str) -> dict:
-    """--latency TOL|off (envelope, carrier), --exponential on|off, --parallel on|off: the engines' speed-ups."""
-    given = {k: getattr(args, k, None) for k in ("latency", "exponential", "parallel")}
-    given = {k: v for k, v in given.items() if v is not None}
-    if "latency" in given and name == "carrier":
-        if set(given) != {"latency"}:
-            raise Mech2SpiceError("--exponential and --parallel: envelope backend options, not carrier's")
-    elif given and name != "envelope":
-        raise Mech2SpiceError(f"{', '.join('--' + k for k in given)}: envelope backend options, not {name}'s")
-    return {k: (v or None) if k == "latency" else v == "on" for k, v in given.items()}
-
-
 def _engine_options(args, backend: str | None = None):
-    """The engine's options from the flags: --steps (steps per drive period), --method / --max-step (ngspice)."""
-    from dataclasses import replace
+    """The engine's options from the flags: each engine reads the flags it takes and refuses the others
+    (backends/_base.py `Engine.options_from_flags`)."""
     from ..backends import engine_class
-    name = backend or args.backend
-    steps, method, max_step = (getattr(args, k, None) for k in ("steps", "method", "max_step"))
-    changes = {}
-    timeout = getattr(args, "ngspice_timeout", None)
-    if name.startswith(("ngspice", "vacask")):                 # the circuit simulators' settings
-        changes.update({k: v for k, v in (("method", method), ("max_step_periods", max_step), ("timeout_s", timeout))
-                        if v is not None})
-        if steps:
-            raise Mech2SpiceError(f"--steps applies to rk4, carrier and envelope; {name}'s step is --max-step")
-    elif method or max_step or timeout:
-        raise Mech2SpiceError(f"--method, --max-step and --ngspice-timeout apply to the circuit simulators "
-                              f"(ngspice, vacask), not {name}")
-    elif steps and name in ("rk4", "carrier"):
-        changes["steps_per_period"] = steps
-    elif steps and name == "envelope":
-        changes["step_periods"] = 1.0 / steps
-    changes.update(_envelope_speed_options(args, name))
-    options = replace(engine_class(name).Options(), **changes)
-    options.validate()
-    return options
+    return engine_class(backend or args.backend).options_from_flags(args)
 
 
 def cmd_subckts(args) -> int:

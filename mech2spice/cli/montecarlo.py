@@ -4,9 +4,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from .. import inputs
+from ..backends import continuing, names
 from ..errors import Mech2SpiceError
 
-BACKENDS = ("envelope", "rk4", "ngspice")
+BACKENDS = names(lambda caps: caps.noise, first="envelope")     # each sample may carry its own thermal noise
 
 
 def add_parser(subparsers) -> None:
@@ -189,7 +190,7 @@ def add_cpu_parser(sub) -> None:
                     "sample passed, 1 otherwise.")
     c.add_argument("program", help="assembly source (.asm) or binary image")
     c.add_argument("--cycles", type=inputs.integer(1, 100_000), default=30, help="clock cycles per sample (default 30)")
-    c.add_argument("--backend", default="envelope", choices=("envelope", "carrier", "rk4"))
+    c.add_argument("--backend", default="envelope", choices=names(continuing, first="envelope"))
     add_sweep_arguments(c)
     c.set_defaults(func=cmd_cpu_montecarlo)
 

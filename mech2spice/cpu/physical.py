@@ -17,7 +17,7 @@ import numpy as np
 from dataclasses import replace
 
 from .. import simulation
-from ..backends import make_engine
+from ..backends import continuing, make_engine, names
 from ..errors import Mech2SpiceError
 from ..physics import network
 from ..physics.params import DEFAULT, band_of
@@ -27,7 +27,7 @@ from .iss import FETCH, Cycle
 from .memory import Memory
 from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
 
-PHYSICAL = ("envelope", "rk4", "carrier")   # engines that continue from a state, so a cycle can follow the last
+PHYSICAL = names(continuing, first="envelope")   # engines that continue from a state, so a cycle can follow the last
 # The defaults: 0.0098 u_R from the full envelope at step 2 over the first 30 sieve cycles, 7.2x faster than
 # step 8 + settle alone (reports/fidelity.md; latency 0.2: 0.042 u_R, over the 0.02 bound; step 20: slower)
 PROCESSOR_STEP = 16.0   # envelope periods with the exponential step (its bound: 27.5)

@@ -353,12 +353,19 @@ def _as_ports(netlist: Netlist, v) -> dict[str, int]:
 
 # --------------------------------------------------------------------------- co-simulation
 
+def _physical(backend: str) -> bool:
+    """Whether the backend integrates the mechanical model (else it is the logic oracle)."""
+    from .backends import engine_class
+    return engine_class(backend).capabilities.physical
+
+
 def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, params, progress) -> list[dict]:
     """Per vector / cycle: {bits, valid, stable, min_margin, amplitudes} of the network on the backend."""
     from . import simulation
     from .backends._base import progress_bar
     from .backends.logic import evaluate_batch
-    if backend == "logic" and not clocked:
+    physical = _physical(backend)
+    if not physical and not clocked:
         bar = progress_bar(len(x), progress, unit="vector")
         out = []
         for start in range(0, len(x), 4096):
@@ -368,7 +375,7 @@ def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, pa
         bar.close()
         return out
     cycles = [_as_ports(netlist, v) for v in x]
-    if clocked and backend == "logic":
+    if clocked and not physical:
         return simulation.run_clocked_logic(netlist, cycles)["trace"]
     if clocked:
         timing = simulation.clock_timing(netlist, p=params)
@@ -398,7 +405,7 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches."""
     t0 = time.time()
     clocked = netlist.clock is not None
-    physical = backend != "logic"
+    physical = _physical(backend)
     n = n or (16 if physical and not clocked else 8 if physical else 2000 if not clocked else 1000)
     rst = reset_port(netlist, reset) if clocked else None
     if clocked:

@@ -58,7 +58,7 @@ def cmd_verify(args) -> int:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --reset applies to clocked designs")
     if nl.clock is not None:
         reset_port(nl, args.reset)                 # checked before the work starts
-    params = load_params(args.params) if args.backend != "logic" else None
+    params = load_params(args.params) if BACKENDS[args.backend].capabilities.physical else None
     res = verify(args.design, backend=args.backend, vectors=args.cycles or args.vectors, exhaustive=args.exhaustive,
                  seed=args.seed, params=params, progress=_progress(args), log=_log(args), netlist=nl,
                  reset=args.reset, equivalence_check=not args.no_equivalence)

@@ -40,7 +40,7 @@ def add_parser(subparsers) -> None:
 
 def cmd_verify(args) -> int:
     """`mech2spice verify`: print the report (text or JSON), write --junit; 0 pass, 1 otherwise."""
-    from .._output import log as _log, print_json as _print_json, progress as _progress
+    from ._output import log as _log, print_json as _print_json, progress as _progress
     from ..physics.params import load_params
     from ..synthesis.synth import synthesize
     if args.vectors is not None and args.exhaustive:

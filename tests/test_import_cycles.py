@@ -88,6 +88,24 @@ def test_no_import_circles_beyond_the_allowed_ones():
     assert not new, "import circles: " + "; ".join(_describe(g, c) for c in new)
 
 
+def unresolved(root: Path) -> list[str]:
+    """Relative imports whose module is not in the package (a module moved without its importers)."""
+    modules, bad = module_names(root), []
+    for name, path in modules.items():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom) and node.level:
+                package = _package_of(name, path)
+                base = package[:len(package) - node.level + 1]
+                mod = ".".join(base + (node.module.split(".") if node.module else []))
+                if mod not in modules:
+                    bad.append(f"{path.relative_to(root.parent)}:{node.lineno}: {'.' * node.level}{node.module or ''}")
+    return bad
+
+
+def test_every_relative_import_names_a_module_of_the_package():
+    assert unresolved(PACKAGE) == []
+
+
 def _write(root: Path, files: dict[str, str]) -> None:
     for rel, text in files.items():
         (root / rel).parent.mkdir(parents=True, exist_ok=True)
@@ -101,4 +119,7 @@ def test_the_graph_sees_function_level_and_relative_circles(tmp_path):
                  "d.py": "from . import c\nfrom .sub import f\n"})
     g = import_graph(pkg)
     assert circles(g) == [{"a", "sub.b"}]
+    assert unresolved(pkg) == []
+    (pkg / "sub" / "e.py").write_text("def f():\n    from .._gone import x\n")
+    assert unresolved(pkg) == ["pkg/sub/e.py:2: .._gone"]
     assert set(g.edges) == {("a", "sub.b"), ("sub.b", "a"), ("c", "sub.b"), ("d", "c"), ("d", "sub")}

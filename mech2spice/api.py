@@ -12,7 +12,7 @@ from .backends import BACKENDS, engine_options
 from .errors import Mech2SpiceError
 from .experiments import clocking
 from .physics import network
-from .physics.params import PRESETS, GateParams, load_params
+from .physics.params import PRESETS, GateParams, load_params, params_file
 from .synthesis import synth
 from .synthesis.ports import pack_inputs
 from .synthesis.synth import Netlist, observe
@@ -107,7 +107,7 @@ def emit(design, inputs: dict[str, int] | None = None, *, params="default", peri
     values, periods, p = check.port_values(inputs), _periods(periods), _params(params)
     if path is not None:                          # the command line's rule, before any work
         read = {"the design": design if isinstance(design, (str, os.PathLike)) else None,
-                "the params file": check.params_file(params) if isinstance(params, (str, os.PathLike)) else None}
+                "the params file": params_file(params) if isinstance(params, (str, os.PathLike)) else None}
         path = check.check_output_file(check.path_value(path, "path"), read, "netlist file", kind=NETLIST,
                                        force=force is True, remedy="force=True replaces it")
     nl = _netlist(design)

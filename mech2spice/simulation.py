@@ -59,10 +59,8 @@ def run_logic(netlist: Netlist, values: dict[str, int]) -> dict:
 
 def _engine_fields(engine) -> dict:
     """Result fields naming a circuit simulator's settings: `ngspice_options` / `vacask_options`."""
-    for simulator in ("ngspice", "vacask"):
-        if engine.name.startswith(simulator):
-            return {f"{simulator}_options": engine.describe()}
-    return {}
+    simulator = engine.capabilities.simulator
+    return {f"{simulator}_options": engine.describe()} if simulator else {}
 
 
 def _observed(netlist: Netlist, model: MechModel) -> list[str]:

@@ -9,7 +9,7 @@ import pytest
 
 from mech2spice import simulation
 from mech2spice.cli import main
-from mech2spice.experiments import mc_cli
+from mech2spice.cli import montecarlo as mc_cli
 from mech2spice.experiments import montecarlo as mc
 from mech2spice.physics import network
 from mech2spice.physics.params import DEFAULT

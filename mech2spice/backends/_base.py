@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 import time
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
-from typing import ClassVar
+from dataclasses import dataclass, field, replace
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -33,9 +33,31 @@ class Capabilities:
     settle: bool = False         # skips idle time once every channel has settled
     averaged: bool = False       # integrates the envelope equations themselves: its states rest exactly on
                                  # their fixed points (physics/stability.py), not within the averaging error
+    noise: bool = False          # takes thermal noise (a Langevin force on every dashpot, --noise)
+    latency: bool = False        # freezes gates that have settled (--latency TOL)
+    simulator: str | None = None  # the external circuit simulator it runs, one process per batch member
 
 
-class Engine(ABC):
+class FromFlags:
+    """An engine's options read from the command line (the logic oracle has no model but takes the flags too)."""
+
+    @classmethod
+    def options_from_flags(cls, flags):
+        """This engine's options from the command line's parsed flags (an argparse namespace: a flag the
+        command does not have is absent, one not given is None), validated; a flag it does not take is refused."""
+        options = replace(cls.Options(), **cls.flag_changes(flags))
+        options.validate()
+        return options
+
+    @classmethod
+    def flag_changes(cls, flags) -> dict:
+        """The Options fields the flags set; by default none (--steps ignored), the circuit simulators' and the
+        envelope's speed flags refused."""
+        refuse_circuit_flags(cls.name, flags)
+        return speed_flags(cls.name, flags, ())
+
+
+class Engine(FromFlags, ABC):
     """An integrator of the mechanical model, configured by its `Options` dataclass."""
 
     name: ClassVar[str]
@@ -69,6 +91,45 @@ class Engine(ABC):
         s (n_slow, B)), what the stability verdict linearises at (physics/stability.py); None where the
         engine returns no state."""
         return None
+
+
+class CircuitSimulator(Engine):
+    """An engine that runs an external circuit simulator: its settings are --method, --max-step and
+    --ngspice-timeout; its step is --max-step, not --steps."""
+
+    @classmethod
+    def flag_changes(cls, flags) -> dict:
+        """--method, --max-step, --ngspice-timeout as option fields; --steps and the speed flags refused."""
+        if _flag(flags, "steps"):
+            raise Mech2SpiceError(f"--steps applies to rk4, carrier and envelope; {cls.name}'s step is --max-step")
+        changes = {name: _flag(flags, f) for f, name in CIRCUIT_FLAGS.items() if _flag(flags, f) is not None}
+        return {**changes, **speed_flags(cls.name, flags, ())}
+
+
+CIRCUIT_FLAGS = {"method": "method", "max_step": "max_step_periods", "ngspice_timeout": "timeout_s"}
+SPEED_FLAGS = ("latency", "exponential", "parallel")
+
+
+def _flag(flags, name: str):
+    return getattr(flags, name, None)
+
+
+def refuse_circuit_flags(engine: str, flags) -> None:
+    """Refuse the circuit simulators' settings for an engine that integrates the model itself."""
+    if any(_flag(flags, f) for f in CIRCUIT_FLAGS):
+        raise Mech2SpiceError(f"--method, --max-step and --ngspice-timeout apply to the circuit simulators "
+                              f"(ngspice, vacask), not {engine}")
+
+
+def speed_flags(engine: str, flags, takes: tuple[str, ...]) -> dict:
+    """--latency TOL|off, --exponential on|off, --parallel on|off as option fields, for the ones in `takes`;
+    any other given is refused (they are the envelope's speed-ups; the carrier takes --latency)."""
+    given = {f: _flag(flags, f) for f in SPEED_FLAGS if _flag(flags, f) is not None}
+    if set(given) - set(takes):
+        named = ("--exponential and --parallel" if "latency" in given and "latency" in takes
+                 else ", ".join("--" + f for f in given))
+        raise Mech2SpiceError(f"{named}: envelope backend options, not {engine}'s")
+    return {f: (v or None) if f == "latency" else v == "on" for f, v in given.items()}
 
 
 @dataclass(frozen=True)

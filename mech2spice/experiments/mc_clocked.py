@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 from .. import simulation
+from ..backends import continuing, names
 from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
 from . import clocking
@@ -24,7 +25,7 @@ from ..physics.noise import check_temperature
 from ..synthesis.ports import output_bits
 from .montecarlo import SpreadSpec, noise_seed
 
-CLOCKED_BACKENDS = ("envelope", "carrier", "rk4")
+CLOCKED_BACKENDS = names(continuing, first="envelope")   # one sample per run, cycle after cycle
 
 
 def sampled(model, elems, spec: SpreadSpec, seed: int, i: int):

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import simulation
-from ..backends import logic, make_engine
+from ..backends import engine_class, logic, make_engine
 from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
 from ..physics import network, spread
@@ -173,7 +173,7 @@ class DesignMC:
         bits = [logic.evaluate_bits(netlist, v) for v in vectors]
         self.want_out = np.array([[b[o] for b in bits] for o in self.outs], int)        # (outs, B)
         self.want_gate = np.array([[b[g] for b in bits] for g in self.gates], int)      # (gates, B)
-        self.union = 1 if self.noise else union or (1 if backend.startswith(("ngspice", "vacask")) else 8)
+        self.union = 1 if self.noise else union or (1 if engine_class(backend).capabilities.simulator else 8)
 
     def engine_for(self, i: int):
         """The engine sample i runs on: with noise, the backend with sample i's own noise seed."""

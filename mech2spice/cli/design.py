@@ -11,7 +11,7 @@ DEFAULT_OUT = "reports/design_search.json"
 
 def add_parser(subparsers) -> None:
     """Register the `design` command."""
-    from .grammar import STRUCTURES
+    from ..design.grammar import STRUCTURES
     s = subparsers.add_parser(
         "design", help="search block structures for a NOR gate that tolerates element spread",
         description="For each block structure of the grammar (docs/design.md), optimise its parameters with "
@@ -46,7 +46,7 @@ def add_parser(subparsers) -> None:
 def _check_files(args) -> None:
     """Before any search: --out (never a --merge file; a search record, whole, if it exists), every --merge
     record whole, and that the package's blocks folder takes --install-robust."""
-    from . import search
+    from ..design import search
     merges = [("the --merge file", f) for f in args.merge or ()]
     out = inputs.check_output_file(args.out, merges, "search record", kind=search.RECORD_KIND,
                                    remedy="give another --out", parents=True)      # write_atomic makes folders
@@ -62,8 +62,8 @@ def _check_files(args) -> None:
 
 def cmd_design(args) -> int:
     """Run (or resume) the search; print per structure its best parameters, tolerance, margin, DOFs."""
-    from ..cli import _log, _print_json, _progress
-    from . import search
+    from ._output import log as _log, print_json as _print_json, progress as _progress
+    from ..design import search
     settings = {"sigma": args.sigma, "samples": args.samples, "seed": args.seed, "maxiter": args.maxiter,
                 "popsize": args.popsize, "budget_s": args.budget_s, "tol_samples": args.tol_samples}
     structures = [s.strip() for s in args.structures.split(",") if s.strip()]

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..compare import agreement, trajectory
 from ..errors import DivergenceError, Mech2SpiceError
 from ._common import SANDBOX, md_table, out_dir, pyplot, read_json, save_figure, write_json
 
@@ -75,11 +76,8 @@ def _bits(run, scene) -> list:
 def compare_runs(ref, got, scene) -> dict:
     """Worst |A| difference (u_R) over every period, probe and member; worst phase difference (deg) where
     |A_ref| > 0.1 u_R; whether every decoded bit agrees."""
-    u = scene.model.amplitude_unit
-    big = np.abs(ref.amp) > 0.1 * u
-    phase = np.degrees(np.abs(np.angle(got.amp[big] / ref.amp[big]))) if big.any() else np.zeros(1)
-    return {"amp_ur": float(np.abs(np.abs(got.amp) - np.abs(ref.amp)).max() / u), "phase_deg": float(phase.max()),
-            "bits_equal": _bits(ref, scene) == _bits(got, scene)}
+    a = agreement(ref.amp, got.amp, scene.model.amplitude_unit, floor=0.1)
+    return {"amp_ur": a.amp, "phase_deg": a.phase_deg, "bits_equal": _bits(ref, scene) == _bits(got, scene)}
 
 
 def accuracy_scenes(quick: bool) -> dict:
@@ -120,7 +118,7 @@ def convergence_scenes(quick: bool) -> dict:
 
 def _errors(ref, got, u) -> dict:
     """Worst |A| difference over every period and probe, and the final state's worst |x| difference (u_R)."""
-    return {"err_ur": float(np.abs(np.abs(got.amp) - np.abs(ref.amp)).max() / u),
+    return {"err_ur": trajectory(ref.amp, got.amp, u),
             "final_ur": float(np.abs(got.x - ref.x).max() / u)}
 
 
@@ -154,7 +152,7 @@ def _ngspice_rows(sc, ref, quick: bool) -> list[dict]:
             row.update(failed="error", detail=r["failed"][:160])
         else:
             u = sc.model.amplitude_unit
-            row["err_ur"] = float(np.abs(np.abs(r["amp"]) - np.abs(ref.amp)).max() / u)
+            row["err_ur"] = trajectory(ref.amp, r["amp"], u)
             if row["err_ur"] > FAIL_UR:
                 row["failed"] = f"error > {FAIL_UR} u_R"
         rows.append(row)

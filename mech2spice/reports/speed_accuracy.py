@@ -42,6 +42,7 @@ import numpy as np
 
 from .. import data, simulation
 from ..backends import rk4
+from ..compare import AVG, settled, settled_agreement, trajectory
 from ..errors import DivergenceError, Mech2SpiceError
 from ..physics import network, nor
 from ..physics.model import MechModel
@@ -56,7 +57,6 @@ from ._common import SANDBOX, out_dir, pyplot, read_json, save_figure, timed, wr
 
 MACHINE = SANDBOX
 P = DEFAULT
-AVG = 20
 ADDER_V = data.verilog("adder2.v")
 ADDER_CASES = [(3, 2), (1, 3)]     # 3+2 = 101 and 1+3 = 100 (carry from bit 0 through bit 1): two ngspice
                                    # processes, one per core
@@ -91,11 +91,7 @@ ADDER_SWEEP = {"rk4": [20, 25, 30, 40, 80],
 def gate_design():
     """The lone NOR gate with its 4 nominal input pairs as one batch: (model, stimulus)."""
     m = nor.single_gate(P)
-    lv = np.array(PAIRS) * P.f_r
-    ch = {}
-    for k, (ds, dd) in enumerate(m.design.input_drives):
-        ch[ds] = ch[dd] = lv[:, k]
-    return m, Stimulus.from_levels(m, [(0.0, ch)], batch=len(PAIRS))
+    return m, Stimulus.input_levels(m, PAIRS, P.f_r)
 
 
 def adder_design():
@@ -116,18 +112,11 @@ def designs(names=SMALL) -> dict:
     return {n: DESIGNS[n]() for n in names}
 
 
-def settled(amp: np.ndarray) -> np.ndarray:
-    """The settled amplitudes: the mean over the last AVG periods."""
-    return amp[-AVG:].mean(axis=0)
-
-
 def score(amp: np.ndarray, ref: np.ndarray) -> dict:
     """Settled amplitude/phase error (max over probes and cases) and the largest amplitude
     difference anywhere along the trajectory (delays, overshoots)."""
-    a, r = settled(amp), settled(ref)
-    return {"amp_err_ur": float(np.abs(np.abs(a) - np.abs(r)).max() / P.u_r),
-            "phase_err_deg": float(np.abs(np.degrees(np.angle(a / r))).max()),
-            "traj_err_ur": float(np.abs(np.abs(amp[SKIP:]) - np.abs(ref[SKIP:])).max() / P.u_r)}
+    s = settled_agreement(ref, amp, P.u_r)
+    return {"amp_err_ur": s.amp, "phase_err_deg": s.phase_deg, "traj_err_ur": trajectory(ref, amp, P.u_r, SKIP)}
 
 
 def cpu_seconds() -> float:

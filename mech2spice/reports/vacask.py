@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..backends import rk4
+from ..compare import settled, settled_agreement, trajectory
 from ..experiments import scenes
 from ..experiments.characterise import gate_forcing
 from ..physics import network, nor, steady
@@ -30,7 +31,6 @@ from ._common import SANDBOX, md_table, pyplot, read_json, save_figure, write_js
 
 BEGIN, END = "<!-- vacask:begin -->", "<!-- vacask:end -->"
 SECTIONS = ("toolchain", "accuracy", "failures", "hb", "solver_choice", "envelope", "scaling", "stats")
-AVG = 20
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -52,18 +52,12 @@ def _load() -> float:
 def _errors(ref, got) -> dict:
     """Settled (mean of the last AVG periods) amplitude and phase error, and the worst per-period amplitude
     difference over the whole run (trajectory), in u_R and degrees."""
-    a, b = ref.amp[-AVG:].mean(0), got.amp[-AVG:].mean(0)
-    return {"settled_ur": float(np.abs(np.abs(a) - np.abs(b)).max() / P.u_r),
-            "phase_deg": float(np.abs(np.degrees(np.angle(b / a))).max()),
-            "traj_ur": float(np.abs(np.abs(ref.amp) - np.abs(got.amp)).max() / P.u_r)}
+    s = settled_agreement(ref.amp, got.amp, P.u_r)
+    return {"settled_ur": s.amp, "phase_deg": s.phase_deg, "traj_ur": trajectory(ref.amp, got.amp, P.u_r)}
 
 
 def _levels(m, pairs) -> Stimulus:
-    lv = np.array(pairs, float) * P.f_r
-    changes = {}
-    for k, (ds, dd) in enumerate(m.design.input_drives):
-        changes[ds] = changes[dd] = lv[:, k]
-    return Stimulus.from_levels(m, [(0.0, changes)], batch=len(pairs))
+    return Stimulus.input_levels(m, pairs, P.f_r)
 
 
 def designs() -> dict:
@@ -125,8 +119,7 @@ def accuracy() -> dict:
                      "cases": 1 if st is None else st.batch, "rk4_160_wall_s": rk_wall,
                      "vacask": {**_errors(ref, v), "wall_s": v_wall, "cpu_s": v_cpu},
                      "ngspice": {**_errors(ref, n), "wall_s": n_wall, "cpu_s": n_cpu},
-                     "vacask_vs_ngspice_ur": float(np.abs(np.abs(v.amp[-AVG:].mean(0)) -
-                                                          np.abs(n.amp[-AVG:].mean(0))).max() / P.u_r)})
+                     "vacask_vs_ngspice_ur": settled_agreement(n.amp, v.amp, P.u_r).amp})
     return {"rows": rows}
 
 
@@ -358,7 +351,7 @@ def hb_adder() -> dict:
     t0 = time.perf_counter()
     ref = rk4.integrate(m0, periods, steps_per_period=80, stimulus=st)
     rk_wall = time.perf_counter() - t0
-    settled = np.abs(ref.amp[-AVG:].mean(0)) / P.u_r
+    levels = np.abs(settled(ref.amp)) / P.u_r
     rows, walls = [], []
     outs = [k for k, p in enumerate(m0.probes) if p.startswith("s[")]
     for b, v in enumerate(vals):
@@ -370,7 +363,7 @@ def hb_adder() -> dict:
             r = vc.run_hb(m, timeout=300)
             amps = np.array([abs(r["phasors"][p][1]) / P.u_r for p in m.probes])
             walls.append(r["wall_s"])
-            rows.append({"inputs": v, "converged": True, "max_diff_ur": float(np.abs(amps[outs] - settled[outs, b]).max())})
+            rows.append({"inputs": v, "converged": True, "max_diff_ur": float(np.abs(amps[outs] - levels[outs, b]).max())})
         except Exception as e:
             rows.append({"inputs": v, "converged": False, "error": str(e)[:200]})
     return {"rows": rows, "rk4_80_wall_s": rk_wall, "periods": periods, "hb_wall_s": walls}
@@ -384,8 +377,9 @@ def envelope() -> dict:
         ref = integrate(m, periods, step_periods=1 / 8, stimulus=st)
         v, v_wall, v_cpu = _timed(lambda: vc.run_envelope_batch(m, periods, st, workers=1))
         n, n_wall, n_cpu = _timed(lambda: se.run_envelope_spice(m, periods, st, workers=1))
-        err = lambda r: {"settled_ur": float(np.abs(r.amp[-AVG:].mean(0) - ref.amp[-AVG:].mean(0)).max() / P.u_r),
-                         "traj_ur": float(np.abs(np.abs(r.amp) - np.abs(ref.amp)).max() / P.u_r)}
+        # settled: the complex difference (amplitude and phase together), not agreement()'s |A| difference
+        err = lambda r: {"settled_ur": float(np.abs(settled(r.amp) - settled(ref.amp)).max() / P.u_r),
+                         "traj_ur": trajectory(ref.amp, r.amp, P.u_r)}
         rows.append({"design": name, "periods": periods, "cases": 1 if st is None else st.batch,
                      "vacask": {**err(v), "wall_s": v_wall, "cpu_s": v_cpu},
                      "ngspice": {**err(n), "wall_s": n_wall, "cpu_s": n_cpu}})

@@ -13,11 +13,10 @@ from pathlib import Path
 
 
 from ..physics.params import BAND0, BAND1
-from ..studies._common import json_default, read_json, write_json  # noqa: F401 (the JSON the studies write)
+from ..studies._common import SANDBOX, json_default, read_json, timed, write_json  # noqa: F401 (the studies')
 
 HOST = f"{platform.machine()} {platform.system()}"
 MACHINE = f"{HOST}, {os.cpu_count()} cores"       # the machine running this report
-SANDBOX = "2-core Debian 12 sandbox"               # where the long reports' checked-in numbers were measured
 
 
 def pyplot():
@@ -51,13 +50,6 @@ def md_table(header: list[str], rows) -> list[str]:
 def log(msg: str) -> None:
     """A timestamped progress line."""
     print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
-
-
-def timed(fn):
-    """fn() and its wall time in seconds."""
-    t0 = time.perf_counter()
-    out = fn()
-    return out, time.perf_counter() - t0
 
 
 def out_dir(directory) -> Path:

@@ -143,7 +143,7 @@ def _ngspice_rows(sc, ref, quick: bool) -> list[dict]:
     if quick or not shutil.which("ngspice"):
         return []
     from ..spice.carrier import SpiceOptions
-    from . import speed_accuracy
+    from ..studies import speed_accuracy
     rows = []
     for ms in NG_STEPS:
         r = speed_accuracy.run_ng(sc.model, sc.stimulus, SpiceOptions(max_step_periods=ms), sc.periods)

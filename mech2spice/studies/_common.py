@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import Mech2SpiceError
+SANDBOX = "2-core Debian 12 sandbox"               # where the long reports' checked-in numbers were measured
+
 
 def load_average() -> list[float]:
     """The 1-, 5- and 15-minute load averages, rounded (other jobs share the machine)."""
@@ -76,3 +78,10 @@ def read_json(path: Path, missing=None):
     except (UnicodeDecodeError, ValueError, RecursionError) as err:
         raise Mech2SpiceError(f"{path} is not the JSON a report wrote ({str(err)[:120]}): delete it to measure "
                               "again") from None
+
+
+def timed(fn):
+    """fn() and its wall time in seconds."""
+    t0 = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t0

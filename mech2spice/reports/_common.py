@@ -57,3 +57,12 @@ def out_dir(directory) -> Path:
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     return d
+
+
+def stored(path: Path, report: str) -> dict:
+    """The JSON a study wrote at `path`; without it one Mech2SpiceError line says how to measure it."""
+    from ..errors import Mech2SpiceError
+    data = read_json(path)
+    if data is None:
+        raise Mech2SpiceError(f"{path} does not exist: measure it with `mech2spice report {report}` (without --render)")
+    return data

@@ -22,7 +22,6 @@ usage: mech2spice report speed_accuracy --only envelope_spice [--quick]       # 
 from __future__ import annotations
 
 import math
-import os
 import platform
 import re
 import subprocess
@@ -41,6 +40,7 @@ from ..backends import envelope
 from ..physics.params import DEFAULT, NOMINAL0
 from ..physics.stimulus import Stimulus
 from ..spice import envelope as se
+from ..studies._common import load_average
 from ._common import SANDBOX, log, pyplot, read_json, save_figure, write_json
 
 MACHINE = f"{SANDBOX}, shared"
@@ -596,12 +596,12 @@ def measure(directory: Path, only=None, quick: bool = False) -> dict:
     t0 = time.perf_counter()
     pre = "rerun_" if only else ""
     res.update(machine=MACHINE, python=platform.python_version(), default_options=asdict(se.EnvelopeSpiceOptions()))
-    res[pre + "load_before"] = " / ".join(f"{x:.1f}" for x in os.getloadavg())
+    res[pre + "load_before"] = " / ".join(f"{x:.1f}" for x in load_average())
     for name, fn in (("accuracy", accuracy), ("failures", failures),
                      ("scaling", lambda q: scaling(q, directory))):
         if not only or name in only:
             res[name] = fn(quick)
-    res[pre + "load_after"] = " / ".join(f"{x:.1f}" for x in os.getloadavg())
+    res[pre + "load_after"] = " / ".join(f"{x:.1f}" for x in load_average())
     res["total_wall_s" if not only else "partial_rerun_s"] = time.perf_counter() - t0
     res["rerun_sections"] = sorted(set(res.get("rerun_sections", [])) | set(only)) if only else []
     res.setdefault("total_wall_s", res.get("partial_rerun_s", 0.0))

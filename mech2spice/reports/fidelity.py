@@ -30,6 +30,7 @@ from ..cpu.physical import PhysicalCPU
 from ..errors import Mech2SpiceError
 from ..physics.params import DEFAULT, margin
 from ..synthesis.synth import synthesize
+from ..studies._common import load_average
 from ._common import SANDBOX, out_dir, read_json, write_json
 from ..experiments.scenes import COUNTER_STEPS, FSM_STEPS, sqrt_steps
 
@@ -405,8 +406,7 @@ def write(directory="reports", only=None, cycles: int = 30, render: bool = False
 
 def _uptime_load() -> str:
     """The 1/5/15-minute load averages at the start of the measurement (2 cores, shared)."""
-    import os
-    return "load average %.2f, %.2f, %.2f" % os.getloadavg()
+    return "load average %.2f, %.2f, %.2f" % tuple(load_average())
 
 
 def _sections(only) -> list[str]:

@@ -24,7 +24,6 @@ mech2spice/reports/carrier.py renders the JSON (and the blocks other reports app
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import time
 from pathlib import Path
@@ -33,7 +32,7 @@ import numpy as np
 
 from ..compare import agreement, trajectory
 from ..errors import DivergenceError, Mech2SpiceError
-from ._common import SANDBOX, conditions, read_json, sections, write_json
+from ._common import SANDBOX, conditions, load_average, read_json, sections, write_json
 
 SECTIONS = ("accuracy", "convergence", "processor", "roofline", "cycles", "sieve", "latency")
 AMP_TOL, PHASE_TOL = 1e-3, 0.5          # the issue's bounds against RK4 at 160 steps (u_R, degrees)
@@ -51,11 +50,6 @@ PROCESSOR_CHECK = "build/carrier/processor_check.json"   # experiments.processor
 ENVELOPE_TRACE = "build/carrier/sieve_envelope.jsonl"
 LATENCY_TRACE = "build/carrier/sieve_latency.jsonl"     # cpu run --backend carrier (its default latency)
 LATENCY_CHECKS = ("build/carrier/latency_check_c30.json", "build/carrier/latency_check_c200.json")
-
-
-def _load() -> float:
-    """The 1-minute load average (2 cores shared by several engineers)."""
-    return round(os.getloadavg()[0], 2)
 
 
 def _measured_on(extra: str = "") -> str:
@@ -105,7 +99,7 @@ def accuracy(quick: bool = False, steps: int | None = None) -> dict:
         row["pass"] = row["amp_ur"] < AMP_TOL and row["phase_deg"] < PHASE_TOL and row["bits_equal"]
         rows.append(row)
         print(f"[accuracy] {name}: {row['amp_ur']:.2e} u_R, {row['phase_deg']:.3f} deg", flush=True)
-    return {"steps": steps, "ref_steps": REF_STEPS, "quick": quick, "load": _load(), "rows": rows}
+    return {"steps": steps, "ref_steps": REF_STEPS, "quick": quick, "load": load_average()[0], "rows": rows}
 
 
 # --- convergence -----------------------------------------------------------------------------------------
@@ -163,7 +157,7 @@ def convergence(quick: bool = False) -> dict:
     from ..backends import carrier, rk4
     _warm_up()
     out = {"reference": f"RK4 at {FINE_STEPS} steps per period", "fail_ur": FAIL_UR, "quick": quick,
-           "load": [_load()], "scenes": {}}
+           "load": [load_average()[0]], "scenes": {}}
     cn = CARRIER_SCAN + ((4, 6, 8, 12, 16) if quick else CARRIER_N)
     rn = RK4_SCAN + ((20, 40, 80, 160) if quick else RK4_N)
     for name, sc in convergence_scenes(quick).items():
@@ -183,7 +177,7 @@ def convergence(quick: bool = False) -> dict:
             rows += _ngspice_rows(sc, ref, quick)
         out["scenes"][name] = {"description": sc.description, "periods": sc.periods, "members": sc.stimulus.batch,
                                "oscillators": sc.model.n, "ref_wall_s": time.perf_counter() - t0, "rows": rows}
-        out["load"].append(_load())
+        out["load"].append(load_average()[0])
     return out
 
 
@@ -235,14 +229,14 @@ def processor(quick: bool = False) -> dict:
     for _, fn in runs.values():
         fn(2)                                    # compile / build operators outside the timings
     walls = {k: [] for k in runs}
-    load = [_load()]
+    load = [load_average()[0]]
     for r in range(repeats):
         for label, (_, fn) in runs.items():
             t0 = time.perf_counter()
             fn(periods)
             walls[label].append(time.perf_counter() - t0)
             print(f"[processor] repeat {r}: {label} {walls[label][-1]:.2f} s", flush=True)
-        load.append(_load())
+        load.append(load_average()[0])
     rows = []
     for label, (n, _) in runs.items():
         wall = float(np.median(walls[label]))
@@ -402,7 +396,7 @@ def roofline(quick: bool = False, proc: dict | None = None) -> dict:
     model, _ = processor_model()
     peaks = machine_peaks(quick)
     cc, rc = carrier_counts(model), rk4_counts(model)
-    out = {"lscpu": lscpu_caches(), "peaks": peaks, "load": _load(), "quick": quick, "oscillators": model.n,
+    out = {"lscpu": lscpu_caches(), "peaks": peaks, "load": load_average()[0], "quick": quick, "oscillators": model.n,
            "counts": {"carrier": cc, "rk4 numpy": rc["numpy"], "rk4 compiled": rc["compiled"]},
            "force_matrix_nnz": rc["nnz"]}
     out["points"] = roofline_points(out, proc)

@@ -53,7 +53,7 @@ from ..spice import num
 from ..spice.carrier import SpiceOptions, emit_with_probes
 from ..synthesis import synth
 from ..reports import envelope_spice       # still measures and renders in one module (issue #28: to split)
-from ._common import SANDBOX, conditions, read_json, timed, write_json
+from ._common import SANDBOX, conditions, load_average, read_json, timed, write_json
 
 MACHINE = SANDBOX
 P = DEFAULT
@@ -608,7 +608,7 @@ def settings() -> dict:
 
 def _run_section(res: dict, name: str, fn, only: list, acc_designs: tuple) -> None:
     """Run one section into `res`; a rerun (`only`) also records its wall time and load average."""
-    t1, load0 = time.perf_counter(), os.getloadavg()[0]
+    t1, load0 = time.perf_counter(), load_average()[0]
     new = fn()
     if name == "accuracy" and only:             # merge per design, in DESIGNS order
         merged = {**res.get("accuracy", {}), **new}
@@ -619,7 +619,7 @@ def _run_section(res: dict, name: str, fn, only: list, acc_designs: tuple) -> No
         key = name if name != "accuracy" or set(acc_designs) == set(DESIGNS) else \
             f"accuracy ({', '.join(acc_designs)})"
         res.setdefault("section_wall_s", {})[key] = time.perf_counter() - t1
-        res.setdefault("section_load_avg", {})[key] = [round(load0, 2), round(os.getloadavg()[0], 2)]
+        res.setdefault("section_load_avg", {})[key] = [load0, load_average()[0]]
 
 
 def _numba() -> bool:

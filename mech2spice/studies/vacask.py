@@ -26,7 +26,7 @@ from ..spice import envelope as se
 from ..spice import runner as ng
 from ..spice import vacask as vc
 from ..synthesis import synth
-from ._common import conditions, read_json, sections, write_json
+from ._common import conditions, load_average, read_json, sections, write_json
 
 SECTIONS = ("toolchain", "accuracy", "failures", "hb", "solver_choice", "envelope", "scaling", "stats")
 ROOT = Path(__file__).resolve().parents[2]
@@ -39,12 +39,6 @@ def _timed(fn):
     out = fn()
     c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     return out, time.perf_counter() - t0, (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)
-
-
-def _load() -> float:
-    """The 1-minute load average (other jobs share the machine)."""
-    import os
-    return os.getloadavg()[0]
 
 
 def _errors(ref, got) -> dict:
@@ -374,7 +368,7 @@ def scaling(sizes=SIZES, periods: int = 2500, carrier_periods: int = 50) -> dict
         ncar, nc_wall, nc_cpu = _timed(lambda: ng.run(m, carrier_periods))
         rows.append({"gates": n, "oscillators": m.n, "vacask_env_s": va_wall, "ngspice_env_s": ng_wall,
                      "vacask_env_cpu_s": va_cpu, "ngspice_env_cpu_s": ng_cpu, "vacask_carrier_cpu_s": vc_cpu,
-                     "ngspice_carrier_cpu_s": nc_cpu, "load_avg": _load(),
+                     "ngspice_carrier_cpu_s": nc_cpu, "load_avg": load_average()[0],
                      "vacask_env_points": va_ex["points"], "ngspice_env_points": ng_ex["points"],
                      "env_diff_ur": float(np.abs(va_amp[-1] - ng_amp[-1]).max() / P.u_r),
                      "vacask_carrier_s": vc_wall, "ngspice_carrier_s": nc_wall,

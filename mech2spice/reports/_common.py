@@ -13,7 +13,7 @@ from pathlib import Path
 
 
 from ..physics.params import BAND0, BAND1
-from ..studies._common import SANDBOX, json_default, read_json, timed, write_json  # noqa: F401 (the studies')
+from ..studies._common import SANDBOX, json_default, log, read_json, timed, write_json  # noqa: F401 (the studies')
 
 HOST = f"{platform.machine()} {platform.system()}"
 MACHINE = f"{HOST}, {os.cpu_count()} cores"       # the machine running this report
@@ -45,11 +45,6 @@ def md_table(header: list[str], rows) -> list[str]:
     """A markdown table as lines: the header, the separator, one line per row of cells."""
     out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     return out + ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-
-
-def log(msg: str) -> None:
-    """A timestamped progress line."""
-    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
 
 def out_dir(directory) -> Path:

@@ -424,11 +424,10 @@ def write(directory="reports", only=None, design=None, quick: bool = False, rend
     speed_accuracy.json / envelope_spice.json and write speed_accuracy.md and its charts."""
     out = out_dir(directory)
     jpath, mpath = out / "speed_accuracy.json", out / "speed_accuracy.md"
-    if render:
-        envelope_spice.redraw(out)
-    else:
+    if not render:
         from ..studies import speed_accuracy as study      # measuring loads the engines; rendering does not
         study.measure_sections(out, only, design, quick)
+    envelope_spice.redraw(out)
     res = read_json(jpath)
     if res is not None:
         res["charts"] = charts(res, out)

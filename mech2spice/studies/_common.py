@@ -85,3 +85,8 @@ def timed(fn):
     t0 = time.perf_counter()
     out = fn()
     return out, time.perf_counter() - t0
+
+
+def log(msg: str) -> None:
+    """A timestamped progress line."""
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)

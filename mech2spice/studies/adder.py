@@ -18,7 +18,7 @@ from ._common import conditions
 from ..experiments.scenes import ADDER_INPUTS
 
 SECTIONS = ("all",)
-AMPS_EVERY = 4          # periods between the stored amplitudes: the figure draws ~25 periods per pixel
+AMPS_EVERY = 10         # periods between the stored amplitudes: the figure draws ~25 periods per pixel
 
 
 def run(design=data.verilog("adder2.v"), hold: int | None = None) -> dict:
@@ -45,10 +45,11 @@ def run(design=data.verilog("adder2.v"), hold: int | None = None) -> dict:
 
 
 def measure(section: str = "all", quick: bool = False) -> dict:
-    """run() as JSON: the amplitudes every AMPS_EVERY periods (u_R, 4 decimals), without the netlist."""
+    """run() as JSON: the amplitudes every AMPS_EVERY periods (u_R, 3 decimals: 1/50 of a pixel), without the
+    netlist."""
     res = run()
     del res["netlist"]
     res["amps_every"] = AMPS_EVERY
-    res["amps"] = np.round(res["amps"][AMPS_EVERY - 1::AMPS_EVERY], 4)
+    res["amps"] = np.round(res["amps"][AMPS_EVERY - 1::AMPS_EVERY], 3)
     res["conditions"] = conditions()
     return res

@@ -52,7 +52,7 @@ from ..spice import runner as ngspice
 from ..spice import num
 from ..spice.carrier import SpiceOptions, emit_with_probes
 from ..synthesis import synth
-from ..reports import envelope_spice       # still measures and renders in one module (issue #28: to split)
+from . import envelope_spice
 from ._common import SANDBOX, conditions, load_average, read_json, timed, write_json
 
 MACHINE = SANDBOX

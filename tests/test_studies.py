@@ -15,18 +15,18 @@ FORBIDDEN = ("backends", "spice", "simulation",                          # the e
              "experiments", "cpu.run", "cpu.physical", "cpu.circuit", "cpu.machines")   # what runs them
 # Report modules that still measure as well as render (issue #28: to move into studies/).  The list may only
 # shrink: a module that no longer needs its entry fails test_not_yet_split_list_is_current.
-NOT_YET_SPLIT = {"cpu", "cpu_circuit", "cpu_physical", "design", "envelope", "envelope_spice",
-                 "fidelity", "performance", "robustness", "sequential", "spice"}
+NOT_YET_SPLIT = {"cpu", "cpu_circuit", "cpu_physical", "design", "envelope",
+                 "fidelity", "robustness", "sequential", "spice"}
 
 
-def _imported(path: Path) -> set[str]:
-    """Every module `path` imports (relative imports resolved against mech2spice.reports), at any depth."""
+def _imported(path: Path, package: str = "reports") -> set[str]:
+    """Every module `path` imports (relative imports resolved against mech2spice.PACKAGE), at any depth."""
     out = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
             out |= {a.name for a in node.names}
         elif isinstance(node, ast.ImportFrom):
-            base = "mech2spice" if node.level == 2 else "mech2spice.reports" if node.level == 1 else ""
+            base = "mech2spice" if node.level == 2 else f"mech2spice.{package}" if node.level == 1 else ""
             mod = ".".join(p for p in (base, node.module or "") if p)
             out |= {mod} | {f"{mod}.{a.name}" for a in node.names}
     return out
@@ -92,3 +92,22 @@ def test_render_without_its_json_is_one_line(capsys, tmp_path, name):
     rc, _, err = run(capsys, "report", name, "--render", "--out", str(tmp_path))
     last = err.strip().splitlines()[-1]          # after the report's progress line
     assert rc == 2 and "Traceback" not in err and f"{name}.json does not exist" in last, err
+
+
+
+@pytest.mark.parametrize("path", sorted((PACKAGE / "studies").glob("*.py")), ids=lambda p: p.stem)
+def test_studies_import_no_report(path):
+    """Measuring never needs a renderer: the JSON is the only link."""
+    assert not [m for m in _imported(path, "studies") if m.startswith("mech2spice.reports")]
+
+
+def test_performance_report_draws_the_study_backends_and_its_clock():
+    from mech2spice import simulation
+    from mech2spice.reports import performance as report
+    from mech2spice.studies import performance as study
+    assert report.BACKENDS == tuple(study.PLAN)
+    clock = {"latch_min_pulse": simulation.LATCH_MIN_PULSE, "latch_output_delay": simulation.LATCH_OUTPUT_DELAY,
+             "gate_delay_max": simulation.GATE_DELAY_MAX, "settle_margin": simulation.SETTLE_MARGIN}
+    nl_free = report._clocked_periods(clock, 3, 10)
+    assert nl_free["periods_per_cycle"] == nl_free["pulse"] + nl_free["pause"]
+    assert nl_free["total_periods"] == nl_free["pause"] + 10 * nl_free["periods_per_cycle"]

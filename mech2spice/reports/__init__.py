@@ -28,7 +28,7 @@ REPORTS: dict[str, Report] = {
     "adder": Report("the 2-bit adder from Verilog, all 16 sums on RK4 (paper Fig. 4)", "~1 min", ("adder.md", "adder.json"),
                     ("render",)),
     "sequential": Report("the latch, a counter, the FSM and sqrt(2809) = 53 (paper Figs. 5, 6)", "~4 min",
-                         ("sequential.md", "sqrt.md"), ("sqrt_rk4",)),
+                         ("sequential.md", "sqrt.md", "sequential.json"), ("sqrt_rk4", "render")),
     "spice": Report("the electrical analogy; ngspice against RK4 on four scenes", "~4 min", ("spice.md", "spice.json"),
                     ("render",)),
     "fidelity": Report("what each envelope speed-up (step, settle detection, cone pruning) costs in accuracy",

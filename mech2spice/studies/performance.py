@@ -146,6 +146,8 @@ def task_scale(backend: str, gates: int, periods: int, step: float = 2.0, design
 def task_adder(backend: str, design: str) -> dict:
     """Worker task: the adder's 16 sums via run_physical on `backend`: wall, correct, margin, memory."""
     from .. import simulation
+    # the private kernel: its numpy path is forced for the whole worker (warm-up and run), as the checked-in
+    # numbers were measured; passing RK4Options(compiled=False) to run_physical would do it for the run alone
     from ..backends import logic, _rk4_kernel as rk4_kernel
     from ..physics.params import DEFAULT as p
     nl = _design(design)
@@ -205,7 +207,7 @@ def task_profile(gates_list: list[int]) -> dict:
     import numpy as np
     from ..backends import envelope
     from ..physics import nor
-    from ..backends import rk4, _rk4_kernel as rk4_kernel
+    from ..backends import rk4, _rk4_kernel as rk4_kernel   # the kernel's own parts are what this profile times
     from ..physics.params import DEFAULT as p
     out = {"envelope": [], "rk4": []}
     for gates in gates_list:

@@ -624,7 +624,7 @@ def _run_section(res: dict, name: str, fn, only: list, acc_designs: tuple) -> No
 
 def _numba() -> bool:
     try:
-        from ..backends import _rk4_kernel as rk4_kernel
+        from ..backends import _rk4_kernel as rk4_kernel    # which RK4 path ran is the kernel's to say
         return bool(rk4_kernel.AVAILABLE)
     except ImportError:
         return False

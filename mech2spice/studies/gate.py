@@ -14,13 +14,16 @@ from ._common import conditions
 SECTIONS = ("all",)
 MAP_GRID = 71
 WIDE_FANOUT = (6, 12)
+CURVE_POINTS = 4000
 
 
 def _figures(out: dict) -> dict:
     """The transient and cascade arrays the figures draw (characterise keeps whole runs beside them)."""
     figs = out.pop("_figures", {})
     tr, cas = figs.get("transient", {}), figs.get("cascade", {})
-    curves = lambda d: {k: np.round(d[k], 4) for k in ("t_periods", "amplitude") if k in d}   # 1e-4: below a pixel
+    def curves(d: dict) -> dict:          # <= CURVE_POINTS points, 1e-4 u_R: below a pixel of the 10-inch figures
+        every = max(1, -(-len(d.get("t_periods", ())) // CURVE_POINTS))
+        return {k: np.round(np.asarray(d[k])[every - 1::every], 4) for k in ("t_periods", "amplitude") if k in d}
     return {"transient": {**{k: tr[k] for k in ("sequence", "hold") if k in tr}, **curves(tr)},
             "cascade": {**{k: cas[k] for k in ("hold", "delay_periods", "restoration") if k in cas}, **curves(cas)}}
 

@@ -18,7 +18,7 @@ from ..synthesis import synth
 from ._common import conditions
 
 SECTIONS = ("all",)
-CURVE_POINTS = 4000       # at most this many stored points per curve: ~3 per pixel of the 11-inch figures
+CURVE_POINTS = 2000       # at most this many stored points per curve: ~2 per pixel of the 11-inch figures
 
 
 def curve(amp) -> dict:
@@ -28,16 +28,16 @@ def curve(amp) -> dict:
     return {"every": every, "amplitude": np.round(amp[every - 1::every], 4)}
 
 
-def _run(r: dict) -> dict:
-    """A clocked run as JSON: its trace, wall time, periods and (physical runs) its thinned waveform."""
+def _run(r: dict, drawn: bool) -> dict:
+    """A clocked run as JSON: its trace, wall time, periods and, where the report draws it, its thinned waveform."""
     out = {k: r[k] for k in ("trace", "wall_s", "periods") if k in r}
-    if "waveform" in r:
+    if drawn and "waveform" in r:
         w = r["waveform"]
         out["waveform"] = {**curve(w.amplitude), "reads": list(w.reads), "probes": list(w.probes)}
     return out
 
 
-def _clocked(design: str, steps: list[dict], backends=("logic", "envelope")) -> tuple:
+def _clocked(design: str, steps: list[dict], backends=("logic", "envelope"), drawn: str = "") -> tuple:
     nl = synth.synthesize(data.verilog(design))
     cycles = simulation.expand_steps(steps)
     timing = simulation.clock_timing(nl)
@@ -46,23 +46,24 @@ def _clocked(design: str, steps: list[dict], backends=("logic", "envelope")) -> 
         runs[b] = simulation.run_clocked_logic(nl, cycles) if b == "logic" else \
             simulation.run_clocked_physical(nl, DEFAULT, cycles, b, timing, progress=sys.stderr.isatty(),
                                           waveform=True)
-    return nl, {b: _run(r) for b, r in runs.items()}, timing
+    return nl, {b: _run(r, b == drawn) for b, r in runs.items()}, timing
 
 
-def _latch(backend: str, **kw) -> dict:
+def _latch(backend: str, drawn: bool = False, **kw) -> dict:
     r = characterise.latch_sequence(DEFAULT, backend, **kw)
     keep = {k: r[k] for k in ("phases", "starts", "pulse", "backend", "decoded", "output_delays")}
-    return {**keep, **curve(r["amplitude"])}
+    return {**keep, **(curve(r["amplitude"]) if drawn else {})}
 
 
 def measure(section: str = "all", quick: bool = False, sqrt_rk4: bool = False) -> dict:
     """The latch on RK4 and the envelope, a short enable pulse, the counter, the FSM and the square root."""
     p = DEFAULT
-    res = {"latch": _latch("rk4"), "latch_envelope": _latch("envelope"), "short_pulse": _latch("envelope", pulse=300)}
+    res = {"latch": _latch("rk4", drawn=True), "latch_envelope": _latch("envelope"), "short_pulse": _latch("envelope", pulse=300)}
     _, res["counter"], res["counter_timing"] = _clocked("counter4.v", COUNTER_STEPS, ("logic", "rk4", "envelope"))
-    _, res["fsm"], res["fsm_timing"] = _clocked("fsm.v", FSM_STEPS, ("logic", "rk4"))
+    _, res["fsm"], res["fsm_timing"] = _clocked("fsm.v", FSM_STEPS, ("logic", "rk4"), drawn="rk4")
     sq_nl, res["sqrt"], res["sqrt_timing"] = _clocked("sqrt.v", sqrt_steps(),
-                                                      ("logic", "envelope") + (("rk4",) if sqrt_rk4 else ()))
+                                                      ("logic", "envelope") + (("rk4",) if sqrt_rk4 else ()),
+                                                      drawn="envelope")
     model = network.build(sq_nl, p)
     res["sqrt_counts"] = {"gates": len(model.design.gates), **model.counts()}
     res.update(sqrt_latches=len(sq_nl.latches()), sqrt_logic=len(sq_nl.gates()), sqrt_rk4=sqrt_rk4, fsm_x=FSM_X,

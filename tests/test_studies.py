@@ -111,3 +111,22 @@ def test_performance_report_draws_the_study_backends_and_its_clock():
     nl_free = report._clocked_periods(clock, 3, 10)
     assert nl_free["periods_per_cycle"] == nl_free["pulse"] + nl_free["pause"]
     assert nl_free["total_periods"] == nl_free["pause"] + 10 * nl_free["periods_per_cycle"]
+
+
+REPORTS_DIR = PACKAGE.parent / "reports"
+
+
+@pytest.mark.parametrize("name, inputs, outputs", [
+    ("adder", ["adder.json"], ["adder.md"]),
+    ("speed_accuracy", ["speed_accuracy.json", "envelope_spice.json", "vacask.json", "carrier.json"],
+     ["speed_accuracy.md"]),
+])
+def test_render_rebuilds_the_checked_in_report_from_its_json(tmp_path, name, inputs, outputs):
+    """`--render` from the stored JSON alone gives the checked-in markdown, byte for byte."""
+    import shutil
+    from mech2spice import reports
+    for f in inputs:
+        shutil.copy(REPORTS_DIR / f, tmp_path / f)
+    reports.module(name).write(tmp_path, render=True)
+    for f in outputs:
+        assert (tmp_path / f).read_text() == (REPORTS_DIR / f).read_text(), f

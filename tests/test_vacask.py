@@ -18,6 +18,7 @@ import pytest
 
 from mech2spice import cli
 from mech2spice.backends import rk4
+from mech2spice.compare import AVG, agreement, settled
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
 from mech2spice.experiments import clocking, scenes
 from mech2spice.physics import network, nor
@@ -34,7 +35,6 @@ ROOT = Path(__file__).resolve().parent.parent
 P = DEFAULT
 U_R = P.u_r
 AMP_TOL, PHASE_TOL = 0.01, 2.0      # u_R, degrees: the issue's criterion after settling
-AVG = 20
 LEVEL_PAIRS = scenes.nominal_levels()   # the truth table's input pairs as drive levels (fraction of F_R)
 
 
@@ -50,25 +50,16 @@ needs_vacask = pytest.mark.skipif(not _have_vacask(), reason="VACASK not install
 
 
 # --- helpers -----------------------------------------------------------------------------------------------
-def settled(run) -> np.ndarray:
-    return run.amp[-AVG:].mean(axis=0)
-
-
 def assert_agree(ref, got, label: str, amp_tol: float = AMP_TOL) -> None:
-    a, b = settled(ref), settled(got)
-    d_amp = np.abs(np.abs(b) - np.abs(a)) / U_R
-    d_ph = np.abs(np.degrees(np.angle(b / a)))
+    a, b = settled(ref.amp), settled(got.amp)
+    d = agreement(a, b, U_R)
     msg = f"{label}: rk4 {np.round(np.abs(a) / U_R, 4).tolist()} vacask {np.round(np.abs(b) / U_R, 4).tolist()}"
-    assert d_amp.max() < amp_tol, msg + f" amplitude error {d_amp.max():.4f} u_R"
-    assert d_ph.max() < PHASE_TOL, msg + f" phase error {d_ph.max():.2f} deg"
+    assert d.amp < amp_tol, msg + f" amplitude error {d.amp:.4f} u_R"
+    assert d.phase_deg < PHASE_TOL, msg + f" phase error {d.phase_deg:.2f} deg"
 
 
 def levels_stimulus(model: MechModel, pairs) -> Stimulus:
-    lv = np.array(pairs, float) * P.f_r
-    changes = {}
-    for k, (ds, dd) in enumerate(model.design.input_drives):
-        changes[ds] = changes[dd] = lv[:, k]
-    return Stimulus.from_levels(model, [(0.0, changes)], batch=len(pairs))
+    return Stimulus.input_levels(model, pairs, P.f_r)
 
 
 @functools.lru_cache(maxsize=None)
@@ -206,7 +197,7 @@ def test_single_gate_all_inputs_match_rk4():
     m, st, ref = design("gate")
     got = vc.run_batch(m, 1500, stimulus=st)
     assert_agree(ref, got, "single gate")
-    out = np.abs(settled(got))[0] / U_R
+    out = np.abs(settled(got.amp))[0] / U_R
     assert out[0] > 0.92 and (out[1:] < 0.67).all()
     assert min(got.extra["uniform_fraction"]) > 0.99 and "warning" not in got.extra
 
@@ -222,7 +213,7 @@ def test_fanout2_matches_rk4():
     m, _, ref = design("fanout2")
     got = vc.run(m, 1500)
     assert_agree(ref, got, "fan-out 2")
-    assert abs(abs(settled(got)[1, 0]) - abs(settled(got)[2, 0])) < 1e-9
+    assert abs(abs(settled(got.amp)[1, 0]) - abs(settled(got.amp)[2, 0])) < 1e-9
 
 
 @needs_vacask
@@ -250,9 +241,9 @@ def test_adder_16_inputs_match_rk4(part):
     nl, m, st, periods, ref = adder()
     idx = [2 * part, 2 * part + 1]
     got = vc.run_batch(m, periods, stimulus=member(st, idx))
-    a = np.abs(settled(ref)[:, idx]) / U_R
-    b = np.abs(settled(got)) / U_R
-    ph = np.degrees(np.angle(settled(got) / settled(ref)[:, idx]))
+    a = np.abs(settled(ref.amp)[:, idx]) / U_R
+    b = np.abs(settled(got.amp)) / U_R
+    ph = np.degrees(np.angle(settled(got.amp) / settled(ref.amp)[:, idx]))
     assert np.abs(a - b).max() < AMP_TOL, (a.round(4).tolist(), b.round(4).tolist())
     assert np.abs(ph).max() < PHASE_TOL, ph.round(2).tolist()
     from mech2spice.simulation import decode
@@ -273,7 +264,7 @@ def test_cli_adder_must_show():
     assert res["outputs"] == {"s": 5} and res["valid"] and res["backend"] == "vacask"
     _, m, _, _, ref = adder()
     k = scenes.ADDER_INPUTS.index({"a": 3, "b": 2})
-    rk = np.abs(settled(ref)[:, k]) / U_R
+    rk = np.abs(settled(ref.amp)[:, k]) / U_R
     for r, name in enumerate(m.probes):
         if name in res["amplitudes"]:
             assert abs(res["amplitudes"][name] - rk[r]) < AMP_TOL, (name, res["amplitudes"][name], rk[r])

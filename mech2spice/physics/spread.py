@@ -112,6 +112,12 @@ def check_trim(mode: str, residual: float) -> None:
         raise Mech2SpiceError("a trim residual needs a trim (f or fc)")
 
 
+def trim_rng(seed: int, index: int) -> np.random.Generator:
+    """Sample `index`'s generator for its trim residuals: apart from its spread draws, so a run without a
+    trim draws exactly what it drew before trims existed."""
+    return np.random.default_rng([seed, index, 0x7472])
+
+
 def trimmed_dofs(model: MechModel, elems: list[Element]) -> list[int]:
     """The DOFs a trim adjusts: every oscillating (not slow) DOF whose local stiffness is among `elems`."""
     return [e.index for e in elems if e.kind == "k" and not model.slow[e.index]]
@@ -139,11 +145,16 @@ def trimmed(model: MechModel, nominal: MechModel, elems: list[Element], mode: st
     return _copy(model, k_total=list(k), c_total=list(c))
 
 
+def check_drift(rel: float) -> None:
+    """Refuse a drift that is not a relative change in (-1, 1)."""
+    if isinstance(rel, bool) or not isinstance(rel, (int, float)) or not -1 < rel < 1:
+        raise Mech2SpiceError(f"drift must be a relative change in (-1, 1), got {rel!r}")
+
+
 def drifted(model: MechModel, rel: float) -> MechModel:
     """Every stiffness (each DOF's local spring, slow ones included, and each coupling spring) times
     (1 + rel): a common-mode temperature drift of the Young's modulus."""
-    if isinstance(rel, bool) or not isinstance(rel, (int, float)) or not -1 < rel < 1:
-        raise Mech2SpiceError(f"drift must be a relative change in (-1, 1), got {rel!r}")
+    check_drift(rel)
     if not rel:
         return model
     return _copy(model, k_total=[k * (1 + rel) for k in model.k_total],

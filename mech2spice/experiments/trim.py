@@ -25,7 +25,7 @@ def add_trim_arguments(parser) -> None:
                         help="relative Gaussian error left on each trimmed quantity (default 0: exact)")
     parser.add_argument("--drift", type=inputs.number(-1, 1), default=None, metavar="REL",
                         help="in service, after the trim: every stiffness times (1 + REL), a common-mode "
-                             "temperature drift (default 0)")
+                             "temperature drift (default 0; a negative one as --drift=-1e-4)")
 
 
 def trim_from_args(args, spread_given: bool = True) -> tuple[str, float, float]:

@@ -116,7 +116,6 @@ def job_of(args) -> dict:
 
 def _clocked_job(args, nl, path) -> dict:
     """A clocked design's job: its stimulus of clock cycles (--stimulus), run one sample per task."""
-    from . import montecarlo as mc
     from .mc_clocked import CLOCKED_BACKENDS
     if not args.stimulus:
         raise Mech2SpiceError(f"{nl.top} is clocked: give its cycles with --stimulus FILE.json "
@@ -198,7 +197,6 @@ def add_cpu_parser(sub) -> None:
 def cpu_job_of(args) -> dict:
     """The processor job a results file is keyed by (the program by path and content hash)."""
     import hashlib
-    from . import montecarlo as mc
     path = Path(args.program)
     if not path.exists():
         raise Mech2SpiceError(f"no such program: {args.program}")

@@ -8,16 +8,16 @@ For each block (--params, default: default robust), on the loaded gate (physics/
   through the trim (physics/spread.py trim_map, sigmas); tolerance = min over points of
   margin / (2.326 ||sigmas * J^T g||), sigmas at a unit spread (trimmed coordinates 0: exact trim);
 * sampled: the largest sigma with >= 99 % yield (experiments/tolerance.py bisection, same draws at every
-  sigma), bracketed around the linear estimate ([lin / 4, 4 lin], ratio 1.3), the kind alone spread by
-  zeroing the other elements' draws;
+  sigma), bracketed around the linear estimate ([lin / 4, 4 lin], ratio 1.3; once 16x lower if lin / 4
+  fails), the kind alone spread by zeroing the other elements' draws;
 * the limiting point after each trim and its largest contributions |sigma_j (J^T g)_j|;
 * the residual a trim may leave (linear, spread 0) and the common-mode drift the nominal block survives
   (both signs, bisection on the steady-state margin).
 
-    python scripts/robustness_decomposition.py [--params default robust] [--samples 40] [--json OUT]
+    python scripts/robustness_decomposition.py [--params default robust] [--samples 20] [--json OUT]
 
-Prints a markdown report; --json writes every number.  About 12 min at 40 samples for both blocks on the
-shared 2-core sandbox.
+Prints a markdown report; --json writes every number.  docs/robustness.md's tables: --samples 40, 19 min
+for both blocks on the shared 2-core sandbox under a load of about 7; --samples 20 about half that.
 """
 from __future__ import annotations
 
@@ -89,7 +89,10 @@ def sampled_tolerance(p, samples: int, seed: int, mask: np.ndarray, trim: str, l
     s = tolerance.Sampler(p, samples, seed, trim=trim)
     s.eps[:, ~mask] = 0.0
     hi = min(lin * BRACKET, 0.5)
-    res = tolerance.tolerance(s, lo=min(lin / BRACKET, hi / BRACKET), hi=hi, resolution=RESOLUTION, log=log)
+    res = tolerance.tolerance(s, lo=hi / BRACKET ** 2, hi=hi, resolution=RESOLUTION, log=log)
+    if res["sigma"] is None:             # below the bracket: one more, a factor BRACKET^2 lower
+        hi /= BRACKET ** 2
+        res = tolerance.tolerance(s, lo=hi / BRACKET ** 2, hi=hi, resolution=RESOLUTION, log=log)
     return {"sigma": res["sigma"], "bracket": res["bracket"], "samples": samples,
             "allowed_failures": res["allowed_failures"], "note": res.get("note")}
 
@@ -185,7 +188,7 @@ def markdown(res: list[dict], samples: int, seed: int) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--params", nargs="+", default=["default", "robust"])
-    ap.add_argument("--samples", type=int, default=40)
+    ap.add_argument("--samples", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", metavar="OUT")
     a = ap.parse_args(argv)

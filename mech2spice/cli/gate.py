@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from .. import inputs
 from ..errors import Mech2SpiceError
+from ..experiments.trim import add_trim_arguments, trim_from_args
 from ._output import log as _log, print_json as _print_json
 
 
@@ -24,6 +25,7 @@ def add_parser(sub) -> None:
                    help="Monte-Carlo samples for --spread (default 200)")
     g.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), metavar="S",
                    help="random seed for --spread (default 0)")
+    add_trim_arguments(g)
     g.set_defaults(func=cmd_gate)
 
 
@@ -32,8 +34,9 @@ def cmd_gate(args) -> int:
     from ..experiments import characterise
     from ..physics.params import load_params
     p = load_params(args.params)
+    trim = trim_from_args(args, args.spread is not None)
     if args.sens or args.spread is not None:
-        return _gate_robustness(args, p)
+        return _gate_robustness(args, p, trim)
     if args.samples is not None or args.seed is not None:
         raise Mech2SpiceError("--samples and --seed apply to --spread SIGMA")
     out = characterise.characterise(p, quick=args.quick, log=_log(args))
@@ -52,7 +55,7 @@ def cmd_gate(args) -> int:
     return 0
 
 
-def _gate_robustness(args, p) -> int:
+def _gate_robustness(args, p, trim) -> int:
     """`gate --sens` / `gate --spread`: sensitivities and tolerance instead of the characterisation."""
     from ..experiments import tolerance
     if args.quick or args.report:
@@ -60,7 +63,7 @@ def _gate_robustness(args, p) -> int:
     if args.spread is None and (args.samples is not None or args.seed is not None):
         raise Mech2SpiceError("--samples and --seed apply to --spread SIGMA")
     out = tolerance.robustness(p, args.sens, args.spread, 200 if args.samples is None else args.samples,
-                               0 if args.seed is None else args.seed, log=_log(args))
+                               0 if args.seed is None else args.seed, log=_log(args), trim=trim)
     if args.json:
         _print_json(out)
     else:

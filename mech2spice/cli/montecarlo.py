@@ -6,6 +6,7 @@ from pathlib import Path
 from .. import inputs
 from ..backends import continuing, names
 from ..errors import Mech2SpiceError
+from ..experiments.trim import add_trim_arguments, spread_spec, trim_json
 
 BACKENDS = names(lambda caps: caps.noise, first="envelope")     # each sample may carry its own thermal noise
 
@@ -44,6 +45,7 @@ def add_sweep_arguments(s) -> None:
                    help='relative sigma on every element, or {"local": SIGMA|{KIND: SIGMA}, "wafer": '
                         'SIGMA|{KIND: SIGMA}, "wafer_rho": RHO} (inline or a file); kinds k m c spring '
                         'dashpot gamma drive, "*" for all')
+    add_trim_arguments(s)
     s.add_argument("--noise", type=inputs.number(0, lo_open=False), default=0.0, metavar="T",
                    help="thermal noise: k_B T in model energy units (docs/robustness.md gives kelvin for a "
                         "1 MHz silicon scaling); a Langevin force on every dashpot, each sample its own seed; "
@@ -107,7 +109,7 @@ def job_of(args) -> dict:
     if nl.clock:
         return _clocked_job(args, nl, path)
     job = {"design": str(path), "params": args.params, "vectors": vectors_of(args, nl), "backend": args.backend,
-           "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "periods": args.periods,
+           "spread": spread_spec(args).describe(), "seed": args.seed, "periods": args.periods,
            "union": args.batch}
     if args.noise:                   # only then: results files of noiseless sweeps keep their keys
         job["noise"] = args.noise
@@ -116,7 +118,6 @@ def job_of(args) -> dict:
 
 def _clocked_job(args, nl, path) -> dict:
     """A clocked design's job: its stimulus of clock cycles (--stimulus), run one sample per task."""
-    from ..experiments import montecarlo as mc
     from ..experiments.mc_clocked import CLOCKED_BACKENDS
     if not args.stimulus:
         raise Mech2SpiceError(f"{nl.top} is clocked: give its cycles with --stimulus FILE.json "
@@ -126,7 +127,7 @@ def _clocked_job(args, nl, path) -> dict:
     if args.backend not in CLOCKED_BACKENDS:
         raise Mech2SpiceError(f"clocked montecarlo runs on {', '.join(CLOCKED_BACKENDS)}, not '{args.backend}'")
     job = {"design": str(path), "params": args.params, "steps": inputs.stimulus_steps(args.stimulus, {}, args.backend),
-           "backend": args.backend, "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed,
+           "backend": args.backend, "spread": spread_spec(args).describe(), "seed": args.seed,
            "union": 1}
     if args.noise:
         job["noise"] = args.noise
@@ -146,7 +147,7 @@ def cmd_montecarlo(args) -> int:
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=_progress(args), log=log)
     res.update({"design": job["design"], "backend": job["backend"], "spread": job["spread"], "seed": job["seed"],
-                "noise": job.get("noise", 0.0)})
+                "noise": job.get("noise", 0.0), **trim_json(job["spread"])})
     if not args.out:
         res.pop("out")
     if args.json:
@@ -198,13 +199,12 @@ def add_cpu_parser(sub) -> None:
 def cpu_job_of(args) -> dict:
     """The processor job a results file is keyed by (the program by path and content hash)."""
     import hashlib
-    from ..experiments import montecarlo as mc
     path = Path(args.program)
     if not path.exists():
         raise Mech2SpiceError(f"no such program: {args.program}")
     return {"program": str(path.resolve()), "program_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
             "cycles": args.cycles, "params": args.params, "backend": args.backend,
-            "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "union": 1,
+            "spread": spread_spec(args).describe(), "seed": args.seed, "union": 1,
             **({"noise": args.noise} if args.noise else {})}      # noiseless files keep their keys
 
 
@@ -220,7 +220,7 @@ def cmd_cpu_montecarlo(args) -> int:
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=_progress(args), log=_log(args))
     res.update({"program": job["program"], "cycles": job["cycles"], "backend": job["backend"],
-                "spread": job["spread"], "seed": job["seed"], "noise": job.get("noise", 0.0)})
+                "spread": job["spread"], "seed": job["seed"], "noise": job.get("noise", 0.0), **trim_json(job["spread"])})
     if not args.out:
         res.pop("out")
     if args.json:

@@ -33,12 +33,12 @@ def sampled(model, elems, spec: SpreadSpec, seed: int, i: int):
     import numpy as np
     if spec.zero:
         return model, None
-    f = spec.factors(elems, seed, i)
+    sample, f = spec.sample(model, elems, seed, i)
     fd = np.ones(len(model.drives))
     for e, x in zip(elems, f):
         if e.kind == "drive":
             fd[e.index] = x
-    return spread.scaled(model, elems, f), fd
+    return sample, fd
 
 
 def _failed(i: int, e: Exception) -> dict:

@@ -48,6 +48,7 @@ from . import clocking
 from .tolerance import QUANTILES, wilson
 
 KINDS = ("k", "m", "c", "spring", "dashpot", "gamma", "drive")
+TRIM_DEFAULTS = {"trim": "none", "trim_residual": 0.0, "drift": 0.0}   # the spec's fields that mean "not trimmed"
 MAX_ALL_VECTORS = 256          # a design with at most this many input combinations is checked on all of them
 
 
@@ -57,11 +58,26 @@ class SpreadSpec:
     local: dict = field(default_factory=dict)     # kind -> sigma (independent per element)
     wafer: dict = field(default_factory=dict)     # kind -> sigma (one shift per kind and sample)
     wafer_rho: float = 0.0                        # correlation of the wafer shifts across kinds
+    trim: str = "none"                            # after the spread: none, f (k/m), fc (k/m and c/m)
+    trim_residual: float = 0.0                    # relative sigma of the trimmed quantity
+    drift: float = 0.0                            # in service: every stiffness times (1 + drift)
+
+    def __post_init__(self):
+        spread.check_trim(self.trim, self.trim_residual)
+        spread.check_drift(self.drift)
 
     @property
     def zero(self) -> bool:
-        """True when no element is spread (the nominal design)."""
-        return not any(self.local.values()) and not any(self.wafer.values())
+        """True when every sample is the nominal design (nothing spread, no residual, no drift)."""
+        return (not any(self.local.values()) and not any(self.wafer.values()) and not self.drift
+                and not (self.trim != "none" and self.trim_residual))
+
+    def sample(self, nominal, elems: list, seed: int, index: int):
+        """Sample `index` of `nominal`: spread, trimmed, drifted; and the factor of every element."""
+        f = self.factors(elems, seed, index)
+        model = spread.scaled(nominal, elems, f)
+        model = spread.trimmed(model, nominal, elems, self.trim, self.trim_residual, spread.trim_rng(seed, index))
+        return spread.drifted(model, self.drift), f
 
     def factors(self, elems: list, seed: int, index: int) -> np.ndarray:
         """The factor of every element of sample `index`."""
@@ -75,8 +91,12 @@ class SpreadSpec:
         return 1.0 + loc * z + waf * w[kind]
 
     def describe(self) -> dict:
-        """The spec as JSON fields."""
-        return asdict(self)
+        """The spec as JSON fields; trim and drift only when set, so untrimmed results files keep their keys."""
+        out = asdict(self)
+        for key, off in TRIM_DEFAULTS.items():
+            if out[key] == off:
+                del out[key]
+        return out
 
 
 def _sigmas(value, where: str) -> dict:
@@ -128,13 +148,18 @@ def spec_of(obj) -> SpreadSpec:
     """A SpreadSpec from a sigma or the JSON object `parse_spread` describes."""
     if not isinstance(obj, dict):
         return SpreadSpec(_sigmas(obj, "local"), _sigmas(0.0, "wafer"))
-    unknown = set(obj) - {"local", "wafer", "wafer_rho"}
+    unknown = set(obj) - {"local", "wafer", "wafer_rho", *TRIM_DEFAULTS}
     if unknown:
-        raise Mech2SpiceError(f"spread spec: unknown field(s) {', '.join(sorted(unknown))} (local, wafer, wafer_rho)")
+        raise Mech2SpiceError(f"spread spec: unknown field(s) {', '.join(sorted(unknown))} (local, wafer, wafer_rho, "
+                              f"{', '.join(TRIM_DEFAULTS)})")
     rho = obj.get("wafer_rho", 0.0)
     if isinstance(rho, bool) or not isinstance(rho, (int, float)) or not 0 <= rho <= 1:
         raise Mech2SpiceError(f"spread spec 'wafer_rho': must be a number in [0, 1], got {rho!r}")
-    return SpreadSpec(_sigmas(obj.get("local", 0.0), "local"), _sigmas(obj.get("wafer", 0.0), "wafer"), float(rho))
+    trim = {key: obj.get(key, off) for key, off in TRIM_DEFAULTS.items()}
+    if not isinstance(trim["trim"], str):
+        raise Mech2SpiceError(f"spread spec 'trim': must be one of {', '.join(spread.TRIMS)}, got {trim['trim']!r}")
+    return SpreadSpec(_sigmas(obj.get("local", 0.0), "local"), _sigmas(obj.get("wafer", 0.0), "wafer"), float(rho),
+                      **trim)
 
 
 def all_vectors(netlist: Netlist) -> list[dict[str, int]]:
@@ -186,8 +211,7 @@ class DesignMC:
         """Sample i's model and stimulus (the nominal ones when the spec spreads nothing)."""
         if self.spec.zero:
             return self.model, self.stim
-        f = self.spec.factors(self.elems, self.seed, i)
-        model = spread.scaled(self.model, self.elems, f)
+        model, f = self.spec.sample(self.model, self.elems, self.seed, i)
         fd = np.ones(len(self.model.drives))
         for e, x in zip(self.elems, f):
             if e.kind == "drive":

@@ -22,7 +22,7 @@ from .experiments.clocking import (GATE_DELAY_MAX, LATCH_MIN_PULSE, LATCH_OUTPUT
 from .physics import network
 from .physics.envelope import Envelope
 from .physics.model import MechModel
-from .physics.params import GateParams, band_of, margin
+from .physics.params import DEFAULT_LEVELS, GateParams, Levels
 from .physics.stimulus import Stimulus
 from .synthesis.ports import output_bits, pack_inputs, port_values
 from .synthesis.synth import Netlist
@@ -34,16 +34,17 @@ MAX_TRACE_BYTES = 2e9    # amplitudes a clocked run keeps in memory (one complex
 ESTIMATE_LOG_S = 10.0    # runs estimated to take longer than this say so before they start
 
 
-def decode(netlist: Netlist, amplitudes: dict[str, float], const: dict[str, int]) -> dict:
-    """bits / outputs / valid / min_margin from output amplitudes (u_R)."""
+def decode(netlist: Netlist, amplitudes: dict[str, float], const: dict[str, int],
+           levels: Levels = DEFAULT_LEVELS) -> dict:
+    """bits / outputs / valid / min_margin from output amplitudes (u_R), in the block's `levels`."""
     bits, margins = {}, []
     for bit in output_bits(netlist):
         if bit in const:
             bits[bit] = const[bit]
             continue
-        b = band_of(amplitudes[bit])
+        b = levels.band_of(amplitudes[bit])
         bits[bit] = b
-        margins.append(margin(amplitudes[bit], b))
+        margins.append(levels.margin(amplitudes[bit], b))
     return {"outputs": port_values(netlist, bits), "bits": bits, "valid": all(v is not None for v in bits.values()),
             "min_margin": float(min(margins)) if margins else None}
 
@@ -119,7 +120,7 @@ def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], 
     for b in range(len(values)):
         a = {n: float(amps[k, b]) for k, n in enumerate(outs)}
         v, ok = judged[b] if judged else (None, False)
-        res = verdict.apply(decode(netlist, a, model.design.const_outputs), a, v, ok, source)
+        res = verdict.apply(decode(netlist, a, model.design.const_outputs, model.levels), a, v, ok, source, model.levels)
         results.append({"backend": backend, **res, "amplitudes": a, "periods": used, "wall_s": wall,
                         **_engine_fields(engine)})
     return results
@@ -150,9 +151,9 @@ def _run_until_settled(engine, model, stim, probes: list[str], budget: int, prog
         history.append(_chunk_summary(run, probes, model.amplitude_unit))
         bar.update(n)
         judged = None
-        if not fixed and done >= next_check and _settled(_rows(history[-2:], rows)):
+        if not fixed and done >= next_check and _settled(_rows(history[-2:], rows), model.levels):
             judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows))
-            wait = _periods_to_settle(judged, _rows(history[-3:], rows), names)
+            wait = _periods_to_settle(judged, _rows(history[-3:], rows), names, model.levels)
             if wait == 0:
                 break
             next_check = done + wait
@@ -185,7 +186,7 @@ def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int,
     for b in range(A.shape[1]):
         v = verdict.judge(model, A[:, b], s[:, b], F[:, b], outs)
         a, swing, step = _recent(history, outs, b)
-        out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.rests_on_fixed_point(), held)))
+        out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.rests_on_fixed_point(), held, model.levels)))
     return out
 
 
@@ -197,17 +198,17 @@ def _recent(history: list, outs: list[str], b: int) -> tuple[dict, dict, dict]:
     return as_dict(last), as_dict(swing), as_dict(step)
 
 
-def _settled(history: list[np.ndarray]) -> bool:
+def _settled(history: list[np.ndarray], levels: Levels = DEFAULT_LEVELS) -> bool:
     """The cheap first test: every output moved less than SETTLED_CHANGE over SETTLE_WINDOW and is in a band."""
     k = SETTLE_WINDOW // CHUNK
     if len(history) <= k:
         return False
     now, before = history[-1][0], history[-1 - k][0]
-    inside = np.vectorize(lambda a: band_of(a) is not None)(now)
+    inside = np.vectorize(lambda a: levels.band_of(a) is not None)(now)
     return bool(np.all(np.abs(now - before) < SETTLED_CHANGE) and np.all(inside))
 
 
-def _periods_to_settle(judged, history: list, probes: list[str]) -> int:
+def _periods_to_settle(judged, history: list, probes: list[str], levels: Levels = DEFAULT_LEVELS) -> int:
     """0 when every member is settled or unstable (no wait helps); else the periods for the slowest decaying
     mode to bring what is still to come down to verdict.SETTLED_BW (at least one chunk)."""
     wait = 0
@@ -215,7 +216,7 @@ def _periods_to_settle(judged, history: list, probes: list[str]) -> int:
         if ok or not v.stable:
             continue
         a, swing, step = _recent(history, probes, b)
-        left = max(verdict.still_to_come(v, a, swing, step, CHUNK), verdict.drift(v, a))
+        left = max(verdict.still_to_come(v, a, swing, step, CHUNK, levels), verdict.drift(v, a, levels))
         wait = max(wait, CHUNK, int(min(v.slowest_decay * np.log(max(left / verdict.SETTLED_BW, 1.0)), 1e7)))
     return wait
 
@@ -382,7 +383,7 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
     for k, t in enumerate(reads):
         a = {n: float(amp[t - 10:t, j].mean()) for j, n in enumerate(outs)}
         v, ok = judged[k] if judged and judged[k] else (None, False)
-        decoded = verdict.apply(decode(netlist, a, model.design.const_outputs), a, v, ok, source)
+        decoded = verdict.apply(decode(netlist, a, model.design.const_outputs, model.levels), a, v, ok, source, model.levels)
         trace.append({"cycle": k, **decoded, "amplitudes": a})
     extra = {"envelope_step": step, "settle": engine.options.settle_tol,
              "simulated_periods": total - run.settled_periods,

@@ -384,9 +384,12 @@ def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, pa
     return simulation.run_physical(netlist, params, cycles, backend, progress=progress)
 
 
-def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], clocked: bool) -> list[dict]:
-    """Every output bit where Icarus and the backend differ (x/z from Icarus and invalid bits included)."""
-    from .physics.params import band_of, margin
+def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], clocked: bool,
+            levels=None) -> list[dict]:
+    """Every output bit where Icarus and the backend differ (x/z from Icarus and invalid bits included); margins
+    in the block's `levels` (default: the default block's)."""
+    from .physics.params import DEFAULT_LEVELS
+    levels = levels or DEFAULT_LEVELS
     mismatches = []
     for k, (r, g) in enumerate(zip(ref, got)):
         for bit in output_bits(netlist):
@@ -396,7 +399,7 @@ def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], c
             amp = g.get("amplitudes", {}).get(bit)
             m = {("cycle" if clocked else "vector"): k, "inputs": _as_ports(netlist, x[k]), "bit": bit,
                  "icarus": want, "backend": have, "amplitude": amp,
-                 "margin": None if amp is None else float(margin(amp, have if have is not None else band_of(amp)))}
+                 "margin": None if amp is None else float(levels.margin(amp, have if have is not None else levels.band_of(amp)))}
             mismatches.append(m)
     return mismatches
 
@@ -421,7 +424,7 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
             complete = False
     ref = icarus(path, netlist, x, clocked)
     got = run_backend(netlist, x, clocked, backend, params, progress)
-    mismatches = compare(netlist, x, ref, got, clocked)
+    mismatches = compare(netlist, x, ref, got, clocked, None if params is None else params.levels)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0}
     if clocked:

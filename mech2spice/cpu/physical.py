@@ -20,7 +20,7 @@ from ..backends import continuing, engine_class, make_engine, names
 from ..errors import Mech2SpiceError
 from ..experiments import clocking
 from ..physics import network
-from ..physics.params import DEFAULT, band_of
+from ..physics.params import DEFAULT
 from . import state_file
 from .isa import mnemonic
 from .iss import FETCH, Cycle
@@ -118,7 +118,7 @@ class PhysicalCPU:
 
     # --- decoding --------------------------------------------------------------------------
     def _port(self, amps, port: str, what: str) -> int:
-        bits = [band_of(amps[f"{port}[{i}]"]) for i in range(self.netlist.outputs[port])]
+        bits = [self.p.levels.band_of(amps[f"{port}[{i}]"]) for i in range(self.netlist.outputs[port])]
         return Memory.decode_address(bits, self.cycle, what)
 
     def registers(self, amps=None) -> dict:
@@ -126,7 +126,7 @@ class PhysicalCPU:
         amps = amps or self.amps
 
         def bit(q: str) -> int:
-            b = band_of(amps[f"latch.{q}"])
+            b = self.p.levels.band_of(amps[f"latch.{q}"])
             if b is None:
                 reg, k = self.regmap[q]
                 raise Mech2SpiceError(f"cycle {self.cycle}: register {reg} bit {k} (latch {q}) is invalid "

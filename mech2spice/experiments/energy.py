@@ -13,7 +13,6 @@ import numpy as np
 from ..backends import rk4
 from ..physics import nor
 from ..physics.energy import Scaling, dissipated_power, kt_ln2, source_power, steady_amplitudes
-from ..physics.params import NOMINAL0, NOMINAL1, band_of
 from .scenes import levels_stimulus
 
 
@@ -21,8 +20,8 @@ def gate_energy(p, scaling: Scaling = Scaling(), transient_periods: int = 3000, 
     """Steady power of one free-standing gate at the four nominal input pairs, energy per drive period, and
     the energy of the switching events 00 -> 10 (output 1 -> 0) and 10 -> 00 (0 -> 1) with their delays
     (periods from the input step until the output stays inside its new band), RK4 (every DOF probed)."""
-    pairs = {"00": (NOMINAL0, NOMINAL0), "10": (NOMINAL1, NOMINAL0), "01": (NOMINAL0, NOMINAL1),
-             "11": (NOMINAL1, NOMINAL1)}
+    n0, n1 = p.levels.nominal0, p.levels.nominal1
+    pairs = {"00": (n0, n0), "10": (n1, n0), "01": (n0, n1), "11": (n1, n1)}
     m = nor.single_gate(p)
     names = list(m.names)
     seq = [("00", "10"), ("10", "00")]
@@ -44,8 +43,8 @@ def gate_energy(p, scaling: Scaling = Scaling(), transient_periods: int = 3000, 
         p_after = P[-20:, b].mean()
         transient = P[half:, b] - p_after
         amp = np.abs(A[out_row, half:, b]) / p.u_r
-        want = int(not (pairs[z][0] > 0.8 or pairs[z][1] > 0.8))
-        inside = np.array([band_of(x) == want for x in amp])
+        want = int(z == "00")
+        inside = np.array([p.levels.band_of(x) == want for x in amp])
         delay = int(np.flatnonzero(~inside)[-1] + 1) if (~inside).any() else 0
         delay = delay if inside[-20:].all() else None
         excess = float(np.sum(transient) * m.period)

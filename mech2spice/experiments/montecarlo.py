@@ -40,7 +40,7 @@ from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
 from ..physics import network, spread
 from ..physics.noise import check_temperature
-from ..physics.params import GateParams, band_of, margin
+from ..physics.params import GateParams
 from ..physics.stimulus import Stimulus
 from ..synthesis.ports import output_bits, port_range
 from ..synthesis.synth import Netlist
@@ -275,6 +275,7 @@ class DesignMC:
         """Pass/fail, margins, wrong output bits and root gate failures of one sample from its amplitudes; a
         sample whose network has a self-oscillating mode (`stable` False) fails whatever its bits read."""
         ao, ag = a[:n_o], a[n_o:]
+        band_of, margin = self.p.levels.band_of, self.p.levels.margin
         got_o = np.vectorize(lambda x: -1 if band_of(x) is None else band_of(x))(ao) if ao.size else ao
         m_o = np.vectorize(margin)(ao, self.want_out) if ao.size else np.zeros((0, 1))
         bad_g = np.vectorize(lambda x, w: band_of(x) != w)(ag, self.want_gate) if ag.size else np.zeros((0, 1), bool)

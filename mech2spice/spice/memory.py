@@ -19,13 +19,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..physics.params import BAND0, BAND1, DEFAULT, NOMINAL0, NOMINAL1, GateParams
+from ..physics.params import DEFAULT, GateParams
 from .openvaf import compile_va, module_text
 
 FILE = "m2s_memory.va"
 BITS = 8
 WIDTH = 0.01                      # u_R: the decoders' tanh width (bands are >= 0.125 u_R from the threshold)
-THRESHOLD = (BAND0[1] + BAND1[0]) / 2
+THRESHOLD = (DEFAULT.levels.band0[1] + DEFAULT.levels.band1[0]) / 2   # the default block's; a block's own: threshold(p)
+
+
+def threshold(p: GateParams) -> float:
+    """The amplitude (u_R) between p's bands at which a memory cell reads a written bit as '1'."""
+    return (p.levels.band0[1] + p.levels.band1[0]) / 2
 
 
 def _select(addr: str, bus: str) -> str:
@@ -35,7 +40,7 @@ def _select(addr: str, bus: str) -> str:
 
 def modules(p: GateParams = DEFAULT) -> list[str]:
     """The three memory modules' Verilog-A text."""
-    bit = module_text("m2s_mem_bit", ["ar", "ai", "q"], [], [("th", THRESHOLD, False), ("w", WIDTH, False)],
+    bit = module_text("m2s_mem_bit", ["ar", "ai", "q"], [], [("th", threshold(p), False), ("w", WIDTH, False)],
                       ["I(q) <+ V(q) - 0.5*(1 + tanh((V(ar)*V(ar) + V(ai)*V(ai) - th*th)/(2*th*w)));"],
                       "m2s_mem_bit: a bus bit (0/1 voltage) from an envelope amplitude node pair (u_R).")
     r, w, d, o = ([f"{x}{b}" for b in range(BITS)] for x in "rwdo")
@@ -57,7 +62,7 @@ def modules(p: GateParams = DEFAULT) -> list[str]:
                        "prints 'm2s_mem ADDR BITS' at the time points from tend on (a model parameter: the run's end).")
     byte = byte.replace("  analog begin", "  real selr, g;\n  analog begin", 1)
     read = module_text("m2s_mem_read", ["o", "wclk", "amp"], ["h"],
-                       [("tau", p.period, False), ("f0", p.force(NOMINAL0), False), ("f1", p.force(NOMINAL1), False)],
+                       [("tau", p.period, False), ("f0", p.force(p.levels.nominal0), False), ("f1", p.force(p.levels.nominal1), False)],
                        ["I(o) <+ V(o);", "I(h) <+ ddt(tau*V(h)) + (1 - V(wclk))*(V(h) - V(o));",
                         "I(amp) <+ V(amp) - (f0 + (f1 - f0)*V(h));"],
                        "m2s_mem_read: one rdata bit: the sum node's resistor, a track-and-hold (holding while\n"

@@ -1,0 +1,274 @@
+"""Design centering of the NOR block by worst-case distance (issue #27; docs/design.md, "Design centering").
+
+The loaded gate (physics/loaded.py) passes when, at every valid input point, its stable steady state stays
+inside the band NOR asks for and does not vanish.  Both are linearised in the relative element changes t
+(physics/spread.py's elements), t = spread * Sa xi + residual * Sb zeta with xi, zeta standard normal:
+
+  * a *margin constraint* per stable steady state: its band margin m (band widths) and gradient g;
+  * a *fold constraint* per local extremum of the insulator's balance r(s) (steady_batch: r(s) = k_s s +
+    1/2 sum h |A(s)|^2, one equation in s per input point): where an extremum's value r_e crosses zero a
+    pair of steady states is born or dies, so a state jumps or a new one appears.  r_e's first-order
+    change is dr/dt at fixed s (dr/ds = 0 there), so its distance is linear in t, not a square root.
+
+Each constraint's worst-case distance is beta = m / ||S^T g|| (in standard deviations of the spread along
+its most dangerous direction).  Both come from one adjoint solve per state: the steady state reduces to
+r(s) = 0 with A = Z(s)^-1 F, so dA/dt = -Z^-1 (dZ/dt A - dF/dt) at fixed s and ds/dt = -dr/dt / r'(s);
+tests/test_centering.py checks the margin gradients against sensitivity.margin_gradients (the
+implicit-function theorem on the full residual) and against finite differences.
+
+Trimming (the sigma vector): after fabrication every oscillating DOF of the block has its total k/m (and
+with 'fc' its total c/m) set back to nominal through its local spring (dashpot), with a relative residual:
+linearised, the local k's change is (K_tot (t_m + residual) - sum of attached coupling springs' changes)
+/ k_local; the insulator, couplings, gammas and drives keep the full spread.
+
+The optimiser (`step`) maximises the smallest beta over all constraints of the coarse input grid by
+sequential linear programming with a trust region over the block's parameters (`Design`), with forward
+finite differences of the active constraints (their states tracked by input point and s).  Continuation in
+sigma: each step works at the spread where the block's smallest beta is Z99 (the linear tolerance), capped
+at the target spread.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import Mech2SpiceError
+from ..physics import loaded, spread, steady_batch
+from ..physics.params import GateParams
+
+Z99 = 2.3263478740408408        # one-sided standard normal quantile of 99 %
+TRIMS = ("none", "f", "fc")
+
+
+# --- the spread spec and its noise matrices ---------------------------------------------------------
+@dataclass(frozen=True)
+class SpreadSpec:
+    """Relative Gaussian spread on every element; optionally trimmed ('f': k/m, 'fc': k/m and c/m of every
+    oscillating DOF of the block) back to nominal with a relative residual."""
+    spread: float
+    trim: str = "none"
+    residual: float = 0.0
+
+    def validate(self) -> None:
+        """Raise Mech2SpiceError on a spread or residual outside [0, 1] or an unknown trim."""
+        for name, v in (("--spread", self.spread), ("--trim-residual", self.residual)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= 1):
+                raise Mech2SpiceError(f"{name} must be a relative sigma in [0, 1], got {v!r}")
+        if self.trim not in TRIMS:
+            raise Mech2SpiceError(f"--trim must be one of {', '.join(TRIMS)}, got {self.trim!r}")
+        if self.spread <= 0:
+            raise Mech2SpiceError("--spread must be > 0: centering needs a spread to center against")
+
+
+def noise_matrices(model, elems: list[spread.Element], trimmed: list[int], trim: str):
+    """(Sa, Sb, residual names): t = spread Sa xi + residual Sb zeta for the elements `elems`, the DOFs
+    `trimmed` trimmed as `trim` says (module docstring)."""
+    n = len(elems)
+    Sa, cols, names = np.eye(n), [], []
+    where = {(e.kind, e.index): j for j, e in enumerate(elems)}
+    if trim == "none":
+        return Sa, np.zeros((n, 0)), names
+    kinds = (("k", "spring", model.k_total, model.k_local, model.springs),
+             ("c", "dashpot", model.c_total, model.c_local, model.dashpots))[:1 if trim == "f" else 2]
+    for i in trimmed:
+        for own, link, total, local, links in kinds:
+            j = where[(own, i)]
+            Sa[j] = 0.0
+            Sa[j, where[("m", i)]] = total[i] / local[i]
+            for e, (a, b, v) in enumerate(links):
+                if i in (a, b):
+                    Sa[j, where[(link, e)]] = -v / local[i]
+            col = np.zeros(n)
+            col[j] = total[i] / local[i]
+            cols.append(col)
+            names.append(f"trim residual {elems[j].name}")
+    return Sa, np.array(cols).T, names
+
+
+# --- states and their first-order changes ------------------------------------------------------------
+@dataclass
+class Fast:
+    """The loaded gate's envelope arrays at input level 1 (steady_batch's), plus what the derivatives need."""
+    lg: loaded.LoadedGate
+    elems: list[spread.Element]
+    st: steady_batch.Stack
+    fast: np.ndarray          # model DOF index of each fast row
+    slow: int
+
+    @classmethod
+    def of(cls, p: GateParams) -> "Fast":
+        lg = loaded.build(p)
+        m = lg.model
+        st = steady_batch.stack([m], lg.input_groups(), lg.gate.channel)
+        return cls(lg, spread.elements(m, lg.block_dofs), st, np.flatnonzero(~np.asarray(m.slow, bool)),
+                   int(np.flatnonzero(m.slow)[0]))
+
+    def state(self, levels: np.ndarray, s: np.ndarray) -> dict:
+        """At slow positions s (n,) and input levels (n, G): A, r, dr/ds, dA_out/ds, and at fixed s the
+        derivatives dr/dt (n, E) and dA_out/dt (n, E) for every element."""
+        st, w, m = self.st, self.lg.model.omega, self.lg.model
+        nf = self.fast.size
+        Z = st.Z0[0][None] + (st.g[0][None, :, None] * np.eye(nf)[None]) * s[:, None, None]
+        F = np.einsum("fg,ng->nf", st.f[0], levels)
+        A = np.linalg.solve(Z, F[..., None])[..., 0]
+        dA_ds = -np.linalg.solve(Z, (st.g[0] * A)[..., None])[..., 0]
+        h = st.h[0]
+        r = st.ks[0] * s + 0.5 * (h * np.abs(A) ** 2).sum(axis=1)
+        r_s = st.ks[0] + (h * (A.conj() * dA_ds).real).sum(axis=1)
+        D, direct = self._dz(A, s, levels, w, m)
+        X = np.linalg.solve(Z, D)                                   # dA/dt = -X at fixed s
+        r_t = direct - np.einsum("f,nf,nfe->ne", h, A.conj(), X).real
+        o = st.out
+        return {"A": A, "r": r, "r_s": r_s, "A_out": A[:, o], "dAo_ds": dA_ds[:, o], "r_t": r_t,
+                "dAo_dt": -X[:, o, :]}
+
+    def _dz(self, A, s, levels, w, m):
+        """Per element: d(Z A - F)/dt (n, nf, E) and the direct part of dr/dt (n, E) at fixed s."""
+        n, nf = A.shape
+        pos = -np.ones(m.n, int)
+        pos[self.fast] = np.arange(nf)
+        D = np.zeros((n, nf, len(self.elems)), complex)
+        direct = np.zeros((n, len(self.elems)))
+        groups = self.lg.input_groups()
+        kl, cl = m.k_local, m.c_local
+        for j, e in enumerate(self.elems):
+            i = e.index
+            if e.kind in ("k", "m", "c") and i == self.slow:
+                direct[:, j] = kl[i] * s if e.kind == "k" else 0.0      # mass and damping: not in a steady state
+            elif e.kind in ("k", "m", "c"):
+                fac = {"k": kl[i], "m": -w * w * m.mass[i], "c": 1j * w * cl[i]}[e.kind]
+                D[:, pos[i], j] = fac * A[:, pos[i]]
+            elif e.kind in ("spring", "dashpot"):
+                a, b, v = (m.springs if e.kind == "spring" else m.dashpots)[i]
+                v = v if e.kind == "spring" else 1j * w * v
+                D[:, pos[a], j] = v * (A[:, pos[a]] - A[:, pos[b]])
+                D[:, pos[b], j] = -D[:, pos[a], j]
+            elif e.kind == "gamma":
+                f, _, g = m.quads[i]
+                D[:, pos[f], j] = 2 * g * s * A[:, pos[f]]
+                direct[:, j] = 0.5 * g * np.abs(A[:, pos[f]]) ** 2
+            else:                                                    # a drive: F moves, Z A - F by -dF
+                d = m.drives[i]
+                D[:, pos[d.dof], j] = 1j * d.amplitude * np.exp(1j * d.phase) * levels[:, groups[i]]
+        return D, direct
+
+
+@dataclass
+class Constraints:
+    """Every linearised pass condition of one block over an input grid."""
+    kind: np.ndarray          # "margin" or "fold"
+    point: np.ndarray         # input-point index
+    s: np.ndarray             # the state's (or extremum's) insulator position
+    value: np.ndarray         # margin (band widths) or |r_e|
+    grad: np.ndarray          # (n, E) d value / dt
+    nominal_margin: float     # the block's worst margin over the grid (point_margins)
+
+    def variances(self, Sa, Sb) -> tuple[np.ndarray, np.ndarray]:
+        """Per constraint ||Sa^T g||^2 and ||Sb^T g||^2."""
+        return (self.grad @ Sa) ** 2 @ np.ones(Sa.shape[1]), (self.grad @ Sb) ** 2 @ np.ones(Sb.shape[1])
+
+
+def constraints(fx: Fast, levels: np.ndarray, expect: np.ndarray, u_r: float, n_grid: int) -> Constraints:
+    """The margin constraints (every stable state) and fold constraints (every extremum of r(s)) of the
+    loaded gate at the input points `levels` (P, G) with expected outputs `expect`."""
+    st = fx.st
+    r = steady_batch.roots(st, 0, levels, n_grid)
+    nominal = float(loaded.point_margins(r, expect, u_r).min())
+    keep = r.stable
+    pts, s_roots = r.point[keep], r.s[keep]
+    sr = fx.state(levels[pts], s_roots)
+    lo, hi = _band_edges(expect[pts])
+    a = np.abs(sr["A_out"]) / u_r
+    sign = np.where(a - lo < hi - a, 1.0, -1.0)
+    ds_dt = -sr["r_t"] / sr["r_s"][:, None]
+    dAo = sr["dAo_dt"] + sr["dAo_ds"][:, None] * ds_dt
+    da = (sr["A_out"].conj()[:, None] * dAo).real / np.abs(sr["A_out"])[:, None] / u_r
+    m_val = np.minimum(a - lo, hi - a) / (hi - lo)
+    m_grad = da * (sign / (hi - lo))[:, None]
+    ep, es = extrema(st, levels, n_grid)
+    se = fx.state(levels[ep], es)
+    f_val, f_grad = np.abs(se["r"]), np.sign(se["r"])[:, None] * se["r_t"]
+    kind = np.array(["margin"] * pts.size + ["fold"] * ep.size)
+    return Constraints(kind, np.concatenate([pts, ep]), np.concatenate([s_roots, es]),
+                       np.concatenate([m_val, f_val]), np.concatenate([m_grad, f_grad]), nominal)
+
+
+def _band_edges(expect: np.ndarray):
+    lo = np.where(expect == 1, loaded.BAND1[0], loaded.BAND0[0])
+    hi = np.where(expect == 1, loaded.BAND1[1], loaded.BAND0[1])
+    return lo, hi
+
+
+def extrema(st: steady_batch.Stack, levels: np.ndarray, n_grid: int) -> tuple[np.ndarray, np.ndarray]:
+    """(point, s) of every interior local extremum of r(s) over the roots' s range, refined by a parabola
+    through the grid's three points around it."""
+    lo, hi = steady_batch.root_range(st, 0, np.abs(levels).max(axis=0))
+    s = np.linspace(lo, hi, n_grid)
+    W = steady_batch.w_matrix(st, 0, steady_batch.responses(st, 0, s)).reshape(n_grid, -1)
+    q = (levels[:, :, None] * levels[:, None, :]).reshape(levels.shape[0], -1)
+    r = st.ks[0] * s[None, :] + 0.5 * q @ W.T                        # (P, S)
+    d = np.diff(r, axis=1)
+    p, j = np.nonzero(np.signbit(d[:, 1:]) != np.signbit(d[:, :-1]))
+    j = j + 1                                                        # the grid point at the turn
+    r0, r1, r2 = r[p, j - 1], r[p, j], r[p, j + 1]
+    den = r0 - 2 * r1 + r2
+    shift = np.where(den != 0, 0.5 * (r0 - r2) / np.where(den != 0, den, 1), 0.0)
+    return p, s[j] + np.clip(shift, -1, 1) * (s[1] - s[0])
+
+
+# --- worst-case distances ------------------------------------------------------------------------
+@dataclass
+class Analysis:
+    """One block's constraints under one spread spec."""
+    p: GateParams
+    spec: SpreadSpec
+    cons: Constraints
+    a: np.ndarray            # per constraint: variance per unit spread^2
+    b: np.ndarray            # ... per unit residual^2
+    levels: np.ndarray
+    elements: list[str]      # names of the noise sources: every element, then the trim residuals
+    sources: np.ndarray      # (n, sources) g^T Sa, g^T Sb
+    n_elements: int          # how many of the sources are elements (the rest: trim residuals)
+
+    def beta(self, spread_: float | None = None) -> np.ndarray:
+        """Per constraint worst-case distance at spread `spread_` (default the spec's) and the spec's residual."""
+        s = self.spec.spread if spread_ is None else spread_
+        var = s * s * self.a + self.spec.residual ** 2 * self.b
+        return np.where(var > 0, self.cons.value / np.sqrt(np.maximum(var, 1e-300)), np.inf)
+
+    def tolerance(self) -> float:
+        """The linear tolerance: the largest spread at which every constraint keeps beta >= Z99 (0 where the
+        residual alone brings one below it, or the nominal block fails)."""
+        if not self.cons.nominal_margin > 0:
+            return 0.0
+        room = (self.cons.value / Z99) ** 2 - self.spec.residual ** 2 * self.b
+        with np.errstate(divide="ignore"):
+            s = np.where(room > 0, np.sqrt(np.maximum(room, 0) / self.a), 0.0)
+        return float(s.min())
+
+    def limiting(self, spread_: float | None = None) -> dict:
+        """The smallest-beta constraint: its kind, input point, beta, and the element contributing most."""
+        beta = self.beta(spread_)
+        k = int(np.argmin(beta))
+        s = self.spec.spread if spread_ is None else spread_
+        n_res = self.sources.shape[1] - self.n_elements
+        scale = np.concatenate([np.full(self.n_elements, s), np.full(n_res, self.spec.residual)])
+        contrib = (self.sources[k] * scale) ** 2
+        top = np.argsort(-contrib)[:3]
+        return {"kind": str(self.cons.kind[k]), "inputs": self.levels[self.cons.point[k], 1:].tolist(),
+                "s": float(self.cons.s[k]), "value": float(self.cons.value[k]), "beta": float(beta[k]),
+                "elements": [{"name": self.elements[i], "share": float(contrib[i] / contrib.sum())} for i in top]}
+
+
+def analyse(p: GateParams, spec: SpreadSpec, per_band: int = 6, n_grid: int = 1000) -> Analysis:
+    """Every constraint of block p over the input grid (per_band levels per band) and its variances."""
+    fx = Fast.of(p)
+    levels, expect = loaded.input_grid(per_band)
+    cons = constraints(fx, levels, expect, p.u_r, n_grid)
+    trimmed = [d for d in fx.lg.block_dofs if not fx.lg.model.slow[d]]
+    Sa, Sb, res_names = noise_matrices(fx.lg.model, fx.elems, trimmed, spec.trim)
+    a, b = cons.variances(Sa, Sb)
+    sources = np.concatenate([cons.grad @ Sa, cons.grad @ Sb], axis=1)
+    return Analysis(p, spec, cons, a, b, levels, [e.name for e in fx.elems] + res_names, sources, len(fx.elems))

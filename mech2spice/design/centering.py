@@ -272,3 +272,298 @@ def analyse(p: GateParams, spec: SpreadSpec, per_band: int = 6, n_grid: int = 10
     a, b = cons.variances(Sa, Sb)
     sources = np.concatenate([cons.grad @ Sa, cons.grad @ Sb], axis=1)
     return Analysis(p, spec, cons, a, b, levels, [e.name for e in fx.elems] + res_names, sources, len(fx.elems))
+
+
+# --- the design variables ------------------------------------------------------------------------
+W_SEED = GateParams().omega
+# name -> (DOFs it sets, what): d* detuning k = m w^2 (1 + d); lq*, lm* log10 of Q and mass
+DOF_VARS = {"c": ("C",), "gs": ("G1s", "G2s"), "gd": ("G1d", "G2d")}
+LOG_VARS = ("lk_i", "lgam_gs", "lgam_gd", "lgam_ic", "lf_c")
+STEP0 = {"d": 2e-4, "l": 2e-3}            # initial trust region per coordinate: detunings, log10 values
+FD_STEP = {"d": 1e-7, "l": 1e-6}
+
+
+@dataclass(frozen=True)
+class Design:
+    """The classic block's parameters as a vector x: per oscillator kind (channel c, spring-linked gates
+    gs, dashpot-linked gates gd) its detuning, log10 Q and log10 mass; log10 of the insulator stiffness,
+    of the gammas and of the source force.  The insulator's mass and Q (steady states do not depend on
+    them), omega, F_R and u_R are the seed's."""
+    seed: GateParams
+
+    @property
+    def names(self) -> list[str]:
+        return [f"{v}_{k}" for k in DOF_VARS for v in ("d", "lq", "lm")] + list(LOG_VARS)
+
+    def x0(self) -> np.ndarray:
+        """The seed block as a vector (refuses a block that is not classic-shaped)."""
+        b = self.seed.structure
+        names = {d.name for d in b.dofs}
+        if names != {"C", "I", "G1s", "G1d", "G2s", "G2d"} or b.springs or b.dashpots or b.output != "C":
+            raise Mech2SpiceError(f"centering needs a classic-shaped block (C, I, G1s, G1d, G2s, G2d), "
+                                  f"not '{self.seed.name}' ({b.name})")
+        w2 = self.seed.omega ** 2
+        x = []
+        for dofs in DOF_VARS.values():
+            d = b.dof(dofs[0])
+            x += [d.k / (d.m * w2) - 1, math.log10(d.q), math.log10(d.m)]
+        gam = {f: g for f, _, g in b.quads}
+        x += [math.log10(b.dof("I").k), math.log10(gam["G1s"]), math.log10(gam["G1d"]), math.log10(-gam["C"]),
+              math.log10(b.source_force)]
+        return np.array(x)
+
+    def params(self, x) -> GateParams:
+        """The block at vector x."""
+        from ..physics.blocks import BlockSpec, Dof
+        from ..physics.params import block_params
+        v = dict(zip(self.names, np.asarray(x, float)))
+        b, w2 = self.seed.structure, self.seed.omega ** 2
+        dofs = []
+        for key, names in DOF_VARS.items():
+            m = 10.0 ** v[f"lm_{key}"]
+            dofs += [Dof(n, m, m * w2 * (1 + v[f"d_{key}"]), 10.0 ** v[f"lq_{key}"]) for n in names]
+        ins = b.dof("I")
+        dofs.insert(1, Dof("I", ins.m, 10.0 ** v["lk_i"], ins.q, slow=True))
+        quads = [("C", "I", -10.0 ** v["lgam_ic"])] + [(n, "I", 10.0 ** v[f"lgam_{k}"])
+                                                       for k in ("gs", "gd") for n in DOF_VARS[k]]
+        spec = BlockSpec(b.name, tuple(dofs), (), (), tuple(quads), "C", 10.0 ** v["lf_c"], "C", b.inputs)
+        return block_params({"block": spec.to_dict(), "name": self.seed.name, "f_r": self.seed.f_r,
+                             "u_r": self.seed.u_r, "omega": self.seed.omega}, "centering")
+
+    def scale(self, table: dict) -> np.ndarray:
+        """Per coordinate: table['d'] for detunings, table['l'] for log10 values."""
+        return np.array([table["d"] if n.startswith("d_") else table["l"] for n in self.names])
+
+
+# --- the optimiser ---------------------------------------------------------------------------------
+ACTIVE_RATIO = 2.0        # constraints within this factor of the smallest beta enter the step's LP
+ACTIVE_MAX = 300
+TRUST_MAX = 64.0          # the trust region's growth cap, in multiples of STEP0
+TRUST_MIN = 1e-3          # ... and where it stops shrinking: the run has converged
+
+
+@dataclass
+class Settings:
+    """What a centering run is: the seed, the spread spec, the grid; a resumed run must match it."""
+    seed_name: str
+    spec: SpreadSpec
+    per_band: int = 6
+    n_grid: int = 1000
+
+    def to_dict(self) -> dict:
+        return {"from": self.seed_name, "spread": self.spec.spread, "trim": self.spec.trim,
+                "trim_residual": self.spec.residual, "per_band": self.per_band, "n_grid": self.n_grid}
+
+
+class Centering:
+    """Maximise the smallest beta of the block `design` over its vector x (module docstring)."""
+
+    def __init__(self, design: Design, settings: Settings):
+        self.design, self.settings = design, settings
+        self.trust0, self.fd = design.scale(STEP0), design.scale(FD_STEP)
+
+    def analyse(self, x) -> Analysis:
+        """The block at x under the run's spec; a block the model rejects is an Analysis-less None."""
+        st = self.settings
+        try:
+            with np.errstate(over="raise", invalid="raise", divide="raise"):
+                return analyse(self.design.params(x), st.spec, st.per_band, st.n_grid)
+        except (Mech2SpiceError, np.linalg.LinAlgError, FloatingPointError, ValueError):
+            return None
+
+    def working_spread(self, an: Analysis) -> float:
+        """Continuation: the spread at which the block's smallest beta is Z99, within [1e-7, target]."""
+        return float(np.clip(an.tolerance(), 1e-7, self.settings.spec.spread))
+
+    @staticmethod
+    def score(an: Analysis | None, s_w: float) -> float:
+        """The smallest beta at spread s_w; -inf for a block that fails nominally (or does not build)."""
+        if an is None or not an.cons.nominal_margin > 0:
+            return -math.inf
+        return float(an.beta(s_w).min())
+
+    def jacobian(self, x, an: Analysis, active: np.ndarray, s_w: float) -> np.ndarray:
+        """Forward differences of the active constraints' betas over x; a constraint that cannot be
+        tracked (its state vanished) gets a zero row entry."""
+        base = an.beta(s_w)[active]
+        J = np.zeros((active.size, x.size))
+        for i in range(x.size):
+            xi = x.copy()
+            xi[i] += self.fd[i]
+            other = self.analyse(xi)
+            if other is None:
+                continue
+            J[:, i] = (_match(an, other, active, s_w) - base) / self.fd[i]
+        return np.where(np.isfinite(J), J, 0.0)
+
+    def step(self, x, trust: float, log=lambda msg: None) -> dict:
+        """One trust-region SLP step from x; returns the step's record (x_new is x when rejected)."""
+        an = self.analyse(x)
+        s_w = self.working_spread(an)
+        beta = an.beta(s_w)
+        active = np.argsort(beta)[:ACTIVE_MAX]
+        active = active[beta[active] <= ACTIVE_RATIO * beta[active[0]]]
+        J = self.jacobian(x, an, active, s_w)
+        dx, predicted = _lp_step(beta[active], J, trust * self.trust0)
+        trial = self.analyse(x + dx)
+        new = self.score(trial, s_w)
+        gain, old = new - beta.min(), float(beta.min())
+        accepted = new > old
+        rho = gain / predicted if predicted > 0 else 0.0
+        trust_next = trust * (2.0 if accepted and rho > 0.5 else 0.5 if accepted and rho > 0.1 else 0.25)
+        rec = {"working_spread": s_w, "beta_before": old, "beta_after": new, "predicted_gain": predicted,
+               "accepted": bool(accepted), "trust": trust, "trust_next": float(min(trust_next, TRUST_MAX)),
+               "active": int(active.size), "limiting": an.limiting(s_w)}
+        done = trial if accepted else an
+        rec.update(_figures(done))
+        rec["x"] = [float(v) for v in (x + dx if accepted else x)]
+        return rec
+
+
+def _match(an: Analysis, other: Analysis, active: np.ndarray, s_w: float) -> np.ndarray:
+    """The betas in `other` of an's constraints `active`: same kind and input point, nearest s."""
+    ob = other.beta(s_w)
+    out = np.full(active.size, np.nan)
+    for n, k in enumerate(active):
+        same = np.flatnonzero((other.cons.kind == an.cons.kind[k]) & (other.cons.point == an.cons.point[k]))
+        if same.size:
+            out[n] = ob[same[np.argmin(np.abs(other.cons.s[same] - an.cons.s[k]))]]
+    return out
+
+
+def _lp_step(beta: np.ndarray, J: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, float]:
+    """max tau s.t. beta + J dx >= tau, |dx| <= radius: the step and its predicted gain of min beta."""
+    from scipy.optimize import linprog
+    n = radius.size
+    A = np.hstack([-J * radius[None, :], np.ones((beta.size, 1))])     # in u = dx / radius
+    res = linprog(np.r_[np.zeros(n), -1.0], A_ub=A, b_ub=beta, bounds=[(-1, 1)] * n + [(None, None)],
+                  method="highs")
+    if not res.success:
+        return np.zeros(n), 0.0
+    return res.x[:n] * radius, float(res.x[n] - beta.min())
+
+
+def _figures(an: Analysis | None) -> dict:
+    """What the record keeps of a block's analysis: nominal margin, linear tolerance, beta at the target."""
+    if an is None:
+        return {"nominal_margin": None, "tolerance_linear": 0.0, "beta_target": None}
+    return {"nominal_margin": an.cons.nominal_margin, "tolerance_linear": an.tolerance(),
+            "beta_target": float(an.beta().min()), "limiting_target": an.limiting()}
+
+
+# --- a resumable run ---------------------------------------------------------------------------------
+FORMAT = "mech2spice-centering"
+RECORD, BEST = "centering.json", "best.json"
+
+
+def read_record(path, settings: dict, n_vars: int) -> dict:
+    """A run's record at `path`, checked field by field (it may come from someone else: docs/architecture.md),
+    or None where it holds other settings."""
+    import json
+    from ..inputs import is_number
+    try:
+        rec = json.loads(open(path, "rb").read())
+    except OSError as e:
+        raise Mech2SpiceError(f"cannot read centering record {path}: {e.strerror or e}") from None
+    except (ValueError, RecursionError) as e:
+        raise Mech2SpiceError(f"centering record {path} is damaged (not JSON: {e})") from None
+    if not (isinstance(rec, dict) and rec.get("format") == FORMAT and isinstance(rec.get("settings"), dict)
+            and isinstance(rec.get("steps"), list)):
+        raise Mech2SpiceError(f"{path} is not a centering record (format '{FORMAT}', settings, steps)")
+    if rec["settings"] != settings:
+        return None
+    for k, st in enumerate(rec["steps"]):
+        ok = (isinstance(st, dict) and isinstance(st.get("x"), list) and len(st["x"]) == n_vars
+              and all(map(is_number, st["x"])) and is_number(st.get("trust_next")) and st["trust_next"] > 0
+              and isinstance(st.get("accepted"), bool)
+              and (st.get("beta_target") is None or is_number(st.get("beta_target"))))
+        if not ok:
+            raise Mech2SpiceError(f"centering record {path}: step {k} is not a step (x of {n_vars} numbers, "
+                                  "trust_next > 0, accepted, beta_target)")
+    return rec
+
+
+def run(seed: GateParams, settings: Settings, out_dir, steps: int, log=lambda msg: None) -> dict:
+    """Centre `seed` for up to `steps` steps in all (resuming out_dir/centering.json when its settings
+    match), writing the record after every step and the best block to out_dir/best.json."""
+    import time
+    from pathlib import Path
+    from .search import write_atomic
+    settings.spec.validate()
+    design = Design(seed)
+    x0 = design.x0()
+    opt = Centering(design, settings)
+    out = Path(out_dir)
+    path = out / RECORD
+    rec = read_record(path, settings.to_dict(), x0.size) if path.is_file() else None
+    if rec is None:
+        rec = {"format": FORMAT, "version": 1, "settings": settings.to_dict(), "variables": design.names,
+               "steps": [{"step": 0, "x": x0.tolist(), "trust_next": 1.0, "accepted": True,
+                          **_figures(opt.analyse(x0))}]}
+        write_atomic(path, rec)
+    t0, start = time.time(), len(rec["steps"])
+    for k in range(start, steps + 1):
+        last = rec["steps"][-1]
+        if last["trust_next"] < TRUST_MIN:
+            log(f"trust region below {TRUST_MIN} x the initial step: converged")
+            break
+        ts = time.time()
+        st = opt.step(np.array(last["x"]), last["trust_next"])
+        rec["steps"].append({"step": k, **st, "wall_s": time.time() - ts})
+        write_atomic(path, rec)
+        eta = (time.time() - t0) / (k - start + 1) * (steps - k)
+        lim = st["limiting"]
+        log(f"step {k}/{steps}: beta {st['beta_before']:.3f} -> {st['beta_after']:.3f} "
+            f"({'accepted' if st['accepted'] else 'rejected'}), linear tolerance {st['tolerance_linear']:.3g}, "
+            f"limiting {lim['kind']} at {lim['inputs']}: {lim['elements'][0]['name']}; ETA {eta:.0f} s")
+    best = max((s for s in rec["steps"] if s["accepted"] and s["beta_target"] is not None),
+               key=lambda s: s["beta_target"])
+    p = design.params(best["x"])
+    block = {"name": p.name, "block": p.structure.to_dict(), "f_r": p.f_r, "u_r": p.u_r, "omega": p.omega,
+             "search": {"method": "design centering (design/centering.py)", **settings.to_dict(),
+                        "step": best["step"], "steps": len(rec["steps"]) - 1},
+             "measured": {k: best[k] for k in ("nominal_margin", "tolerance_linear", "beta_target")}}
+    write_atomic(out / BEST, block)
+    return {"record": str(path), "best_file": str(out / BEST), "best_step": best["step"],
+            "steps": len(rec["steps"]) - 1, **block["measured"],
+            "seed": {k: rec["steps"][0][k] for k in ("nominal_margin", "tolerance_linear", "beta_target")},
+            "limiting": best.get("limiting_target")}
+
+
+# --- `mech2spice center` ---------------------------------------------------------------------------
+def add_parser(subparsers) -> None:
+    """Register the `center` command (called from design/cli.py)."""
+    from .. import inputs
+    s = subparsers.add_parser(
+        "center", help="design centering of the NOR block by worst-case distance (docs/design.md)",
+        description="Maximise the smallest worst-case distance beta = margin / ||sigma o grad margin|| over the "
+                    "loaded gate's margin and fold constraints (every valid input point) under a spread spec, "
+                    "by trust-region linear programming over the block's parameters, seeded by a working block. "
+                    "Resumable: the record DIR/centering.json is written after every step; DIR/best.json is "
+                    "the best block (a --params file).")
+    s.add_argument("--from", dest="seed", default="robust", help="seed block: a preset or block file (robust)")
+    s.add_argument("--spread", type=inputs.number(0, 1), default=0.01, help="relative spread (0.01)")
+    s.add_argument("--trim", choices=TRIMS, default="none", help="trim k/m (f) or k/m and c/m (fc) (none)")
+    s.add_argument("--trim-residual", type=inputs.number(0, 1), default=0.0, help="trim residual (0)")
+    s.add_argument("--steps", type=inputs.integer(0, 10_000), default=50, help="steps in all (50)")
+    s.add_argument("--out", required=True, metavar="DIR", help="record and best block folder")
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.set_defaults(func=cmd_center)
+
+
+def cmd_center(args) -> int:
+    """Run or resume a centering; print the best block's figures."""
+    from ..cli import _log, _print_json
+    from ..physics.params import load_params
+    if args.trim == "none" and args.trim_residual:
+        raise Mech2SpiceError("--trim-residual needs --trim f or fc")
+    spec = SpreadSpec(args.spread, args.trim, args.trim_residual)
+    spec.validate()
+    out = run(load_params(args.seed), Settings(args.seed, spec), args.out, args.steps, _log(args))
+    if args.json:
+        _print_json(out)
+        return 0
+    print(f"best step {out['best_step']} of {out['steps']}: linear tolerance {out['tolerance_linear']:.3g} "
+          f"(seed {out['seed']['tolerance_linear']:.3g}), beta at the target {out['beta_target']:.3g}, "
+          f"nominal margin {out['nominal_margin']:+.4f}; block: {out['best_file']}")
+    return 0

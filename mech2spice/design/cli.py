@@ -41,6 +41,8 @@ def add_parser(subparsers) -> None:
                         "loads and its nominal gate works (else exit 2, the installed block untouched)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_design)
+    from . import centering
+    centering.add_parser(subparsers)                 # `mech2spice center`: design/centering.py
 
 
 def _check_files(args) -> None:

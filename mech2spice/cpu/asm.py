@@ -43,6 +43,28 @@ class Program:
     symbols: dict[str, int]
     tape: TapeSpec | None = None
     lines: list = field(default_factory=list)   # (address, bytes, source) per statement
+    results: list = field(default_factory=list)  # ResultSpec per .result: what the program computes, where
+
+    def read_results(self, memory: list[int]) -> dict[str, list[int]]:
+        """{label: values} of every .result, read from a final memory image."""
+        return {r.label: r.read(memory) for r in self.results}
+
+
+@dataclass(frozen=True)
+class ResultSpec:
+    """`.result LABEL zeros ADDR COUNT [BASE]`: the numbers BASE + i (i < COUNT) whose cell ADDR + i holds 0
+    (a sieve's unmarked numbers); `.result LABEL bytes ADDR COUNT`: the COUNT bytes from ADDR."""
+    label: str
+    kind: str          # "zeros" or "bytes"
+    addr: int
+    count: int
+    base: int = 0
+
+    def read(self, memory: list[int]) -> list[int]:
+        cells = [memory[(self.addr + i) % MEM_SIZE] for i in range(self.count)]
+        if self.kind == "bytes":
+            return cells
+        return [self.base + i for i, v in enumerate(cells) if v == 0]
 
 
 def assemble(text: str) -> tuple[bytes, str, dict[str, int]]:
@@ -65,9 +87,18 @@ def assemble_program(text: str) -> Program:
         end = max(end, st.addr + len(data))
         rows.append((st.addr, data, st.source))
     tape = _tape(statements, symbols, rows)
+    results = [_result(st, symbols) for st in statements if st.result is not None]
     listing = "\n".join(f"{addr:3d}  {' '.join(f'{b:02X}' for b in data):<6} {src}" if data
                          else f"{'':11}{src}" for addr, data, src in rows)
-    return Program(bytes(image[:end]), listing, symbols, tape, rows)
+    return Program(bytes(image[:end]), listing, symbols, tape, rows, results)
+
+
+def _result(st, symbols: dict[str, int]) -> ResultSpec:
+    label, kind, *nums = st.result
+    values = [_value(v, symbols, st.lineno) for v in nums]
+    if kind == "bytes" and len(values) == 3:
+        raise _err(st.lineno, ".result LABEL bytes ADDR COUNT takes no BASE")
+    return ResultSpec(label, kind, *values)
 
 
 def _tape(statements: list, symbols: dict[str, int], rows: list) -> TapeSpec | None:
@@ -98,6 +129,7 @@ class _Statement:
     op: str | None = None            # mnemonic, or None for data/directives
     values: list = field(default_factory=list)   # operand expressions (bytes emitted)
     equ: tuple | None = None
+    result: tuple | None = None      # .result LABEL KIND ADDR COUNT [BASE], unevaluated
     org: str | None = None
     tape: tuple | None = None
     addr: int = 0
@@ -150,6 +182,11 @@ def _parse_directive(st: _Statement, word: str, rest: str) -> None:
         if not rest:
             raise _err(st.lineno, ".org needs an address")
         st.org = rest
+    elif word == ".result":
+        parts = rest.split()
+        if not (4 <= len(parts) <= 5 and _NAME.match(parts[0]) and parts[1] in ("zeros", "bytes")):
+            raise _err(st.lineno, ".result needs LABEL zeros|bytes ADDR COUNT [BASE]")
+        st.result = tuple(parts)
     elif word == ".tape":
         parts = rest.split()
         if len(parts) != 3 or not re.fullmatch(r"[0-7]+", parts[2]):

@@ -230,13 +230,27 @@ def cmd_run(args) -> int:
         print(json.dumps(res, indent=2))
     else:
         _print_run(res)
-    return 0 if res["halted"] and res.get("stable", True) else 1
+    agrees = res.get("iss_check", {}).get("mismatches", 0) == 0
+    return 0 if res["halted"] and res.get("stable", True) and agrees else 1
 
 
 def _print_run(res: dict) -> None:
     regs = res["registers"]
     state = "halted" if res["halted"] else "did not halt"
     print(f"{state} after {res['cycles']} cycles ({res['backend']}, {res['wall_s']:.2f} s)")
+    if "model" in res:
+        m = res["model"]
+        print(f"model: {m['oscillators']} oscillators, {m['linear_springs']} springs, "
+              f"{m['nonlinear_springs']} nonlinear springs, {m['dashpots']} dashpots")
+    if "iss_check" in res:
+        chk = res["iss_check"]
+        first = chk["first_mismatch"]
+        print(f"ISS check: every cycle equal to the instruction-set simulator ({chk['cycles_checked']} cycles "
+              f"from cycle {chk['from_cycle']})" if not chk["mismatches"] else
+              f"ISS check: {chk['mismatches']} of {chk['cycles_checked']} cycles differ from the instruction-set "
+              f"simulator, first at cycle {first['cycle']}")
+    for label, values in res.get("results", {}).items():
+        print(f"{label}{'' if res['halted'] else ' (not halted: partial)'}: {' '.join(map(str, values))}")
     print("registers: " + " ".join(f"{k}={v}" for k, v in regs.items()))
     if "stability" in res:
         st = res["stability"]

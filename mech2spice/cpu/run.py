@@ -7,6 +7,7 @@ cycles and at the end; ``resume=True`` continues from that file (cycle counts ar
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import glob
 import hashlib
@@ -21,7 +22,7 @@ from pathlib import Path
 from ..errors import Mech2SpiceError
 from ..inputs import check_output_file, first_json_line, is_int, read_json
 from .isa import MEM_SIZE
-from .iss import FETCH, LDNX, LOAD, REGISTERS
+from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS
 from .asm import Program, assemble_program
 from .machines import CIRCUIT, PHYSICAL, make_cpu
 from .memory import Memory
@@ -57,6 +58,33 @@ def make_memory(program: Program) -> Memory:
     if program.tape is not None:
         devices[program.tape.addr] = Tape.from_digits(program.tape.cells, program.tape.head)
     return Memory(program.image, devices)
+
+
+class IssCheck:
+    """The instruction-set simulator in lockstep with another machine, from that machine's state (at power-up
+    or at a resumed checkpoint): every cycle's memory access and the registers after it must be the ISS's."""
+
+    def __init__(self, cpu):
+        self.iss = ISS(copy.deepcopy(cpu.mem))      # its own memory and devices: both commit their own writes
+        self.iss.set_registers(cpu.registers())
+        self.iss.cycle, self.iss.halted = cpu.cycle, cpu.halted
+        self.start, self.checked, self.mismatches, self.first = cpu.cycle, 0, 0, None
+
+    def compare(self, rec, cpu) -> None:
+        want = None if self.iss.halted else self.iss.step()
+        self.checked += 1
+        got_regs, want_regs = cpu.registers(), self.iss.registers()
+        if want == rec and got_regs == want_regs and cpu.halted == self.iss.halted:
+            return
+        self.mismatches += 1
+        if self.first is None:
+            self.first = {"cycle": rec.cycle, "machine": {**dataclasses.asdict(rec), "registers": got_regs},
+                          "iss": {**(dataclasses.asdict(want) if want else {"halted": True}),
+                                  "registers": want_regs}}
+
+    def to_json(self) -> dict:
+        return {"from_cycle": self.start, "cycles_checked": self.checked, "mismatches": self.mismatches,
+                "first_mismatch": self.first}
 
 
 # --------------------------------------------------------------------------- checkpoints
@@ -354,8 +382,11 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     if trace is not None and not callable(trace):
         trace = TraceFile(trace, cpu.cycle if resume else None)
     bar = _cycle_bar(progress if backend != "iss" else False, cpu.cycle, max_cycles, backend)
+    shadow = IssCheck(cpu) if backend != "iss" else None
     while not cpu.halted and cpu.cycle < max_cycles:
         rec = cpu.step()
+        if shadow is not None:
+            shadow.compare(rec, cpu)
         bar.update(1)
         if trace is not None:
             trace(rec, cpu)
@@ -369,6 +400,12 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     result = {"backend": backend, "cycles": cpu.cycle, "halted": cpu.halted,
               "memory": cpu.mem.snapshot(), "registers": cpu.registers(),
               "wall_s": time.perf_counter() - t0, **cost.totals()}
+    if program.results:
+        result["results"] = program.read_results(result["memory"])
+    if shadow is not None:
+        result["iss_check"] = shadow.to_json()
+    if hasattr(cpu, "model"):
+        result["model"] = cpu.model.counts()
     if backend in PHYSICAL:
         result.update(periods=cpu.period, simulated_periods=cpu.simulated, step=cpu.step_periods,
                       settle=cpu.settle, latency=cpu.latency, block_steps=cpu.block_steps)

@@ -189,6 +189,7 @@ def measure(p, sigma: float, samples: int, tol_samples: int, seed: int, log=lamb
 def block_file(p, record: dict) -> dict:
     """The block file (--params FILE) of a found block, with how it was found and what was measured."""
     return {"name": p.name, "block": p.structure.to_dict(), "f_r": p.f_r, "u_r": p.u_r, "omega": p.omega,
+            "levels": p.levels.to_dict(),
             "search": record["search"], "measured": record["measured"]}
 
 

@@ -300,10 +300,13 @@ def job_key(job: dict) -> str:
     Parameters named by a file or a shipped block ('robust' changes when `mech2spice design` installs a
     better one) enter by their values, so a results file never resumes under other values; the built-in
     presets enter by name, which keeps the keys of results files written before blocks were data."""
-    from ..physics.params import BUILTIN, load_params
+    from ..physics.params import BUILTIN, DEFAULT_LEVELS, load_params
     keyed = dict(job)
     if job.get("params") not in BUILTIN:
-        keyed["params_values"] = load_params(job["params"]).to_dict()
+        values = load_params(job["params"]).to_dict()
+        if values["levels"] == DEFAULT_LEVELS.to_dict():
+            del values["levels"]          # keys of results files written before levels were block data
+        keyed["params_values"] = values
     return hashlib.sha256(json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 

@@ -40,7 +40,7 @@ class Sampler:
         self.base = loaded.build(p)
         self.elements = spread.elements(self.base.model, self.base.block_dofs)
         self.eps = spread.draws(len(self.elements), samples, seed)
-        self.levels, self.expect = input_grid(per_band)
+        self.levels, self.expect = input_grid(per_band, p.levels)
 
     def model(self, sigma: float, i: int | None):
         """Sample i at spread sigma (None: the nominal gate)."""
@@ -52,7 +52,7 @@ class Sampler:
         """Per-point margins of one model of the loaded gate's topology."""
         st = steady_batch.stack([model], self.base.input_groups(), self.base.gate.channel)
         r = steady_batch.roots(st, 0, self.levels, self.n_grid)
-        return point_margins(r, self.expect, self.p.u_r)
+        return point_margins(r, self.expect, self.p.u_r, self.p.levels)
 
     def run(self, sigma: float, max_failures: int | None = None) -> dict:
         """Margin of every sample at sigma; stops early once more than max_failures samples failed."""
@@ -184,7 +184,8 @@ def rk4_check(sampler: Sampler, sigma: float, picks: list[tuple[int, int]], peri
         e = sampler.expect[k:k + 1]
         out.append({"sample": i, "point": k, "inputs": sampler.levels[k, 1:].tolist(), "rk4": float(amp[n]),
                     "steady": (r.amp[r.stable] / sampler.p.u_r).tolist(),
-                    "margin_steady": float(point_margins(r, e, sampler.p.u_r)[0]), "margin_rk4": float(band_margin(amp[n:n + 1], e)[0])})
+                    "margin_steady": float(point_margins(r, e, sampler.p.u_r, sampler.p.levels)[0]),
+                    "margin_rk4": float(band_margin(amp[n:n + 1], e, sampler.p.levels)[0])})
     return out
 
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import nor
 from .model import MechModel
-from .params import BAND0, BAND1, NOMINAL0, GateParams, band_of
+from .params import DEFAULT_LEVELS, GateParams, Levels
 from .steady_batch import Roots
 
 GATE, INPUTS, LOAD = "gate", ("in1", "in2"), "load"
@@ -69,7 +69,7 @@ def build(p: GateParams, load: str = "pair") -> LoadedGate:
         nor.connect(m, p, u, pair)
     if load == "gate":
         lg = nor.add_nor(m, p, LOAD)
-        nor.drive_pair(m, p, lg.inputs[1], NOMINAL0, f"{LOAD}.x2")
+        nor.drive_pair(m, p, lg.inputs[1], p.levels.nominal0, f"{LOAD}.x2")
         pair = lg.inputs[0]
     elif load == "pair":
         pair = tuple(m.add_dof(f"{LOAD}.{d.name}", d.m, d.k, d.c) for d in (b.dof(a.dof) for a in b.inputs[0]))
@@ -87,25 +87,31 @@ def at_inputs(lg: LoadedGate, x1: float, x2: float, model: MechModel | None = No
     return scaled(model if model is not None else lg.model, ins, np.array([x1, x2], float))
 
 
-def input_grid(per_band: int = PER_BAND) -> tuple[np.ndarray, np.ndarray]:
+def input_grid(per_band: int = PER_BAND, levels: Levels = DEFAULT_LEVELS) -> tuple[np.ndarray, np.ndarray]:
     """Drive-group levels (P, 3) = (1, x1, x2) over both bands of both inputs, and NOR of each point."""
-    lv = np.concatenate([np.linspace(*BAND0, per_band), np.linspace(*BAND1, per_band)])
+    lv = np.concatenate([np.linspace(*levels.band0, per_band), np.linspace(*levels.band1, per_band)])
     X1, X2 = np.meshgrid(lv, lv, indexing="ij")
     x1, x2 = X1.ravel(), X2.ravel()
-    expect = np.array([int(not (band_of(a) or band_of(b))) for a, b in zip(x1, x2)])
+    expect = np.array([int(not (levels.band_of(a) or levels.band_of(b))) for a, b in zip(x1, x2)])
     return np.stack([np.ones_like(x1), x1, x2], axis=1), expect
 
 
-def band_margin(a: np.ndarray, expect: np.ndarray) -> np.ndarray:
-    """params.margin, vectorised: distance of amplitudes a (u_R) to the edge of band `expect`, in band widths."""
-    lo = np.where(expect == 1, BAND1[0], BAND0[0])
-    hi = np.where(expect == 1, BAND1[1], BAND0[1])
+def band_edges(expect: np.ndarray, levels: Levels = DEFAULT_LEVELS) -> tuple[np.ndarray, np.ndarray]:
+    """The low and high edges of band `expect` (per element)."""
+    lo = np.where(expect == 1, levels.band1[0], levels.band0[0])
+    hi = np.where(expect == 1, levels.band1[1], levels.band0[1])
+    return lo, hi
+
+
+def band_margin(a: np.ndarray, expect: np.ndarray, levels: Levels = DEFAULT_LEVELS) -> np.ndarray:
+    """Levels.margin, vectorised: distance of amplitudes a (u_R) to the edge of band `expect`, in band widths."""
+    lo, hi = band_edges(expect, levels)
     return np.minimum(a - lo, hi - a) / (hi - lo)
 
 
-def point_margins(roots: Roots, expect: np.ndarray, u_r: float) -> np.ndarray:
+def point_margins(roots: Roots, expect: np.ndarray, u_r: float, levels: Levels = DEFAULT_LEVELS) -> np.ndarray:
     """Per input point: the smallest band margin over its stable states, -1 where none is stable."""
-    m = np.where(roots.stable, band_margin(roots.amp / u_r, expect[roots.point]), np.inf)
+    m = np.where(roots.stable, band_margin(roots.amp / u_r, expect[roots.point], levels), np.inf)
     out = np.full(expect.size, np.inf)
     np.minimum.at(out, roots.point, m)
     out[np.isinf(out)] = -1.0

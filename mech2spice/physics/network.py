@@ -14,7 +14,7 @@ from . import nor
 from ..errors import Mech2SpiceError
 from ..synthesis.ports import input_bits, output_bits, pack_inputs
 from .model import MechModel
-from .params import NOMINAL0, NOMINAL1, GateParams
+from .params import GateParams
 from .stimulus import Stimulus
 from ..synthesis.synth import Netlist
 
@@ -51,13 +51,13 @@ def build(netlist: Netlist, p: GateParams, delay_pairs: int = LATCH_DELAY_PAIRS)
         if kind in ("nor", "latch"):
             nor.connect(m, p, outs[src].channel, pair)
         elif kind == "input":
-            bit_drives[src] += nor.drive_pair(m, p, pair, NOMINAL0, f"in.{src}.{sink}")
+            bit_drives[src] += nor.drive_pair(m, p, pair, p.levels.nominal0, f"in.{src}.{sink}")
         elif src == "const0":
-            nor.drive_pair(m, p, pair, NOMINAL0, f"zero.{sink}")
+            nor.drive_pair(m, p, pair, p.levels.nominal0, f"zero.{sink}")
         else:
             raise Mech2SpiceError(f"gate {sink} is fed by {src} ({kind}); only gates, latches, inputs "
                                   "and const0 can drive a gate")
-    clock_drives = [d for pair in clock_pairs for d in nor.drive_pair(m, p, pair, NOMINAL0, "clk")]
+    clock_drives = [d for pair in clock_pairs for d in nor.drive_pair(m, p, pair, p.levels.nominal0, "clk")]
     const_out = {}
     m.probes.clear()              # a design is observed at its outputs (internal DOFs by name if wanted)
     for bit in output_bits(netlist):
@@ -90,7 +90,7 @@ def _add_latch(m: MechModel, p: GateParams, q: str, delay_pairs: int):
         mk[f"d{k}"] = last = nxt
     for name, block in mk.items():                 # every free pin 1 is a constant '0'
         if name == "ne" or name.startswith("d"):
-            nor.drive_pair(m, p, block.inputs[1], NOMINAL0, f"zero.{block.name}")
+            nor.drive_pair(m, p, block.inputs[1], p.levels.nominal0, f"zero.{block.name}")
     m.design.latch_blocks.extend(mk.values())
     return mk["a"], last, [mk["ne"].inputs[0], mk["b"].inputs[1]]
 
@@ -101,7 +101,7 @@ def drive_levels(model: MechModel, netlist: Netlist, p: GateParams, values: list
     out: dict[int, np.ndarray] = {}
     bits = [pack_inputs(netlist, v) for v in values]
     for bit, drives in model.design.bit_drives.items():
-        amp = np.array([p.force(NOMINAL1 if b.get(bit, 0) else NOMINAL0) for b in bits])
+        amp = np.array([p.force(p.levels.nominal(b.get(bit, 0))) for b in bits])
         for d in drives:
             out[d] = amp
     return out
@@ -116,7 +116,7 @@ def stimulus(model: MechModel, netlist: Netlist, p: GateParams,
     for k, (t, vals) in enumerate(segments):
         lv = drive_levels(model, netlist, p, vals)
         if model.design.clock_drives:
-            ck = np.array([p.force(NOMINAL1 if c else NOMINAL0) for c in (clock[k] if clock else [0] * batch)])
+            ck = np.array([p.force(p.levels.nominal(c)) for c in (clock[k] if clock else [0] * batch)])
             lv.update({d: ck for d in model.design.clock_drives})
         levels.append((t * p.period, lv))
     return Stimulus.from_levels(model, levels, batch=batch)

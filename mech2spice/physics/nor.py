@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 from .model import MechModel
-from .params import NOMINAL0, GateParams
+from .params import GateParams
 
 SPRING_PHASE = 0.0
 DASHPOT_PHASE = math.pi / 2     # a dashpot's force leads the spring's by 90 degrees
@@ -93,8 +93,15 @@ def drive_pair(model: MechModel, p: GateParams, pair: tuple[int, ...], level: fl
 
 
 # --- small circuits used by characterisation, tests and benchmarks ----------
-def single_gate(p: GateParams, x1: float = NOMINAL0, x2: float = NOMINAL0) -> MechModel:
-    """One NOR gate with its two inputs driven externally at levels x1, x2 (fractions of F_R)."""
+def _zero(p: GateParams, x: float | None) -> float:
+    """x, or the block's nominal '0' where not given."""
+    return p.levels.nominal0 if x is None else x
+
+
+def single_gate(p: GateParams, x1: float | None = None, x2: float | None = None) -> MechModel:
+    """One NOR gate with its two inputs driven externally at levels x1, x2 (fractions of F_R; default the
+    block's nominal '0')."""
+    x1, x2 = _zero(p, x1), _zero(p, x2)
     m = new_model(p)
     g = add_nor(m, p, "g0")
     m.design.input_drives = [drive_pair(m, p, g.inputs[0], x1, "x1"),
@@ -103,22 +110,24 @@ def single_gate(p: GateParams, x1: float = NOMINAL0, x2: float = NOMINAL0) -> Me
     return m
 
 
-def chain(p: GateParams, n: int = 3, x1: float = NOMINAL0, x2: float = NOMINAL0) -> MechModel:
+def chain(p: GateParams, n: int = 3, x1: float | None = None, x2: float | None = None) -> MechModel:
     """((x1 NOR x2) NOR 0) NOR 0 ...: n gates, each later gate's second input a constant '0'."""
+    x1, x2 = _zero(p, x1), _zero(p, x2)
     m = new_model(p)
     gates = [add_nor(m, p, f"g{k}") for k in range(n)]
     m.design.input_drives = [drive_pair(m, p, gates[0].inputs[0], x1, "x1"),
                               drive_pair(m, p, gates[0].inputs[1], x2, "x2")]
     for k in range(1, n):
         connect(m, p, gates[k - 1].channel, gates[k].inputs[0])
-        drive_pair(m, p, gates[k].inputs[1], NOMINAL0, f"zero{k}")
+        drive_pair(m, p, gates[k].inputs[1], p.levels.nominal0, f"zero{k}")
     m.design.gates = gates
     return m
 
 
-def fanout(p: GateParams, n_loads: int, x1: float = NOMINAL0, x2: float = NOMINAL0,
-           load_x2: float = NOMINAL0) -> MechModel:
+def fanout(p: GateParams, n_loads: int, x1: float | None = None, x2: float | None = None,
+           load_x2: float | None = None) -> MechModel:
     """One driver gate whose channel feeds input 1 of n_loads gates (their input 2 at load_x2)."""
+    x1, x2, load_x2 = _zero(p, x1), _zero(p, x2), _zero(p, load_x2)
     m = new_model(p)
     drv = add_nor(m, p, "drv")
     m.design.input_drives = [drive_pair(m, p, drv.inputs[0], x1, "x1"),

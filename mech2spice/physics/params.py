@@ -23,11 +23,105 @@ from pathlib import Path
 from ..errors import Mech2SpiceError
 from .blocks import BlockSpec
 
-# Logic bands, as fractions of F_R (inputs) or u_R (outputs).
-BAND0 = (0.365, 0.67)
-BAND1 = (0.92, 1.025)
-NOMINAL0 = 0.5      # a constant logical '0' is a force of 0.5 F_R
-NOMINAL1 = 0.97
+
+
+@dataclass(frozen=True)
+class Levels:
+    """A block's logic levels, as fractions of F_R (input forces) or u_R (output amplitudes): the band each
+    bit may take and the nominal value a constant input is driven at.
+
+    They are the block's design data, not physics constants: the window a threshold must fall in is set by
+    the top of band 0 against the bottom of band 1 (docs/robustness.md).  A block must drive itself: its
+    outputs for inputs anywhere in the bands must land inside the bands, which the margin measures."""
+    band0: tuple[float, float] = (0.365, 0.67)
+    band1: tuple[float, float] = (0.92, 1.025)
+    nominal0: float = 0.5      # a constant logical '0' is a force of 0.5 F_R
+    nominal1: float = 0.97
+
+    def __post_init__(self):
+        # JSON gives lists; the record is hashable and compares equal however it was read
+        object.__setattr__(self, "band0", tuple(float(v) for v in self.band0))
+        object.__setattr__(self, "band1", tuple(float(v) for v in self.band1))
+
+    def band(self, bit: int) -> tuple[float, float]:
+        """The band of logical `bit`."""
+        return self.band1 if bit else self.band0
+
+    def nominal(self, bit: int) -> float:
+        """The level a constant logical `bit` is driven at."""
+        return self.nominal1 if bit else self.nominal0
+
+    def band_of(self, x: float) -> int | None:
+        """0, 1, or None (ambiguous) for an amplitude/force given in units of u_R / F_R."""
+        if self.band0[0] <= x <= self.band0[1]:
+            return 0
+        if self.band1[0] <= x <= self.band1[1]:
+            return 1
+        return None
+
+    def margin(self, x: float, expected: int | None = None) -> float:
+        """Signed distance to the nearest edge of the band (expected, or x's own), in widths of band 0.
+
+        Positive inside the band, negative outside (how far out)."""
+        if expected is None:
+            expected = self.band_of(x)
+            if expected is None:
+                edges = (*self.band0, *self.band1)
+                return -min(abs(x - e) for e in edges) / self.width(0)
+        lo, hi = self.band(expected)
+        return min(x - lo, hi - x) / self.width(expected)
+
+    def width(self, bit: int) -> float:
+        lo, hi = self.band(bit)
+        return hi - lo
+
+    def validate(self, where: str = "levels") -> None:
+        """Raise Mech2SpiceError unless 0 <= band0 < band1 (each low < high) and each nominal in its band."""
+        values = (*self.band0, *self.band1, self.nominal0, self.nominal1)
+        if len(self.band0) != 2 or len(self.band1) != 2 or not all(math.isfinite(v) for v in values):
+            raise Mech2SpiceError(f"{where}: band0 and band1 must be two finite numbers each, "
+                                  f"nominal0 and nominal1 finite numbers")
+        (lo0, hi0), (lo1, hi1) = self.band0, self.band1
+        if not 0 <= lo0 < hi0 < lo1 < hi1:
+            raise Mech2SpiceError(f"{where}: the bands must satisfy 0 <= band0 low < band0 high < band1 low "
+                                  f"< band1 high, got band0 {self.band0}, band1 {self.band1}")
+        for bit in (0, 1):
+            if self.band_of(self.nominal(bit)) != bit:
+                raise Mech2SpiceError(f"{where}: nominal{bit} = {self.nominal(bit)} lies outside band{bit} "
+                                      f"{self.band(bit)}")
+
+    def to_dict(self) -> dict:
+        return {"band0": list(self.band0), "band1": list(self.band1),
+                "nominal0": self.nominal0, "nominal1": self.nominal1}
+
+    @classmethod
+    def from_dict(cls, data, where: str = "levels") -> "Levels":
+        """Levels from a JSON object {band0: [lo, hi], band1: [lo, hi], nominal0?, nominal1?}."""
+        from ..inputs import is_number, type_name
+        if not isinstance(data, dict):
+            raise Mech2SpiceError(f"{where}: levels must be a JSON object, not {type_name(data)}")
+        unknown = set(data) - {"band0", "band1", "nominal0", "nominal1"}
+        if unknown or not {"band0", "band1"} <= set(data):
+            raise Mech2SpiceError(f"{where}: levels need band0 and band1 (and may give nominal0, nominal1); "
+                                  f"unknown: {', '.join(sorted(unknown)) or 'none'}")
+        for key in ("band0", "band1"):
+            v = data[key]
+            if not (isinstance(v, list) and len(v) == 2 and all(is_number(x) for x in v)):
+                raise Mech2SpiceError(f"{where}: {key} must be a list of two numbers [low, high]")
+        for key in ("nominal0", "nominal1"):
+            if key in data and not is_number(data[key]):
+                raise Mech2SpiceError(f"{where}: {key} must be a finite number")
+        b0, b1 = data["band0"], data["band1"]
+        lv = cls(tuple(b0), tuple(b1), float(data.get("nominal0", sum(b0) / 2)),
+                 float(data.get("nominal1", sum(b1) / 2)))
+        lv.validate(where)
+        return lv
+
+
+DEFAULT_LEVELS = Levels()
+# Today's bands under their old names, for code that has no block at hand (a block's own are p.levels).
+BAND0, BAND1 = DEFAULT_LEVELS.band0, DEFAULT_LEVELS.band1
+NOMINAL0, NOMINAL1 = DEFAULT_LEVELS.nominal0, DEFAULT_LEVELS.nominal1
 
 
 @dataclass(frozen=True)
@@ -51,6 +145,7 @@ class GateParams:
     f_c: float = 1.326
     omega: float = 48.754145
     name: str = "default"
+    levels: Levels = DEFAULT_LEVELS   # the block's logic bands and nominal constants
     # the block structure (physics/blocks.py); None: the classic block built from the fields above
     block: BlockSpec | None = field(default=None, repr=False)
 
@@ -103,13 +198,14 @@ class GateParams:
         """Raise Mech2SpiceError unless every field is finite and masses, Qs, stiffnesses, omega, F_R, u_R > 0."""
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name not in ("name", "block") and not (isinstance(v, (int, float)) and math.isfinite(v)):
+            if f.name not in ("name", "block", "levels") and not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise Mech2SpiceError(f"gate parameter {f.name} = {v!r} is not a finite number")
         for name in ("m_g", "m_i", "m_c", "q_g", "q_i", "q_c", "k_g", "k_i", "k_c", "omega", "f_r", "u_r"):
             if getattr(self, name) <= 0:
                 raise Mech2SpiceError(f"gate parameter {name} = {getattr(self, name)} must be positive")
         if self.block is not None:
             self.block.validate()
+        self.levels.validate(f"gate parameters {self.name}")
 
     @property
     def structure(self) -> BlockSpec:
@@ -119,10 +215,21 @@ class GateParams:
 
     def to_dict(self) -> dict:
         """The fields as a plain dict (with the block structure only when there is one)."""
-        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "block"}
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("block", "levels")}
+        out["levels"] = self.levels.to_dict()
         if self.block is not None:
             out["block"] = self.block.to_dict()
         return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "GateParams":
+        """The inverse of to_dict (a trusted record this package wrote: no validation beyond the fields')."""
+        data = dict(data)
+        if "levels" in data:
+            data["levels"] = Levels.from_dict(data["levels"])
+        if "block" in data:
+            data["block"] = BlockSpec.from_dict(data["block"])
+        return cls(**data)
 
 
 PRINTED = GateParams(
@@ -196,7 +303,11 @@ def load_params(spec: str | None) -> GateParams:
     if unknown:
         raise Mech2SpiceError(f"parameter file {spec}: unknown field(s) {', '.join(sorted(unknown))} "
                               f"(known: {', '.join(sorted(known))})")
+    if "levels" in data:
+        data = {**data, "levels": Levels.from_dict(data["levels"], f"parameter file {spec}")}
     for name, value in data.items():
+        if name == "levels":
+            continue
         ok = is_name(value) if name == "name" else is_number(value)
         if not ok:
             want = f"a string of at most {MAX_NAME} printable characters" if name == "name" else "a finite number"
@@ -211,10 +322,10 @@ def block_params(data: dict, where: str = "block file") -> GateParams:
     fields (m_c, k_c, ...) are taken from the block's DOFs C, I, G1s and quads where it has them, so
     the library defaults of the SPICE emitters match a classic-shaped block."""
     from ..inputs import MAX_NAME, is_name, is_number
-    unknown = set(data) - {"block", *GATE_FIELDS, *EXTRA_KEYS}
+    unknown = set(data) - {"block", "levels", *GATE_FIELDS, *EXTRA_KEYS}
     if unknown:
         raise Mech2SpiceError(f"block file {where}: unknown key(s) {', '.join(sorted(unknown))} "
-                              f"(known: block, {', '.join(GATE_FIELDS + EXTRA_KEYS)})")
+                              f"(known: block, levels, {', '.join(GATE_FIELDS + EXTRA_KEYS)})")
     for key in GATE_FIELDS[:3]:
         if key in data and not is_number(data[key]):
             raise Mech2SpiceError(f"block file {where}: {key} must be a finite number")
@@ -232,6 +343,8 @@ def block_params(data: dict, where: str = "block file") -> GateParams:
     if ("G1s", "I") in gam:
         roles["gamma_ig"] = gam[("G1s", "I")]
     name = data.get("name", Path(str(where)).stem)
+    if "levels" in data:
+        roles["levels"] = Levels.from_dict(data["levels"], f"block file {where}")
     p = replace(DEFAULT, **roles, **{k: float(data[k]) for k in GATE_FIELDS[:3] if k in data},
                 f_c=spec.source_force, name=str(name), block=spec)
     p.validate()
@@ -239,23 +352,10 @@ def block_params(data: dict, where: str = "block file") -> GateParams:
 
 
 def band_of(x: float) -> int | None:
-    """0, 1, or None (ambiguous) for an amplitude/force given in units of u_R / F_R."""
-    if BAND0[0] <= x <= BAND0[1]:
-        return 0
-    if BAND1[0] <= x <= BAND1[1]:
-        return 1
-    return None
+    """The default levels' band of x (a block's own: p.levels.band_of)."""
+    return DEFAULT_LEVELS.band_of(x)
 
 
 def margin(x: float, expected: int | None = None) -> float:
-    """Signed distance to the nearest edge of the band (expected, or x's own), as a fraction of band width.
-
-    Positive inside the band, negative outside (how far out, in band widths)."""
-    if expected is None:
-        expected = band_of(x)
-        if expected is None:
-            lo0, hi0 = BAND0
-            lo1, hi1 = BAND1
-            return -min(abs(x - lo0), abs(x - hi0), abs(x - lo1), abs(x - hi1)) / (hi0 - lo0)
-    lo, hi = BAND1 if expected else BAND0
-    return min(x - lo, hi - x) / (hi - lo)
+    """The default levels' margin of x (a block's own: p.levels.margin)."""
+    return DEFAULT_LEVELS.margin(x, expected)

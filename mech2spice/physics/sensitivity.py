@@ -147,17 +147,16 @@ def gate_sensitivity(p, per_band: int | None = None, n_grid: int | None = None) 
     d(quantity)/d(relative change): the output amplitude (u_R) for the four nominal input pairs, and the
     margin (band widths) at the worst input point and at the limiting point (smallest margin / |gradient|)."""
     from . import loaded, steady_batch
-    from .params import NOMINAL0, NOMINAL1
     per_band, n_grid = per_band or loaded.PER_BAND, n_grid or steady_batch.N_GRID
     lg = loaded.build(p)
     elems = spread_elements(lg)
-    level = {0: NOMINAL0, 1: NOMINAL1}
+    level = {0: p.levels.nominal0, 1: p.levels.nominal1}
     outputs, amps = {}, {}
     for a, b in CASES:
         g = margin_gradients(p, lg, elems, np.array([[1.0, level[a], level[b]]]), np.array([int(not (a or b))]),
                              n_grid)
         outputs[f"{a}{b}"], amps[f"{a}{b}"] = g["amp_grad"][0], g["amp"][0]
-    levels, expect = loaded.input_grid(per_band)
+    levels, expect = loaded.input_grid(per_band, p.levels)
     g = margin_gradients(p, lg, elems, levels, expect, n_grid)
     k = int(np.argmin(g["margin"]))
     ratio = np.where(g["margin"] > 0, g["margin"] / np.linalg.norm(g["margin_grad"], axis=1), np.inf)
@@ -183,21 +182,20 @@ def margin_gradients(p, lg, elems, levels: np.ndarray, expect: np.ndarray, n_gri
     from . import loaded, steady_batch
     st = steady_batch.stack([lg.model], lg.input_groups(), lg.gate.channel)
     r = steady_batch.roots(st, 0, levels, n_grid)
-    margin = loaded.point_margins(r, expect, p.u_r)
+    margin = loaded.point_margins(r, expect, p.u_r, p.levels)
     n = levels.shape[0]
     amp, amp_grad = np.full(n, np.nan), np.full((n, len(elems) + 1), np.nan)
     for k in range(n):
         idx = np.flatnonzero((r.point == k) & r.stable)
         if not idx.size:
             continue
-        i = idx[np.argmin(loaded.band_margin(r.amp[idx] / p.u_r, np.full(idx.size, expect[k])))]
+        i = idx[np.argmin(loaded.band_margin(r.amp[idx] / p.u_r, np.full(idx.size, expect[k]), p.levels))]
         op = Operator(loaded.at_inputs(lg, *levels[k, 1:]), elems)
         A = steady_batch.responses(st, 0, r.s[i:i + 1])[0] @ levels[k]
         y = op.polish(op.pack(A, r.s[i:i + 1]))
         amp[k] = np.hypot(y[op.out_row(lg.gate.channel)], y[op.nf + op.out_row(lg.gate.channel)]) / p.u_r
         amp_grad[k] = op.amplitude_sensitivity(y, lg.gate.channel) / p.u_r
-    lo = np.where(expect == 1, loaded.BAND1[0], loaded.BAND0[0])
-    hi = np.where(expect == 1, loaded.BAND1[1], loaded.BAND0[1])
+    lo, hi = loaded.band_edges(expect, p.levels)
     sign = np.where(amp - lo < hi - amp, 1.0, -1.0)
     return {"margin": margin, "amp": amp, "amp_grad": amp_grad,
             "margin_grad": amp_grad * (sign / (hi - lo))[:, None]}

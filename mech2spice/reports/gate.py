@@ -117,7 +117,7 @@ def write_gate_report(out: dict, directory, log=lambda m: None) -> Path:
     """Write gate.md + figures for the default set `out`, re-running the printed set for comparison."""
     from ..physics.params import PRINTED
     d = out_dir(directory)
-    p = GateParams(**out["params"])
+    p = GateParams.from_dict(out["params"])
     log("report: steady-state map")
     mp = plot_map(p, d / "gate_map.png")
     plot_transient(out["_figures"]["transient"], d / "gate_transient.png")

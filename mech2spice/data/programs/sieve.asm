@@ -10,6 +10,7 @@
 
         .equ ARRAY 128
         .equ LAST 159               ; ARRAY + 31
+        .result primes zeros ARRAY+2 30 2   ; what it computes: the numbers 2..31 left unmarked
 
         LDNX_AB cont                ; C = cont: the jump at 6 falls through to 7
         SWAP_AC

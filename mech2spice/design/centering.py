@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import Mech2SpiceError
 from ..physics import loaded, spread, steady_batch
-from ..physics.params import GateParams
+from ..physics.params import GateParams, Levels
 
 Z99 = 2.3263478740408408        # one-sided standard normal quantile of 99 %
 TRIMS = ("none", "f", "fc")
@@ -170,16 +170,16 @@ class Constraints:
         return (self.grad @ Sa) ** 2 @ np.ones(Sa.shape[1]), (self.grad @ Sb) ** 2 @ np.ones(Sb.shape[1])
 
 
-def constraints(fx: Fast, levels: np.ndarray, expect: np.ndarray, u_r: float, n_grid: int) -> Constraints:
+def constraints(fx: Fast, levels: np.ndarray, expect: np.ndarray, p: GateParams, n_grid: int) -> Constraints:
     """The margin constraints (every stable state) and fold constraints (every extremum of r(s)) of the
     loaded gate at the input points `levels` (P, G) with expected outputs `expect`."""
-    st = fx.st
+    st, u_r = fx.st, p.u_r
     r = steady_batch.roots(st, 0, levels, n_grid)
-    nominal = float(loaded.point_margins(r, expect, u_r).min())
+    nominal = float(loaded.point_margins(r, expect, u_r, p.levels).min())
     keep = r.stable
     pts, s_roots = r.point[keep], r.s[keep]
     sr = fx.state(levels[pts], s_roots)
-    lo, hi = _band_edges(expect[pts])
+    lo, hi = loaded.band_edges(expect[pts], p.levels)
     a = np.abs(sr["A_out"]) / u_r
     sign = np.where(a - lo < hi - a, 1.0, -1.0)
     ds_dt = -sr["r_t"] / sr["r_s"][:, None]
@@ -193,12 +193,6 @@ def constraints(fx: Fast, levels: np.ndarray, expect: np.ndarray, u_r: float, n_
     kind = np.array(["margin"] * pts.size + ["fold"] * ep.size)
     return Constraints(kind, np.concatenate([pts, ep]), np.concatenate([s_roots, es]),
                        np.concatenate([m_val, f_val]), np.concatenate([m_grad, f_grad]), nominal)
-
-
-def _band_edges(expect: np.ndarray):
-    lo = np.where(expect == 1, loaded.BAND1[0], loaded.BAND0[0])
-    hi = np.where(expect == 1, loaded.BAND1[1], loaded.BAND0[1])
-    return lo, hi
 
 
 def extrema(st: steady_batch.Stack, levels: np.ndarray, n_grid: int) -> tuple[np.ndarray, np.ndarray]:
@@ -265,8 +259,8 @@ class Analysis:
 def analyse(p: GateParams, spec: SpreadSpec, per_band: int = 6, n_grid: int = 1000) -> Analysis:
     """Every constraint of block p over the input grid (per_band levels per band) and its variances."""
     fx = Fast.of(p)
-    levels, expect = loaded.input_grid(per_band)
-    cons = constraints(fx, levels, expect, p.u_r, n_grid)
+    levels, expect = loaded.input_grid(per_band, p.levels)
+    cons = constraints(fx, levels, expect, p, n_grid)
     trimmed = [d for d in fx.lg.block_dofs if not fx.lg.model.slow[d]]
     Sa, Sb, res_names = noise_matrices(fx.lg.model, fx.elems, trimmed, spec.trim)
     a, b = cons.variances(Sa, Sb)
@@ -279,8 +273,11 @@ W_SEED = GateParams().omega
 # name -> (DOFs it sets, what): d* detuning k = m w^2 (1 + d); lq*, lm* log10 of Q and mass
 DOF_VARS = {"c": ("C",), "gs": ("G1s", "G2s"), "gd": ("G1d", "G2d")}
 LOG_VARS = ("lk_i", "lgam_gs", "lgam_gd", "lgam_ic", "lf_c")
-STEP0 = {"d": 2e-4, "l": 2e-3}            # initial trust region per coordinate: detunings, log10 values
-FD_STEP = {"d": 1e-7, "l": 1e-6}
+LEVEL_VARS = ("band0_lo", "band0_hi", "band1_lo", "band1_hi")
+STEP0 = {"d": 2e-4, "l": 2e-3, "b": 2e-3}    # initial trust region per coordinate: detunings, log10 values, bands
+FD_STEP = {"d": 1e-7, "l": 1e-6, "b": 1e-6}
+WIDTH_FLOOR = 0.05        # the narrowest band (u_R, F_R) the optimiser may make
+GAP_FLOOR = 0.02          # ... and the narrowest gap between band 0 and band 1
 
 
 @dataclass(frozen=True)
@@ -288,12 +285,15 @@ class Design:
     """The classic block's parameters as a vector x: per oscillator kind (channel c, spring-linked gates
     gs, dashpot-linked gates gd) its detuning, log10 Q and log10 mass; log10 of the insulator stiffness,
     of the gammas and of the source force.  The insulator's mass and Q (steady states do not depend on
-    them), omega, F_R and u_R are the seed's."""
+    them), omega, F_R and u_R are the seed's.  With `levels`, the four band edges too (docs/design.md):
+    a block's bands are its own data, and the window between them is what its threshold must fall in."""
     seed: GateParams
+    levels: bool = True
 
     @property
     def names(self) -> list[str]:
-        return [f"{v}_{k}" for k in DOF_VARS for v in ("d", "lq", "lm")] + list(LOG_VARS)
+        return ([f"{v}_{k}" for k in DOF_VARS for v in ("d", "lq", "lm")] + list(LOG_VARS)
+                + list(LEVEL_VARS if self.levels else ()))
 
     def x0(self) -> np.ndarray:
         """The seed block as a vector (refuses a block that is not classic-shaped)."""
@@ -310,6 +310,8 @@ class Design:
         gam = {f: g for f, _, g in b.quads}
         x += [math.log10(b.dof("I").k), math.log10(gam["G1s"]), math.log10(gam["G1d"]), math.log10(-gam["C"]),
               math.log10(b.source_force)]
+        if self.levels:
+            x += [*self.seed.levels.band0, *self.seed.levels.band1]
         return np.array(x)
 
     def params(self, x) -> GateParams:
@@ -328,11 +330,39 @@ class Design:
                                                        for k in ("gs", "gd") for n in DOF_VARS[k]]
         spec = BlockSpec(b.name, tuple(dofs), (), (), tuple(quads), "C", 10.0 ** v["lf_c"], "C", b.inputs)
         return block_params({"block": spec.to_dict(), "name": self.seed.name, "f_r": self.seed.f_r,
-                             "u_r": self.seed.u_r, "omega": self.seed.omega}, "centering")
+                             "u_r": self.seed.u_r, "omega": self.seed.omega,
+                             "levels": self._levels(v).to_dict()}, "centering")
+
+    def _levels(self, v: dict) -> Levels:
+        """The seed's levels, or the bands of v with the seed's nominal levels where they stay inside
+        (else the band's middle)."""
+        old = self.seed.levels
+        if not self.levels:
+            return old
+        bands = ((v["band0_lo"], v["band0_hi"]), (v["band1_lo"], v["band1_hi"]))
+        nominal = [old.nominal(bit) if lo <= old.nominal(bit) <= hi else (lo + hi) / 2
+                   for bit, (lo, hi) in enumerate(bands)]
+        return Levels(*bands, *nominal)
 
     def scale(self, table: dict) -> np.ndarray:
-        """Per coordinate: table['d'] for detunings, table['l'] for log10 values."""
-        return np.array([table["d"] if n.startswith("d_") else table["l"] for n in self.names])
+        """Per coordinate: table['d'] for detunings, table['l'] for log10 values, table['b'] for band edges."""
+        return np.array([table[n[0]] for n in self.names])
+
+    def linear(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """(A, b): A dx <= b keeps the bands ordered, each at least WIDTH_FLOOR wide, GAP_FLOOR apart, >= 0."""
+        if not self.levels:
+            return np.zeros((0, x.size)), np.zeros(0)
+        i = [self.names.index(n) for n in LEVEL_VARS]
+        rows, b = [], []
+        for lo, hi, floor in ((None, i[0], 0.0), (i[0], i[1], WIDTH_FLOOR), (i[1], i[2], GAP_FLOOR),
+                              (i[2], i[3], WIDTH_FLOOR)):
+            row = np.zeros(x.size)                       # x[hi] + dx[hi] - x[lo] - dx[lo] >= floor
+            row[hi] = -1.0
+            if lo is not None:
+                row[lo] = 1.0
+            rows.append(row)
+            b.append(x[hi] - (x[lo] if lo is not None else 0.0) - floor)
+        return np.array(rows), np.array(b)
 
 
 # --- the optimiser ---------------------------------------------------------------------------------
@@ -404,7 +434,7 @@ class Centering:
         active = np.argsort(beta)[:ACTIVE_MAX]
         active = active[beta[active] <= ACTIVE_RATIO * beta[active[0]]]
         J = self.jacobian(x, an, active, s_w)
-        dx, predicted = _lp_step(beta[active], J, trust * self.trust0)
+        dx, predicted = _lp_step(beta[active], J, trust * self.trust0, *self.design.linear(x))
         trial = self.analyse(x + dx)
         new = self.score(trial, s_w)
         gain, old = new - beta.min(), float(beta.min())
@@ -431,13 +461,16 @@ def _match(an: Analysis, other: Analysis, active: np.ndarray, s_w: float) -> np.
     return out
 
 
-def _lp_step(beta: np.ndarray, J: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, float]:
-    """max tau s.t. beta + J dx >= tau, |dx| <= radius: the step and its predicted gain of min beta."""
+def _lp_step(beta: np.ndarray, J: np.ndarray, radius: np.ndarray, A_lin: np.ndarray,
+             b_lin: np.ndarray) -> tuple[np.ndarray, float]:
+    """max tau s.t. beta + J dx >= tau, A_lin dx <= b_lin, |dx| <= radius: the step and its predicted gain
+    of min beta."""
     from scipy.optimize import linprog
     n = radius.size
-    A = np.hstack([-J * radius[None, :], np.ones((beta.size, 1))])     # in u = dx / radius
-    res = linprog(np.r_[np.zeros(n), -1.0], A_ub=A, b_ub=beta, bounds=[(-1, 1)] * n + [(None, None)],
-                  method="highs")
+    A = np.vstack([np.hstack([-J * radius[None, :], np.ones((beta.size, 1))]),     # in u = dx / radius
+                   np.hstack([A_lin * radius[None, :], np.zeros((b_lin.size, 1))])])
+    res = linprog(np.r_[np.zeros(n), -1.0], A_ub=A, b_ub=np.r_[beta, b_lin],
+                  bounds=[(-1, 1)] * n + [(None, None)], method="highs")
     if not res.success:
         return np.zeros(n), 0.0
     return res.x[:n] * radius, float(res.x[n] - beta.min())

@@ -164,6 +164,7 @@ class Constraints:
     value: np.ndarray         # margin (band widths) or |r_e|
     grad: np.ndarray          # (n, E) d value / dt
     nominal_margin: float     # the block's worst margin over the grid (point_margins)
+    growth: float             # the largest growth rate (1/time) of any stable state over the grid
 
     def variances(self, Sa, Sb) -> tuple[np.ndarray, np.ndarray]:
         """Per constraint ||Sa^T g||^2 and ||Sb^T g||^2."""
@@ -192,7 +193,8 @@ def constraints(fx: Fast, levels: np.ndarray, expect: np.ndarray, p: GateParams,
     f_val, f_grad = np.abs(se["r"]), np.sign(se["r"])[:, None] * se["r_t"]
     kind = np.array(["margin"] * pts.size + ["fold"] * ep.size)
     return Constraints(kind, np.concatenate([pts, ep]), np.concatenate([s_roots, es]),
-                       np.concatenate([m_val, f_val]), np.concatenate([m_grad, f_grad]), nominal)
+                       np.concatenate([m_val, f_val]), np.concatenate([m_grad, f_grad]), nominal,
+                       float(r.growth[keep].max(initial=-np.inf)))
 
 
 def extrema(st: steady_batch.Stack, levels: np.ndarray, n_grid: int) -> tuple[np.ndarray, np.ndarray]:
@@ -272,12 +274,16 @@ def analyse(p: GateParams, spec: SpreadSpec, per_band: int = 6, n_grid: int = 10
 W_SEED = GateParams().omega
 # name -> (DOFs it sets, what): d* detuning k = m w^2 (1 + d); lq*, lm* log10 of Q and mass
 DOF_VARS = {"c": ("C",), "gs": ("G1s", "G2s"), "gd": ("G1d", "G2d")}
-LOG_VARS = ("lk_i", "lgam_gs", "lgam_gd", "lgam_ic", "lf_c")
+LOG_VARS = ("lk_i", "lgam_gs", "lgam_gd", "lgam_ic", "lf_c", "lq_i")
 LEVEL_VARS = ("band0_lo", "band0_hi", "band1_lo", "band1_hi")
 STEP0 = {"d": 2e-4, "l": 2e-3, "b": 2e-3}    # initial trust region per coordinate: detunings, log10 values, bands
 FD_STEP = {"d": 1e-7, "l": 1e-6, "b": 1e-6}
 WIDTH_FLOOR = 0.05        # the narrowest band (u_R, F_R) the optimiser may make
 GAP_FLOOR = 0.02          # ... and the narrowest gap between band 0 and band 1
+# Every stable state over the grid must decay at least this fast (1/time; the default block's slowest decays
+# at 0.0064): without it the optimiser walks the robust block to a Hopf point of the insulator mode at the
+# (1, 1) corner (growth -1e-5, measured), which no margin or fold constraint sees.
+GROWTH_FLOOR = 0.005
 
 
 @dataclass(frozen=True)
@@ -309,7 +315,7 @@ class Design:
             x += [d.k / (d.m * w2) - 1, math.log10(d.q), math.log10(d.m)]
         gam = {f: g for f, _, g in b.quads}
         x += [math.log10(b.dof("I").k), math.log10(gam["G1s"]), math.log10(gam["G1d"]), math.log10(-gam["C"]),
-              math.log10(b.source_force)]
+              math.log10(b.source_force), math.log10(b.dof("I").q)]
         if self.levels:
             x += [*self.seed.levels.band0, *self.seed.levels.band1]
         return np.array(x)
@@ -325,7 +331,7 @@ class Design:
             m = 10.0 ** v[f"lm_{key}"]
             dofs += [Dof(n, m, m * w2 * (1 + v[f"d_{key}"]), 10.0 ** v[f"lq_{key}"]) for n in names]
         ins = b.dof("I")
-        dofs.insert(1, Dof("I", ins.m, 10.0 ** v["lk_i"], ins.q, slow=True))
+        dofs.insert(1, Dof("I", ins.m, 10.0 ** v["lk_i"], 10.0 ** v["lq_i"], slow=True))
         quads = [("C", "I", -10.0 ** v["lgam_ic"])] + [(n, "I", 10.0 ** v[f"lgam_{k}"])
                                                        for k in ("gs", "gd") for n in DOF_VARS[k]]
         spec = BlockSpec(b.name, tuple(dofs), (), (), tuple(quads), "C", 10.0 ** v["lf_c"], "C", b.inputs)
@@ -381,7 +387,7 @@ class Settings:
     n_grid: int = 1000
 
     def to_dict(self) -> dict:
-        return {"from": self.seed_name, "spread": self.spec.spread, "trim": self.spec.trim,
+        return {"from": self.seed_name, "variables": Design(GateParams()).names, "spread": self.spec.spread, "trim": self.spec.trim,
                 "trim_residual": self.spec.residual, "per_band": self.per_band, "n_grid": self.n_grid}
 
 
@@ -412,11 +418,11 @@ class Centering:
             return -math.inf
         return float(an.beta(s_w).min())
 
-    def jacobian(self, x, an: Analysis, active: np.ndarray, s_w: float) -> np.ndarray:
-        """Forward differences of the active constraints' betas over x; a constraint that cannot be
-        tracked (its state vanished) gets a zero row entry."""
+    def jacobian(self, x, an: Analysis, active: np.ndarray, s_w: float) -> tuple[np.ndarray, np.ndarray]:
+        """Forward differences over x of the active constraints' betas (a constraint that cannot be tracked,
+        its state vanished, gets a zero entry) and of the largest growth rate."""
         base = an.beta(s_w)[active]
-        J = np.zeros((active.size, x.size))
+        J, Jg = np.zeros((active.size, x.size)), np.zeros(x.size)
         for i in range(x.size):
             xi = x.copy()
             xi[i] += self.fd[i]
@@ -424,7 +430,16 @@ class Centering:
             if other is None:
                 continue
             J[:, i] = (_match(an, other, active, s_w) - base) / self.fd[i]
-        return np.where(np.isfinite(J), J, 0.0)
+            Jg[i] = (other.cons.growth - an.cons.growth) / self.fd[i]
+        return np.where(np.isfinite(J), J, 0.0), np.where(np.isfinite(Jg), Jg, 0.0)
+
+    @staticmethod
+    def growth_caps(an: Analysis) -> tuple[float, float]:
+        """(what the step's LP aims at, what a trial may have) for the largest growth rate: -GROWTH_FLOOR,
+        or no worse than now for a block above it; a trial may overshoot the aim by 2 % of the floor (the
+        LP is linear, the growth rate is not, and it sits on its bound once active)."""
+        aim = an.cons.growth if an.cons.growth > -0.9 * GROWTH_FLOOR else -GROWTH_FLOOR
+        return aim, max(aim, -GROWTH_FLOOR) + 0.02 * GROWTH_FLOOR
 
     def step(self, x, trust: float, log=lambda msg: None) -> dict:
         """One trust-region SLP step from x; returns the step's record (x_new is x when rejected)."""
@@ -433,10 +448,13 @@ class Centering:
         beta = an.beta(s_w)
         active = np.argsort(beta)[:ACTIVE_MAX]
         active = active[beta[active] <= ACTIVE_RATIO * beta[active[0]]]
-        J = self.jacobian(x, an, active, s_w)
-        dx, predicted = _lp_step(beta[active], J, trust * self.trust0, *self.design.linear(x))
+        J, Jg = self.jacobian(x, an, active, s_w)
+        A_lin, b_lin = self.design.linear(x)
+        aim, cap = self.growth_caps(an)
+        dx, predicted = _lp_step(beta[active], J, trust * self.trust0, np.vstack([A_lin, Jg]),
+                                 np.r_[b_lin, aim - an.cons.growth])
         trial = self.analyse(x + dx)
-        new = self.score(trial, s_w)
+        new = self.score(trial, s_w) if trial is not None and trial.cons.growth <= cap else -math.inf
         gain, old = new - beta.min(), float(beta.min())
         accepted = new > old
         rho = gain / predicted if predicted > 0 else 0.0
@@ -480,7 +498,7 @@ def _figures(an: Analysis | None) -> dict:
     """What the record keeps of a block's analysis: nominal margin, linear tolerance, beta at the target."""
     if an is None:
         return {"nominal_margin": None, "tolerance_linear": 0.0, "beta_target": None}
-    return {"nominal_margin": an.cons.nominal_margin, "tolerance_linear": an.tolerance(),
+    return {"nominal_margin": an.cons.nominal_margin, "growth": an.cons.growth, "tolerance_linear": an.tolerance(),
             "beta_target": float(an.beta().min()), "limiting_target": an.limiting()}
 
 
@@ -553,9 +571,10 @@ def run(seed: GateParams, settings: Settings, out_dir, steps: int, log=lambda ms
                key=lambda s: s["beta_target"])
     p = design.params(best["x"])
     block = {"name": p.name, "block": p.structure.to_dict(), "f_r": p.f_r, "u_r": p.u_r, "omega": p.omega,
+             "levels": p.levels.to_dict(),
              "search": {"method": "design centering (design/centering.py)", **settings.to_dict(),
                         "step": best["step"], "steps": len(rec["steps"]) - 1},
-             "measured": {k: best[k] for k in ("nominal_margin", "tolerance_linear", "beta_target")}}
+             "measured": {k: best.get(k) for k in ("nominal_margin", "tolerance_linear", "beta_target", "growth")}}
     write_atomic(out / BEST, block)
     return {"record": str(path), "best_file": str(out / BEST), "best_step": best["step"],
             "steps": len(rec["steps"]) - 1, **block["measured"],

@@ -385,9 +385,11 @@ class Settings:
     spec: SpreadSpec
     per_band: int = 6
     n_grid: int = 1000
+    levels: bool = True          # the band edges are design variables
 
     def to_dict(self) -> dict:
-        return {"from": self.seed_name, "variables": Design(GateParams()).names, "spread": self.spec.spread, "trim": self.spec.trim,
+        return {"from": self.seed_name, "variables": Design(GateParams(), self.levels).names,
+                "spread": self.spec.spread, "trim": self.spec.trim,
                 "trim_residual": self.spec.residual, "per_band": self.per_band, "n_grid": self.n_grid}
 
 
@@ -541,7 +543,7 @@ def run(seed: GateParams, settings: Settings, out_dir, steps: int, log=lambda ms
     from pathlib import Path
     from .search import write_atomic
     settings.spec.validate()
-    design = Design(seed)
+    design = Design(seed, settings.levels)
     x0 = design.x0()
     opt = Centering(design, settings)
     out = Path(out_dir)
@@ -598,6 +600,7 @@ def add_parser(subparsers) -> None:
     s.add_argument("--trim", choices=TRIMS, default="none", help="trim k/m (f) or k/m and c/m (fc) (none)")
     s.add_argument("--trim-residual", type=inputs.number(0, 1), default=0.0, help="trim residual (0)")
     s.add_argument("--steps", type=inputs.integer(0, 10_000), default=50, help="steps in all (50)")
+    s.add_argument("--fixed-levels", action="store_true", help="keep the seed's bands (default: optimise them)")
     s.add_argument("--out", required=True, metavar="DIR", help="record and best block folder")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_center)
@@ -611,7 +614,8 @@ def cmd_center(args) -> int:
         raise Mech2SpiceError("--trim-residual needs --trim f or fc")
     spec = SpreadSpec(args.spread, args.trim, args.trim_residual)
     spec.validate()
-    out = run(load_params(args.seed), Settings(args.seed, spec), args.out, args.steps, _log(args))
+    settings = Settings(args.seed, spec, levels=not args.fixed_levels)
+    out = run(load_params(args.seed), settings, args.out, args.steps, _log(args))
     if args.json:
         _print_json(out)
         return 0

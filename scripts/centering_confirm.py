@@ -61,18 +61,22 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--per-band", type=int, default=15)
     ap.add_argument("--n-grid", type=int, default=4000)
+    ap.add_argument("--only", metavar="KIND", help="spread only elements of this kind (k, m, c, spring, dashpot, "
+                                                  "gamma, drive): which kind fails the block")
     ap.add_argument("--tolerance", action="store_true",
                     help="also the largest spread with 99 %% yield (tolerance.py's bisection, same draws)")
     a = ap.parse_args()
     t0, load0 = time.time(), os.getloadavg()[0]
     p = load_params(a.block)
     s = TrimmedSampler(p, a.samples, a.seed, a.per_band, a.n_grid, a.trim, a.residual)
+    if a.only:
+        s.eps[:, [e.kind != a.only for e in s.elements]] = 0.0
     res = s.run(a.spread)
     worst = res["margins"]
     where = [s.levels[k, 1:].tolist() for k in res["worst_point"]]
     k = int(np.sum(worst > 0))
     extra = {"tolerance": tol.tolerance(s, lo=a.spread / 100, hi=min(1.0, a.spread * 10))} if a.tolerance else {}
-    print(json.dumps({"block": a.block, "spread": a.spread, "trim": a.trim, "residual": a.residual,
+    print(json.dumps({"block": a.block, "spread": a.spread, "only": a.only, "trim": a.trim, "residual": a.residual,
                       "samples": a.samples, "seed": a.seed, "grid": [a.per_band, a.n_grid],
                       "nominal_margin": float(s.margins(s.base.model).min()), "yield": k / a.samples,
                       "yield_ci95": list(tol.wilson(k, a.samples)),

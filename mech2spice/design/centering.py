@@ -386,10 +386,11 @@ class Settings:
     per_band: int = 6
     n_grid: int = 1000
     levels: bool = True          # the band edges are design variables
+    growth_floor: float = GROWTH_FLOOR
 
     def to_dict(self) -> dict:
         return {"from": self.seed_name, "variables": Design(GateParams(), self.levels).names,
-                "spread": self.spec.spread, "trim": self.spec.trim,
+                "growth_floor": self.growth_floor, "spread": self.spec.spread, "trim": self.spec.trim,
                 "trim_residual": self.spec.residual, "per_band": self.per_band, "n_grid": self.n_grid}
 
 
@@ -435,13 +436,25 @@ class Centering:
             Jg[i] = (other.cons.growth - an.cons.growth) / self.fd[i]
         return np.where(np.isfinite(J), J, 0.0), np.where(np.isfinite(Jg), Jg, 0.0)
 
-    @staticmethod
-    def growth_caps(an: Analysis) -> tuple[float, float]:
-        """(what the step's LP aims at, what a trial may have) for the largest growth rate: -GROWTH_FLOOR,
-        or no worse than now for a block above it; a trial may overshoot the aim by 2 % of the floor (the
-        LP is linear, the growth rate is not, and it sits on its bound once active)."""
-        aim = an.cons.growth if an.cons.growth > -0.9 * GROWTH_FLOOR else -GROWTH_FLOOR
-        return aim, max(aim, -GROWTH_FLOOR) + 0.02 * GROWTH_FLOOR
+    def growth_caps(self, an: Analysis) -> tuple[float, float]:
+        """(what the step's LP aims at, what a trial may have) for the largest growth rate: -floor, or no
+        worse than now for a block above it; a trial may overshoot the aim by 2 % of the floor (the LP is
+        linear, the growth rate is not, and it sits on its bound once active)."""
+        floor = self.settings.growth_floor
+        aim = an.cons.growth if an.cons.growth > -0.9 * floor else -floor
+        return aim, max(aim, -floor) + 0.02 * floor
+
+    def lp(self, an: Analysis, beta, J, Jg, radius, x):
+        """The step's LP; a block above the growth floor is first asked to come 10 % of the floor nearer it
+        (then, where that is infeasible in the trust region, only not to get worse)."""
+        A_lin, b_lin = self.design.linear(x)
+        aim, _ = self.growth_caps(an)
+        floor = self.settings.growth_floor
+        for target in ((max(aim - 0.1 * floor, -floor), aim) if aim > -floor else (aim,)):
+            dx, gain = _lp_step(beta, J, radius, np.vstack([A_lin, Jg]), np.r_[b_lin, target - an.cons.growth])
+            if np.any(dx):
+                break
+        return dx, gain
 
     def step(self, x, trust: float, log=lambda msg: None) -> dict:
         """One trust-region SLP step from x; returns the step's record (x_new is x when rejected)."""
@@ -451,12 +464,12 @@ class Centering:
         active = np.argsort(beta)[:ACTIVE_MAX]
         active = active[beta[active] <= ACTIVE_RATIO * beta[active[0]]]
         J, Jg = self.jacobian(x, an, active, s_w)
-        A_lin, b_lin = self.design.linear(x)
-        aim, cap = self.growth_caps(an)
-        dx, predicted = _lp_step(beta[active], J, trust * self.trust0, np.vstack([A_lin, Jg]),
-                                 np.r_[b_lin, aim - an.cons.growth])
+        _, cap = self.growth_caps(an)
+        dx, predicted = self.lp(an, beta[active], J, Jg, trust * self.trust0, x)
         trial = self.analyse(x + dx)
         new = self.score(trial, s_w) if trial is not None and trial.cons.growth <= cap else -math.inf
+        if an.cons.growth > -self.settings.growth_floor and trial is not None and new > -math.inf:
+            new = new if trial.cons.growth < an.cons.growth else -math.inf    # above the floor: growth must fall
         gain, old = new - beta.min(), float(beta.min())
         accepted = new > old
         rho = gain / predicted if predicted > 0 else 0.0
@@ -601,6 +614,8 @@ def add_parser(subparsers) -> None:
     s.add_argument("--trim-residual", type=inputs.number(0, 1), default=0.0, help="trim residual (0)")
     s.add_argument("--steps", type=inputs.integer(0, 10_000), default=50, help="steps in all (50)")
     s.add_argument("--fixed-levels", action="store_true", help="keep the seed's bands (default: optimise them)")
+    s.add_argument("--growth-floor", type=inputs.number(0), default=GROWTH_FLOOR,
+                   help=f"slowest decay rate (1/time) of any stable state over the grid ({GROWTH_FLOOR})")
     s.add_argument("--out", required=True, metavar="DIR", help="record and best block folder")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_center)
@@ -614,7 +629,7 @@ def cmd_center(args) -> int:
         raise Mech2SpiceError("--trim-residual needs --trim f or fc")
     spec = SpreadSpec(args.spread, args.trim, args.trim_residual)
     spec.validate()
-    settings = Settings(args.seed, spec, levels=not args.fixed_levels)
+    settings = Settings(args.seed, spec, levels=not args.fixed_levels, growth_floor=args.growth_floor)
     out = run(load_params(args.seed), settings, args.out, args.steps, _log(args))
     if args.json:
         _print_json(out)

@@ -16,7 +16,9 @@ def main() -> None:
     a = ap.parse_args()
     rec = json.load(open(a.record))
     st = rec["steps"]
-    print(f"settings: {json.dumps({k: v for k, v in rec['settings'].items() if k != 'variables'})}; "
+    cfg = {k: v for k, v in rec["settings"].items() if k != "variables"}
+    levels = "free" if "band0_lo" in rec["settings"].get("variables", []) else "fixed"
+    print(f"settings: {json.dumps(cfg)}, levels {levels}; "
           f"{len(st) - 1} steps, {sum(s['accepted'] for s in st[1:])} accepted, "
           f"{sum(s.get('wall_s', 0) for s in st):.0f} s")
     print("| step | linear tolerance | beta at target | nominal margin | limiting (kind, inputs) | elements (share) |")

@@ -18,10 +18,10 @@ from ..backends.envelope import EnvelopeOptions
 from ..errors import DivergenceError
 from ..physics import nor, steady
 from ..physics.envelope import Envelope
-from ..physics.params import BAND0, BAND1, NOMINAL0, NOMINAL1, GateParams, band_of, margin
+from ..physics.params import GateParams, band_of
 from ..physics.stimulus import Stimulus
-from .scenes import (CASCADE_EDGES, FANOUT_CASES, LEVEL, MID, PAIRS, Scene, chain_scene, fanout_scene, gate_scene,
-                     input_amps, latch_scene, levels_stimulus, nominal_levels)
+from .scenes import (FANOUT_CASES, MID, PAIRS, Scene, cascade_edges, chain_scene, fanout_scene, gate_scene,
+                     input_amps, latch_scene, levels_stimulus, mid, nominal_levels)
 
 def _nor(a: int, b: int) -> int:
     return int(not (a or b))
@@ -88,7 +88,8 @@ def steady_map(p: GateParams, n: int = 61, lo: float = 0.2, hi: float = 1.15):
 def valid_region_margin(p: GateParams, per_band: int = 15) -> dict:
     """Worst output margin (fraction of band width) over every valid input pair; multistability or no stable
     state counts as failure at that point."""
-    levels = np.concatenate([np.linspace(*BAND0, per_band), np.linspace(*BAND1, per_band)])
+    lv = p.levels
+    levels = np.concatenate([np.linspace(*lv.band0, per_band), np.linspace(*lv.band1, per_band)])
     X1, X2 = np.meshgrid(levels, levels, indexing="ij")
     x1, x2 = X1.ravel(), X2.ravel()
     res = steady_outputs(p, x1, x2)
@@ -96,12 +97,12 @@ def valid_region_margin(p: GateParams, per_band: int = 15) -> dict:
     multistable = 0
     for k, states in enumerate(res):
         st = [a for a, ok in states if ok]
-        expect = _nor(band_of(x1[k]), band_of(x2[k]))
+        expect = _nor(lv.band_of(x1[k]), lv.band_of(x2[k]))
         if len(st) != 1:
             multistable += 1
             mg = -1.0
         else:
-            mg = margin(st[0], expect)
+            mg = lv.margin(st[0], expect)
         if mg < worst["min_margin"]:
             worst = {"min_margin": mg, "at_inputs": [float(x1[k]), float(x2[k])],
                      "output": st[0] if len(st) == 1 else None, "n_stable": len(st)}
@@ -115,7 +116,8 @@ def omega_scan(p: GateParams, omegas: np.ndarray) -> dict:
     amp00, amp11 = [], []
     for w in omegas:
         q = replace(p, omega=float(w))
-        outs = steady_outputs(q, np.array([NOMINAL0, NOMINAL1]), np.array([NOMINAL0, NOMINAL1]))
+        nominal = np.array([p.levels.nominal0, p.levels.nominal1])
+        outs = steady_outputs(q, nominal, nominal)
         amp00.append(max(a for a, _ in outs[0]))
         amp11.append(min(a for a, _ in outs[1]))
     amp00, amp11 = np.array(amp00), np.array(amp11)
@@ -130,15 +132,15 @@ def truth_table(p: GateParams, periods: int = 3000, steps: int = rk4.DEFAULT_STE
     """The four nominal input pairs on RK4 from rest, decoded (rows) and the run (to continue from)."""
     model = nor.single_gate(p)
     try:
-        run, amp = run_from_rest(model, p, nominal_levels(), periods, steps)
+        run, amp = run_from_rest(model, p, nominal_levels(p), periods, steps)
     except DivergenceError as e:
         return {"diverged": str(e), "rows": []}
     rows = []
     for b, (x1, x2) in enumerate(PAIRS):
         a = float(amp[0, b])
         expect = _nor(x1, x2)
-        rows.append({"inputs": [x1, x2], "output_amplitude": a, "logic": band_of(a), "expected": expect,
-                     "margin": margin(a, expect)})
+        rows.append({"inputs": [x1, x2], "output_amplitude": a, "logic": p.levels.band_of(a), "expected": expect,
+                     "margin": p.levels.margin(a, expect)})
     return {"rows": rows, "run": run}
 
 
@@ -146,7 +148,9 @@ def transient(p: GateParams, sequence=((0, 0), (1, 0), (0, 0), (0, 1), (1, 1), (
               hold: int = 1200) -> dict:
     """Single gate under changing inputs; also tests history independence (revisits give the same output)."""
     model = nor.single_gate(p)
-    stim = levels_stimulus(model, p, [(k * hold, np.array([[LEVEL[a], LEVEL[b]]])) for k, (a, b) in enumerate(sequence)])
+    lv = p.levels
+    stim = levels_stimulus(model, p, [(k * hold, np.array([[lv.nominal(a), lv.nominal(b)]]))
+                                      for k, (a, b) in enumerate(sequence)])
     run = rk4.integrate(model, hold * len(sequence), stimulus=stim)
     amp = run.amplitude("g0")[:, 0] / p.u_r
     ends = {}
@@ -165,25 +169,26 @@ def cascade(p: GateParams, hold: int = 1500) -> dict:
     sc = chain_scene(p, hold)
     run = rk4.integrate(sc.model, sc.periods, stimulus=sc.stimulus)
     amp = np.abs(run.amp) / p.u_r                         # (P, 3 stages, B)
-    delays = [_crossings(amp[:, :, 0], start) for start in (hold, 2 * hold)]
+    delays = [_crossings(amp[:, :, 0], start, mid(p)) for start in (hold, 2 * hold)]
     per_gate = [d for ds in delays for d in np.diff([0.0] + ds)]
     restoration = []
-    for b, (x1, x2) in enumerate(CASCADE_EDGES, start=1):
+    lv = p.levels
+    for b, (x1, x2) in enumerate(cascade_edges(p), start=1):
         settled = amp[-20:, :, b].mean(axis=0)        # constant inputs: settle over all 3 holds
-        expect = _nor(band_of(x1), band_of(x2))
-        stage_margins = [margin(float(a), (expect + k) % 2) for k, a in enumerate(settled)]
+        expect = _nor(lv.band_of(x1), lv.band_of(x2))
+        stage_margins = [lv.margin(float(a), (expect + k) % 2) for k, a in enumerate(settled)]
         restoration.append({"inputs": [x1, x2], "outputs": settled.tolist(), "stage_margins": stage_margins,
-                            "input_margin": min(margin(x1), margin(x2))})
+                            "input_margin": min(lv.margin(x1), lv.margin(x2))})
     return {"t_periods": np.arange(1, amp.shape[0] + 1), "amplitude": amp[:, :, 0], "hold": hold,
             "delays": delays, "delay_periods": float(np.mean(per_gate)), "delay_max": float(np.max(per_gate)),
             "restoration": restoration}
 
 
-def _crossings(amp: np.ndarray, start: int) -> list[float]:
+def _crossings(amp: np.ndarray, start: int, threshold: float = MID) -> list[float]:
     """Periods after `start` at which each stage's amplitude first crosses the mid threshold."""
     out = []
     for k in range(amp.shape[1]):
-        a = amp[start:, k] - MID
+        a = amp[start:, k] - threshold
         idx = np.flatnonzero(np.sign(a[:-1]) != np.sign(a[1:]))
         out.append(float(idx[0] + 1) if idx.size else math.nan)
     return out
@@ -195,13 +200,13 @@ def fanout_test(p: GateParams, n_loads: int, periods: int = 2500) -> dict:
     sc = fanout_scene(p, n_loads, periods)
     run = rk4.integrate(sc.model, sc.periods, stimulus=sc.stimulus)
     amp = np.abs(run.amp[-20:]).mean(axis=0) / p.u_r        # (1 + n_loads, B)
-    ok, worst = True, math.inf
+    ok, worst, lv = True, math.inf, p.levels
     for b, (a, bb, c) in enumerate(FANOUT_CASES):
         d = _nor(a, bb)
-        ok &= band_of(amp[0, b]) == d
+        ok &= lv.band_of(amp[0, b]) == d
         for k in range(n_loads):
-            ok &= band_of(amp[1 + k, b]) == _nor(d, c)
-            worst = min(worst, margin(amp[1 + k, b], _nor(d, c)))
+            ok &= lv.band_of(amp[1 + k, b]) == _nor(d, c)
+            worst = min(worst, lv.margin(amp[1 + k, b], _nor(d, c)))
     load_swing = float(max(abs(amp[0, 0] - amp[0, 1]), abs(amp[0, 2] - amp[0, 3])))
     branch_spread = float(np.ptp(amp[1:], axis=0).max()) if n_loads > 1 else 0.0
     return {"n_loads": n_loads, "correct": bool(ok), "driver": amp[0].tolist(), "loads": amp[1:].tolist(),
@@ -220,7 +225,7 @@ def spectrum_purity(run: Run, p: GateParams, periods: int = 20) -> float:
 
 def phase_insensitivity(p: GateParams, periods: int = 2500) -> dict:
     """Shift each input pair's phase; the steady output must not change."""
-    levels = nominal_levels()
+    levels = nominal_levels(p)
     base = run_from_rest(nor.single_gate(p), p, levels, periods)[1][0]
     worst = 0.0
     for th1, th2 in [(2.1, 0.7), (4.0, 5.5)]:
@@ -235,7 +240,7 @@ def phase_insensitivity(p: GateParams, periods: int = 2500) -> dict:
 
 def convergence(p: GateParams, periods: int = 1500, steps: int = rk4.DEFAULT_STEPS_PER_PERIOD) -> float:
     """Change of the four outputs when the RK4 step is halved from `steps` per period (u_R)."""
-    levels = nominal_levels()
+    levels = nominal_levels(p)
     a1 = run_from_rest(nor.single_gate(p), p, levels, periods, steps, avg=1)[1][0]
     a2 = run_from_rest(nor.single_gate(p), p, levels, periods, 2 * steps, avg=1)[1][0]
     return float(np.abs(a1 - a2).max())
@@ -247,7 +252,8 @@ def stability(p: GateParams, per_band: int = 8, periods: int = 3000) -> dict:
     (an envelope run settled, then the network's verdict).  Growth per drive period: < 0 decays."""
     from ..backends import make_engine
     from ..physics import stability as stab
-    levels = np.concatenate([np.linspace(*BAND0, per_band), np.linspace(*BAND1, per_band)])
+    lv = p.levels                            # the block's own bands and nominal levels
+    levels = np.concatenate([np.linspace(*lv.band0, per_band), np.linspace(*lv.band1, per_band)])
     worst = {"growth_rate": -math.inf}
     x1, x2 = (g.ravel() for g in np.meshgrid(levels, levels, indexing="ij"))
     env, F, ch = gate_forcing(p, x1, x2)
@@ -260,7 +266,7 @@ def stability(p: GateParams, per_band: int = 8, periods: int = 3000) -> dict:
                          "at_inputs": [float(x1[k]), float(x2[k])]}
     chain = []
     for a, b in PAIRS:
-        m = nor.chain(p, 3, LEVEL[a], LEVEL[b])
+        m = nor.chain(p, 3, lv.nominal(a), lv.nominal(b))
         run = make_engine("envelope").run(m, periods)
         v = stab.verdict(m, run.state[0][:, 0], run.state[1][:, 0],
                          Envelope.of(m).forcing(np.array([[d.amplitude] for d in m.drives]))[:, 0])
@@ -286,7 +292,7 @@ def characterise(p: GateParams, quick: bool = False, log=lambda msg: None) -> di
     out["truth_table"] = tt["rows"]
     out["switches"] = all(r["logic"] == r["expected"] for r in tt["rows"])
     log("steady states and RK4 agreement")
-    ss = steady_outputs(p, np.array([LEVEL[a] for a, _ in PAIRS]), np.array([LEVEL[b] for _, b in PAIRS]))
+    ss = steady_outputs(p, *nominal_levels(p).T)
     out["steady_states"] = [[{"amplitude": a, "stable": ok} for a, ok in s] for s in ss]
     log("step halving")
     out["step_halving_change"] = convergence(p, periods=int(1500 * scale))

@@ -81,14 +81,32 @@ def levels_stimulus(model: MechModel, p: GateParams, segments: list[tuple[int, n
     return Stimulus.from_levels(model, segs, batch=segments[0][1].shape[0])
 
 
-def nominal_levels() -> np.ndarray:
-    """The four nominal input pairs of PAIRS as force levels (4, 2)."""
-    return np.array([[LEVEL[a], LEVEL[b]] for a, b in PAIRS], float)
+def nominal_levels(p: GateParams = DEFAULT) -> np.ndarray:
+    """The four nominal input pairs of PAIRS as force levels (4, 2), at p's nominal levels."""
+    lv = p.levels
+    return np.array([[lv.nominal(a), lv.nominal(b)] for a, b in PAIRS], float)
+
+
+def mid(p: GateParams = DEFAULT) -> float:
+    """The threshold between p's bands, for delays (MID for today's bands)."""
+    return (p.levels.band0[1] + p.levels.band1[0]) / 2
+
+
+def band_edges(p: GateParams = DEFAULT) -> tuple[float, ...]:
+    """p's band edges as input levels (EDGES for today's bands)."""
+    return (*p.levels.band0, *p.levels.band1)
+
+
+def cascade_edges(p: GateParams = DEFAULT) -> list[tuple[float, float]]:
+    """Constant band-edge inputs for level restoration (CASCADE_EDGES for today's bands)."""
+    (lo0, hi0), (lo1, hi1) = p.levels.band0, p.levels.band1
+    return [(lo0, lo0), (hi0, lo0), (hi0, hi0), (lo1, lo0), (hi1, hi0), (hi1, hi1), (lo1, lo1)]
 
 
 def gate_scene(p: GateParams = DEFAULT, which: str = "nominal", periods: int = 2500) -> Scene:
     """Single gate from rest: the 4 nominal input pairs, or all 16 pairs of band-edge levels."""
-    pairs = [tuple(x) for x in nominal_levels()] if which == "nominal" else [(a, b) for a in EDGES for b in EDGES]
+    edges = band_edges(p)
+    pairs = [tuple(x) for x in nominal_levels(p)] if which == "nominal" else [(a, b) for a in edges for b in edges]
     m = nor.single_gate(p)
     return Scene(f"gate_{which}", m, levels_stimulus(m, p, [(0, np.array(pairs, float))]), periods, ["g0"],
                  [f"{a:g},{b:g}" for a, b in pairs], [0], [periods],
@@ -99,9 +117,10 @@ def chain_scene(p: GateParams = DEFAULT, hold: int = 1500, edges: bool = True) -
     """3-gate chain ((x1 NOR x2) NOR 0) NOR 0: member 0 inputs 00 -> 10 -> 00 (delays both ways), the others
     constant band-edge inputs (level restoration)."""
     m = nor.chain(p, 3)
-    lv0 = np.array([[NOMINAL0, NOMINAL0]] + ([list(e) for e in CASCADE_EDGES] if edges else []))
+    n0, n1 = p.levels.nominal0, p.levels.nominal1
+    lv0 = np.array([[n0, n0]] + ([list(e) for e in cascade_edges(p)] if edges else []))
     lv1 = lv0.copy()
-    lv1[0] = [NOMINAL1, NOMINAL0]
+    lv1[0] = [n1, n0]
     st = levels_stimulus(m, p, [(0, lv0), (hold, lv1), (2 * hold, lv0)])
     return Scene("chain3", m, st, 3 * hold, ["g0", "g1", "g2"],
                  ["00->10->00"] + [f"{a:g},{b:g}" for a, b in lv0[1:]], [0, hold, 2 * hold],
@@ -112,10 +131,11 @@ def chain_scene(p: GateParams = DEFAULT, hold: int = 1500, edges: bool = True) -
 def fanout_scene(p: GateParams = DEFAULT, n_loads: int = 2, periods: int = 2500) -> Scene:
     """One driver feeding n_loads gates: driver 00 / 10, every load's second input 0 / 1 (FANOUT_CASES)."""
     m = nor.fanout(p, n_loads)
-    lv = np.array([[LEVEL[a], LEVEL[b]] for a, b, _ in FANOUT_CASES])
+    nominal = p.levels.nominal
+    lv = np.array([[nominal(a), nominal(b)] for a, b, _ in FANOUT_CASES])
     amps = input_amps(m.design.input_drives, lv, p)
     for pair in m.design.load_drives:
-        amps.update(input_amps([pair], np.array([[LEVEL[c]] for *_, c in FANOUT_CASES]), p))
+        amps.update(input_amps([pair], np.array([[nominal(c)] for *_, c in FANOUT_CASES]), p))
     st = Stimulus.from_levels(m, [(0.0, amps)], batch=len(FANOUT_CASES))
     return Scene(f"fanout{n_loads}", m, st, periods, list(m.probes),
                  [f"drv {a}{b}, loads x2={c}" for a, b, c in FANOUT_CASES], [0], [periods],

@@ -125,3 +125,16 @@ def test_center_bad_input_exits_2(capsys, tmp_path):
     out.mkdir()
     (out / c.RECORD).write_text("{not json")
     refused(capsys, "center", "--out", out, "--steps", "1", needle="damaged")
+
+
+def test_gate_checks_read_the_blocks_own_levels():
+    """The characterisation's levels (nominal inputs, delay threshold, band-edge cascade inputs) are today's
+    constants for the default block and follow a block's own bands."""
+    from dataclasses import replace
+    from mech2spice.experiments import scenes
+    from mech2spice.physics.params import DEFAULT, Levels
+    assert scenes.nominal_levels(DEFAULT).tolist() == [[scenes.LEVEL[a], scenes.LEVEL[b]] for a, b in scenes.PAIRS]
+    assert scenes.mid(DEFAULT) == scenes.MID and scenes.cascade_edges(DEFAULT) == scenes.CASCADE_EDGES
+    p = replace(DEFAULT, levels=Levels((0.3, 0.5), (0.9, 1.1), 0.4, 1.0))
+    assert scenes.nominal_levels(p)[3].tolist() == [1.0, 1.0] and scenes.mid(p) == pytest.approx(0.7)
+    assert scenes.cascade_edges(p)[4] == (1.1, 0.5)

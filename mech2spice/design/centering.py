@@ -165,6 +165,7 @@ class Constraints:
     grad: np.ndarray          # (n, E) d value / dt
     nominal_margin: float     # the block's worst margin over the grid (point_margins)
     growth: float             # the largest growth rate (1/time) of any stable state over the grid
+    growth_at: tuple[int, float]   # ... its input point and s
 
     def variances(self, Sa, Sb) -> tuple[np.ndarray, np.ndarray]:
         """Per constraint ||Sa^T g||^2 and ||Sb^T g||^2."""
@@ -194,7 +195,31 @@ def constraints(fx: Fast, levels: np.ndarray, expect: np.ndarray, p: GateParams,
     kind = np.array(["margin"] * pts.size + ["fold"] * ep.size)
     return Constraints(kind, np.concatenate([pts, ep]), np.concatenate([s_roots, es]),
                        np.concatenate([m_val, f_val]), np.concatenate([m_grad, f_grad]), nominal,
-                       float(r.growth[keep].max(initial=-np.inf)))
+                       *_slowest(r.growth[keep], pts, s_roots))
+
+
+def _slowest(growth: np.ndarray, pts: np.ndarray, s: np.ndarray) -> tuple[float, tuple[int, float]]:
+    """The largest growth rate among the stable states and where (point, s)."""
+    if not growth.size:
+        return -math.inf, (-1, math.nan)
+    k = int(np.argmax(growth))
+    return float(growth[k]), (int(pts[k]), float(s[k]))
+
+
+GROWTH_STEP = 1e-5          # relative element change of the growth rate's forward differences
+
+
+def growth_gradient(fx: Fast, levels: np.ndarray, point: int, s: float, n_grid: int) -> np.ndarray:
+    """d(growth rate)/dt of the stable state at (point, s) for every element: forward differences, every
+    perturbed copy in one stack (the growth rate is an eigenvalue: no adjoint here)."""
+    m, E = fx.lg.model, len(fx.elems)
+    copies = [spread.scaled(m, fx.elems, 1 + GROWTH_STEP * (np.arange(E) == j)) for j in range(E)]
+    st = steady_batch.stack([m, *copies], fx.lg.input_groups(), fx.lg.gate.channel)
+    out = np.empty(E + 1)
+    for b in range(E + 1):
+        r = steady_batch.roots(st, b, levels[point:point + 1], n_grid)
+        out[b] = r.growth[np.argmin(np.abs(r.s - s))] if r.s.size else np.nan
+    return (out[1:] - out[0]) / GROWTH_STEP
 
 
 def extrema(st: steady_batch.Stack, levels: np.ndarray, n_grid: int) -> tuple[np.ndarray, np.ndarray]:
@@ -227,6 +252,32 @@ class Analysis:
     elements: list[str]      # names of the noise sources: every element, then the trim residuals
     sources: np.ndarray      # (n, sources) g^T Sa, g^T Sb
     n_elements: int          # how many of the sources are elements (the rest: trim residuals)
+    fx: Fast
+    noise: tuple             # (Sa, Sb)
+    n_grid: int
+
+    def stability(self) -> dict:
+        """The stability constraint: the slowest stable state's growth rate, whose worst-case distance is
+        -growth / ||S^T grad growth|| (a state that starts to grow is a failing input point, `gate --spread`'s
+        -1); a, b as for the other constraints, and the sources of its variance at the target spread."""
+        if getattr(self, "_stability", None) is None:
+            Sa, Sb = self.noise
+            g = growth_gradient(self.fx, self.levels, *self.cons.growth_at, self.n_grid)
+            g = np.where(np.isfinite(g), g, 0.0)
+            ga, gb = g @ Sa, g @ Sb
+            parts = np.concatenate([ga * self.spec.spread, gb * self.spec.residual]) ** 2
+            top = np.argsort(-parts)[:3]
+            self._stability = {"value": -self.cons.growth, "a": float(ga @ ga), "b": float(gb @ gb),
+                               "inputs": self.levels[self.cons.growth_at[0], 1:].tolist(),
+                               "elements": [{"name": self.elements[i], "share": float(parts[i] / parts.sum())}
+                                            for i in top]}
+        return self._stability
+
+    def stability_beta(self, spread_: float | None = None) -> float:
+        """The stability constraint's beta at spread_ (default the spec's) and the spec's residual."""
+        st, s = self.stability(), self.spec.spread if spread_ is None else spread_
+        var = s * s * st["a"] + self.spec.residual ** 2 * st["b"]
+        return st["value"] / math.sqrt(var) if var > 0 else math.inf
 
     def beta(self, spread_: float | None = None) -> np.ndarray:
         """Per constraint worst-case distance at spread `spread_` (default the spec's) and the spec's residual."""
@@ -234,14 +285,19 @@ class Analysis:
         var = s * s * self.a + self.spec.residual ** 2 * self.b
         return np.where(var > 0, self.cons.value / np.sqrt(np.maximum(var, 1e-300)), np.inf)
 
-    def tolerance(self) -> float:
-        """The linear tolerance: the largest spread at which every constraint keeps beta >= Z99 (0 where the
-        residual alone brings one below it, or the nominal block fails)."""
+    def tolerance(self, stability: bool = False) -> float:
+        """The linear tolerance: the largest spread at which every margin and fold constraint (and with
+        `stability` the stability constraint) keeps beta >= Z99 (0 where the residual alone brings one below
+        it, or the nominal block fails)."""
         if not self.cons.nominal_margin > 0:
             return 0.0
-        room = (self.cons.value / Z99) ** 2 - self.spec.residual ** 2 * self.b
+        value, a, b = self.cons.value, self.a, self.b
+        if stability:
+            st = self.stability()
+            value, a, b = np.r_[value, st["value"]], np.r_[a, st["a"]], np.r_[b, st["b"]]
+        room = (value / Z99) ** 2 - self.spec.residual ** 2 * b
         with np.errstate(divide="ignore"):
-            s = np.where(room > 0, np.sqrt(np.maximum(room, 0) / self.a), 0.0)
+            s = np.where(room > 0, np.sqrt(np.maximum(room, 0) / a), 0.0)
         return float(s.min())
 
     def limiting(self, spread_: float | None = None) -> dict:
@@ -267,7 +323,8 @@ def analyse(p: GateParams, spec: SpreadSpec, per_band: int = 6, n_grid: int = 10
     Sa, Sb, res_names = noise_matrices(fx.lg.model, fx.elems, trimmed, spec.trim)
     a, b = cons.variances(Sa, Sb)
     sources = np.concatenate([cons.grad @ Sa, cons.grad @ Sb], axis=1)
-    return Analysis(p, spec, cons, a, b, levels, [e.name for e in fx.elems] + res_names, sources, len(fx.elems))
+    return Analysis(p, spec, cons, a, b, levels, [e.name for e in fx.elems] + res_names, sources, len(fx.elems),
+                    fx, (Sa, Sb), n_grid)
 
 
 # --- the design variables ------------------------------------------------------------------------
@@ -426,7 +483,7 @@ class Centering:
 
     def working_spread(self, an: Analysis) -> float:
         """Continuation: the spread at which the block's smallest beta is Z99, within [1e-7, target]."""
-        return float(np.clip(an.tolerance(), 1e-7, self.settings.spec.spread))
+        return float(np.clip(an.tolerance(stability=True), 1e-7, self.settings.spec.spread))
 
     @staticmethod
     def score(an: Analysis | None, s_w: float) -> float:
@@ -478,19 +535,25 @@ class Centering:
         active = np.argsort(beta)[:ACTIVE_MAX]
         active = active[beta[active] <= ACTIVE_RATIO * beta[active[0]]]
         J, Jg = self.jacobian(x, an, active, s_w)
+        b_g = an.stability_beta(s_w)                 # the stability constraint, its sigma held for the step
+        sigma_g = an.stability()["value"] / b_g
         _, cap = self.growth_caps(an)
-        dx, predicted = self.lp(an, beta[active], J, Jg, trust * self.trust0, x)
+        dx, predicted = self.lp(an, np.r_[beta[active], b_g], np.vstack([J, -Jg / sigma_g]), Jg,
+                                trust * self.trust0, x)
         trial = self.analyse(x + dx)
         new = self.score(trial, s_w) if trial is not None and trial.cons.growth <= cap else -math.inf
         if an.cons.growth > -self.settings.growth_floor and trial is not None and new > -math.inf:
             new = new if trial.cons.growth < an.cons.growth else -math.inf    # above the floor: growth must fall
-        gain, old = new - beta.min(), float(beta.min())
+        if new > -math.inf:
+            new = min(new, -trial.cons.growth / sigma_g)
+        gain, old = new - min(beta.min(), b_g), float(min(beta.min(), b_g))
         accepted = new > old and self.works_on_full_grid(trial.p)
         rho = gain / predicted if predicted > 0 else 0.0
         trust_next = trust * (2.0 if accepted and rho > 0.5 else 0.5 if accepted and rho > 0.1 else 0.25)
         rec = {"working_spread": s_w, "beta_before": old, "beta_after": new, "predicted_gain": predicted,
                "accepted": bool(accepted), "trust": trust, "trust_next": float(min(trust_next, TRUST_MAX)),
-               "active": int(active.size), "limiting": an.limiting(s_w)}
+               "active": int(active.size), "limiting": an.limiting(s_w) if beta.min() <= b_g else
+               {"kind": "stability", "beta": b_g, **{k: an.stability()[k] for k in ("inputs", "elements")}}}
         done = trial if accepted else an
         rec.update(_figures(done))
         rec["x"] = [float(v) for v in (x + dx if accepted else x)]
@@ -527,8 +590,13 @@ def _figures(an: Analysis | None) -> dict:
     """What the record keeps of a block's analysis: nominal margin, linear tolerance, beta at the target."""
     if an is None:
         return {"nominal_margin": None, "tolerance_linear": 0.0, "beta_target": None}
+    st = an.stability()
+    beta, beta_g = float(an.beta().min()), an.stability_beta()
     return {"nominal_margin": an.cons.nominal_margin, "growth": an.cons.growth, "tolerance_linear": an.tolerance(),
-            "beta_target": float(an.beta().min()), "limiting_target": an.limiting()}
+            "tolerance_linear_stability": an.tolerance(stability=True), "beta_target": min(beta, beta_g),
+            "beta_stability_target": beta_g,
+            "limiting_target": an.limiting() if beta <= beta_g else
+            {"kind": "stability", "beta": beta_g, **{k: st[k] for k in ("inputs", "elements")}}}
 
 
 # --- a resumable run ---------------------------------------------------------------------------------

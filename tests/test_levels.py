@@ -17,8 +17,9 @@ def test_default_levels_are_the_papers_bands():
     assert DEFAULT.levels == DEFAULT_LEVELS
     assert (DEFAULT_LEVELS.band0, DEFAULT_LEVELS.band1) == (BAND0, BAND1) == ((0.365, 0.67), (0.92, 1.025))
     assert (DEFAULT_LEVELS.nominal0, DEFAULT_LEVELS.nominal1) == (0.5, 0.97)
-    for name in PRESETS:
-        assert PRESETS[name].levels == DEFAULT_LEVELS, name
+    for name in PRESETS:           # the centred blocks (design/centering.py) carry bands of their own
+        if not name.startswith("centered"):
+            assert PRESETS[name].levels == DEFAULT_LEVELS, name
 
 
 @pytest.mark.parametrize("x, bit, margin", [(0.5, 0, 0.135 / 0.305), (0.97, 1, 0.05 / 0.105), (0.8, None, -0.12 / 0.305)])

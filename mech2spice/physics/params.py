@@ -240,7 +240,7 @@ PRINTED = GateParams(
 DEFAULT = GateParams()
 
 BUILTIN = {"default": DEFAULT, "printed": PRINTED}
-BLOCK_PRESETS = ("robust", "classic")        # block files shipped under mech2spice/data/blocks/
+BLOCK_PRESETS = ("robust", "classic", "centered", "centered_fc")   # block files under mech2spice/data/blocks/
 
 
 class _Presets(Mapping):

@@ -1,7 +1,7 @@
 """VACASK (compiled Verilog-A devices) against RK4 and ngspice: accuracy, failure points, harmonic balance
 against the steady-state solver, and scaling of the envelope form against ngspice-envelope.
 
-Not a report of its own: it measures into reports/vacask.json (`python -m mech2spice.reports.vacask [DIR]
+Not a report of its own: it measures into reports/vacask.json (`python -m mech2spice.studies.vacask [DIR]
 [--only SECTION,...]`, ~15 min on the shared 2-core sandbox); speed_accuracy.md, written by
 mech2spice/reports/speed_accuracy.py alone, renders this section from it (`block`).  Every ngspice/VACASK pair runs one process at a time in the same run, so their
 wall-time ratios are measured under the same load.
@@ -396,3 +396,20 @@ def measure(directory: Path, only=None) -> dict:
         write_json(path, res)
         print(f"{name}: {res['section_s'][name]:.0f} s", file=sys.stderr)
     return res
+
+
+def main(argv=None) -> int:
+    """`python -m mech2spice.studies.vacask [DIR] [--only a,b]`: measure into DIR/vacask.json."""
+    import argparse
+    ap = argparse.ArgumentParser(prog="python -m mech2spice.studies.vacask")
+    ap.add_argument("directory", nargs="?", default="reports")
+    ap.add_argument("--only", type=lambda s: s.split(","), default=None)
+    args = ap.parse_args(argv)
+    measure(Path(args.directory), args.only)
+    print(f"measured into {Path(args.directory) / 'vacask.json'}; its section of speed_accuracy.md: "
+          f"mech2spice report speed_accuracy --out {args.directory} --render", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -10,8 +10,9 @@ from . import inputs as check
 from . import simulation
 from .backends import BACKENDS, engine_options
 from .errors import Mech2SpiceError
+from .experiments import clocking
 from .physics import network
-from .physics.params import PRESETS, GateParams, load_params
+from .physics.params import PRESETS, GateParams, load_params, params_file
 from .synthesis import synth
 from .synthesis.ports import pack_inputs
 from .synthesis.synth import Netlist, observe
@@ -68,7 +69,7 @@ def simulate(design, inputs: dict[str, int] | None = None, *, backend: str = "rk
         if steps is None:
             raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give cycles=N or a stimulus")
         cycle_values = simulation.expand_steps(steps)
-        timing = simulation.clock_timing(nl, p=p)
+        timing = clocking.clock_timing(nl, p=p)
         return simulation.run_clocked_physical(nl, p, cycle_values, backend, timing, progress=progress,
                                                options=options)
     if steps is not None:
@@ -100,13 +101,13 @@ def emit(design, inputs: dict[str, int] | None = None, *, params="default", peri
     never the design or parameter file, nor an existing file that is not a netlist unless `force`).  It reads
     its own result: `ngspice -b FILE` prints each output bit and port (docs/spice.md)."""
     from .spice._common import NETLIST
-    from .spice.carrier import emit as emit_netlist
+    from .spice.oscillator_netlist import emit as emit_netlist
     from .spice.readout import about
     options = engine_options("ngspice", options)
     values, periods, p = check.port_values(inputs), _periods(periods), _params(params)
     if path is not None:                          # the command line's rule, before any work
         read = {"the design": design if isinstance(design, (str, os.PathLike)) else None,
-                "the params file": check.params_file(params) if isinstance(params, (str, os.PathLike)) else None}
+                "the params file": params_file(params) if isinstance(params, (str, os.PathLike)) else None}
         path = check.check_output_file(check.path_value(path, "path"), read, "netlist file", kind=NETLIST,
                                        force=force is True, remedy="force=True replaces it")
     nl = _netlist(design)
@@ -115,7 +116,7 @@ def emit(design, inputs: dict[str, int] | None = None, *, params="default", peri
     stim = network.stimulus(model, nl, p, [(0, [values])])
     title = f"mech2spice: {nl.top} with {', '.join(f'{k}={v}' for k, v in values.items()) or 'inputs 0'}"
     source = os.fspath(design) if isinstance(design, (str, os.PathLike)) else "(a Netlist)"
-    text = emit_netlist(model, periods or simulation.period_budget(nl), stim, options=options, title=title,
+    text = emit_netlist(model, periods or clocking.period_budget(nl), stim, options=options, title=title,
                         about=about(source, nl.top, values))
     if path is not None:
         check.write_text(path, text, encoding="ascii")

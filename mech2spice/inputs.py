@@ -325,17 +325,6 @@ def first_json_line(path, limit: int = 64 << 20):
         return None
 
 
-def params_file(spec):
-    """The file a --params value reads (the package's file for a shipped block; None for a preset)."""
-    from .physics.params import BLOCK_PRESETS, PRESETS
-    if spec in BLOCK_PRESETS:                     # shipped blocks are files (PRESETS names them too)
-        from . import data
-        return data.path("blocks", f"{spec}.json")
-    if spec is None or spec in PRESETS:
-        return None
-    return spec
-
-
 def _labelled(inputs):
     """(label, path) pairs of the file inputs ({label: path}, (label, path) pairs or bare paths; program
     bytes and None left out)."""

@@ -6,8 +6,6 @@ run the whole budget.  A bit outside both bands is reported as invalid, never ro
 """
 from __future__ import annotations
 
-import json
-import math
 import time
 from dataclasses import dataclass, replace
 
@@ -17,10 +15,14 @@ from . import verdict
 from .backends import logic, make_engine
 from .backends._base import progress_bar
 from .errors import Mech2SpiceError
+from .experiments.clocking import period_budget
+# re-exported for cli.py and reports/, which are being moved (#28); new code imports experiments.clocking
+from .experiments.clocking import (GATE_DELAY_MAX, LATCH_MIN_PULSE, LATCH_OUTPUT_DELAY,  # noqa: F401
+                                   LATCH_OUTPUT_DELAY_MIN, SETTLE_MARGIN, block_slowdown, clock_timing)
 from .physics import network
 from .physics.envelope import Envelope
 from .physics.model import MechModel
-from .physics.params import GateParams, band_of, margin
+from .physics.params import DEFAULT_LEVELS, GateParams, Levels
 from .physics.stimulus import Stimulus
 from .synthesis.ports import output_bits, pack_inputs, port_values
 from .synthesis.synth import Netlist
@@ -32,21 +34,17 @@ MAX_TRACE_BYTES = 2e9    # amplitudes a clocked run keeps in memory (one complex
 ESTIMATE_LOG_S = 10.0    # runs estimated to take longer than this say so before they start
 
 
-def period_budget(netlist: Netlist) -> int:
-    """Enough periods for the slowest measured gate delay (~225) through the deepest path, plus settling."""
-    return 800 + 300 * network.logic_depth(netlist)
-
-
-def decode(netlist: Netlist, amplitudes: dict[str, float], const: dict[str, int]) -> dict:
-    """bits / outputs / valid / min_margin from output amplitudes (u_R)."""
+def decode(netlist: Netlist, amplitudes: dict[str, float], const: dict[str, int],
+           levels: Levels = DEFAULT_LEVELS) -> dict:
+    """bits / outputs / valid / min_margin from output amplitudes (u_R), in the block's `levels`."""
     bits, margins = {}, []
     for bit in output_bits(netlist):
         if bit in const:
             bits[bit] = const[bit]
             continue
-        b = band_of(amplitudes[bit])
+        b = levels.band_of(amplitudes[bit])
         bits[bit] = b
-        margins.append(margin(amplitudes[bit], b))
+        margins.append(levels.margin(amplitudes[bit], b))
     return {"outputs": port_values(netlist, bits), "bits": bits, "valid": all(v is not None for v in bits.values()),
             "min_margin": float(min(margins)) if margins else None}
 
@@ -62,10 +60,8 @@ def run_logic(netlist: Netlist, values: dict[str, int]) -> dict:
 
 def _engine_fields(engine) -> dict:
     """Result fields naming a circuit simulator's settings: `ngspice_options` / `vacask_options`."""
-    for simulator in ("ngspice", "vacask"):
-        if engine.name.startswith(simulator):
-            return {f"{simulator}_options": engine.describe()}
-    return {}
+    simulator = engine.capabilities.simulator
+    return {f"{simulator}_options": engine.describe()} if simulator else {}
 
 
 def _observed(netlist: Netlist, model: MechModel) -> list[str]:
@@ -124,7 +120,7 @@ def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], 
     for b in range(len(values)):
         a = {n: float(amps[k, b]) for k, n in enumerate(outs)}
         v, ok = judged[b] if judged else (None, False)
-        res = verdict.apply(decode(netlist, a, model.design.const_outputs), a, v, ok, source)
+        res = verdict.apply(decode(netlist, a, model.design.const_outputs, model.levels), a, v, ok, source, model.levels)
         results.append({"backend": backend, **res, "amplitudes": a, "periods": used, "wall_s": wall,
                         **_engine_fields(engine)})
     return results
@@ -155,9 +151,9 @@ def _run_until_settled(engine, model, stim, probes: list[str], budget: int, prog
         history.append(_chunk_summary(run, probes, model.amplitude_unit))
         bar.update(n)
         judged = None
-        if not fixed and done >= next_check and _settled(_rows(history[-2:], rows)):
+        if not fixed and done >= next_check and _settled(_rows(history[-2:], rows), model.levels):
             judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows))
-            wait = _periods_to_settle(judged, _rows(history[-3:], rows), names)
+            wait = _periods_to_settle(judged, _rows(history[-3:], rows), names, model.levels)
             if wait == 0:
                 break
             next_check = done + wait
@@ -190,7 +186,7 @@ def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int,
     for b in range(A.shape[1]):
         v = verdict.judge(model, A[:, b], s[:, b], F[:, b], outs)
         a, swing, step = _recent(history, outs, b)
-        out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.rests_on_fixed_point(), held)))
+        out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.rests_on_fixed_point(), held, model.levels)))
     return out
 
 
@@ -202,17 +198,17 @@ def _recent(history: list, outs: list[str], b: int) -> tuple[dict, dict, dict]:
     return as_dict(last), as_dict(swing), as_dict(step)
 
 
-def _settled(history: list[np.ndarray]) -> bool:
+def _settled(history: list[np.ndarray], levels: Levels = DEFAULT_LEVELS) -> bool:
     """The cheap first test: every output moved less than SETTLED_CHANGE over SETTLE_WINDOW and is in a band."""
     k = SETTLE_WINDOW // CHUNK
     if len(history) <= k:
         return False
     now, before = history[-1][0], history[-1 - k][0]
-    inside = np.vectorize(lambda a: band_of(a) is not None)(now)
+    inside = np.vectorize(lambda a: levels.band_of(a) is not None)(now)
     return bool(np.all(np.abs(now - before) < SETTLED_CHANGE) and np.all(inside))
 
 
-def _periods_to_settle(judged, history: list, probes: list[str]) -> int:
+def _periods_to_settle(judged, history: list, probes: list[str], levels: Levels = DEFAULT_LEVELS) -> int:
     """0 when every member is settled or unstable (no wait helps); else the periods for the slowest decaying
     mode to bring what is still to come down to verdict.SETTLED_BW (at least one chunk)."""
     wait = 0
@@ -220,62 +216,12 @@ def _periods_to_settle(judged, history: list, probes: list[str]) -> int:
         if ok or not v.stable:
             continue
         a, swing, step = _recent(history, probes, b)
-        left = max(verdict.still_to_come(v, a, swing, step, CHUNK), verdict.drift(v, a))
+        left = max(verdict.still_to_come(v, a, swing, step, CHUNK, levels), verdict.drift(v, a, levels))
         wait = max(wait, CHUNK, int(min(v.slowest_decay * np.log(max(left / verdict.SETTLED_BW, 1.0)), 1e7)))
     return wait
 
 
-# --- clocked designs -------------------------------------------------------------------------
-# Measured on verilog/dff.v (reports/sequential.md, RK4 and envelope agree within 4 periods): a 300-period
-# enable pulse does not capture a 0, 500 does; the latch output (3 delay pairs) moves 1282 (storing 1)
-# to 1648 (storing 0) periods after the pulse starts. Gate delays are at most 225 periods (reports/gate.md).
-LATCH_MIN_PULSE = 500
-LATCH_OUTPUT_DELAY_MIN = 1280
-LATCH_OUTPUT_DELAY = 1650
-GATE_DELAY_MAX = 225
-SETTLE_MARGIN = 600
-
-
-def block_slowdown(p: GateParams | None) -> float:
-    """How much slower this block's gates switch than the default block's, >= 1: the largest gate delay of
-    the 3-gate chain on RK4 (experiments/characterise.cascade, the measurement GATE_DELAY_MAX comes from),
-    against the default's.  The schedule's latch and gate delays were measured on the default block; a
-    slower block needs them stretched (the robust block: 340 against 224 periods, 1.52x).  Cached."""
-    from .physics.params import DEFAULT
-    if p is None or p == DEFAULT:
-        return 1.0
-    return max(1.0, _largest_delay(p) / _largest_delay(DEFAULT))
-
-
-def _largest_delay(p: GateParams) -> float:
-    """The 3-gate chain's largest gate delay (periods, RK4), cached per parameter set."""
-    key = json.dumps(p.to_dict(), sort_keys=True, default=str)
-    if key not in _DELAY:
-        from .experiments.characterise import cascade
-        _DELAY[key] = cascade(p)["delay_max"]
-    return _DELAY[key]
-
-
-_DELAY: dict[str, float] = {}
-
-
-def clock_timing(netlist: Netlist, pulse: int | None = None, pause: int | None = None,
-                 p: GateParams | None = None) -> dict:
-    """Pulse and pause (drive periods) from the measured latch and gate delays and the logic depth, the
-    delays stretched by `block_slowdown(p)` for a block slower than the default."""
-    s = block_slowdown(p)
-    min_pulse, out_min = int(math.ceil(s * LATCH_MIN_PULSE)), int(s * LATCH_OUTPUT_DELAY_MIN)
-    pulse = pulse or int(1.6 * min_pulse)
-    if pulse >= out_min:
-        raise Mech2SpiceError(f"a {pulse}-period clock pulse outlasts the latch's shortest output delay "
-                              f"({out_min} periods): outputs would change while it latches")
-    if pulse < min_pulse:
-        raise Mech2SpiceError(f"a {pulse}-period clock pulse is shorter than the {min_pulse} periods "
-                              "the latch was measured to need")
-    depth = network.logic_depth(netlist)
-    need = int(math.ceil(s * (LATCH_OUTPUT_DELAY + GATE_DELAY_MAX * (depth + 1) + SETTLE_MARGIN))) - pulse
-    return {"pulse": pulse, "pause": pause or need, "derived_pause": need, "logic_depth": depth,
-            "block_slowdown": s}
+# --- clocked designs (their pulse and pause: experiments/clocking.clock_timing) -------------------
 
 
 def expand_steps(steps: list[dict]) -> list[dict[str, int]]:
@@ -437,7 +383,7 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
     for k, t in enumerate(reads):
         a = {n: float(amp[t - 10:t, j].mean()) for j, n in enumerate(outs)}
         v, ok = judged[k] if judged and judged[k] else (None, False)
-        decoded = verdict.apply(decode(netlist, a, model.design.const_outputs), a, v, ok, source)
+        decoded = verdict.apply(decode(netlist, a, model.design.const_outputs, model.levels), a, v, ok, source, model.levels)
         trace.append({"cycle": k, **decoded, "amplitudes": a})
     extra = {"envelope_step": step, "settle": engine.options.settle_tol,
              "simulated_periods": total - run.settled_periods,

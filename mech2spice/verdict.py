@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .physics import stability
-from .physics.params import BAND0, BAND1, band_of, margin
+from .physics.params import DEFAULT_LEVELS, Levels
 
 SETTLED_BW = 0.005     # band widths: an output with less than this still to come has settled (its margin
                        # is then within this of the long run's)
@@ -27,10 +27,10 @@ AVERAGING_ERROR = 2.5e-3   # u_R: how far an oscillator-level steady state may l
                            # 3-input majority)
 
 
-def band_width(x: float) -> float:
+def band_width(x: float, levels: Levels = DEFAULT_LEVELS) -> float:
     """The width of the band x lies in (u_R), or of the narrower band when x lies in neither."""
-    w0, w1 = BAND0[1] - BAND0[0], BAND1[1] - BAND1[0]
-    b = band_of(x)
+    w0, w1 = levels.width(0), levels.width(1)
+    b = levels.band_of(x)
     return w0 if b == 0 else w1 if b == 1 else min(w0, w1)
 
 
@@ -42,13 +42,13 @@ def judge(model, A: np.ndarray, s: np.ndarray, F: np.ndarray, outs: list[str]) -
     return stability.verdict(model, A, s, F, watch)
 
 
-def drift(v: stability.Verdict, amplitudes: dict[str, float]) -> float:
+def drift(v: stability.Verdict, amplitudes: dict[str, float], levels: Levels = DEFAULT_LEVELS) -> float:
     """Largest distance of an output from its fixed point, in band widths."""
-    return max((abs(a - v.fixed[n]) / band_width(a) for n, a in amplitudes.items() if n in v.fixed), default=0.0)
+    return max((abs(a - v.fixed[n]) / band_width(a, levels) for n, a in amplitudes.items() if n in v.fixed), default=0.0)
 
 
 def still_to_come(v: stability.Verdict, amplitudes: dict[str, float], swing: dict[str, float],
-                  step: dict[str, float], lag: float) -> float:
+                  step: dict[str, float], lag: float, levels: Levels = DEFAULT_LEVELS) -> float:
     """Largest change still to come of an output, in band widths, from its own recent motion: the larger of
     its swing over the last `lag` periods (a ringing mode: what is left is at most that) and its drift,
     the change of its `lag`-period mean from the one before, carried on by the slowest decaying mode
@@ -56,12 +56,12 @@ def still_to_come(v: stability.Verdict, amplitudes: dict[str, float], swing: dic
     if not np.isfinite(v.slowest_decay):
         return float("inf")
     r = np.exp(-lag / max(v.slowest_decay, 1e-9))
-    return max((max(swing[n], step[n] * r / (1 - r)) / band_width(a) for n, a in amplitudes.items()
+    return max((max(swing[n], step[n] * r / (1 - r)) / band_width(a, levels) for n, a in amplitudes.items()
                 if n in swing), default=0.0)
 
 
 def settled(v: stability.Verdict, amplitudes: dict[str, float], swing: dict[str, float], step: dict[str, float],
-            lag: float, on_fixed_point: bool, held: bool = False) -> bool:
+            lag: float, on_fixed_point: bool, held: bool = False, levels: Levels = DEFAULT_LEVELS) -> bool:
     """Stable, and less than SETTLED_BW band widths still to come on every output.  An engine that rests
     exactly on the envelope equations' fixed points (`on_fixed_point`: their RK4 steps) is as far from
     settled as its distance from the fixed point (and a run that held a snapshot of a moving network is far
@@ -72,23 +72,24 @@ def settled(v: stability.Verdict, amplitudes: dict[str, float], swing: dict[str,
     if not v.stable:
         return False
     if on_fixed_point:
-        return drift(v, amplitudes) <= SETTLED_BW
+        return drift(v, amplitudes, levels) <= SETTLED_BW
     if held:          # idle skipping held the state: its flat trend says nothing, so how far it is from rest
-        return all(abs(a - v.fixed[n]) <= SETTLED_BW * band_width(a) + AVERAGING_ERROR
+        return all(abs(a - v.fixed[n]) <= SETTLED_BW * band_width(a, levels) + AVERAGING_ERROR
                    for n, a in amplitudes.items() if n in v.fixed)
-    return still_to_come(v, amplitudes, swing, step, lag) <= SETTLED_BW
+    return still_to_come(v, amplitudes, swing, step, lag, levels) <= SETTLED_BW
 
 
 def apply(decoded: dict, amplitudes: dict[str, float], v: stability.Verdict | None, settled_now: bool,
-          source: str = "run") -> dict:
+          source: str = "run", levels: Levels = DEFAULT_LEVELS) -> dict:
     """`decoded` (bits, valid, min_margin) with the rule applied and the verdict's fields added."""
     if v is None:
         return decoded
+    band_of = levels.band_of
     same = all(band_of(v.fixed[n]) == band_of(a) for n, a in amplitudes.items() if n in v.fixed)
-    fixed_margin = [margin(v.fixed[n], band_of(a)) for n, a in amplitudes.items()
+    fixed_margin = [levels.margin(v.fixed[n], band_of(a)) for n, a in amplitudes.items()
                     if n in v.fixed and band_of(a) is not None]
     fields = {**v.to_json(), "settled": settled_now,
               "fixed_point_margin": float(min(fixed_margin)) if fixed_margin else None,
-              "output_drift_bw": drift(v, amplitudes), "stability_from": source}
+              "output_drift_bw": drift(v, amplitudes, levels), "stability_from": source}
     return {**decoded, "valid": bool(decoded["valid"] and v.stable and same), "stable": v.stable,
             "settled": settled_now, "stability": fields}

@@ -23,8 +23,6 @@ from xml.sax.saxutils import quoteattr, escape
 
 import numpy as np
 
-from . import inputs
-from .backends import BACKENDS
 from .errors import Mech2SpiceError, ToolMissingError
 from .synthesis import yosys
 from .synthesis.ports import input_bits, output_bits
@@ -355,12 +353,20 @@ def _as_ports(netlist: Netlist, v) -> dict[str, int]:
 
 # --------------------------------------------------------------------------- co-simulation
 
+def _physical(backend: str) -> bool:
+    """Whether the backend integrates the mechanical model (else it is the logic oracle)."""
+    from .backends import engine_class
+    return engine_class(backend).capabilities.physical
+
+
 def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, params, progress) -> list[dict]:
     """Per vector / cycle: {bits, valid, stable, min_margin, amplitudes} of the network on the backend."""
     from . import simulation
     from .backends._base import progress_bar
+    from .experiments import clocking
     from .backends.logic import evaluate_batch
-    if backend == "logic" and not clocked:
+    physical = _physical(backend)
+    if not physical and not clocked:
         bar = progress_bar(len(x), progress, unit="vector")
         out = []
         for start in range(0, len(x), 4096):
@@ -370,17 +376,20 @@ def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, pa
         bar.close()
         return out
     cycles = [_as_ports(netlist, v) for v in x]
-    if clocked and backend == "logic":
+    if clocked and not physical:
         return simulation.run_clocked_logic(netlist, cycles)["trace"]
     if clocked:
-        timing = simulation.clock_timing(netlist, p=params)
+        timing = clocking.clock_timing(netlist, p=params)
         return simulation.run_clocked_physical(netlist, params, cycles, backend, timing, progress=progress)["trace"]
     return simulation.run_physical(netlist, params, cycles, backend, progress=progress)
 
 
-def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], clocked: bool) -> list[dict]:
-    """Every output bit where Icarus and the backend differ (x/z from Icarus and invalid bits included)."""
-    from .physics.params import band_of, margin
+def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], clocked: bool,
+            levels=None) -> list[dict]:
+    """Every output bit where Icarus and the backend differ (x/z from Icarus and invalid bits included); margins
+    in the block's `levels` (default: the default block's)."""
+    from .physics.params import DEFAULT_LEVELS
+    levels = levels or DEFAULT_LEVELS
     mismatches = []
     for k, (r, g) in enumerate(zip(ref, got)):
         for bit in output_bits(netlist):
@@ -390,7 +399,7 @@ def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], c
             amp = g.get("amplitudes", {}).get(bit)
             m = {("cycle" if clocked else "vector"): k, "inputs": _as_ports(netlist, x[k]), "bit": bit,
                  "icarus": want, "backend": have, "amplitude": amp,
-                 "margin": None if amp is None else float(margin(amp, have if have is not None else band_of(amp)))}
+                 "margin": None if amp is None else float(levels.margin(amp, have if have is not None else levels.band_of(amp)))}
             mismatches.append(m)
     return mismatches
 
@@ -400,7 +409,7 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches."""
     t0 = time.time()
     clocked = netlist.clock is not None
-    physical = backend != "logic"
+    physical = _physical(backend)
     n = n or (16 if physical and not clocked else 8 if physical else 2000 if not clocked else 1000)
     rst = reset_port(netlist, reset) if clocked else None
     if clocked:
@@ -415,7 +424,7 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
             complete = False
     ref = icarus(path, netlist, x, clocked)
     got = run_backend(netlist, x, clocked, backend, params, progress)
-    mismatches = compare(netlist, x, ref, got, clocked)
+    mismatches = compare(netlist, x, ref, got, clocked, None if params is None else params.levels)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0}
     if clocked:
@@ -514,65 +523,3 @@ def text(result: dict) -> str:
         lines.append(f"  ... {len(co['mismatches']) - 20} more (--json lists all)")
     lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)")
     return "\n".join(lines)
-
-
-def add_parser(subparsers) -> None:
-    """Register the `verify` command."""
-    s = subparsers.add_parser(
-        "verify", help="prove the NOR network equal to the Verilog and co-simulate it against Icarus",
-        description="1. Formal equivalence of the mapped NOR network (written back as Verilog) and the source, "
-                    "with Yosys (miter + SAT; temporal induction from the all-zero state for clocked designs). "
-                    "2. Co-simulation of the source on Icarus Verilog against a backend on the same vectors "
-                    "(clocked: a reset cycle, then random inputs per cycle). Exit 0 when proved and every bit "
-                    "agrees, 1 on a counterexample, a mismatch, an invalid output or an unproved equivalence.")
-    s.add_argument("design", help="Verilog file")
-    s.add_argument("--top", help="top module (default: the only/auto-detected top)")
-    s.add_argument("--backend", default="logic", choices=list(BACKENDS),
-                   help="the network's engine for the co-simulation (default logic; a physical one runs a sample)")
-    s.add_argument("--vectors", type=inputs.integer(1, 10_000_000), metavar="N",
-                   help="random input vectors (default 2000 on logic, 16 on a physical backend; all of them when "
-                        "there are no more)")
-    s.add_argument("--exhaustive", action="store_true", help="every input vector (combinational designs)")
-    s.add_argument("--cycles", type=inputs.integer(1, inputs.MAX_CYCLES), metavar="N",
-                   help="clock cycles after the reset cycle's start (default 1000 on logic, 8 on a physical backend)")
-    s.add_argument("--reset", metavar="PORT", help="the synchronous reset asserted in cycle 0 (default: an input "
-                   "named rst/reset, or rst_n/rstn/reset_n/resetn active low; 'none': no reset)")
-    s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, help="random seed (default 0)")
-    s.add_argument("--params", default="default", help="gate parameters of a physical backend")
-    s.add_argument("--no-equivalence", action="store_true", help="co-simulation only")
-    s.add_argument("--junit", metavar="FILE", help="also write a JUnit XML report")
-    s.add_argument("--json", action="store_true", help="machine-readable output")
-    s.set_defaults(func=cmd_verify)
-
-
-def cmd_verify(args) -> int:
-    """`mech2spice verify`: print the report (text or JSON), write --junit; 0 pass, 1 otherwise."""
-    from .cli import _log, _print_json, _progress
-    from .physics.params import load_params
-    from .synthesis.synth import synthesize
-    if args.vectors is not None and args.exhaustive:
-        raise Mech2SpiceError("give --vectors N or --exhaustive, not both")
-    if args.junit:
-        inputs.check_output_file(args.junit, {"the design": args.design}, "JUnit file")
-    if not Path(args.design).is_file():
-        raise Mech2SpiceError(f"cannot read Verilog file {args.design}: no such file")
-    nl = synthesize(args.design, top=args.top)
-    if nl.clock is None and args.cycles:
-        raise Mech2SpiceError(f"{nl.top} has no flip-flops: --cycles applies to clocked designs (use --vectors)")
-    if nl.clock is not None and (args.vectors or args.exhaustive):
-        raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N, not --vectors/--exhaustive")
-    if nl.clock is None and args.reset:
-        raise Mech2SpiceError(f"{nl.top} has no flip-flops: --reset applies to clocked designs")
-    if nl.clock is not None:
-        reset_port(nl, args.reset)                 # checked before the work starts
-    params = load_params(args.params) if args.backend != "logic" else None
-    res = verify(args.design, backend=args.backend, vectors=args.cycles or args.vectors, exhaustive=args.exhaustive,
-                 seed=args.seed, params=params, progress=_progress(args), log=_log(args), netlist=nl,
-                 reset=args.reset, equivalence_check=not args.no_equivalence)
-    if args.junit:
-        inputs.write_text(args.junit, junit_xml(res))
-    if args.json:
-        _print_json(res)
-    else:
-        print(text(res))
-    return exit_code(res)

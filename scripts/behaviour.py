@@ -26,6 +26,10 @@ COUNTER_STIMULUS = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1
 # name -> argv after `mech2spice`
 RUNS = {
     "gate": ["gate", "--json"],
+    "gate_robust": ["gate", "--params", "robust", "--json"],
+    "gate_spread_default": ["gate", "--spread", "1e-6", "--samples", "40", "--json"],
+    "gate_spread_robust": ["gate", "--params", "robust", "--spread", "1e-5", "--samples", "40", "--json"],
+    "simulate_adder_envelope_robust": ["simulate", *ADDER, "--backend", "envelope", "--params", "robust", "--json"],
     "synth_adder": ["synth", "verilog/adder2.v", "--json"],
     "synth_sqrt": ["synth", "verilog/sqrt.v", "--json"],
     "synth_cpu": ["synth", "verilog/cpu.v", "--json"],

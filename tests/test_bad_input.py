@@ -428,7 +428,7 @@ def test_a_bug_gives_a_traceback_a_report_line_and_exit_3(capsys, monkeypatch):
 
     def broken(args):
         return 1 / 0
-    monkeypatch.setattr(cli, "cmd_synth", broken)
+    monkeypatch.setattr(cli.simulate, "cmd_synth", broken)
     rc, _, err = run(capsys, "synth", ADDER)
     assert rc == cli.BUG_EXIT == 3 and "Traceback" in err and "ZeroDivisionError" in err
     assert "please report it" in err.splitlines()[-1]

@@ -103,7 +103,7 @@ def test_gate_params_files_still_load(tmp_path):
 @pytest.mark.parametrize("x1", [0.5, 0.97])
 def test_non_classic_block_emits_dof_by_dof_and_ngspice_matches_rk4(x1):
     from mech2spice.spice import runner as ngspice
-    from mech2spice.spice.carrier import emit
+    from mech2spice.spice.oscillator_netlist import emit
     p = buffer_block()
     m = nor.single_gate(p, x1, 0.5)
     assert "m2s_nor2" not in emit(m, 10).split(".ends")[-1]       # no classic instance for this block

@@ -11,6 +11,7 @@ import pytest
 
 from mech2spice.backends import carrier, make_engine, rk4
 from mech2spice.backends.carrier import CarrierOptions
+from mech2spice.compare import agreement
 from mech2spice.cpu.run import run_program
 from mech2spice.errors import Mech2SpiceError
 from mech2spice.experiments import scenes as S
@@ -31,10 +32,8 @@ def differences(scene, steps: int = carrier.DEFAULT_STEPS_PER_PERIOD):
                         probes=scene.probes)
     out = carrier.integrate(scene.model, scene.periods, steps_per_period=steps, stimulus=scene.stimulus,
                             probes=scene.probes)
-    u = scene.model.amplitude_unit
-    big = np.abs(ref.amp) > 0.1 * u
-    return (np.abs(np.abs(out.amp) - np.abs(ref.amp)).max() / u,
-            np.degrees(np.abs(np.angle(out.amp[big] / ref.amp[big]))).max())
+    d = agreement(ref.amp, out.amp, scene.model.amplitude_unit, floor=0.1)
+    return d.amp, d.phase_deg
 
 
 def test_gate_matches_rk4_at_160_steps():

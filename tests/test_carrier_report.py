@@ -7,6 +7,7 @@ import pytest
 
 from mech2spice.errors import Mech2SpiceError
 from mech2spice.reports import REPORTS, carrier as R
+from mech2spice.studies import carrier as study
 from mech2spice.reports._common import write_json
 
 
@@ -75,7 +76,7 @@ def test_sieve_section_reads_a_partial_trace_pair(tmp_path):
     (tmp_path / "sieve_carrier.json").write_text("")                 # a run in progress: its result not written
     (tmp_path / "sieve_envelope.json").write_text(json.dumps({"cycles": 5, "halted": True, "wall_s": 3.0,
                                                                "periods": 900, "simulated_periods": 300}))
-    s = R.sieve(tmp_path / "sieve_carrier.jsonl", tmp_path / "sieve_envelope.jsonl")
+    s = study.sieve(tmp_path / "sieve_carrier.jsonl", tmp_path / "sieve_envelope.jsonl")
     assert s["cycles_compared"] == 3 and s["total_cycles"] == 5 and not s["complete"]
     assert s["worst_ur"] == pytest.approx([0.0, 0.03, 0.0]) and s["max_probe"] == "x[0]"
     assert s["registers_equal"] == [True, True, False]
@@ -94,7 +95,7 @@ def test_sieve_section_reads_a_partial_trace_pair(tmp_path):
 def test_latency_section_compares_the_latency_trace_with_the_carrier_and_the_iss(tmp_path):
     """Per-cycle differences against the carrier trace, block-steps per cycle from the cumulative count, the
     ISS check on the real sieve's registers, and the processor_check --latency table."""
-    from mech2spice.reports.carrier import iss_registers
+    iss_registers = study.iss_registers
     regs = iss_registers(3)
     car = [_cycle(k, {"x[0]": 0.5, "x[1]": 0.97}, regs=regs[k]) for k in range(3)]
     lat = [{**_cycle(k, {"x[0]": 0.5 + 0.01 * k, "x[1]": 0.97}, regs=regs[k]), "block_steps": 1000 * (k + 1) ** 2,
@@ -109,7 +110,7 @@ def test_latency_section_compares_the_latency_trace_with_the_carrier_and_the_iss
              "latency": [{"tol": 0.05, "periods": 80, "wall_s": 2.0, "vs_full": [
                  {"cycle": 30, "amp_diff": 0.012, "phase_diff_deg": 3.1, "registers_equal": True}]}]}
     write_json(tmp_path / "check.json", check)
-    s = R.latency(tmp_path / "lat.jsonl", tmp_path / "car.jsonl", tmp_path / "none.jsonl", [tmp_path / "check.json"])
+    s = study.latency(tmp_path / "lat.jsonl", tmp_path / "car.jsonl", tmp_path / "none.jsonl", [tmp_path / "check.json"])
     assert s["vs_carrier"]["worst_ur"] == pytest.approx([0.0, 0.01, 0.02]) and s["max_at_cycle"] == 2
     assert s["block_steps"] == [1000, 3000, 5000] and s["iss_mismatches"] == [] and s["complete"]
     assert s["vs_envelope"] == [] and s["blocks"] == 1081 and s["steps_per_period"] == 12

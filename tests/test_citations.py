@@ -21,7 +21,11 @@ command that reproduces a run).  Found, per source line:
   the shared reference folder, which must be cited as ``../shared/...`` (the folder beside the
   repository) and is checked only where that folder is present;
 * dotted module names ``mech2spice.a.b``: must resolve to a module file, a trailing part to a name
-  the module defines.
+  the module defines;
+* ``module.name`` in inline code, where the module is one of mech2spice's by its file name
+  (``simulation.clock_timing``, ``clocking.block_slowdown``): some module of that name defines it;
+* commands ``mech2spice WORD`` (at a command's start, or after ``python -m``) in code (inline code, fenced blocks, the
+  data files' commands): WORD must be a subcommand of the command line.
 
 Excluded, by one rule (`_placeholder`): tokens with a placeholder (an all-capitals word such as ``NAME``,
 ``FILE``, ``DIR``, ``DESIGN.v``, ``PROG.asm``; ``*``, ``{...}``, ``<...>``, ``...``), temporary paths
@@ -30,6 +34,7 @@ Excluded, by one rule (`_placeholder`): tokens with a placeholder (an all-capita
 """
 import ast
 import importlib
+import importlib.util
 import json
 import re
 from pathlib import Path
@@ -59,6 +64,10 @@ _PATH = re.compile(
     + r")/)" + _CHAR + r"*)")
 _BARE = re.compile(r"(?<![A-Za-z0-9_./\-])([A-Za-z0-9_\-]+\.py)(?![A-Za-z0-9_/\-]|:\d+\()")
 _LINK = re.compile(r"\]\(([^()\s]+)\)")
+_COMMAND = re.compile(r"(?:^|[;&|(]|\$ |python3? -m )\s*(?:[A-Z_]+=\S*\s+)*"   # where a command starts
+                      r"mech2spice(?:\.cli)?[ \t]+([a-z][a-z0-9_\-]*)(?![A-Za-z0-9_./])")
+_CODE_SPAN = re.compile(r"`([^`]+)`")
+_ATTR = re.compile(r"(?<![A-Za-z0-9_./\-])([a-z_][a-z0-9_]*)\.([A-Za-z_][A-Za-z0-9_]*)(?![A-Za-z0-9_/])")
 _MODULE = re.compile(r"(?<![A-Za-z0-9_./\-])(mech2spice(?:\.[A-Za-z_][A-Za-z0-9_]*)+)")
 
 
@@ -165,6 +174,65 @@ def _check_module(token):
     return None
 
 
+_SUBCOMMANDS = None
+
+
+def _subcommands():
+    """The first word of every `mech2spice` command line."""
+    global _SUBCOMMANDS
+    if _SUBCOMMANDS is None:
+        import argparse
+        from mech2spice.cli import build_parser
+        actions = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+        _SUBCOMMANDS = set(actions[0].choices)
+    return _SUBCOMMANDS
+
+
+_STEMS = None
+_EXTENSIONS = {"py", "md", "json", "sim", "cir", "v", "asm", "va", "osdi", "txt", "png", "npz", "raw", "subckt", "inc"}
+_NOT_MODULES = {"mech2spice", "model"}      # the package; `model.design`: a MechModel in the prose
+
+
+def _check_attr(stem, name):
+    """None when some mech2spice module named `stem` defines `name` (or has it as a submodule); else why
+    not; None too when no module has that name (then it is not a citation of ours)."""
+    global _STEMS
+    if _STEMS is None:
+        _STEMS = {}
+        for p in (ROOT / "mech2spice").rglob("*.py"):
+            parts = p.relative_to(ROOT).with_suffix("").parts
+            parts = parts[:-1] if parts[-1] == "__init__" else parts
+            _STEMS.setdefault(parts[-1], []).append(".".join(parts))
+    modules = _STEMS.get(stem, [])
+    if not modules or stem in _NOT_MODULES or name in _EXTENSIONS:
+        return None
+    for module in modules:
+        if importlib.util.find_spec(f"{module}.{name}") if (ROOT / module.replace(".", "/") / "__init__.py").exists() \
+                else False:
+            return None
+        if hasattr(importlib.import_module(module), name):
+            return None
+    return f"no module {stem} defines {name}"
+
+
+def _code(label, lines):
+    """(line number, code text) of a source: inline code and fenced blocks of markdown; every line of the
+    generators' literals is searched for inline code; a data file's commands are code throughout."""
+    fenced = False
+    for lineno, text in lines:
+        if label.endswith(".json"):
+            yield lineno, text
+            continue
+        if text.lstrip().startswith("```"):
+            fenced = not fenced
+            continue
+        if fenced:
+            yield lineno, text
+        else:
+            for span in _CODE_SPAN.findall(text):
+                yield lineno, span
+
+
 def _drop_urls(text):
     """A URL's path is not a repository path."""
     return re.sub(r"https?://\S+", " ", text)
@@ -174,6 +242,16 @@ def find_stale():
     stale = []
     for label, lines in _sources():
         numbered = lines if lines and isinstance(lines[0], tuple) else list(enumerate(lines, 1))
+        for lineno, code in _code(label, numbered):
+            if not label.endswith(".json"):
+                for m in _ATTR.finditer(code):
+                    why = _check_attr(*m.groups())
+                    if why:
+                        stale.append(f"{label}:{lineno}: {m.group(0)} ({why})")
+            for m in _COMMAND.finditer(code):
+                if m.group(1) not in _subcommands():
+                    where = f"{label}:{lineno}" if lineno else f"{label} (a command)"
+                    stale.append(f"{where}: mech2spice {m.group(1)} (no such subcommand)")
         for lineno, text in numbered:
             where = f"{label}:{lineno}" if lineno else f"{label} (a command)"
             text = _drop_urls(text)

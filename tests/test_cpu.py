@@ -11,7 +11,7 @@ import pytest
 
 from mech2spice.cpu import tm
 from mech2spice.cpu.asm import assemble, assemble_program
-from mech2spice.cpu.cli import add_parser
+from mech2spice.cli.cpu import add_parser
 from mech2spice.cpu.isa import CYCLES, OPCODES
 from mech2spice.cpu.iss import FETCH, ISS
 from mech2spice.cpu.memory import Memory

@@ -12,9 +12,9 @@ from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
 
 
 def _vacask():
-    from mech2spice.spice import veriloga
+    from mech2spice.spice import openvaf
     try:
-        return veriloga.tools()
+        return openvaf.tools()
     except ToolMissingError:
         pytest.skip("VACASK not installed")
 

@@ -1,8 +1,9 @@
-"""Energy per operation (physics/energy.py): steady dissipation equals the drives' input power, for the
+"""Energy per operation (physics/energy.py, experiments/energy.py): steady dissipation equals the drives' input power, for the
 classic and a non-classic block; switching events dissipate a positive energy far above kT ln 2."""
 import numpy as np
 import pytest
 
+from mech2spice.experiments.energy import gate_energy
 from mech2spice.physics import energy, nor
 from mech2spice.physics.params import DEFAULT
 from test_blocks import buffer_block
@@ -21,7 +22,7 @@ def test_steady_dissipation_equals_source_power(p, x1):
 
 
 def test_switching_energy_and_scaling():
-    e = energy.gate_energy(DEFAULT, transient_periods=1500)
+    e = gate_energy(DEFAULT, transient_periods=1500)
     for ev in e["switching"].values():
         assert ev["delay_periods"] and 50 < ev["delay_periods"] < 1000
         assert ev["energy_model"] > 0 and ev["energy_J"] > 1e3 * e["kT_ln2_J"]["300K"]

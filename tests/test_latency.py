@@ -11,6 +11,7 @@ from mech2spice import simulation
 from mech2spice.backends import envelope
 from mech2spice.backends.envelope import EnvelopeOptions, integrate
 from mech2spice.errors import Mech2SpiceError
+from mech2spice.experiments import clocking
 from mech2spice.experiments import scenes as S
 from mech2spice.physics.params import DEFAULT, band_of
 from mech2spice.synthesis.synth import synthesize
@@ -58,7 +59,7 @@ def test_latency_counter_trace_equals_full():
     """The clocked counter: latency on vs off decode the same trace, amplitudes within 0.02 u_R at reads."""
     nl = synthesize(data.verilog("counter4.v"))
     cycles = simulation.expand_steps(S.COUNTER_STEPS)
-    timing = simulation.clock_timing(nl)
+    timing = clocking.clock_timing(nl)
     runs = [simulation.run_clocked_physical(nl, DEFAULT, cycles, "envelope", timing,
                                             options=EnvelopeOptions(latency=lat)) for lat in (None, LATENCY)]
     full, lat = ([e["outputs"] for e in r["trace"]] for r in runs)

@@ -67,3 +67,42 @@ def test_constant_inputs_are_driven_at_the_blocks_nominal_levels():
     amps = lambda m: [m.drives[d].amplitude for pair in m.design.input_drives for d in pair]
     assert amps(nor.single_gate(p)) == pytest.approx([a * 0.35 / 0.5 for a in amps(nor.single_gate(DEFAULT))])
     assert amps(nor.single_gate(p)) == pytest.approx([0.35 * p.f_r] * 4)
+
+
+def _params_file(tmp_path, levels: Levels) -> str:
+    f = tmp_path / "levels.json"
+    f.write_text(json.dumps({"levels": levels.to_dict()}))
+    return str(f)
+
+
+def test_outputs_are_decoded_in_the_blocks_own_bands(tmp_path, capsys):
+    """The default block, read with two other sets of bands: its '0' (0.55 u_R for s[1] of 3 + 2) lies in
+    band 0 of the first and above band 0 of the second, so the same physics is valid in one and not the other."""
+    from cli_helpers import run
+    wide = _params_file(tmp_path, Levels((0.3, 0.6), (0.9, 1.05), 0.45, 0.97))
+    code, out, _ = run(capsys, "simulate", "verilog/adder2.v", "--set", "a=3", "--set", "b=2", "--backend",
+                       "envelope", "--params", wide, "--json")
+    res = json.loads(out)
+    assert code == 0 and res["outputs"] == {"s": 5} and res["valid"]
+    s1 = res["amplitudes"]["s[1]"]
+    assert res["min_margin"] == pytest.approx(min(Levels((0.3, 0.6), (0.9, 1.05)).margin(a)
+                                                  for a in res["amplitudes"].values()))
+    narrow = tmp_path / "narrow"
+    narrow.mkdir()
+    low = _params_file(narrow, Levels((0.2, 0.5), (0.9, 1.05), 0.35, 0.97))
+    code, out, _ = run(capsys, "simulate", "verilog/adder2.v", "--set", "a=3", "--set", "b=2", "--backend",
+                       "envelope", "--params", low, "--json")
+    res = json.loads(out)
+    assert s1 > 0.5 and res["amplitudes"]["s[1]"] > 0.5
+    assert code == 1 and not res["valid"] and res["bits"]["s[1]"] is None
+
+
+def test_an_emitted_netlist_reads_in_the_blocks_bands(tmp_path, capsys):
+    from cli_helpers import run
+    lv = Levels((0.3, 0.6), (0.9, 1.05), 0.45, 0.97)
+    out = tmp_path / "a.cir"
+    code, _, _ = run(capsys, "emit", "verilog/adder2.v", "--set", "a=1", "--set", "b=1", "-o", out,
+                     "--params", _params_file(tmp_path, lv))
+    text = out.read_text()
+    assert code == 0 and "'0' 0.3..0.6 u_R, '1' 0.9..1.05 u_R" in text
+    assert "ge 0.3 and" in text and "le 1.05" in text and "ge 0.365" not in text

@@ -87,7 +87,7 @@ def test_spread_zero_is_the_deterministic_run_bit_for_bit(backend, nor_v):
 
 
 def test_spread_zero_netlist_is_the_nominal_netlist():
-    from mech2spice.spice.carrier import emit
+    from mech2spice.spice.oscillator_netlist import emit
     nl = netlist(str(ADDER))
     d = mc.DesignMC(nl, DEFAULT, [{"a": 3, "b": 2}], "ngspice", mc.parse_spread("0"), 0)
     assert emit(*d.sample(5)[:1], 10, d.sample(5)[1]) == emit(d.model, 10, d.stim)
@@ -97,7 +97,7 @@ def test_spread_zero_netlist_is_the_nominal_netlist():
 @pytest.mark.ngspice
 @pytest.mark.skipif(shutil.which("ngspice") is None, reason="ngspice not installed")
 def test_sampled_adder_ngspice_matches_rk4():
-    from mech2spice.spice.carrier import emit
+    from mech2spice.spice.oscillator_netlist import emit
     nl = netlist(str(ADDER))
     got = {}
     for be in ("rk4", "ngspice"):

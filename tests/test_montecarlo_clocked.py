@@ -9,7 +9,7 @@ import pytest
 
 from mech2spice import simulation
 from mech2spice.cli import main
-from mech2spice.experiments import mc_clocked
+from mech2spice.experiments import clocking, mc_clocked
 from mech2spice.experiments import montecarlo as mc
 from mech2spice.physics import network
 from mech2spice.physics.params import DEFAULT
@@ -28,7 +28,7 @@ def test_clocked_spread_zero_is_the_deterministic_clocked_run():
     d = mc_clocked.ClockedMC(nl, DEFAULT, DFF_STEPS, "envelope", mc.parse_spread("0"), 1)
     rec = d.evaluate([0])[0]
     ref = simulation.run_clocked_physical(nl, DEFAULT, simulation.expand_steps(DFF_STEPS), "envelope",
-                                          simulation.clock_timing(nl))
+                                          clocking.clock_timing(nl))
     assert rec["pass"] and rec["margin"] == ref["min_margin"] and rec["periods"] == ref["periods"]
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from mech2spice import simulation
 from mech2spice.cli import main
-from mech2spice.experiments import mc_cli
+from mech2spice.cli import montecarlo as mc_cli
 from mech2spice.experiments import montecarlo as mc
 from mech2spice.physics import network
 from mech2spice.physics.params import DEFAULT
@@ -43,7 +43,7 @@ def test_spread_zero_noise_zero_is_the_deterministic_run_bit_for_bit(backend, no
 
 def test_ngspice_noise_zero_is_the_deterministic_netlist(nor_v):
     from mech2spice.backends._noise_envelope import noisy_engine
-    from mech2spice.spice.carrier import emit
+    from mech2spice.spice.oscillator_netlist import emit
     _, d = _design(nor_v, "ngspice", 0.0)
     eng = noisy_engine("ngspice", None, 0.0, 4)
     assert emit(d.model, 20, d.stim, options=eng.options) == emit(d.model, 20, d.stim)

@@ -16,7 +16,7 @@ from mech2spice.backends.envelope import EnvelopeEngine
 from mech2spice.errors import Mech2SpiceError
 from mech2spice.experiments import noise_agreement as na
 from mech2spice.physics import noise, nor, params
-from mech2spice.spice.carrier import SpiceOptions, emit, noisy_options
+from mech2spice.spice.oscillator_netlist import SpiceOptions, emit, noisy_options
 
 T_LINEAR = 1e-4      # model energy units; fluctuations ~1e-2 of the drive response: linear regime
 T_GATE = 1e-4        # channel rms ~1e-3 / 0.0182 = 0.05 u_R: linear about the '1' state

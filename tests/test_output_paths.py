@@ -113,7 +113,8 @@ def test_montecarlo_out_of_another_kind_is_refused_before_truncation(tmp_path, c
 def _header(f: dict) -> str:
     """The header line a montecarlo run of these files writes (its job key)."""
     from mech2spice.cli import build_parser
-    from mech2spice.experiments import mc_cli, montecarlo as mc
+    from mech2spice.cli import montecarlo as mc_cli
+    from mech2spice.experiments import montecarlo as mc
     job = mc_cli.job_of(build_parser().parse_args([str(a) for a in _mc_argv(f, Path("x"))]))
     return json.dumps({"type": "header", "key": mc.job_key(job), "job": job}) + "\n"
 

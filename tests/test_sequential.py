@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from mech2spice import simulation
-from mech2spice.experiments import characterise
+from mech2spice.experiments import characterise, clocking
 from mech2spice.synthesis import synth
 
 REPO = Path(__file__).resolve().parent.parent
@@ -53,7 +53,7 @@ def test_counter_traces_identical_logic_and_rk4(tmp_path):
 def test_counter_envelope_matches_logic(p):
     nl = synth.synthesize(str(REPO / "verilog" / "counter4.v"))
     cycles = simulation.expand_steps(COUNTER_STEPS + [{"set": {"en": 1}, "cycles": 3}])
-    env = simulation.run_clocked_physical(nl, p, cycles, "envelope", simulation.clock_timing(nl))
+    env = simulation.run_clocked_physical(nl, p, cycles, "envelope", clocking.clock_timing(nl))
     log = simulation.run_clocked_logic(nl, cycles)
     assert [e["outputs"] for e in env["trace"]] == [e["outputs"] for e in log["trace"]]
     assert env["valid"]
@@ -100,16 +100,23 @@ def test_the_clock_schedule_stretches_with_a_slower_block():
     """The schedule's latch and gate delays were measured on the default block: a block whose gates switch
     more slowly (the robust preset: 340 against 224 periods, the 3-gate chain's largest delay on RK4) gets
     a proportionally longer pulse and pause; the default's schedule is unchanged."""
-    from mech2spice import data, simulation
+    from mech2spice import data
     from mech2spice.physics.params import DEFAULT, load_params
     from mech2spice.synthesis.synth import synthesize
     nl = synthesize(data.verilog("sqrt.v"))
-    base, same = simulation.clock_timing(nl), simulation.clock_timing(nl, p=DEFAULT)
-    assert base == same and base["pulse"] == int(1.6 * simulation.LATCH_MIN_PULSE)
-    assert base["pause"] == (simulation.LATCH_OUTPUT_DELAY - base["pulse"] + simulation.SETTLE_MARGIN
-                             + simulation.GATE_DELAY_MAX * (base["logic_depth"] + 1))
-    slow = simulation.clock_timing(nl, p=load_params("robust"))
+    base, same = clocking.clock_timing(nl), clocking.clock_timing(nl, p=DEFAULT)
+    assert base == same and base["pulse"] == int(1.6 * clocking.LATCH_MIN_PULSE)
+    assert base["pause"] == (clocking.LATCH_OUTPUT_DELAY - base["pulse"] + clocking.SETTLE_MARGIN
+                             + clocking.GATE_DELAY_MAX * (base["logic_depth"] + 1))
+    slow = clocking.clock_timing(nl, p=load_params("robust"))
     s = slow["block_slowdown"]
     assert 1.4 < s < 1.7
-    assert slow["pulse"] >= s * simulation.LATCH_MIN_PULSE and slow["pulse"] < s * simulation.LATCH_OUTPUT_DELAY_MIN
+    assert slow["pulse"] >= s * clocking.LATCH_MIN_PULSE and slow["pulse"] < s * clocking.LATCH_OUTPUT_DELAY_MIN
     assert slow["pause"] + slow["pulse"] >= s * (base["pause"] + base["pulse"]) - 1
+
+
+def test_adder_scene_holds_for_its_period_budget():
+    """scenes.ADDER_HOLD is a constant (scenes import no clocking); it must stay adder2.v's period budget."""
+    from mech2spice import data
+    from mech2spice.experiments.scenes import ADDER_HOLD
+    assert ADDER_HOLD == clocking.period_budget(synth.synthesize(data.verilog("adder2.v")))

@@ -12,6 +12,7 @@ from mech2spice.errors import Mech2SpiceError
 from mech2spice.backends import logic
 from mech2spice.physics import network
 from mech2spice.synthesis import synth
+from mech2spice.experiments import clocking
 from mech2spice.experiments.scenes import ADDER_INPUTS
 
 REPO = Path(__file__).resolve().parent.parent
@@ -182,4 +183,4 @@ def test_a_clocked_trace_too_large_for_memory_is_refused(p):
     nl = synth.synthesize(str(REPO / "verilog" / "counter4.v"))
     cycles = simulation.expand_steps([{"set": {"rst": 0, "en": 1}, "cycles": 40_000}])
     with pytest.raises(Mech2SpiceError, match="GB of amplitudes"):
-        simulation.run_clocked_physical(nl, p, cycles, "envelope", simulation.clock_timing(nl))
+        simulation.run_clocked_physical(nl, p, cycles, "envelope", clocking.clock_timing(nl))

@@ -18,12 +18,14 @@ import pytest
 from mech2spice.spice import runner as ngspice
 from mech2spice.physics import nor
 from mech2spice.backends import rk4
+from mech2spice.compare import agreement, settled
 from mech2spice.backends import Run
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
+from mech2spice.experiments import scenes
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
 from mech2spice.spice import Namer
-from mech2spice.spice.carrier import SpiceOptions, emit, emit_with_probes, subckt_library, write_subckt_library
+from mech2spice.spice.oscillator_netlist import SpiceOptions, emit, emit_with_probes, subckt_library, write_subckt_library
 from mech2spice.physics.stimulus import Stimulus
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -31,9 +33,8 @@ P = DEFAULT
 U_R = P.u_r
 AMP_TOL = 0.01          # u_R
 PHASE_TOL = 2.0         # degrees
-PAIRS = [(NOMINAL0, NOMINAL0), (NOMINAL1, NOMINAL0), (NOMINAL0, NOMINAL1), (NOMINAL1, NOMINAL1)]
+LEVEL_PAIRS = scenes.nominal_levels()   # the truth table's input pairs as drive levels (fraction of F_R)
 PERIODS = 1500          # all three designs settle to < 0.002 u_R/100 periods by then (RK4)
-AVG = 20                # periods averaged at the end
 
 needs_ngspice = pytest.mark.skipif(shutil.which("ngspice") is None, reason="ngspice not installed")
 pytestmark = [pytest.mark.ngspice, needs_ngspice]
@@ -42,25 +43,15 @@ pytestmark = [pytest.mark.ngspice, needs_ngspice]
 # --- helpers ---------------------------------------------------------------------------------
 def levels_stimulus(model: MechModel, pairs) -> Stimulus:
     """Constant input levels (fractions of F_R) on the model's two external inputs, one batch member each."""
-    lv = np.array(pairs, float) * P.f_r
-    changes = {}
-    for k, (ds, dd) in enumerate(model.design.input_drives):
-        changes[ds] = changes[dd] = lv[:, k]
-    return Stimulus.from_levels(model, [(0.0, changes)], batch=len(pairs))
-
-
-def settled(run: Run) -> np.ndarray:
-    """Complex amplitude per probe and batch member, averaged over the last AVG periods."""
-    return run.amp[-AVG:].mean(axis=0)
+    return Stimulus.input_levels(model, pairs, P.f_r)
 
 
 def assert_agree(ref: Run, got: Run, label: str) -> None:
-    a, b = settled(ref), settled(got)
-    d_amp = np.abs(np.abs(b) - np.abs(a)) / U_R
-    d_ph = np.abs(np.degrees(np.angle(b / a)))
+    a, b = settled(ref.amp), settled(got.amp)
+    d = agreement(a, b, U_R)
     msg = f"{label}: rk4 {np.round(np.abs(a) / U_R, 4).tolist()} ngspice {np.round(np.abs(b) / U_R, 4).tolist()}"
-    assert d_amp.max() < AMP_TOL, msg + f" amplitude error {d_amp.max():.4f} u_R"
-    assert d_ph.max() < PHASE_TOL, msg + f" phase error {d_ph.max():.2f} deg"
+    assert d.amp < AMP_TOL, msg + f" amplitude error {d.amp:.4f} u_R"
+    assert d.phase_deg < PHASE_TOL, msg + f" phase error {d.phase_deg:.2f} deg"
 
 
 @functools.lru_cache(maxsize=None)
@@ -68,7 +59,7 @@ def design(name: str, periods: int = PERIODS):
     """(model, stimulus, RK4 run at 40 steps/period) for a named design, computed once."""
     if name == "gate":
         m = nor.single_gate(P)
-        st = levels_stimulus(m, PAIRS)
+        st = levels_stimulus(m, LEVEL_PAIRS)
     else:
         m = nor.chain(P, 3) if name == "chain3" else nor.fanout(P, 2)
         st = None
@@ -198,7 +189,7 @@ def test_single_gate_all_inputs_match_rk4():
     got = ngspice.run_batch(m, PERIODS, stimulus=st)
     assert_agree(ref, got, "single gate")
     # and the logic itself: 00 -> '1', the others -> '0'
-    out = np.abs(settled(got))[0] / U_R
+    out = np.abs(settled(got.amp))[0] / U_R
     assert out[0] > 0.92 and (out[1:] < 0.67).all()
 
 
@@ -211,14 +202,14 @@ def test_fanout2_matches_rk4():
     m, st, ref = design("fanout2")
     got = ngspice.run(m, PERIODS)
     assert_agree(ref, got, "fan-out 2")
-    assert abs(abs(settled(got)[1, 0]) - abs(settled(got)[2, 0])) < 1e-9   # identical loads
+    assert abs(abs(settled(got.amp)[1, 0]) - abs(settled(got.amp)[2, 0])) < 1e-9   # identical loads
 
 
 def test_without_prewarp_trap_is_detuned():
     """Why prewarp is the default: plain trap at the same (pinned) step misses the '1' by ~0.2 u_R, 24 deg."""
     m, st, ref = design("gate")
     got = ngspice.run(m, PERIODS, options=SpiceOptions(prewarp=False, trtol=1e4))
-    a, b = settled(ref)[0, 0], settled(got)[0, 0]
+    a, b = settled(ref.amp)[0, 0], settled(got.amp)[0, 0]
     assert abs(abs(b) - abs(a)) / U_R > 0.1
     assert abs(np.degrees(np.angle(b / a))) > 10
 

@@ -17,8 +17,9 @@ from mech2spice import simulation
 from mech2spice.physics import nor
 from mech2spice.backends import envelope
 from mech2spice.synthesis import synth
-from mech2spice.spice import envelope as se
+from mech2spice.spice import envelope_netlist as se
 from mech2spice.spice import failure
+from mech2spice.experiments import clocking
 from mech2spice.experiments import scenes as S
 from mech2spice.errors import DivergenceError, Mech2SpiceError
 from mech2spice.physics.model import MechModel
@@ -126,7 +127,7 @@ def test_adder_3_plus_2_through_simulate():
     nl = synth.synthesize(str(REPO / "verilog" / "adder2.v"))
     res = simulation.run_physical(nl, P, [{"a": 3, "b": 2}], backend="ngspice-envelope")[0]
     assert res["outputs"] == {"s": 5} and res["valid"], res
-    assert res["backend"] == "ngspice-envelope" and res["periods"] == simulation.period_budget(nl)
+    assert res["backend"] == "ngspice-envelope" and res["periods"] == clocking.period_budget(nl)
 
 
 def test_cli_simulate_ngspice_envelope_json():

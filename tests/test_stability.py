@@ -10,6 +10,7 @@ import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
 from mech2spice.cli import main
+from mech2spice.experiments import clocking
 from mech2spice.physics import network, nor, params, stability, steady
 from mech2spice.physics.envelope import Envelope
 from mech2spice.synthesis.synth import synthesize
@@ -188,7 +189,7 @@ def test_every_clocked_design_is_stable_at_every_read(name):
     path, steps = _clocked_cases()[name]
     nl = synthesize(path)
     cycles = simulation.expand_steps(steps)
-    timing = simulation.clock_timing(nl)
+    timing = clocking.clock_timing(nl)
     res = simulation.run_clocked_physical(nl, params.DEFAULT, cycles, "envelope", timing)
     logic = simulation.run_clocked_logic(nl, cycles)
     assert [t["outputs"] for t in res["trace"]] == [t["outputs"] for t in logic["trace"]]

@@ -21,9 +21,9 @@ STEEP = (0.3628571428571429, 0.8785714285714286)   # the averaged solver's worst
 
 
 def _have_vacask() -> bool:
-    from mech2spice.spice import veriloga
+    from mech2spice.spice import openvaf
     try:
-        veriloga.tools()
+        openvaf.tools()
         return True
     except ToolMissingError:
         return False

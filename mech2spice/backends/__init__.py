@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 from ..errors import Mech2SpiceError
-from ._base import Capabilities, Engine, Run
+from ..run_result import Run
+from ._base import Capabilities, Engine
 from .carrier import CarrierEngine
 from .envelope import EnvelopeEngine
 from .logic import LogicEngine
@@ -12,6 +13,19 @@ from .vacask import VacaskEngine, VacaskEnvelopeEngine
 
 _ENGINES = (LogicEngine, RK4Engine, CarrierEngine, EnvelopeEngine, NgspiceEngine, NgspiceEnvelopeEngine, VacaskEngine, VacaskEnvelopeEngine)
 BACKENDS: dict[str, type] = {e.name: e for e in _ENGINES}
+
+
+def names(capable, first: str | None = None) -> tuple[str, ...]:
+    """The registered engines whose Capabilities satisfy `capable`, in the registry's order (`first`, a
+    command's default, leading)."""
+    found = [name for name, cls in BACKENDS.items() if capable(cls.capabilities)]
+    return tuple(sorted(found, key=lambda name: name != first))
+
+
+def continuing(caps: Capabilities) -> bool:
+    """An engine a processor or a clocked sweep can run cycle after cycle on: it continues from its own
+    state and that state can be saved."""
+    return caps.physical and caps.state and caps.checkpoint
 
 
 def engine_class(name: str) -> type:
@@ -39,4 +53,5 @@ def make_engine(name: str, options=None):
     return engine_class(name)(engine_options(name, options))
 
 
-__all__ = ["BACKENDS", "Capabilities", "Engine", "Run", "engine_class", "engine_options", "make_engine"]
+__all__ = ["BACKENDS", "Capabilities", "Engine", "Run", "continuing", "engine_class", "engine_options", "make_engine",
+           "names"]

@@ -1,4 +1,5 @@
-"""What every engine shares: the result type, the interface, the divergence check and the progress bar.
+"""What every engine shares: the interface, the idle-time watch and the progress bar (the result type
+and the divergence check are in run_result.py, which spice/ reads too).
 
 An engine integrates one mechanical model (physics.model.MechModel) under one stimulus for a number
 of drive periods and returns a Run: the complex amplitude of each probe at the drive frequency for
@@ -12,48 +13,15 @@ from __future__ import annotations
 import math
 import time
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
 import numpy as np
 
-from ..errors import DivergenceError, Mech2SpiceError
+from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
-
-BLOWUP = 1e3     # u_R: an amplitude this large means the integration diverged (logic levels are ~1 u_R)
-
-
-@dataclass
-class Run:
-    """Result of an integration; amplitudes are complex phasors A with u = Re(A e^{i omega t})."""
-    probe_names: list[str]
-    period: float
-    t_end: np.ndarray                 # (P,) time at the end of each recorded period
-    amp: np.ndarray                   # (P, n_probes, B) complex
-    mean: np.ndarray                  # (P, n_probes, B)
-    x: np.ndarray | None              # final displacements (n, B), carrier-level engines
-    v: np.ndarray | None              # final velocities (n, B)
-    t: float                          # final time
-    traces: np.ndarray | None = None  # (S, n_probes, B) raw samples if asked for
-    trace_t: np.ndarray | None = None
-    extra: dict = field(default_factory=dict)
-    state: Any = None                 # the engine's state at the end, to continue from (Engine.run(state=...))
-    settled_periods: int = 0          # periods held at a settled state instead of integrated (idle skipping)
-
-    def probe(self, name: str) -> int:
-        """Row of a probe in `amp`."""
-        return self.probe_names.index(name)
-
-    def amplitude(self, name: str) -> np.ndarray:
-        """|A| per period, (P, B)."""
-        return np.abs(self.amp[:, self.probe(name), :])
-
-    def final_amplitudes(self, names: list[str], unit: float, average: int = 1) -> np.ndarray:
-        """|A| / unit over the last `average` periods, (len(names), B)."""
-        rows = [self.probe(n) for n in names]
-        return np.abs(self.amp[-average:, rows, :]).mean(axis=0) / unit
-
+from ..run_result import Run
 
 @dataclass(frozen=True)
 class Capabilities:
@@ -65,9 +33,31 @@ class Capabilities:
     settle: bool = False         # skips idle time once every channel has settled
     averaged: bool = False       # integrates the envelope equations themselves: its states rest exactly on
                                  # their fixed points (physics/stability.py), not within the averaging error
+    noise: bool = False          # takes thermal noise (a Langevin force on every dashpot, --noise)
+    latency: bool = False        # freezes gates that have settled (--latency TOL)
+    simulator: str | None = None  # the external circuit simulator it runs, one process per batch member
 
 
-class Engine(ABC):
+class FromFlags:
+    """An engine's options read from the command line (the logic oracle has no model but takes the flags too)."""
+
+    @classmethod
+    def options_from_flags(cls, flags):
+        """This engine's options from the command line's parsed flags (an argparse namespace: a flag the
+        command does not have is absent, one not given is None), validated; a flag it does not take is refused."""
+        options = replace(cls.Options(), **cls.flag_changes(flags))
+        options.validate()
+        return options
+
+    @classmethod
+    def flag_changes(cls, flags) -> dict:
+        """The Options fields the flags set; by default none (--steps ignored), the circuit simulators' and the
+        envelope's speed flags refused."""
+        refuse_circuit_flags(cls.name, flags)
+        return speed_flags(cls.name, flags, ())
+
+
+class Engine(FromFlags, ABC):
     """An integrator of the mechanical model, configured by its `Options` dataclass."""
 
     name: ClassVar[str]
@@ -103,6 +93,45 @@ class Engine(ABC):
         return None
 
 
+class CircuitSimulator(Engine):
+    """An engine that runs an external circuit simulator: its settings are --method, --max-step and
+    --ngspice-timeout; its step is --max-step, not --steps."""
+
+    @classmethod
+    def flag_changes(cls, flags) -> dict:
+        """--method, --max-step, --ngspice-timeout as option fields; --steps and the speed flags refused."""
+        if _flag(flags, "steps"):
+            raise Mech2SpiceError(f"--steps applies to rk4, carrier and envelope; {cls.name}'s step is --max-step")
+        changes = {name: _flag(flags, f) for f, name in CIRCUIT_FLAGS.items() if _flag(flags, f) is not None}
+        return {**changes, **speed_flags(cls.name, flags, ())}
+
+
+CIRCUIT_FLAGS = {"method": "method", "max_step": "max_step_periods", "ngspice_timeout": "timeout_s"}
+SPEED_FLAGS = ("latency", "exponential", "parallel")
+
+
+def _flag(flags, name: str):
+    return getattr(flags, name, None)
+
+
+def refuse_circuit_flags(engine: str, flags) -> None:
+    """Refuse the circuit simulators' settings for an engine that integrates the model itself."""
+    if any(_flag(flags, f) for f in CIRCUIT_FLAGS):
+        raise Mech2SpiceError(f"--method, --max-step and --ngspice-timeout apply to the circuit simulators "
+                              f"(ngspice, vacask), not {engine}")
+
+
+def speed_flags(engine: str, flags, takes: tuple[str, ...]) -> dict:
+    """--latency TOL|off, --exponential on|off, --parallel on|off as option fields, for the ones in `takes`;
+    any other given is refused (they are the envelope's speed-ups; the carrier takes --latency)."""
+    given = {f: _flag(flags, f) for f in SPEED_FLAGS if _flag(flags, f) is not None}
+    if set(given) - set(takes):
+        named = ("--exponential and --parallel" if "latency" in given and "latency" in takes
+                 else ", ".join("--" + f for f in given))
+        raise Mech2SpiceError(f"{named}: envelope backend options, not {engine}'s")
+    return {f: (v or None) if f == "latency" else v == "on" for f, v in given.items()}
+
+
 @dataclass(frozen=True)
 class NoOptions:
     """For engines without settings."""
@@ -115,24 +144,6 @@ def require_rest(engine: str, state, start_period: int) -> None:
     """Refuse a continuation for an engine that always starts from rest (the circuit simulators)."""
     if state is not None or start_period:
         raise Mech2SpiceError(f"the {engine} engine starts from rest: it cannot continue from a state")
-
-
-def blowup_bound(model: MechModel) -> float:
-    """The displacement or amplitude beyond which a run counts as diverged."""
-    return BLOWUP * model.amplitude_unit
-
-
-def check_divergence(model: MechModel, values: np.ndarray, t: float, dofs=None, bound: float | None = None) -> None:
-    """Raise DivergenceError naming the first DOF whose |value| (rows of `values`) is non-finite or past the bound.
-
-    `dofs` maps rows to DOF indices (default: row k is DOF k)."""
-    bound = bound or blowup_bound(model)
-    mag = np.abs(values).max(axis=1) if values.ndim > 1 else np.abs(values)
-    bad = ~np.isfinite(mag) | (mag > bound)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        dof = i if dofs is None else int(dofs[i])
-        raise DivergenceError(model.names[dof], t, model.period, float(mag[i]))
 
 
 class _NoBar:

@@ -33,7 +33,8 @@ from ..physics.envelope import Envelope
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import envelope as det
-from ._base import Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar
+from ..run_result import Run, blowup_bound, check_divergence
+from ._base import Capabilities, Engine, probe_dofs, progress_bar
 
 DEFAULT_NOISE_STEP = 1.0      # periods, at most: the linear-mode variance bias is O((lambda h)^2), lambda h ~ 0.02
 
@@ -167,6 +168,6 @@ def noisy_engine(backend: str, options, temperature: float, seed: int):
     if not hasattr(base, "noise_temperature"):
         raise Mech2SpiceError(f"the {backend} backend has no thermal noise (rk4, envelope and ngspice do)")
     if backend == "ngspice":
-        from ..spice.carrier import noisy_options
+        from ..spice.oscillator_netlist import noisy_options
         return make_engine(backend, noisy_options(base, T, int(seed)))
     return make_engine(backend, replace(base, noise_temperature=T, noise_seed=int(seed)))

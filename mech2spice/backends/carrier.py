@@ -36,8 +36,9 @@ from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import _carrier_kernel as kernel
 from . import _carrier_latency as latent
-from ._base import (Capabilities, Engine, Run, oscillator_phasors, blowup_bound, check_divergence, probe_dofs, progress_bar,
-                    watched_dofs)
+from ..run_result import Run, blowup_bound, check_divergence
+from ._base import (Capabilities, Engine, oscillator_phasors, probe_dofs, progress_bar,
+                    refuse_circuit_flags, speed_flags, watched_dofs)
 from .envelope import SETTLE_MIN, SETTLE_WINDOW
 
 DEFAULT_STEPS_PER_PERIOD = 12    # as accurate as RK4 at 160 steps on a switching gate; within 4e-4 u_R of it on
@@ -339,8 +340,15 @@ class CarrierEngine(Engine):
     """Lawson RK4 on the carrier: the linear oscillators exact, couplings and nonlinearity explicit."""
 
     name = "carrier"
-    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True)
+    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True, latency=True)
     Options = CarrierOptions
+
+    @classmethod
+    def flag_changes(cls, flags) -> dict:
+        """--steps: steps per drive period; --latency TOL|off."""
+        refuse_circuit_flags(cls.name, flags)
+        steps = getattr(flags, "steps", None)
+        return {**({"steps_per_period": steps} if steps else {}), **speed_flags(cls.name, flags, ("latency",))}
 
     def estimate_seconds(self, model, periods, batch=1):
         """Wall time from the measured oscillator-step rate (without idle skipping or latency)."""

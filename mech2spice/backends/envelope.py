@@ -21,7 +21,9 @@ from ..physics.envelope import Envelope, gershgorin_rate, spectral_rate
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from . import _envelope_kernel
-from ._base import Capabilities, Engine, Run, blowup_bound, check_divergence, probe_dofs, progress_bar
+from ..run_result import Run, blowup_bound, check_divergence
+from ._base import (SPEED_FLAGS, Capabilities, Engine, probe_dofs, progress_bar, refuse_circuit_flags,
+                    speed_flags)
 
 RK4_STABILITY = 2.5          # |lambda h| RK4 keeps stable (its region reaches ~2.8 on both axes)
 RATE_SAFETY = 1.5            # x the largest |eigenvalue| at rest: along switching trajectories it moved by
@@ -289,8 +291,16 @@ class EnvelopeEngine(Engine):
     """RK4 on the slowly-varying amplitude equations, steps of whole drive periods."""
 
     name = "envelope"
-    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True, averaged=True)
+    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True, averaged=True, noise=True,
+                                latency=True)
     Options = EnvelopeOptions
+
+    @classmethod
+    def flag_changes(cls, flags) -> dict:
+        """--steps N: one step per N-th of a period (step_periods 1/N); --latency, --exponential, --parallel."""
+        refuse_circuit_flags(cls.name, flags)
+        steps = getattr(flags, "steps", None)
+        return {**({"step_periods": 1.0 / steps} if steps else {}), **speed_flags(cls.name, flags, SPEED_FLAGS)}
 
     def estimate_seconds(self, model, periods, batch=1):
         """Wall time from the measured rate, without idle skipping (an upper bound for settling runs)."""

@@ -11,7 +11,7 @@ import numpy as np
 from ..errors import Mech2SpiceError
 from ..synthesis.ports import input_bits, output_bits, pack_inputs, port_values
 from ..synthesis.synth import Netlist
-from ._base import Capabilities, NoOptions
+from ._base import Capabilities, FromFlags, NoOptions
 
 __all__ = ["evaluate", "evaluate_bits", "evaluate_batch", "ClockedLogic", "LogicEngine"]
 
@@ -93,7 +93,7 @@ def evaluate_batch(netlist: Netlist, vectors) -> np.ndarray:
     return result
 
 
-class LogicEngine:
+class LogicEngine(FromFlags):
     """The NOR graph evaluated as Boolean logic: the oracle the physical engines must match."""
 
     name = "logic"

@@ -32,8 +32,9 @@ from ..inputs import check_fields
 from ..physics import noise as thermal
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
-from ._base import (Capabilities, Engine, Run, oscillator_phasors, SettleWatch, blowup_bound, check_divergence, probe_dofs,
-                    progress_bar, watched_dofs)
+from ..run_result import Run, blowup_bound, check_divergence
+from ._base import (Capabilities, Engine, oscillator_phasors, SettleWatch, probe_dofs, progress_bar,
+                    refuse_circuit_flags, speed_flags, watched_dofs)
 from .envelope import SETTLE_MIN, SETTLE_WINDOW
 
 DEFAULT_STEPS_PER_PERIOD = 80   # 40 (the paper's 0.025 periods) leaves a 1e-3 u_R error; see reports/gate.md
@@ -249,8 +250,15 @@ class RK4Engine(Engine):
     """Fixed-step classical RK4 on the carrier: the textbook reference every reduced model is checked against."""
 
     name = "rk4"
-    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True)
+    capabilities = Capabilities(batch=True, state=True, checkpoint=True, settle=True, noise=True)
     Options = RK4Options
+
+    @classmethod
+    def flag_changes(cls, flags) -> dict:
+        """--steps: steps per drive period."""
+        refuse_circuit_flags(cls.name, flags)
+        steps = getattr(flags, "steps", None)
+        return {**({"steps_per_period": steps} if steps else {}), **speed_flags(cls.name, flags, ())}
 
     def estimate_seconds(self, model, periods, batch=1):
         """Wall time from the measured oscillator-step rate."""

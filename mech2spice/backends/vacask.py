@@ -6,16 +6,16 @@ Like ngspice, VACASK is a separate process started per run: neither engine conti
 from __future__ import annotations
 
 from ..spice import vacask
-from ._base import Capabilities, Engine, require_rest
+from ._base import Capabilities, CircuitSimulator, require_rest
 
 SECONDS_PER_OSCILLATOR_PERIOD = 1.5e-5    # carrier level, T/40, CPU: the adder, 2 x 2900 periods in 9.0 s (docs/vacask.md)
 
 
-class VacaskEngine(Engine):
+class VacaskEngine(CircuitSimulator):
     """The mobility analogy as OSDI devices under VACASK, prewarped trapezoidal steps pinned at T/40."""
 
     name = "vacask"
-    capabilities = Capabilities(batch=True)
+    capabilities = Capabilities(batch=True, simulator="vacask")
     Options = vacask.VacaskOptions
 
     def estimate_seconds(self, model, periods, batch=1):
@@ -28,11 +28,11 @@ class VacaskEngine(Engine):
         return vacask.run_batch(model, periods, stimulus=stimulus, options=self.options)
 
 
-class VacaskEnvelopeEngine(Engine):
+class VacaskEnvelopeEngine(CircuitSimulator):
     """The envelope equations as OSDI devices under VACASK (two amplitude nodes per oscillating DOF)."""
 
     name = "vacask-envelope"
-    capabilities = Capabilities(batch=True)
+    capabilities = Capabilities(batch=True, simulator="vacask")
     Options = vacask.VacaskEnvelopeOptions
 
     def run(self, model, periods, stimulus=None, *, state=None, start_period=0, probes=None, progress=False):

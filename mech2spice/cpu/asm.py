@@ -8,6 +8,8 @@ Syntax, one statement per line (``;`` starts a comment, mnemonics are case-insen
             .equ MMR 255     ; a named constant (no byte emitted)
             .org 128         ; continue at an address (forward only; the gap is zeros)
             .tape 255 21 110102  ; a Turing-machine tape at address 255: head cell, cell digits
+            .result primes zeros 130 30 2  ; what the program computes, printed by `cpu run`: the numbers
+                                           ; 2 + i (i < 30) whose cell 130 + i is 0 (or `bytes ADDR N`)
 
 Numbers: decimal, 0x.. hex, 0b.. binary.  Every value must fit a byte (0..255).  Errors are one
 line naming the source line.  ``assemble`` returns (image, listing, symbols); the image runs from

@@ -27,11 +27,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .. import simulation
 from ..errors import Mech2SpiceError
+from ..experiments import clocking
 from ..inputs import is_number
 from ..physics import network
-from ..physics.params import DEFAULT, NOMINAL0, NOMINAL1, band_of
+from ..physics.params import DEFAULT
 from ..spice import memory as vmem
 from ..spice._common import num
 from . import state_file
@@ -104,10 +104,10 @@ class Schedule:
 
 
 def default_schedule(netlist, cycles: int, settle: int | None = None, p=DEFAULT) -> Schedule:
-    """simulation.clock_timing's pulse and pause; each cycle settles one pause (derived for the longest NOR
+    """clocking.clock_timing's pulse and pause; each cycle settles one pause (derived for the longest NOR
     path, 44 gates: the path latch -> raddr -> memory -> rdata -> latch is 5 + 30, `memory_path`, and the
     memory adds ~5 periods, its read stage's time constants, to a pause of 11575)."""
-    t = simulation.clock_timing(netlist, p=p)
+    t = clocking.clock_timing(netlist, p=p)
     return Schedule(t["pulse"], t["pause"], settle or t["pause"], cycles)
 
 
@@ -169,7 +169,7 @@ class _CpuEmitter(_Emitter):
         """rst (1 through the reset pulse), the clock and the write window as pulse sources; times are
         local (absolute period - the schedule's offset)."""
         p, s, T = self.p_gate, self.sched, self.T
-        f0, f1 = p.force(NOMINAL0), p.force(NOMINAL1)
+        f0, f1 = p.force(p.levels.nominal0), p.force(p.levels.nominal1)
         ramp = self.opt.RAMP_PERIODS * T
         w0, w1 = s.pulse * WINDOW, s.pulse * (1 - WINDOW)
         first_pulse = s.pause if s.resets else s.pulse_at(s.first)    # the reset pulse, or cycle first's
@@ -229,7 +229,7 @@ def emit_cpu(image, cycles: int, p=DEFAULT, *, settle: int | None = None, max_st
     if memory:
         e.lines += ["// --- the memory (spice/memory.py)", *e.memory(image, net)]
     else:
-        e.amp_lines += [f"vrd{b} ({node} 0) vsource dc={num(p.force(NOMINAL0))}" for b, node in enumerate(rdata)]
+        e.amp_lines += [f"vrd{b} ({node} 0) vsource dc={num(p.force(p.levels.nominal0))}" for b, node in enumerate(rdata)]
     osdi = OSDI[ENVELOPE].replace(".osdi", ".va") if standalone else OSDI[ENVELOPE]
     mem_ref = vmem.FILE if standalone else vmem.FILE.replace(".va", ".osdi")
     span = sched.stop - sched.offset
@@ -486,11 +486,11 @@ class CircuitCPU:
 
     def _port(self, k: int, port: str, what: str) -> int:
         amps = self._sample(k)[0]
-        bits = [band_of(amps[f"{port}[{i}]"]) for i in range(self.netlist.outputs[port])]
+        bits = [self.p.levels.band_of(amps[f"{port}[{i}]"]) for i in range(self.netlist.outputs[port])]
         return Memory.decode_address(bits, k, what)
 
     def _rdata(self, k: int) -> int:
-        f0, f1 = self.p.force(NOMINAL0), self.p.force(NOMINAL1)
+        f0, f1 = self.p.force(self.p.levels.nominal0), self.p.force(self.p.levels.nominal1)
         x = (self._sample(k)[1] - f0) / (f1 - f0)
         if np.any(np.abs(x - np.round(x)) > 0.1):
             raise Mech2SpiceError(f"cycle {k}: the memory's rdata levels {np.round(x, 3).tolist()} are not bits")
@@ -502,7 +502,7 @@ class CircuitCPU:
         amps = self._sample(k)[0]
 
         def bit(q: str) -> int:
-            b = band_of(amps[f"latch.{q}"])
+            b = self.p.levels.band_of(amps[f"latch.{q}"])
             if b is None:
                 reg, i = self.regmap[q]
                 raise Mech2SpiceError(f"cycle {k}: register {reg} bit {i} (latch {q}) is invalid "

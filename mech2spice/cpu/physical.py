@@ -16,18 +16,18 @@ import numpy as np
 
 from dataclasses import replace
 
-from .. import simulation
-from ..backends import make_engine
+from ..backends import continuing, engine_class, make_engine, names
 from ..errors import Mech2SpiceError
+from ..experiments import clocking
 from ..physics import network
-from ..physics.params import DEFAULT, band_of
+from ..physics.params import DEFAULT
 from . import state_file
 from .isa import mnemonic
 from .iss import FETCH, Cycle
 from .memory import Memory
 from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
 
-PHYSICAL = ("envelope", "rk4", "carrier")   # engines that continue from a state, so a cycle can follow the last
+PHYSICAL = names(continuing, first="envelope")   # engines that continue from a state, so a cycle can follow the last
 # The defaults: 0.0098 u_R from the full envelope at step 2 over the first 30 sieve cycles, 7.2x faster than
 # step 8 + settle alone (reports/fidelity.md; latency 0.2: 0.042 u_R, over the 0.02 bound; step 20: slower)
 PROCESSOR_STEP = 16.0   # envelope periods with the exponential step (its bound: 27.5)
@@ -37,6 +37,19 @@ LATENCY = 0.1           # u_R: per-gate latency threshold (None: off; docs/laten
 CARRIER_LATENCY = 0.05  # u_R: the carrier's (docs/carrier.md: its cost against the carrier without it)
 OWN_LATENCY = "own"     # latency: the backend's own default (LATENCY, CARRIER_LATENCY; rk4 has none)
 EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability bound; docs/latency.md)
+
+
+def _options(backend: str, **settings):
+    """The engine's options from the processor's settings: each engine takes those among its own fields
+    (envelope: step_periods, latency, exponential, parallel; carrier: latency, threads, steps_per_period;
+    rk4: steps_per_period); steps_per_period only where given, else the engine's default."""
+    from dataclasses import fields
+    cls = engine_class(backend).Options
+    settings = {"step_periods": settings.pop("step"), **settings, "latency": settings["latency"] or None}
+    if not settings["steps_per_period"]:
+        del settings["steps_per_period"]
+    own = {f.name for f in fields(cls)}
+    return cls(**{k: v for k, v in settings.items() if k in own})
 
 
 def _no_inf(a: np.ndarray, key: str) -> np.ndarray:
@@ -63,17 +76,19 @@ class PhysicalCPU:
         step = step or (PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP)
         if latency == OWN_LATENCY:           # the carrier's latency loop is serial: threads ask for every gate integrated
             latency = {"envelope": LATENCY, "carrier": CARRIER_LATENCY if threads == 1 else None}.get(backend)
-        if backend == "carrier":
-            self.pulse_engine, self.pause_engine = self._carrier_engines(settle, steps_per_period, threads, latency)
-            step = 1.0 / self.pulse_engine.options.steps_per_period      # the step, in drive periods
-        else:
-            self.pulse_engine, self.pause_engine = self._engines(backend, step, settle, latency, exponential, parallel,
-                                                                 steps_per_period)
+        options = _options(backend, step=step, latency=latency, exponential=exponential, parallel=parallel,
+                           steps_per_period=steps_per_period, threads=threads)
+        # only pauses may end early once settled; pulses always run in full
+        self.pulse_engine = make_engine(backend, options)
+        self.pause_engine = make_engine(backend, replace(options, settle_tol=settle or None))
+        if backend == "carrier":     # its own step is the one reported (rk4 reports the envelope's, as it always has)
+            step = 1.0 / options.steps_per_period      # the step, in drive periods
         if noise and noise[0]:          # thermal noise (k_B T, seed): the noisy engine, never settled or frozen
             from ..backends._noise_envelope import noisy_engine
             self.pulse_engine = self.pause_engine = noisy_engine(backend, self.pulse_engine.options, *noise)
-        t = simulation.clock_timing(self.netlist, p=p)
-        whole = max(1, int(round(step))) if backend == "envelope" else 1   # changes fall on step boundaries
+        t = clocking.clock_timing(self.netlist, p=p)
+        averaged = engine_class(backend).capabilities.averaged      # steps of whole periods, `step` long
+        whole = max(1, int(round(step))) if averaged else 1   # changes fall on step boundaries
         self.pulse, self.pause = -(-t["pulse"] // whole) * whole, -(-t["pause"] // whole) * whole
         self.backend, self.p, self.mem = backend, p, memory
         self.step_periods, self.settle, self.latency = step, settle, latency
@@ -84,28 +99,6 @@ class PhysicalCPU:
         self.amps = self._reset() if power_up else None      # else: load() a checkpoint
 
     # --- integration -----------------------------------------------------------------------
-    @staticmethod
-    def _engines(backend: str, step: float, settle: float | None, latency: float | None, exponential: bool,
-                 parallel: bool, steps_per_period: int | None = None):
-        """(pulse engine, pause engine): only pauses may end early once settled; pulses always run in full."""
-        if backend != "envelope":                  # rk4: the same rule for ending pauses
-            engine = make_engine(backend)
-            if steps_per_period:
-                engine = make_engine(backend, replace(engine.options, steps_per_period=steps_per_period))
-            return engine, make_engine(backend, replace(engine.options, settle_tol=settle or None))
-        pulse = make_engine(backend, make_engine(backend).Options(step_periods=step, latency=latency or None,
-                                                                  exponential=exponential, parallel=parallel))
-        return pulse, make_engine(backend, replace(pulse.options, settle_tol=settle or None))
-
-    @staticmethod
-    def _carrier_engines(settle: float | None, steps_per_period: int | None, threads: int, latency: float | None):
-        """(pulse engine, pause engine) at oscillator level: Lawson RK4, pauses end once the channels settle."""
-        from ..backends.carrier import CarrierOptions
-        options = CarrierOptions(threads=threads, latency=latency or None,
-                                 **({"steps_per_period": steps_per_period} if steps_per_period else {}))
-        pulse = make_engine("carrier", options)
-        return pulse, make_engine("carrier", replace(options, settle_tol=settle or None))
-
     def _run(self, periods: int, values: dict, clock: int) -> dict[str, float]:
         stim = network.stimulus(self.model, self.netlist, self.p, [(0, [values])], clock=[[clock]])
         engine = self.pulse_engine if clock else self.pause_engine
@@ -125,7 +118,7 @@ class PhysicalCPU:
 
     # --- decoding --------------------------------------------------------------------------
     def _port(self, amps, port: str, what: str) -> int:
-        bits = [band_of(amps[f"{port}[{i}]"]) for i in range(self.netlist.outputs[port])]
+        bits = [self.p.levels.band_of(amps[f"{port}[{i}]"]) for i in range(self.netlist.outputs[port])]
         return Memory.decode_address(bits, self.cycle, what)
 
     def registers(self, amps=None) -> dict:
@@ -133,7 +126,7 @@ class PhysicalCPU:
         amps = amps or self.amps
 
         def bit(q: str) -> int:
-            b = band_of(amps[f"latch.{q}"])
+            b = self.p.levels.band_of(amps[f"latch.{q}"])
             if b is None:
                 reg, k = self.regmap[q]
                 raise Mech2SpiceError(f"cycle {self.cycle}: register {reg} bit {k} (latch {q}) is invalid "

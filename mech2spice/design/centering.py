@@ -39,7 +39,7 @@ from ..physics import loaded, spread, steady_batch
 from ..physics.params import GateParams, Levels
 
 Z99 = 2.3263478740408408        # one-sided standard normal quantile of 99 %
-TRIMS = ("none", "f", "fc")
+TRIMS = spread.TRIMS
 
 
 # --- the spread spec and its noise matrices ---------------------------------------------------------
@@ -62,29 +62,13 @@ class SpreadSpec:
             raise Mech2SpiceError("--spread must be > 0: centering needs a spread to center against")
 
 
-def noise_matrices(model, elems: list[spread.Element], trimmed: list[int], trim: str):
-    """(Sa, Sb, residual names): t = spread Sa xi + residual Sb zeta for the elements `elems`, the DOFs
-    `trimmed` trimmed as `trim` says (module docstring)."""
-    n = len(elems)
-    Sa, cols, names = np.eye(n), [], []
-    where = {(e.kind, e.index): j for j, e in enumerate(elems)}
-    if trim == "none":
-        return Sa, np.zeros((n, 0)), names
-    kinds = (("k", "spring", model.k_total, model.k_local, model.springs),
-             ("c", "dashpot", model.c_total, model.c_local, model.dashpots))[:1 if trim == "f" else 2]
-    for i in trimmed:
-        for own, link, total, local, links in kinds:
-            j = where[(own, i)]
-            Sa[j] = 0.0
-            Sa[j, where[("m", i)]] = total[i] / local[i]
-            for e, (a, b, v) in enumerate(links):
-                if i in (a, b):
-                    Sa[j, where[(link, e)]] = -v / local[i]
-            col = np.zeros(n)
-            col[j] = total[i] / local[i]
-            cols.append(col)
-            names.append(f"trim residual {elems[j].name}")
-    return Sa, np.array(cols).T, names
+def noise_matrices(model, elems: list[spread.Element], trim: str):
+    """(Sa, Sb, residual names): t = spread Sa xi + residual Sb zeta for the elements `elems`, trimmed as
+    `trim` says: physics/spread.py's linearised trim (trim_map), its coordinates split by what spreads them."""
+    J = spread.trim_map(model, elems, trim)
+    by_spread = spread.sigmas(elems, model, 1.0, trim, 0.0) == 1.0      # the rest: trim residuals
+    names = [f"trim residual {e.name}" for e, s in zip(elems, by_spread) if not s]
+    return J[:, by_spread], J[:, ~by_spread], names
 
 
 # --- states and their first-order changes ------------------------------------------------------------
@@ -319,8 +303,7 @@ def analyse(p: GateParams, spec: SpreadSpec, per_band: int = 6, n_grid: int = 10
     fx = Fast.of(p)
     levels, expect = loaded.input_grid(per_band, p.levels)
     cons = constraints(fx, levels, expect, p, n_grid)
-    trimmed = [d for d in fx.lg.block_dofs if not fx.lg.model.slow[d]]
-    Sa, Sb, res_names = noise_matrices(fx.lg.model, fx.elems, trimmed, spec.trim)
+    Sa, Sb, res_names = noise_matrices(fx.lg.model, fx.elems, spec.trim)
     a, b = cons.variances(Sa, Sb)
     sources = np.concatenate([cons.grad @ Sa, cons.grad @ Sb], axis=1)
     return Analysis(p, spec, cons, a, b, levels, [e.name for e in fx.elems] + res_names, sources, len(fx.elems),
@@ -677,46 +660,3 @@ def run(seed: GateParams, settings: Settings, out_dir, steps: int, log=lambda ms
             "steps": len(rec["steps"]) - 1, **block["measured"],
             "seed": {k: rec["steps"][0][k] for k in ("nominal_margin", "tolerance_linear", "beta_target")},
             "limiting": best.get("limiting_target")}
-
-
-# --- `mech2spice center` ---------------------------------------------------------------------------
-def add_parser(subparsers) -> None:
-    """Register the `center` command (called from design/cli.py)."""
-    from .. import inputs
-    s = subparsers.add_parser(
-        "center", help="design centering of the NOR block by worst-case distance (docs/design.md)",
-        description="Maximise the smallest worst-case distance beta = margin / ||sigma o grad margin|| over the "
-                    "loaded gate's margin and fold constraints (every valid input point) under a spread spec, "
-                    "by trust-region linear programming over the block's parameters, seeded by a working block. "
-                    "Resumable: the record DIR/centering.json is written after every step; DIR/best.json is "
-                    "the best block (a --params file).")
-    s.add_argument("--from", dest="seed", default="robust", help="seed block: a preset or block file (robust)")
-    s.add_argument("--spread", type=inputs.number(0, 1), default=0.01, help="relative spread (0.01)")
-    s.add_argument("--trim", choices=TRIMS, default="none", help="trim k/m (f) or k/m and c/m (fc) (none)")
-    s.add_argument("--trim-residual", type=inputs.number(0, 1), default=0.0, help="trim residual (0)")
-    s.add_argument("--steps", type=inputs.integer(0, 10_000), default=50, help="steps in all (50)")
-    s.add_argument("--fixed-levels", action="store_true", help="keep the seed's bands (default: optimise them)")
-    s.add_argument("--growth-floor", type=inputs.number(0), default=GROWTH_FLOOR,
-                   help=f"slowest decay rate (1/time) of any stable state over the grid ({GROWTH_FLOOR})")
-    s.add_argument("--out", required=True, metavar="DIR", help="record and best block folder")
-    s.add_argument("--json", action="store_true", help="machine-readable output")
-    s.set_defaults(func=cmd_center)
-
-
-def cmd_center(args) -> int:
-    """Run or resume a centering; print the best block's figures."""
-    from ..cli import _log, _print_json
-    from ..physics.params import load_params
-    if args.trim == "none" and args.trim_residual:
-        raise Mech2SpiceError("--trim-residual needs --trim f or fc")
-    spec = SpreadSpec(args.spread, args.trim, args.trim_residual)
-    spec.validate()
-    settings = Settings(args.seed, spec, levels=not args.fixed_levels, growth_floor=args.growth_floor)
-    out = run(load_params(args.seed), settings, args.out, args.steps, _log(args))
-    if args.json:
-        _print_json(out)
-        return 0
-    print(f"best step {out['best_step']} of {out['steps']}: linear tolerance {out['tolerance_linear']:.3g} "
-          f"(seed {out['seed']['tolerance_linear']:.3g}), beta at the target {out['beta_target']:.3g}, "
-          f"nominal margin {out['nominal_margin']:+.4f}; block: {out['best_file']}")
-    return 0

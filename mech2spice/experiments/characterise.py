@@ -13,15 +13,15 @@ from dataclasses import replace
 import numpy as np
 
 from ..backends import make_engine, rk4
-from ..backends._base import Run
+from ..run_result import Run
 from ..backends.envelope import EnvelopeOptions
 from ..errors import DivergenceError
 from ..physics import nor, steady
 from ..physics.envelope import Envelope
-from ..physics.params import GateParams, band_of
+from ..physics.params import GateParams, Levels
 from ..physics.stimulus import Stimulus
-from .scenes import (FANOUT_CASES, MID, PAIRS, Scene, cascade_edges, chain_scene, fanout_scene, gate_scene,
-                     input_amps, latch_scene, levels_stimulus, mid, nominal_levels)
+from .scenes import (FANOUT_CASES, PAIRS, Scene, cascade_edges, mid, chain_scene, fanout_scene, gate_scene,
+                     input_amps, latch_scene, levels_stimulus, nominal_levels)
 
 def _nor(a: int, b: int) -> int:
     return int(not (a or b))
@@ -85,11 +85,16 @@ def steady_map(p: GateParams, n: int = 61, lo: float = 0.2, hi: float = 1.15):
     return xs, out.reshape(X1.shape), nstable.reshape(X1.shape)
 
 
+def _grid(levels: Levels, per_band: int) -> np.ndarray:
+    """per_band input levels across each band."""
+    return np.concatenate([np.linspace(*levels.band0, per_band), np.linspace(*levels.band1, per_band)])
+
+
 def valid_region_margin(p: GateParams, per_band: int = 15) -> dict:
     """Worst output margin (fraction of band width) over every valid input pair; multistability or no stable
     state counts as failure at that point."""
     lv = p.levels
-    levels = np.concatenate([np.linspace(*lv.band0, per_band), np.linspace(*lv.band1, per_band)])
+    levels = _grid(lv, per_band)
     X1, X2 = np.meshgrid(levels, levels, indexing="ij")
     x1, x2 = X1.ravel(), X2.ravel()
     res = steady_outputs(p, x1, x2)
@@ -148,9 +153,7 @@ def transient(p: GateParams, sequence=((0, 0), (1, 0), (0, 0), (0, 1), (1, 1), (
               hold: int = 1200) -> dict:
     """Single gate under changing inputs; also tests history independence (revisits give the same output)."""
     model = nor.single_gate(p)
-    lv = p.levels
-    stim = levels_stimulus(model, p, [(k * hold, np.array([[lv.nominal(a), lv.nominal(b)]]))
-                                      for k, (a, b) in enumerate(sequence)])
+    stim = levels_stimulus(model, p, [(k * hold, np.array([[p.levels.nominal(a), p.levels.nominal(b)]])) for k, (a, b) in enumerate(sequence)])
     run = rk4.integrate(model, hold * len(sequence), stimulus=stim)
     amp = run.amplitude("g0")[:, 0] / p.u_r
     ends = {}
@@ -169,11 +172,11 @@ def cascade(p: GateParams, hold: int = 1500) -> dict:
     sc = chain_scene(p, hold)
     run = rk4.integrate(sc.model, sc.periods, stimulus=sc.stimulus)
     amp = np.abs(run.amp) / p.u_r                         # (P, 3 stages, B)
-    delays = [_crossings(amp[:, :, 0], start, mid(p)) for start in (hold, 2 * hold)]
+    lv = p.levels
+    delays = [_crossings(amp[:, :, 0], start, mid(lv)) for start in (hold, 2 * hold)]
     per_gate = [d for ds in delays for d in np.diff([0.0] + ds)]
     restoration = []
-    lv = p.levels
-    for b, (x1, x2) in enumerate(cascade_edges(p), start=1):
+    for b, (x1, x2) in enumerate(cascade_edges(lv), start=1):
         settled = amp[-20:, :, b].mean(axis=0)        # constant inputs: settle over all 3 holds
         expect = _nor(lv.band_of(x1), lv.band_of(x2))
         stage_margins = [lv.margin(float(a), (expect + k) % 2) for k, a in enumerate(settled)]
@@ -184,8 +187,8 @@ def cascade(p: GateParams, hold: int = 1500) -> dict:
             "restoration": restoration}
 
 
-def _crossings(amp: np.ndarray, start: int, threshold: float = MID) -> list[float]:
-    """Periods after `start` at which each stage's amplitude first crosses the mid threshold."""
+def _crossings(amp: np.ndarray, start: int, threshold: float) -> list[float]:
+    """Periods after `start` at which each stage's amplitude first crosses the threshold between the bands."""
     out = []
     for k in range(amp.shape[1]):
         a = amp[start:, k] - threshold
@@ -200,13 +203,13 @@ def fanout_test(p: GateParams, n_loads: int, periods: int = 2500) -> dict:
     sc = fanout_scene(p, n_loads, periods)
     run = rk4.integrate(sc.model, sc.periods, stimulus=sc.stimulus)
     amp = np.abs(run.amp[-20:]).mean(axis=0) / p.u_r        # (1 + n_loads, B)
-    ok, worst, lv = True, math.inf, p.levels
+    ok, worst = True, math.inf
     for b, (a, bb, c) in enumerate(FANOUT_CASES):
         d = _nor(a, bb)
-        ok &= lv.band_of(amp[0, b]) == d
+        ok &= p.levels.band_of(amp[0, b]) == d
         for k in range(n_loads):
-            ok &= lv.band_of(amp[1 + k, b]) == _nor(d, c)
-            worst = min(worst, lv.margin(amp[1 + k, b], _nor(d, c)))
+            ok &= p.levels.band_of(amp[1 + k, b]) == _nor(d, c)
+            worst = min(worst, p.levels.margin(amp[1 + k, b], _nor(d, c)))
     load_swing = float(max(abs(amp[0, 0] - amp[0, 1]), abs(amp[0, 2] - amp[0, 3])))
     branch_spread = float(np.ptp(amp[1:], axis=0).max()) if n_loads > 1 else 0.0
     return {"n_loads": n_loads, "correct": bool(ok), "driver": amp[0].tolist(), "loads": amp[1:].tolist(),
@@ -252,8 +255,7 @@ def stability(p: GateParams, per_band: int = 8, periods: int = 3000) -> dict:
     (an envelope run settled, then the network's verdict).  Growth per drive period: < 0 decays."""
     from ..backends import make_engine
     from ..physics import stability as stab
-    lv = p.levels                            # the block's own bands and nominal levels
-    levels = np.concatenate([np.linspace(*lv.band0, per_band), np.linspace(*lv.band1, per_band)])
+    levels = _grid(p.levels, per_band)
     worst = {"growth_rate": -math.inf}
     x1, x2 = (g.ravel() for g in np.meshgrid(levels, levels, indexing="ij"))
     env, F, ch = gate_forcing(p, x1, x2)
@@ -266,7 +268,7 @@ def stability(p: GateParams, per_band: int = 8, periods: int = 3000) -> dict:
                          "at_inputs": [float(x1[k]), float(x2[k])]}
     chain = []
     for a, b in PAIRS:
-        m = nor.chain(p, 3, lv.nominal(a), lv.nominal(b))
+        m = nor.chain(p, 3, p.levels.nominal(a), p.levels.nominal(b))
         run = make_engine("envelope").run(m, periods)
         v = stab.verdict(m, run.state[0][:, 0], run.state[1][:, 0],
                          Envelope.of(m).forcing(np.array([[d.amplitude] for d in m.drives]))[:, 0])
@@ -292,7 +294,7 @@ def characterise(p: GateParams, quick: bool = False, log=lambda msg: None) -> di
     out["truth_table"] = tt["rows"]
     out["switches"] = all(r["logic"] == r["expected"] for r in tt["rows"])
     log("steady states and RK4 agreement")
-    ss = steady_outputs(p, *nominal_levels(p).T)
+    ss = steady_outputs(p, np.array([p.levels.nominal(a) for a, _ in PAIRS]), np.array([p.levels.nominal(b) for _, b in PAIRS]))
     out["steady_states"] = [[{"amplitude": a, "stable": ok} for a, ok in s] for s in ss]
     log("step halving")
     out["step_halving_change"] = convergence(p, periods=int(1500 * scale))
@@ -382,13 +384,14 @@ def latch_decode(scene: Scene, amp: np.ndarray) -> dict:
     """The latch's output at the end of each phase (mean of its last 10 periods) and the threshold crossing
     after each storing pulse starts, from per-period amplitudes (P, probes) of a latch_scene run."""
     phases, starts = scene.extra["phases"], [0] + scene.windows
+    lv = scene.model.levels
     decoded = [{"phase": name, "d": d, "clock": c, "output": float(amp[t1 - 10:t1, 0].mean()),
-                "logic": band_of(float(amp[t1 - 10:t1, 0].mean()))}
+                "logic": lv.band_of(float(amp[t1 - 10:t1, 0].mean()))}
                for (name, d, c, _), t1 in zip(phases, starts[1:])]
     delays = []
     for k, (_, _, c, _) in enumerate(phases):
         if c:
-            x = amp[starts[k]:, 0] - MID
+            x = amp[starts[k]:, 0] - mid(lv)
             idx = np.flatnonzero(np.sign(x[:-1]) != np.sign(x[1:]))
             delays.append(float(idx[0] + 1) if idx.size else math.nan)
     return {"amplitude": amp, "starts": starts, "phases": phases, "decoded": decoded, "output_delays": delays,

@@ -16,14 +16,16 @@ from __future__ import annotations
 import math
 
 from .. import simulation
-from ..backends._base import DivergenceError
+from ..backends import continuing, names
+from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
+from . import clocking
 from ..physics import network, spread
 from ..physics.noise import check_temperature
 from ..synthesis.ports import output_bits
 from .montecarlo import SpreadSpec, noise_seed
 
-CLOCKED_BACKENDS = ("envelope", "carrier", "rk4")
+CLOCKED_BACKENDS = names(continuing, first="envelope")   # one sample per run, cycle after cycle
 
 
 def sampled(model, elems, spec: SpreadSpec, seed: int, i: int):
@@ -31,12 +33,12 @@ def sampled(model, elems, spec: SpreadSpec, seed: int, i: int):
     import numpy as np
     if spec.zero:
         return model, None
-    f = spec.factors(elems, seed, i)
+    sample, f = spec.sample(model, elems, seed, i)
     fd = np.ones(len(model.drives))
     for e, x in zip(elems, f):
         if e.kind == "drive":
             fd[e.index] = x
-    return spread.scaled(model, elems, f), fd
+    return sample, fd
 
 
 def _failed(i: int, e: Exception) -> dict:
@@ -56,7 +58,7 @@ class ClockedMC:
         self.netlist, self.p, self.backend, self.spec, self.seed = netlist, p, backend, spec, seed
         self.options, self.noise = options, check_temperature(noise)
         self.cycles = simulation.expand_steps(steps)
-        self.timing = simulation.clock_timing(netlist, p=p)
+        self.timing = clocking.clock_timing(netlist, p=p)
         self.want = simulation.run_clocked_logic(netlist, self.cycles)["trace"]
         self.model = network.build(netlist, p)
         self.elems = spread.elements(self.model)

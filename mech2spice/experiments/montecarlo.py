@@ -35,18 +35,20 @@ from pathlib import Path
 import numpy as np
 
 from .. import simulation
-from ..backends import logic, make_engine
-from ..backends._base import DivergenceError
+from ..backends import engine_class, logic, make_engine
+from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
 from ..physics import network, spread
 from ..physics.noise import check_temperature
-from ..physics.params import GateParams, band_of, margin
+from ..physics.params import GateParams
 from ..physics.stimulus import Stimulus
 from ..synthesis.ports import output_bits, port_range
 from ..synthesis.synth import Netlist
+from . import clocking
 from .tolerance import QUANTILES, wilson
 
 KINDS = ("k", "m", "c", "spring", "dashpot", "gamma", "drive")
+TRIM_DEFAULTS = {"trim": "none", "trim_residual": 0.0, "drift": 0.0}   # the spec's fields that mean "not trimmed"
 MAX_ALL_VECTORS = 256          # a design with at most this many input combinations is checked on all of them
 
 
@@ -56,11 +58,26 @@ class SpreadSpec:
     local: dict = field(default_factory=dict)     # kind -> sigma (independent per element)
     wafer: dict = field(default_factory=dict)     # kind -> sigma (one shift per kind and sample)
     wafer_rho: float = 0.0                        # correlation of the wafer shifts across kinds
+    trim: str = "none"                            # after the spread: none, f (k/m), fc (k/m and c/m)
+    trim_residual: float = 0.0                    # relative sigma of the trimmed quantity
+    drift: float = 0.0                            # in service: every stiffness times (1 + drift)
+
+    def __post_init__(self):
+        spread.check_trim(self.trim, self.trim_residual)
+        spread.check_drift(self.drift)
 
     @property
     def zero(self) -> bool:
-        """True when no element is spread (the nominal design)."""
-        return not any(self.local.values()) and not any(self.wafer.values())
+        """True when every sample is the nominal design (nothing spread, no residual, no drift)."""
+        return (not any(self.local.values()) and not any(self.wafer.values()) and not self.drift
+                and not (self.trim != "none" and self.trim_residual))
+
+    def sample(self, nominal, elems: list, seed: int, index: int):
+        """Sample `index` of `nominal`: spread, trimmed, drifted; and the factor of every element."""
+        f = self.factors(elems, seed, index)
+        model = spread.scaled(nominal, elems, f)
+        model = spread.trimmed(model, nominal, elems, self.trim, self.trim_residual, spread.trim_rng(seed, index))
+        return spread.drifted(model, self.drift), f
 
     def factors(self, elems: list, seed: int, index: int) -> np.ndarray:
         """The factor of every element of sample `index`."""
@@ -74,8 +91,12 @@ class SpreadSpec:
         return 1.0 + loc * z + waf * w[kind]
 
     def describe(self) -> dict:
-        """The spec as JSON fields."""
-        return asdict(self)
+        """The spec as JSON fields; trim and drift only when set, so untrimmed results files keep their keys."""
+        out = asdict(self)
+        for key, off in TRIM_DEFAULTS.items():
+            if out[key] == off:
+                del out[key]
+        return out
 
 
 def _sigmas(value, where: str) -> dict:
@@ -127,13 +148,18 @@ def spec_of(obj) -> SpreadSpec:
     """A SpreadSpec from a sigma or the JSON object `parse_spread` describes."""
     if not isinstance(obj, dict):
         return SpreadSpec(_sigmas(obj, "local"), _sigmas(0.0, "wafer"))
-    unknown = set(obj) - {"local", "wafer", "wafer_rho"}
+    unknown = set(obj) - {"local", "wafer", "wafer_rho", *TRIM_DEFAULTS}
     if unknown:
-        raise Mech2SpiceError(f"spread spec: unknown field(s) {', '.join(sorted(unknown))} (local, wafer, wafer_rho)")
+        raise Mech2SpiceError(f"spread spec: unknown field(s) {', '.join(sorted(unknown))} (local, wafer, wafer_rho, "
+                              f"{', '.join(TRIM_DEFAULTS)})")
     rho = obj.get("wafer_rho", 0.0)
     if isinstance(rho, bool) or not isinstance(rho, (int, float)) or not 0 <= rho <= 1:
         raise Mech2SpiceError(f"spread spec 'wafer_rho': must be a number in [0, 1], got {rho!r}")
-    return SpreadSpec(_sigmas(obj.get("local", 0.0), "local"), _sigmas(obj.get("wafer", 0.0), "wafer"), float(rho))
+    trim = {key: obj.get(key, off) for key, off in TRIM_DEFAULTS.items()}
+    if not isinstance(trim["trim"], str):
+        raise Mech2SpiceError(f"spread spec 'trim': must be one of {', '.join(spread.TRIMS)}, got {trim['trim']!r}")
+    return SpreadSpec(_sigmas(obj.get("local", 0.0), "local"), _sigmas(obj.get("wafer", 0.0), "wafer"), float(rho),
+                      **trim)
 
 
 def all_vectors(netlist: Netlist) -> list[dict[str, int]]:
@@ -162,7 +188,7 @@ class DesignMC:
         self.model = network.build(netlist, p)
         self.stim = network.stimulus(self.model, netlist, p, [(0, vectors)])
         self.elems = spread.elements(self.model)
-        self.budget = periods or simulation.period_budget(netlist)
+        self.budget = periods or clocking.period_budget(netlist)
         self.fixed = periods is not None
         self.outs = [b for b in output_bits(netlist) if b in self.model.probes]
         self.gates = list(self.model.design.blocks)
@@ -172,7 +198,7 @@ class DesignMC:
         bits = [logic.evaluate_bits(netlist, v) for v in vectors]
         self.want_out = np.array([[b[o] for b in bits] for o in self.outs], int)        # (outs, B)
         self.want_gate = np.array([[b[g] for b in bits] for g in self.gates], int)      # (gates, B)
-        self.union = 1 if self.noise else union or (1 if backend.startswith(("ngspice", "vacask")) else 8)
+        self.union = 1 if self.noise else union or (1 if engine_class(backend).capabilities.simulator else 8)
 
     def engine_for(self, i: int):
         """The engine sample i runs on: with noise, the backend with sample i's own noise seed."""
@@ -185,8 +211,7 @@ class DesignMC:
         """Sample i's model and stimulus (the nominal ones when the spec spreads nothing)."""
         if self.spec.zero:
             return self.model, self.stim
-        f = self.spec.factors(self.elems, self.seed, i)
-        model = spread.scaled(self.model, self.elems, f)
+        model, f = self.spec.sample(self.model, self.elems, self.seed, i)
         fd = np.ones(len(self.model.drives))
         for e, x in zip(self.elems, f):
             if e.kind == "drive":
@@ -250,6 +275,7 @@ class DesignMC:
         """Pass/fail, margins, wrong output bits and root gate failures of one sample from its amplitudes; a
         sample whose network has a self-oscillating mode (`stable` False) fails whatever its bits read."""
         ao, ag = a[:n_o], a[n_o:]
+        band_of, margin = self.p.levels.band_of, self.p.levels.margin
         got_o = np.vectorize(lambda x: -1 if band_of(x) is None else band_of(x))(ao) if ao.size else ao
         m_o = np.vectorize(margin)(ao, self.want_out) if ao.size else np.zeros((0, 1))
         bad_g = np.vectorize(lambda x, w: band_of(x) != w)(ag, self.want_gate) if ag.size else np.zeros((0, 1), bool)

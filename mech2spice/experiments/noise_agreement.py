@@ -125,7 +125,7 @@ def envelope_variance(model: MechModel, T: float, batch: int, periods: int, seed
 def ngspice_variance(model: MechModel, T: float, periods: int, settle: int, seed: int = 0) -> float:
     """ngspice (trnoise sources) from rest: variance over time of the per-period amplitude after `settle`."""
     from ..spice import runner
-    from ..spice.carrier import SpiceOptions, noisy_options
+    from ..spice.oscillator_netlist import SpiceOptions, noisy_options
     run = runner.run_batch(model, settle + periods, options=noisy_options(SpiceOptions(), T, seed))
     return _spread(run.amp[settle:, 0, 0])
 

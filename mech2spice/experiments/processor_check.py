@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..compare import agreement
 from ..cpu import run as cpu_run
 from ..inputs import write_text
 from ..cpu.machines import make_cpu
@@ -152,10 +153,9 @@ def compare(a: dict, b: dict) -> list[dict]:
     out = []
     for x, y in zip(a["rows"], b["rows"]):
         ax, ay = x["amp"] * a["unit"], y["amp"] * b["unit"]
-        big = np.abs(ay) > 0.1
+        d = agreement(ay, ax, 1.0, floor=0.1)
         out.append({"cycle": x["cycle"], "instr": x["instr"], "registers_equal": x["registers"] == y["registers"],
-                    "amp_diff": float(np.abs(np.abs(ax) - np.abs(ay)).max()),
-                    "phase_diff_deg": float(np.degrees(np.abs(np.angle(ax[big] / ay[big]))).max())})
+                    "amp_diff": d.amp, "phase_diff_deg": d.phase_deg})
     return out
 
 

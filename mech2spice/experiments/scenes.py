@@ -11,23 +11,42 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import data, simulation
+from .. import data
 from ..inputs import read_json
 from ..physics import network, nor
 from ..physics.model import MechModel
-from ..physics.params import BAND0, BAND1, DEFAULT, NOMINAL0, NOMINAL1, GateParams
+from ..physics.params import DEFAULT, GateParams, Levels
 from ..physics.stimulus import Stimulus
 from ..synthesis import synth
 from ..synthesis.ports import output_bits
 
 PAIRS = [(0, 0), (1, 0), (0, 1), (1, 1)]                  # the truth table's input pairs, in this order
-LEVEL = {0: NOMINAL0, 1: NOMINAL1}                         # a logic level as a drive force (fraction of F_R)
-MID = (BAND0[1] + BAND1[0]) / 2                            # threshold between the bands, for delays
-EDGES = (BAND0[0], BAND0[1], BAND1[0], BAND1[1])           # the band edges, as input levels
-CASCADE_EDGES = [(0.365, 0.365), (0.67, 0.365), (0.67, 0.67), (0.92, 0.365), (1.025, 0.67), (1.025, 1.025),
-                 (0.92, 0.92)]                             # constant inputs at band edges: level restoration
+
+
+def mid(levels: Levels) -> float:
+    """The threshold between the bands (u_R), for delays."""
+    return (levels.band0[1] + levels.band1[0]) / 2
+
+
+def edges(levels: Levels) -> tuple[float, ...]:
+    """The band edges, as input levels."""
+    return (*levels.band0, *levels.band1)
+
+
+def cascade_edges(levels: Levels) -> list[tuple[float, float]]:
+    """Constant input pairs at band edges, for level restoration: both low edges, high/low of '0', ..."""
+    (lo0, hi0), (lo1, hi1) = levels.band0, levels.band1
+    return [(lo0, lo0), (hi0, lo0), (hi0, hi0), (lo1, lo0), (hi1, hi0), (hi1, hi1), (lo1, lo1)]
+
+
+# the default block's, for code that has no block at hand (a block's own: the functions above on p.levels)
+LEVEL = {0: DEFAULT.levels.nominal0, 1: DEFAULT.levels.nominal1}   # a logic level as a drive force (F_R)
+MID = mid(DEFAULT.levels)
+EDGES = edges(DEFAULT.levels)
+CASCADE_EDGES = cascade_edges(DEFAULT.levels)
 FANOUT_CASES = [(0, 0, 0), (0, 0, 1), (1, 0, 0), (1, 0, 1)]   # (driver x1, driver x2, every load's x2)
 ADDER_INPUTS = [{"a": a, "b": b} for a in range(4) for b in range(4)]   # all 16 sums of the 2-bit adder
+ADDER_HOLD = 2900   # adder2.v's clocking.period_budget (logic depth 7), a constant so scenes need not import it
 COUNTER_STEPS = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, "cycles": 3},
                  {"set": {"en": 0}, "cycles": 2}, {"set": {"en": 1}, "cycles": 2}, {"set": {"rst": 1}, "cycles": 1}]
 FSM_X = [1, 1, 0, 1, 1, 0, 1, 0]                           # verilog/fsm.v's input sequence, one bit per cycle
@@ -82,31 +101,14 @@ def levels_stimulus(model: MechModel, p: GateParams, segments: list[tuple[int, n
 
 
 def nominal_levels(p: GateParams = DEFAULT) -> np.ndarray:
-    """The four nominal input pairs of PAIRS as force levels (4, 2), at p's nominal levels."""
-    lv = p.levels
-    return np.array([[lv.nominal(a), lv.nominal(b)] for a, b in PAIRS], float)
-
-
-def mid(p: GateParams = DEFAULT) -> float:
-    """The threshold between p's bands, for delays (MID for today's bands)."""
-    return (p.levels.band0[1] + p.levels.band1[0]) / 2
-
-
-def band_edges(p: GateParams = DEFAULT) -> tuple[float, ...]:
-    """p's band edges as input levels (EDGES for today's bands)."""
-    return (*p.levels.band0, *p.levels.band1)
-
-
-def cascade_edges(p: GateParams = DEFAULT) -> list[tuple[float, float]]:
-    """Constant band-edge inputs for level restoration (CASCADE_EDGES for today's bands)."""
-    (lo0, hi0), (lo1, hi1) = p.levels.band0, p.levels.band1
-    return [(lo0, lo0), (hi0, lo0), (hi0, hi0), (lo1, lo0), (hi1, hi0), (hi1, hi1), (lo1, lo1)]
+    """The four nominal input pairs of PAIRS as force levels (4, 2), in p's levels."""
+    return np.array([[p.levels.nominal(a), p.levels.nominal(b)] for a, b in PAIRS], float)
 
 
 def gate_scene(p: GateParams = DEFAULT, which: str = "nominal", periods: int = 2500) -> Scene:
     """Single gate from rest: the 4 nominal input pairs, or all 16 pairs of band-edge levels."""
-    edges = band_edges(p)
-    pairs = [tuple(x) for x in nominal_levels(p)] if which == "nominal" else [(a, b) for a in edges for b in edges]
+    e = edges(p.levels)
+    pairs = [tuple(x) for x in nominal_levels(p)] if which == "nominal" else [(a, b) for a in e for b in e]
     m = nor.single_gate(p)
     return Scene(f"gate_{which}", m, levels_stimulus(m, p, [(0, np.array(pairs, float))]), periods, ["g0"],
                  [f"{a:g},{b:g}" for a, b in pairs], [0], [periods],
@@ -118,7 +120,7 @@ def chain_scene(p: GateParams = DEFAULT, hold: int = 1500, edges: bool = True) -
     constant band-edge inputs (level restoration)."""
     m = nor.chain(p, 3)
     n0, n1 = p.levels.nominal0, p.levels.nominal1
-    lv0 = np.array([[n0, n0]] + ([list(e) for e in cascade_edges(p)] if edges else []))
+    lv0 = np.array([[n0, n0]] + ([list(e) for e in cascade_edges(p.levels)] if edges else []))
     lv1 = lv0.copy()
     lv1[0] = [n1, n0]
     st = levels_stimulus(m, p, [(0, lv0), (hold, lv1), (2 * hold, lv0)])
@@ -131,22 +133,21 @@ def chain_scene(p: GateParams = DEFAULT, hold: int = 1500, edges: bool = True) -
 def fanout_scene(p: GateParams = DEFAULT, n_loads: int = 2, periods: int = 2500) -> Scene:
     """One driver feeding n_loads gates: driver 00 / 10, every load's second input 0 / 1 (FANOUT_CASES)."""
     m = nor.fanout(p, n_loads)
-    nominal = p.levels.nominal
-    lv = np.array([[nominal(a), nominal(b)] for a, b, _ in FANOUT_CASES])
+    level = p.levels.nominal
+    lv = np.array([[level(a), level(b)] for a, b, _ in FANOUT_CASES])
     amps = input_amps(m.design.input_drives, lv, p)
     for pair in m.design.load_drives:
-        amps.update(input_amps([pair], np.array([[nominal(c)] for *_, c in FANOUT_CASES]), p))
+        amps.update(input_amps([pair], np.array([[level(c)] for *_, c in FANOUT_CASES]), p))
     st = Stimulus.from_levels(m, [(0.0, amps)], batch=len(FANOUT_CASES))
     return Scene(f"fanout{n_loads}", m, st, periods, list(m.probes),
                  [f"drv {a}{b}, loads x2={c}" for a, b, c in FANOUT_CASES], [0], [periods],
                  f"one driver feeding {n_loads} loads, {periods} periods from rest")
 
 
-def adder_scene(p: GateParams = DEFAULT, hold: int | None = None) -> Scene:
+def adder_scene(p: GateParams = DEFAULT, hold: int = ADDER_HOLD) -> Scene:
     """verilog/adder2.v: inputs 0 for `hold` periods (default: its period budget), then each of the 16 (a, b)."""
     nl = synth.synthesize(data.verilog("adder2.v"))
     m = network.build(nl, p)
-    hold = hold or simulation.period_budget(nl)
     st = network.stimulus(m, nl, p, [(0, [{}] * len(ADDER_INPUTS)), (hold, ADDER_INPUTS)])
     probes = [b for b in output_bits(nl) if b in m.probes]
     return Scene("adder2", m, st, 2 * hold, probes, [f"a={v['a']} b={v['b']}" for v in ADDER_INPUTS], [0, hold],

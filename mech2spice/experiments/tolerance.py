@@ -33,10 +33,12 @@ class Sampler:
     """Loaded-gate samples with a fixed set of standard normal draws (common random numbers)."""
 
     def __init__(self, p: GateParams, samples: int, seed: int, per_band: int = loaded.PER_BAND,
-                 n_grid: int = steady_batch.N_GRID):
+                 n_grid: int = steady_batch.N_GRID, trim: str = "none", residual: float = 0.0, drift: float = 0.0):
         if samples < 1:
             raise Mech2SpiceError(f"--samples must be at least 1, got {samples}")
+        spread.check_trim(trim, residual)
         self.p, self.seed, self.n_grid = p, seed, n_grid
+        self.trim, self.residual, self.drift = trim, residual, drift
         self.base = loaded.build(p)
         self.elements = spread.elements(self.base.model, self.base.block_dofs)
         self.eps = spread.draws(len(self.elements), samples, seed)
@@ -46,7 +48,13 @@ class Sampler:
         """Sample i at spread sigma (None: the nominal gate)."""
         if i is None:
             return self.base.model
-        return spread.scaled(self.base.model, self.elements, 1.0 + sigma * self.eps[i])
+        return self.finished(self.base.model, self.elements, spread.scaled(self.base.model, self.elements,
+                                                                           1.0 + sigma * self.eps[i]), i)
+
+    def finished(self, nominal, elems, model, i: int):
+        """Sample i's spread `model` trimmed (its own residual draws) and drifted, as in service."""
+        model = spread.trimmed(model, nominal, elems, self.trim, self.residual, spread.trim_rng(self.seed, i))
+        return spread.drifted(model, self.drift)
 
     def margins(self, model) -> np.ndarray:
         """Per-point margins of one model of the loaded gate's topology."""
@@ -117,16 +125,18 @@ def tolerance(sampler: Sampler, target: float = TARGET_YIELD, lo: float = SIGMA_
 
 
 def study(p: GateParams, sigma: float, samples: int, seed: int, per_band: int = loaded.PER_BAND,
-          n_grid: int = steady_batch.N_GRID, with_tolerance: bool = True, log=lambda msg: None) -> dict:
-    """Everything `mech2spice gate --spread` reports."""
+          n_grid: int = steady_batch.N_GRID, with_tolerance: bool = True, log=lambda msg: None,
+          trim: str = "none", residual: float = 0.0, drift: float = 0.0) -> dict:
+    """Everything `mech2spice gate --spread` reports (spread, then trim, then drift: physics/spread.py)."""
     if not (sigma >= 0 and math.isfinite(sigma)):
         raise Mech2SpiceError(f"--spread must be a finite sigma >= 0, got {sigma}")
     t0 = time.time()
-    sampler = Sampler(p, samples, seed, per_band, n_grid)
+    sampler = Sampler(p, samples, seed, per_band, n_grid, trim, residual, drift)
     nominal = sampler.margins(sampler.model(0.0, None))
     log(f"nominal margin {nominal.min():+.4f}; {samples} samples at sigma {sigma:g}")
     y = yield_at(sampler, sigma)
-    out = {"sigma": sigma, "samples": samples, "seed": seed, "yield": y["yield"], "yield_ci95": y["yield_ci95"],
+    out = {"sigma": sigma, "samples": samples, "seed": seed, "trim": trim, "trim_residual": residual, "drift": drift,
+           "yield": y["yield"], "yield_ci95": y["yield_ci95"],
            "margin_quantiles": y["margin_quantiles"], "nominal_margin": float(nominal.min()),
            "elements_spread": [e.name for e in sampler.elements],
            "method": {"model": "loaded gate (physics/loaded.py, load='pair')", "grid_points": int(nominal.size),
@@ -163,7 +173,8 @@ def sample_at_point(sampler: Sampler, sigma: float, i: int, point: int, load: st
     (elements matched by name, so load="gate" gets the same draws as the sampler's load="pair")."""
     lg = loaded.build(sampler.p, load)
     elems = {e.name: e for e in spread.elements(lg.model, lg.block_dofs)}
-    model = spread.scaled(lg.model, [elems[e.name] for e in sampler.elements], 1.0 + sigma * sampler.eps[i])
+    mine = [elems[e.name] for e in sampler.elements]
+    model = sampler.finished(lg.model, mine, spread.scaled(lg.model, mine, 1.0 + sigma * sampler.eps[i]), i)
     return loaded.at_inputs(lg, *sampler.levels[point, 1:], model)
 
 
@@ -251,15 +262,15 @@ NUMERIC_FAILURES = (np.linalg.LinAlgError, OverflowError, FloatingPointError, Ze
 
 
 def robustness(p: GateParams, sens: bool, sigma: float | None, samples: int, seed: int,
-               log=lambda msg: None) -> dict:
-    """What `mech2spice gate --sens` and/or `--spread SIGMA` print."""
+               log=lambda msg: None, trim: tuple = ("none", 0.0, 0.0)) -> dict:
+    """What `mech2spice gate --sens` and/or `--spread SIGMA` print; trim = (mode, residual, drift)."""
     out: dict = {"params": p.to_dict()}
     try:
         with np.errstate(over="raise", invalid="raise", divide="raise"):
             if sens:
                 out.update(sensitivity_report(p, log))
             if sigma is not None:
-                out.update(study(p, sigma, samples, seed, log=log))
+                out.update(study(p, sigma, samples, seed, log=log, trim=trim[0], residual=trim[1], drift=trim[2]))
     except NUMERIC_FAILURES as err:
         raise Mech2SpiceError(f"parameters '{p.name}': the steady-state analysis failed numerically "
                               f"({type(err).__name__}: {err}); a parameter is far outside the range the gate "
@@ -286,6 +297,8 @@ def text(out: dict, top: int = 12) -> str:
     if "yield" in out:
         lo, hi = out["yield_ci95"]
         q = out["margin_quantiles"]
+        if out["trim"] != "none" or out["drift"]:
+            lines.append(f"trim {out['trim']} (residual {out['trim_residual']:g}), drift {out['drift']:+g}")
         lines.append(f"sigma {out['sigma']:g}, {out['samples']} samples, seed {out['seed']}: yield {out['yield']:.3f} "
                      f"(95 % Wilson {lo:.3f} ... {hi:.3f}); nominal margin {out['nominal_margin']:+.4f}")
         lines.append("margin quantiles: " + ", ".join(f"{k} {v:+.3f}" for k, v in q.items()))

@@ -12,6 +12,7 @@ import time
 import numpy as np
 
 from ..backends import envelope, rk4
+from ..compare import AVG
 from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
@@ -21,7 +22,6 @@ from .scenes import MID, Scene
 
 AMP_TOL = 0.02          # u_R, settled amplitudes
 TIME_TOL = 0.10         # relative, threshold-crossing times
-AVG = 20                # periods averaged for a settled amplitude
 
 
 # --- running ---------------------------------------------------------------------------------

@@ -63,6 +63,13 @@ class MechModel:
         return 2 * np.pi / self.omega
 
     @property
+    def levels(self):
+        """The logic levels outputs are decoded with: the builder's block's (the default ones without gate
+        parameters)."""
+        from .params import DEFAULT_LEVELS
+        return self.params.levels if self.params is not None else DEFAULT_LEVELS
+
+    @property
     def amplitude_unit(self) -> float:
         """u_R, the unit output amplitudes are decoded in (1 for a model built without gate parameters)."""
         return self.params.u_r if self.params is not None else 1.0

@@ -150,6 +150,11 @@ class GateParams:
     block: BlockSpec | None = field(default=None, repr=False)
 
     def __post_init__(self):
+        # to_dict's plain records read back: GateParams(**p.to_dict()) == p
+        if isinstance(self.levels, Mapping):
+            object.__setattr__(self, "levels", Levels.from_dict(dict(self.levels)))
+        if isinstance(self.block, Mapping):
+            object.__setattr__(self, "block", BlockSpec.from_dict(dict(self.block)))
         # "default" names the default values only: GateParams(q_g=150.0) or replace(DEFAULT, ...) would
         # otherwise call itself default in every result, report and JSON file
         if self.name == "default" and any(getattr(self, f.name) != f.default for f in fields(self)):
@@ -223,12 +228,7 @@ class GateParams:
 
     @classmethod
     def from_dict(cls, data: dict) -> "GateParams":
-        """The inverse of to_dict (a trusted record this package wrote: no validation beyond the fields')."""
-        data = dict(data)
-        if "levels" in data:
-            data["levels"] = Levels.from_dict(data["levels"])
-        if "block" in data:
-            data["block"] = BlockSpec.from_dict(data["block"])
+        """The inverse of to_dict."""
         return cls(**data)
 
 
@@ -280,6 +280,16 @@ def _block_preset(name: str) -> GateParams:
 
 GATE_FIELDS = ("f_r", "u_r", "omega", "name")   # what a block file may set beside its "block"
 EXTRA_KEYS = ("search", "measured", "note")   # a block file's record of how it was found (not read)
+
+
+def params_file(spec):
+    """The file a --params value reads (the package's file for a shipped block; None for a preset)."""
+    if spec in BLOCK_PRESETS:                     # shipped blocks are files (PRESETS names them too)
+        from .. import data
+        return data.path("blocks", f"{spec}.json")
+    if spec is None or spec in PRESETS:
+        return None
+    return spec
 
 
 def load_params(spec: str | None) -> GateParams:

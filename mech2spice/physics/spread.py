@@ -12,6 +12,13 @@ the total stiffness of both DOFs it joins, as it would in a device.
 
 Used by the single-gate tolerance study (experiments/tolerance.py) and meant for a Monte-Carlo of
 whole designs: `perturb(model, sigma, rng)` with no `dofs` spreads every element of the model.
+
+Trimming (docs/robustness.md, "Trimming"): after fabrication each oscillating DOF's total k/m ("f"),
+and optionally its total c/m ("fc"), is set back to nominal through its own local spring (dashpot),
+with a relative Gaussian residual error.  Masses, couplings, gammas, drives and the slow (insulator)
+DOFs keep their spread.  `trimmed` does it to one sampled model; `trim_map` and `sigmas` give the
+same thing linearised, for worst-case distances: element changes t = J u with independent u_j of
+standard deviation sigmas[j].  `drifted` is the common-mode temperature drift applied in service.
 """
 from __future__ import annotations
 
@@ -23,6 +30,7 @@ from ..errors import Mech2SpiceError
 from .model import Drive, MechModel
 
 PER_DOF = ("k", "m", "c")
+TRIMS = ("none", "f", "fc")    # nothing; total k/m; total k/m and c/m
 
 
 @dataclass(frozen=True)
@@ -91,3 +99,120 @@ def perturb(model: MechModel, sigma: float, rng: np.random.Generator,
     (or every element of `dofs`)."""
     elems = elements(model, dofs)
     return scaled(model, elems, 1.0 + sigma * rng.standard_normal(len(elems)))
+
+
+# --- trimming and drift ------------------------------------------------------------------------------
+def check_trim(mode: str, residual: float) -> None:
+    """Refuse an unknown trim mode or a residual outside [0, 1) (or a residual with nothing trimmed)."""
+    if mode not in TRIMS:
+        raise Mech2SpiceError(f"trim must be one of {', '.join(TRIMS)}, got {mode!r}")
+    if isinstance(residual, bool) or not isinstance(residual, (int, float)) or not 0 <= residual < 1:
+        raise Mech2SpiceError(f"trim residual must be a number in [0, 1), got {residual!r}")
+    if mode == "none" and residual:
+        raise Mech2SpiceError("a trim residual needs a trim (f or fc)")
+
+
+def trim_rng(seed: int, index: int) -> np.random.Generator:
+    """Sample `index`'s generator for its trim residuals: apart from its spread draws, so a run without a
+    trim draws exactly what it drew before trims existed."""
+    return np.random.default_rng([seed, index, 0x7472])
+
+
+def trimmed_dofs(model: MechModel, elems: list[Element]) -> list[int]:
+    """The DOFs a trim adjusts: every oscillating (not slow) DOF whose local stiffness is among `elems`."""
+    return [e.index for e in elems if e.kind == "k" and not model.slow[e.index]]
+
+
+def trimmed(model: MechModel, nominal: MechModel, elems: list[Element], mode: str, residual: float,
+            rng: np.random.Generator) -> MechModel:
+    """`model` (a spread copy of `nominal`) after trimming: each trimmed DOF's total k set so that k/m is
+    nominal times (1 + residual z), with "fc" its total c likewise for c/m.  Totals minus the (spread)
+    couplings are the local parts, so this sets the local spring and dashpot, as a trim would.
+
+    Draws 2 x len(trimmed DOFs) normals from rng (k row, then c row) whatever the mode, so "f" and "fc"
+    share their k residuals."""
+    check_trim(mode, residual)
+    if mode == "none":
+        return model
+    dofs = trimmed_dofs(model, elems)
+    z = rng.standard_normal((2, len(dofs)))
+    m, m0 = np.asarray(model.mass, float)[dofs], np.asarray(nominal.mass, float)[dofs]
+    k = np.array(model.k_total, float)
+    k[dofs] = m * np.asarray(nominal.k_total, float)[dofs] / m0 * (1 + residual * z[0])
+    c = np.array(model.c_total, float)
+    if mode == "fc":
+        c[dofs] = m * np.asarray(nominal.c_total, float)[dofs] / m0 * (1 + residual * z[1])
+    return _copy(model, k_total=list(k), c_total=list(c))
+
+
+def check_drift(rel: float) -> None:
+    """Refuse a drift that is not a relative change in (-1, 1)."""
+    if isinstance(rel, bool) or not isinstance(rel, (int, float)) or not -1 < rel < 1:
+        raise Mech2SpiceError(f"drift must be a relative change in (-1, 1), got {rel!r}")
+
+
+def drifted(model: MechModel, rel: float) -> MechModel:
+    """Every stiffness (each DOF's local spring, slow ones included, and each coupling spring) times
+    (1 + rel): a common-mode temperature drift of the Young's modulus."""
+    check_drift(rel)
+    if not rel:
+        return model
+    return _copy(model, k_total=[k * (1 + rel) for k in model.k_total],
+                 springs=[(i, j, k * (1 + rel)) for i, j, k in model.springs])
+
+
+def _copy(model: MechModel, **changes) -> MechModel:
+    """A copy with its own lists (nothing shared with `model`) and the given fields replaced."""
+    base = dict(names=list(model.names), slow=list(model.slow), probes=dict(model.probes), mass=list(model.mass),
+                k_total=list(model.k_total), c_total=list(model.c_total), springs=list(model.springs),
+                dashpots=list(model.dashpots), quads=list(model.quads), drives=list(model.drives))
+    return replace(model, **{**base, **changes})
+
+
+def trim_map(model: MechModel, elems: list[Element], mode: str) -> np.ndarray:
+    """J with element relative changes t = J u, linearised about `model` (nominal).  u is t except at
+    a trimmed DOF's "k" element (u: the relative error of its total k/m) and, with "fc", its "c"
+    element (of c/m): there the local part is what the trim leaves,
+        t_k = (K (u_k + u_m) - sum of the DOF's spread springs k_s u_s) / k_local,  likewise c."""
+    check_trim(mode, 0.0)
+    n = len(elems)
+    J = np.eye(n)
+    if mode == "none":
+        return J
+    pos = {(e.kind, e.index): j for j, e in enumerate(elems)}
+    kinds = (("k", "spring", model.k_total, model.springs, model.k_local),) + (
+        (("c", "dashpot", model.c_total, model.dashpots, model.c_local),) if mode == "fc" else ())
+    for i in trimmed_dofs(model, elems):
+        for own, link, total, links, local in kinds:
+            if (own, i) in pos:
+                J[pos[(own, i)]] = _trim_row(model, pos, i, own, link, total[i], links, local[i], n)
+    return J
+
+
+def _trim_row(model, pos, i, own, link, total, links, local, n) -> np.ndarray:
+    """One row of trim_map: the trimmed local part's relative change in terms of u."""
+    if abs(local) <= 1e-12 * abs(total):
+        raise Mech2SpiceError(f"cannot trim DOF '{model.names[i]}': it has no local {own} to adjust")
+    row = np.zeros(n)
+    row[pos[(own, i)]] = total
+    if ("m", i) in pos:
+        row[pos[("m", i)]] = total
+    for e, (a, b, v) in enumerate(links):
+        if i in (a, b) and (link, e) in pos:
+            row[pos[(link, e)]] -= v
+    return row / local
+
+
+def sigmas(elems: list[Element], model: MechModel, spread: float, trim: str = "none",
+           residual: float = 0.0) -> np.ndarray:
+    """The standard deviation of each coordinate u of trim_map: `residual` at a trimmed k (and, with
+    "fc", c) element, `spread` everywhere else.  A margin with gradient g in t has, linearised, the
+    standard deviation ||sigmas * (J^T g)||."""
+    check_trim(trim, residual)
+    out = np.full(len(elems), float(spread))
+    dofs = set(trimmed_dofs(model, elems)) if trim != "none" else set()
+    own = {"k"} | ({"c"} if trim == "fc" else set())
+    for j, e in enumerate(elems):
+        if e.kind in own and e.index in dofs:
+            out[j] = residual
+    return out

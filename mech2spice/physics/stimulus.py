@@ -54,6 +54,16 @@ class Stimulus:
         return cls([0.0], np.repeat(amp, batch, axis=2))
 
     @classmethod
+    def input_levels(cls, model: MechModel, pairs, f_r: float) -> "Stimulus":
+        """Constant levels on the model's external inputs from t = 0: one batch member per row of `pairs`
+        (one level per input, as fractions of the reference force `f_r`; both drives of an input get it)."""
+        lv = np.asarray(pairs, float) * f_r
+        changes = {}
+        for k, (ds, dd) in enumerate(model.design.input_drives):
+            changes[ds] = changes[dd] = lv[:, k]
+        return cls.from_levels(model, [(0.0, changes)], batch=len(lv))
+
+    @classmethod
     def from_levels(cls, model: MechModel, segments: list[tuple[float, dict[int, np.ndarray | float]]],
                     batch: int = 1) -> "Stimulus":
         """Segments of (start time, {drive index: amplitude or (B,) amplitudes}); unnamed drives keep

@@ -24,11 +24,13 @@ class Report:
 # speed_accuracy.md appends carrier.json's section.
 REPORTS: dict[str, Report] = {
     "gate": Report("the NOR gate against the paper's six requirements; why the printed parameters fail",
-                   "~1 min", ("gate.md",), ("quick",)),
-    "adder": Report("the 2-bit adder from Verilog, all 16 sums on RK4 (paper Fig. 4)", "~1 min", ("adder.md",)),
+                   "~1 min", ("gate.md", "gate.json"), ("quick", "render")),
+    "adder": Report("the 2-bit adder from Verilog, all 16 sums on RK4 (paper Fig. 4)", "~1 min", ("adder.md", "adder.json"),
+                    ("render",)),
     "sequential": Report("the latch, a counter, the FSM and sqrt(2809) = 53 (paper Figs. 5, 6)", "~4 min",
-                         ("sequential.md", "sqrt.md"), ("sqrt_rk4",)),
-    "spice": Report("the electrical analogy; ngspice against RK4 on four scenes", "~4 min", ("spice.md",)),
+                         ("sequential.md", "sqrt.md", "sequential.json"), ("sqrt_rk4", "render")),
+    "spice": Report("the electrical analogy; ngspice against RK4 on four scenes", "~4 min", ("spice.md", "spice.json"),
+                    ("render",)),
     "fidelity": Report("what each envelope speed-up (step, settle detection, cone pruning) costs in accuracy",
                        "~20 min", ("fidelity.md",), ("only", "cycles", "render")),
     "cpu_physical": Report("the processor as 6486 oscillators against the ISS, cycle by cycle, to the halt",

@@ -1,62 +1,32 @@
-"""reports/adder.md: the 2-bit adder from Verilog, all 16 sums on RK4 (paper Fig. 4).
+"""reports/adder.md: the 2-bit adder from Verilog, all 16 sums on RK4 (paper Fig. 4), rendered from adder.json
+(mech2spice/studies/adder.py measures it).
 
-Run: mech2spice report adder
+Run: mech2spice report adder [--render]
 """
 from __future__ import annotations
 
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-from .. import data, simulation
-from ..backends import logic, rk4
-from ..synthesis import ports
-from ..physics import network
-from ..physics.params import DEFAULT
-from ..synthesis import synth
-from ._common import MACHINE, out_dir, pyplot, save_figure, shade_bands
-from ..experiments.scenes import ADDER_INPUTS
+from ._common import out_dir, pyplot, save_figure, shade_bands, stored, write_json
 
 plt = pyplot()
 
 PAPER = {"gates": 17, "oscillators": 102, "linear_springs": 19, "nonlinear_springs": 85, "dashpots": 19}
 
 
-def run(design=data.verilog("adder2.v"), hold: int | None = None) -> dict:
-    """Inputs 0 for the first half, then each of the 16 pairs (one RK4 batch)."""
-    p = DEFAULT
-    nl = synth.synthesize(design)
-    model = network.build(nl, p)
-    hold = hold or simulation.period_budget(nl)
-    vals = list(ADDER_INPUTS)
-    stim = network.stimulus(model, nl, p, [(0, [{}] * 16), (hold, vals)])
-    t0 = time.time()
-    probes = [b for b in ports.output_bits(nl) if b in model.probes]
-    r = rk4.integrate(model, 2 * hold, stimulus=stim, probes=probes, progress=sys.stderr.isatty())
-    wall = time.time() - t0
-    amps = np.abs(r.amp) / p.u_r                              # (P, 3, 16)
-    names = probes
-    rows = []
-    for b, v in enumerate(vals):
-        d = simulation.decode(nl, {n: float(amps[-20:, k, b].mean()) for k, n in enumerate(names)}, {})
-        rows.append({"inputs": v, **d, "expected": logic.evaluate(nl, v)["s"],
-                     "amplitudes": {n: float(amps[-1, k, b]) for k, n in enumerate(names)}})
-    return {"netlist": nl, "counts": {"gates": len(nl.gates()), **model.counts()}, "hold": hold,
-            "amps": amps, "names": names, "rows": rows, "wall_s": wall, "depth": network.logic_depth(nl)}
-
-
 def plot(res: dict, path: Path) -> None:
     """The three sum bits' amplitudes over time for each of the 16 input pairs (the paper's Fig. 4)."""
     fig, axs = plt.subplots(4, 4, figsize=(12, 9), sharex=True, sharey=True)
-    t = np.arange(1, res["amps"].shape[0] + 1)
+    amps = np.asarray(res["amps"], float)
+    t = res["amps_every"] * np.arange(1, amps.shape[0] + 1)
     for b, row in enumerate(res["rows"]):
         ax = axs[b // 4, b % 4]
         for k, n in enumerate(res["names"]):          # LSB on top, as in the paper
             off = 2.4 * (len(res["names"]) - 1 - k)
             shade_bands(ax, off)
-            ax.plot(t, off + res["amps"][:, k, b], lw=0.9)
+            ax.plot(t, off + amps[:, k, b], lw=0.9)
         ax.axvline(res["hold"], color="k", lw=0.5)
         ax.set_title(f"a={row['inputs']['a']} b={row['inputs']['b']} -> s={row['outputs']['s']}", fontsize=9)
         ax.set_yticks([])
@@ -66,10 +36,13 @@ def plot(res: dict, path: Path) -> None:
     save_figure(fig, path, dpi=100)
 
 
-def write(directory="reports") -> Path:
-    """Run the 16 sums and write adder.md and adder.png."""
+def write(directory="reports", render: bool = False) -> Path:
+    """Run the 16 sums into adder.json (unless `render`) and write adder.md and adder.png from it."""
     d = out_dir(directory)
-    res = run()
+    if not render:
+        from ..studies import adder as study          # measuring loads the engines; rendering does not
+        write_json(d / "adder.json", study.measure())
+    res = stored(d / "adder.json", "adder")
     plot(res, d / "adder.png")
     c = res["counts"]
     counts = "\n".join(f"| {k} | {c[k]} | {PAPER[k]} |" for k in PAPER)
@@ -78,7 +51,8 @@ def write(directory="reports") -> Path:
         + " | ".join(f"{r['amplitudes'][n]:.3f}" for n in res["names"]) + f" | {r['min_margin']:+.3f} |"
         for r in res["rows"])
     ok = all(r["valid"] and r["outputs"]["s"] == r["expected"] for r in res["rows"])
-    text = ADDER_MD.format(machine=MACHINE, counts=counts, table=table, ok="all 16 correct and valid" if ok
+    text = ADDER_MD.format(machine=res["conditions"]["machine"], counts=counts, table=table,
+                           ok="all 16 correct and valid" if ok
                            else "NOT all correct", wall=res["wall_s"], hold=res["hold"], depth=res["depth"],
                            worst=min(r["min_margin"] for r in res["rows"]))
     (d / "adder.md").write_text(text)

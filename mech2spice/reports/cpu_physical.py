@@ -21,6 +21,7 @@ from ..cpu.iss import ISS
 from ..cpu import physical as P
 from ..cpu.physical import PROCESSOR_STEP as ENVELOPE_STEP, SETTLE_TOL as SETTLE
 from ..errors import Mech2SpiceError
+from ..studies._common import load_average
 from ._common import HOST, out_dir, pyplot, read_json, save_figure, write_json
 from .cpu import fig_sieve, plot_traffic, sieve_moments
 
@@ -120,7 +121,7 @@ def write(directory="reports", cycles: int = 0, program: str = "programs/sieve.a
     t0, c0 = time.perf_counter(), time.process_time()
     res = _run(a, tracker, out)
     wall, cpu_s = time.perf_counter() - t0, time.process_time() - c0
-    load = "load average %.2f, %.2f, %.2f" % __import__("os").getloadavg()
+    load = "load average %.2f, %.2f, %.2f" % tuple(load_average())
     golden = R.run_program(a.path, "iss")
     final_same = res["memory"] == golden["memory"] and res["cycles"] == golden["cycles"]
     moments = sieve_moments(tracker.frames) if res["halted"] and a.sieve else []

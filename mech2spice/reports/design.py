@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import Mech2SpiceError
+from ..studies._common import load_average
 from ._common import MACHINE, md_table, out_dir, pyplot, read_json, save_figure, write_json
 
 SEARCH = Path("reports/design_search.json")
@@ -49,7 +50,8 @@ def blocks(search: dict) -> dict:
 def block_figures(name: str, p, rec: dict | None, log) -> dict:
     """Tolerance, margin, energy, delay and the limiting elements of one block."""
     from ..design.search import measure
-    from ..physics import energy, sensitivity
+    from ..experiments import energy
+    from ..physics import sensitivity
     t0 = time.time()
     m = rec["measured"] if rec else measure(p, SIGMA, 200, TOL_SAMPLES, 0, log)
     e = energy.gate_energy(p)
@@ -92,7 +94,7 @@ def threshold_gap(p) -> dict:
 
 def run_check(argv: list[str]) -> dict:
     """One command line run through `python -m mech2spice.cli`; its JSON, exit code and wall time."""
-    t0, load0 = time.time(), os.getloadavg()[0]
+    t0, load0 = time.time(), load_average()[0]
     root = Path(__file__).resolve().parents[2]
     r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *argv], capture_output=True, text=True, cwd=root,
                        env={**os.environ, "PYTHONPATH": str(root)})
@@ -101,7 +103,7 @@ def run_check(argv: list[str]) -> dict:
     except json.JSONDecodeError:
         data = {"stdout": r.stdout[-2000:], "stderr": r.stderr[-2000:]}
     return {"argv": argv, "rc": r.returncode, "wall_s": time.time() - t0, "json": data,
-            "loadavg_1min": [load0, os.getloadavg()[0]]}
+            "loadavg_1min": [load0, load_average()[0]]}
 
 
 def adder_check(p, backend: str) -> dict:
@@ -111,13 +113,13 @@ def adder_check(p, backend: str) -> dict:
     from ..experiments.scenes import ADDER_INPUTS
     from ..synthesis import synth
     nl = synth.synthesize(data.verilog("adder2.v"))
-    t0, load0 = time.time(), os.getloadavg()[0]
+    t0, load0 = time.time(), load_average()[0]
     res = simulation.run_physical(nl, p, list(ADDER_INPUTS), backend)
     rows = [{"inputs": v, "s": r["outputs"].get("s"), "expected": logic.evaluate(nl, v)["s"],
              "min_margin": r.get("min_margin")} for v, r in zip(ADDER_INPUTS, res)]
     return {"backend": backend, "correct": sum(r["s"] == r["expected"] for r in rows), "of": len(rows),
             "min_margin": min((r["min_margin"] for r in rows if r["min_margin"] is not None), default=None),
-            "rows": rows, "wall_s": time.time() - t0, "loadavg_1min": [load0, os.getloadavg()[0]]}
+            "rows": rows, "wall_s": time.time() - t0, "loadavg_1min": [load0, load_average()[0]]}
 
 
 def plot_pareto(figs: dict, path: Path, machine: str) -> None:

@@ -471,7 +471,7 @@ other jobs, so the wall times here are indicative only; `reports/performance.md`
 ## Verdict
 
 **Every scene meets both criteria at the default envelope step ({E:g} drive periods, `envelope.DEFAULT_STEP`;
-`simulation.envelope_step` would lower it below a model's stability bound, which does not bind in any scene here),
+`backends/envelope.default_step` would lower it below a model's stability bound, which does not bind in any scene here),
 at 2 periods (the default when this study started) and at 1/2 period**: settled amplitudes within {worst_amp:.1e} u_R of RK4 at 80 steps/period (criterion
 {V.AMP_TOL} u_R), threshold-crossing times within {100 * worst_time:.2f} % (criterion {100 * V.TIME_TOL:.0f} %;
 worst: {worst_scene['scene']}), the same number of crossings in all {ncross} (output, input change, batch member)

@@ -27,9 +27,9 @@ from ..backends.envelope import EnvelopeEngine, EnvelopeOptions
 from ..cpu import run as R
 from ..cpu.iss import ISS
 from ..cpu.physical import PhysicalCPU
-from ..errors import Mech2SpiceError
 from ..physics.params import DEFAULT, margin
 from ..synthesis.synth import synthesize
+from ..studies._common import load_average, sections
 from ._common import SANDBOX, out_dir, read_json, write_json
 from ..experiments.scenes import COUNTER_STEPS, FSM_STEPS, sqrt_steps
 
@@ -405,14 +405,9 @@ def write(directory="reports", only=None, cycles: int = 30, render: bool = False
 
 def _uptime_load() -> str:
     """The 1/5/15-minute load averages at the start of the measurement (2 cores, shared)."""
-    import os
-    return "load average %.2f, %.2f, %.2f" % os.getloadavg()
+    return "load average %.2f, %.2f, %.2f" % tuple(load_average())
 
 
 def _sections(only) -> list[str]:
     """The sections to measure: all by default; unknown names are an error."""
-    wanted = list(only or SECTIONS)
-    bad = [s for s in wanted if s not in SECTIONS]
-    if bad:
-        raise Mech2SpiceError(f"fidelity: unknown section {', '.join(bad)} (choose from {', '.join(SECTIONS)})")
-    return wanted
+    return sections("fidelity", only, SECTIONS)

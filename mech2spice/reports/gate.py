@@ -1,6 +1,7 @@
-"""reports/gate.md and its figures (paper Fig. 3d-g), from `characterise` results.
+"""reports/gate.md and its figures (paper Fig. 3d-g), rendered from gate.json (mech2spice/studies/gate.py
+measures it).
 
-Run: mech2spice report gate (the same as `mech2spice gate --report reports`).
+Run: mech2spice report gate [--quick] [--render] (or `mech2spice gate --report reports`).
 """
 from __future__ import annotations
 
@@ -9,26 +10,38 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 
-from ..experiments import characterise
 from ..physics.params import BAND0, BAND1, GateParams
-from ._common import MACHINE, log, md_table, out_dir, pyplot, save_figure, shade_bands
+from ._common import log, md_table, out_dir, pyplot, save_figure, shade_bands, stored, write_json
 
 plt = pyplot()
 
 
-def write(directory="reports", quick: bool = False) -> Path:
-    """Characterise the default gate (`--quick`: shorter runs) and write gate.md with its figures."""
-    from ..physics.params import DEFAULT
-    return write_gate_report(characterise.characterise(DEFAULT, quick=quick, log=log), directory, log=log)
+def write(directory="reports", quick: bool = False, render: bool = False) -> Path:
+    """Characterise the default gate (`--quick`: shorter runs) into gate.json, unless `render`, and write gate.md
+    with its figures from it."""
+    d = out_dir(directory)
+    if not render:
+        from ..studies import gate as study          # measuring loads the engines; rendering does not
+        write_json(d / "gate.json", study.measure(quick=quick, log=log))
+    return render_report(stored(d / "gate.json", "gate"), d)
+
+
+def write_gate_report(out: dict, directory, log=lambda m: None) -> Path:
+    """`mech2spice gate --report DIR`: complete `characterise`'s result `out` for the report, keep it as gate.json
+    and write gate.md with its figures."""
+    from ..studies import gate as study
+    d = out_dir(directory)
+    write_json(d / "gate.json", study.complete(out, log))
+    return render_report(stored(d / "gate.json", "gate"), d)
 
 
 def _shade_bands(ax):
     shade_bands(ax, alpha=0.12)
 
 
-def plot_map(p: GateParams, path: Path, n: int = 71) -> dict:
+def plot_map(mp: dict, path: Path) -> dict:
     """Plot the steady-state output over both input forces; returns the grid size and the multistable count."""
-    xs, out, nstable = characterise.steady_map(p, n=n)
+    xs, out, nstable = (np.asarray(mp[k], float) for k in ("xs", "out", "nstable"))
     cls = np.full(out.shape, 0.5)                     # ambiguous
     cls[(out >= BAND0[0]) & (out <= BAND0[1])] = 0.0
     cls[(out >= BAND1[0]) & (out <= BAND1[1])] = 1.0
@@ -48,7 +61,7 @@ def plot_map(p: GateParams, path: Path, n: int = 71) -> dict:
     axs[0].set_title("output band (red '0', blue '1', white invalid, grey multistable)")
     axs[1].set_title("stable steady-state output")
     save_figure(fig, path)
-    return {"grid": n, "multistable_or_none": int((nstable != 1).sum())}
+    return {"grid": mp["grid"], "multistable_or_none": int((nstable != 1).sum())}
 
 
 def plot_transient(tr: dict, path: Path) -> None:
@@ -69,8 +82,9 @@ def plot_cascade(cas: dict, path: Path) -> None:
     """Plot the 3-gate cascade's transient and its level restoration of band-edge inputs."""
     fig, axs = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios": [2, 1]})
     _shade_bands(axs[0])
+    amp = np.asarray(cas["amplitude"], float)
     for k in range(3):
-        axs[0].plot(cas["t_periods"], cas["amplitude"][:, k], label=f"gate {k + 1}")
+        axs[0].plot(cas["t_periods"], amp[:, k], label=f"gate {k + 1}")
     h = cas["hold"]
     axs[0].axvline(h, color="k", lw=0.6)
     axs[0].axvline(2 * h, color="k", lw=0.6)
@@ -96,7 +110,8 @@ def plot_printed_scan(scan: dict, path: Path) -> None:
     """Plot the printed (Appendix A) gate's steady state over drive frequency."""
     fig, ax = plt.subplots(figsize=(7, 3.2))
     ax.semilogy(scan["omega"], scan["amp00"], label="inputs 00")
-    ax.semilogy(scan["omega"], np.maximum(scan["amp00"] - scan["amp11"], 1e-12), label="|out(00) - out(11)|")
+    ax.semilogy(scan["omega"], np.maximum(np.subtract(scan["amp00"], scan["amp11"]), 1e-12),
+                label="|out(00) - out(11)|")
     ax.axhline(BAND1[0], color="tab:blue", ls="--", lw=0.8, label="'1' band lower edge")
     ax.set_xlabel("drive frequency omega (rad/s)")
     ax.set_ylabel("channel amplitude / $u_R$")
@@ -113,23 +128,15 @@ def _tt_table(out: dict) -> str:
          for r in out["truth_table"])))
 
 
-def write_gate_report(out: dict, directory, log=lambda m: None) -> Path:
-    """Write gate.md + figures for the default set `out`, re-running the printed set for comparison."""
-    from ..physics.params import PRINTED
-    d = out_dir(directory)
-    p = GateParams.from_dict(out["params"])
-    log("report: steady-state map")
-    mp = plot_map(p, d / "gate_map.png")
-    plot_transient(out["_figures"]["transient"], d / "gate_transient.png")
-    plot_cascade(out["_figures"]["cascade"], d / "gate_cascade.png")
-    log("report: step study and wide fan-out")
-    conv40 = characterise.convergence(p, 1500, 40)
-    wide = [characterise.fanout_test(p, n, periods=2000) for n in (6, 12)]
-    fo_rows = out["fanout"] + wide
-    log("report: printed parameter set")
-    pr = characterise.characterise(PRINTED, quick=True)
-    scan = characterise.omega_scan(PRINTED, np.linspace(0.3, 60, 1200))
+def render_report(data: dict, d: Path) -> Path:
+    """gate.md and its figures from gate.json's `data`."""
+    out, pr, scan = data["characterise"], data["printed"], data["printed_scan"]
+    p, printed = GateParams(**out["params"]), GateParams(**pr["params"])
+    mp = plot_map(data["map"], d / "gate_map.png")
+    plot_transient(data["figures"]["transient"], d / "gate_transient.png")
+    plot_cascade(data["figures"]["cascade"], d / "gate_cascade.png")
     plot_printed_scan(scan, d / "gate_printed_scan.png")
+    fo_rows, conv40 = out["fanout"] + data["wide_fanout"], data["conv40"]
     req = "\n".join(f"| {k} | {'pass' if r['pass'] else 'FAIL'} | {r['figure']} |"
                     for k, r in out["requirements"].items())
     restore = "\n".join(
@@ -139,14 +146,15 @@ def write_gate_report(out: dict, directory, log=lambda m: None) -> Path:
                    f"{f['driver_swing_with_load_state']:.1e} | {f['branch_spread']:.1e} |" for f in fo_rows)
     vm = out["min_margin_detail"]
     text = GATE_MD.format(
-        machine=MACHINE, tt=_tt_table(out), rk4_ss=out["rk4_vs_steady"], halving=out["step_halving_change"],
+        machine=data["conditions"]["machine"], tt=_tt_table(out), rk4_ss=out["rk4_vs_steady"],
+        halving=out["step_halving_change"],
         steps=out["steps_per_period"], steps2=2 * out["steps_per_period"], conv40=conv40,
         mm=out["min_margin"], mm_at=vm["at_inputs"], mm_out=vm["output"] or float("nan"),
         grid=vm["grid_points"], multi=vm["multistable_points"], map_grid=mp["grid"],
         map_bad=mp["multistable_or_none"], delay=out["delay_periods"], delay_max=out["delay_max_periods"],
         delays=out["cascade"]["delays"], restore=restore, fo=fo, req=req, pr_tt=_tt_table(pr),
         pr_max=scan["max_channel_amplitude"], pr_contrast=scan["max_switch_contrast"],
-        pr_w=scan["at_omega"], wall=out["wall_s"], p=p, pr=PRINTED, chdet=p.k_c - p.m_c * p.omega ** 2)
+        pr_w=scan["at_omega"], wall=out["wall_s"], p=p, pr=printed, chdet=p.k_c - p.m_c * p.omega ** 2)
     (d / "gate.md").write_text(text)
     return d / "gate.md"
 

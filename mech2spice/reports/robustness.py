@@ -17,6 +17,7 @@ import numpy as np
 
 from ..experiments import mc_run
 from ..experiments import montecarlo as mc
+from ..studies._common import load_average
 from ._common import MACHINE, SANDBOX, pyplot, save_figure
 
 CACHE = Path("build/robustness")
@@ -174,16 +175,15 @@ def noise_agreement() -> dict:
 def scaling(samples: int = SCALING_SAMPLES, union: int = 8) -> list[dict]:
     """The same adder sweep on a LocalCluster of 1 then 2 workers, in one run (fresh result files), with the
     load average before each (other sessions share the machine)."""
-    import os
     out = []
     for w in (1, 2):
         path = CACHE / f"scaling_{w}.jsonl"
         path.unlink(missing_ok=True)
-        load = os.getloadavg()
+        load = load_average()
         res = mc_run.run({**job("adder", BIG[1]), "union": union}, samples, path, scheduler="local", workers=w)
         out.append({"workers": w, "samples": samples, "union": union, "wall_s": res["wall_s"],
                     "samples_per_s": res["samples_per_s"], "steady_samples_per_s": res.get("steady_samples_per_s"),
-                    "load_before": load, "load_after": os.getloadavg(),
+                    "load_before": load, "load_after": load_average(),
                     "worker_peak_rss_mb": res["worker_peak_rss_mb"], "driver_peak_rss_mb": res["driver_peak_rss_mb"]})
     return out
 

@@ -1,36 +1,35 @@
-"""reports/sequential.md and sqrt.md: the mechanical latch, clocked designs, the FSM and sqrt(2809).
+"""reports/sequential.md and sqrt.md: the mechanical latch, clocked designs, the FSM and sqrt(2809), rendered from
+sequential.json (mech2spice/studies/sequential.py measures it).
 
-Run: mech2spice report sequential [--sqrt-rk4]
+Run: mech2spice report sequential [--sqrt-rk4] [--render]
 (--sqrt-rk4 adds the oscillator-level RK4 run of the square root: ~15-30 min on 2 cores.)
 """
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
-from .. import data, simulation
-from ..backends import envelope
-from ..experiments import characterise
-from ..experiments.scenes import COUNTER_STEPS, FSM_STEPS, FSM_X, sqrt_steps
-from ..physics import network
-from ..physics.params import DEFAULT
-from ..synthesis import synth
-from ._common import MACHINE, md_table, out_dir, pyplot, save_figure, shade_bands
+from ._common import md_table, out_dir, pyplot, save_figure, shade_bands, stored, write_json
 
 plt = pyplot()
 
 PAPER_SQRT = {"gates": 501, "oscillators": 3006, "linear_springs": 685, "nonlinear_springs": 2505, "dashpots": 685}
 
 
+def _periods(c: dict) -> tuple[np.ndarray, np.ndarray]:
+    """A stored curve's amplitudes and the (1-based) periods they stand for."""
+    amp = np.asarray(c["amplitude"], float)
+    return amp, c["every"] * np.arange(1, amp.shape[0] + 1)
+
+
 def plot_latch(res: dict, path: Path) -> None:
     """Plot the latch's output and loop-node amplitudes through its pulse sequence (enable pulses shaded)."""
     fig, ax = plt.subplots(figsize=(11, 3.4))
     shade_bands(ax)
-    t = np.arange(1, res["amplitude"].shape[0] + 1)
-    ax.plot(t, res["amplitude"][:, 0], label="latch output q")
-    ax.plot(t, res["amplitude"][:, 1], lw=0.8, alpha=0.7, label="loop node m (before the delay line)")
+    amp, t = _periods(res)
+    ax.plot(t, amp[:, 0], label="latch output q")
+    ax.plot(t, amp[:, 1], lw=0.8, alpha=0.7, label="loop node m (before the delay line)")
     for (name, d, c, _), t0, t1 in zip(res["phases"], res["starts"][:-1], res["starts"][1:]):
         if c:
             ax.axvspan(t0, t1, color="k", alpha=0.15, lw=0)
@@ -45,15 +44,14 @@ def plot_latch(res: dict, path: Path) -> None:
 
 def plot_trace(res: dict, path: Path, title: str) -> None:
     """Output-bit amplitudes over the whole clocked run, read points marked (paper Fig. 6b style)."""
-    amp, names = res["waveform"].amplitude, res["waveform"].probes
+    (amp, t), names = _periods(res["waveform"]), res["waveform"]["probes"]
     fig, ax = plt.subplots(figsize=(11, 0.55 * len(names) + 1.5))
-    t = np.arange(1, amp.shape[0] + 1)
     for k, n in enumerate(names):
         off = 1.3 * k
         shade_bands(ax, off)
         ax.plot(t, off + amp[:, k], lw=0.9)
         ax.text(-0.01 * t[-1], off + 0.7, n, ha="right", fontsize=8)
-    for r in res["waveform"].reads:
+    for r in res["waveform"]["reads"]:
         ax.axvline(r, color="k", lw=0.4, ls=":")
     ax.set_yticks([])
     ax.set_xlabel("drive periods")
@@ -71,55 +69,42 @@ def _trace_table(runs: dict[str, dict]) -> str:
     return "\n".join(md_table(["cycle", *names, f"min margin ({', '.join(physical)})"], rows))
 
 
-def _clocked(design: str, steps: list[dict], backends=("logic", "envelope")) -> tuple:
-    nl = synth.synthesize(data.verilog(design))
-    cycles = simulation.expand_steps(steps)
-    timing = simulation.clock_timing(nl)
-    runs = {}
-    for b in backends:
-        runs[b] = simulation.run_clocked_logic(nl, cycles) if b == "logic" else \
-            simulation.run_clocked_physical(nl, DEFAULT, cycles, b, timing, progress=sys.stderr.isatty(),
-                                          waveform=True)
-    return nl, runs, timing
-
-
-def write(directory="reports", sqrt_rk4: bool = False) -> Path:
-    """Write sequential.md and sqrt.md with their figures (`sqrt_rk4`: also the ~20-min RK4 square root)."""
+def write(directory="reports", sqrt_rk4: bool = False, render: bool = False) -> Path:
+    """Measure into sequential.json (`sqrt_rk4`: also the ~20-min RK4 square root; `render`: nothing measured) and
+    write sequential.md and sqrt.md with their figures from it."""
     d = out_dir(directory)
-    p = DEFAULT
-    latch = characterise.latch_sequence(p, "rk4")
-    latch_env = characterise.latch_sequence(p, "envelope")
+    if not render:
+        from ..studies import sequential as study      # measuring loads the engines; rendering does not
+        write_json(d / "sequential.json", study.measure(sqrt_rk4=sqrt_rk4))
+    res = stored(d / "sequential.json", "sequential")
+    latch, ctr, fsm, sq = res["latch"], res["counter"], res["fsm"], res["sqrt"]
     plot_latch(latch, d / "latch.png")
-    short = characterise.latch_sequence(p, "envelope", pulse=300)
-    ctr_nl, ctr, ctr_t = _clocked("counter4.v", COUNTER_STEPS, ("logic", "rk4", "envelope"))
-    fsm_steps = FSM_STEPS
-    fsm_nl, fsm, fsm_t = _clocked("fsm.v", fsm_steps, ("logic", "rk4"))
     plot_trace(fsm["rk4"], d / "fsm.png", "FSM (1101 detector), RK4: output amplitudes; dotted = read points")
-    sq_nl, sq, sq_t = _clocked("sqrt.v", sqrt_steps(), ("logic", "envelope") + (("rk4",) if sqrt_rk4 else ()))
     plot_trace(sq["envelope"], d / "sqrt.png", "sqrt(2809), envelope model: |root[i]| over time; dotted = read points")
-    counts = {"gates": len(network.build(sq_nl, p).design.gates), **network.build(sq_nl, p).counts()}
+    counts, machine = res["sqrt_counts"], res["conditions"]["machine"]
     latch_rows = "\n".join(f"| {ph['phase']} | {ph['d']} | {ph['clock']} | {ph['output']:.3f} | {ph['logic']} |"
                            for ph in latch["decoded"])
     fmt_t = lambda t: f"pulse {t['pulse']}, pause {t['pause']} periods (logic depth {t['logic_depth']})"
     fmt_w = lambda runs: ", ".join(f"{b} {r['wall_s']:.1f} s" for b, r in runs.items())
     counts_md = "\n".join(f"| {k} | {counts[k]} | {PAPER_SQRT[k]} |" for k in PAPER_SQRT)
-    sq_rk4_md = "" if sqrt_rk4 else ("The oscillator-level RK4 run of the square root is optional "
-                                     "(`--sqrt-rk4`, ~15-30 min here) and was not part of this report run.")
-    env_desc = (f"envelope model at {envelope.DEFAULT_STEP:g}-period steps (clocked runs end each pause once "
-                f"every channel has settled within {simulation.CLOCKED_SETTLE_TOL} u_R: `fidelity.md`)")
-    text = SEQ_MD.format(env_desc=env_desc,
-        machine=MACHINE, latch_rows=latch_rows, delays=latch["output_delays"], env_delays=latch_env["output_delays"],
-        pulse=latch["pulse"], short_ok=[ph["logic"] for ph in short["decoded"]][6:8],
-        ctr_table=_trace_table(ctr), ctr_timing=fmt_t(ctr_t), ctr_wall=fmt_w(ctr),
+    sq_rk4_md = "" if res["sqrt_rk4"] else ("The oscillator-level RK4 run of the square root is optional "
+                                            "(`--sqrt-rk4`, ~15-30 min here) and was not part of this report run.")
+    env_desc = (f"envelope model at {res['envelope_step']:g}-period steps (clocked runs end each pause once "
+                f"every channel has settled within {res['clocked_settle_tol']} u_R: `fidelity.md`)")
+    text = SEQ_MD.replace("{fsm_x}", str(res["fsm_x"])).format(
+        env_desc=env_desc, machine=machine, latch_rows=latch_rows, delays=latch["output_delays"],
+        env_delays=res["latch_envelope"]["output_delays"], pulse=latch["pulse"],
+        short_ok=[ph["logic"] for ph in res["short_pulse"]["decoded"]][6:8],
+        ctr_table=_trace_table(ctr), ctr_timing=fmt_t(res["counter_timing"]), ctr_wall=fmt_w(ctr),
         ctr_periods=ctr["rk4"]["periods"], fsm_table=_trace_table(fsm), fsm_wall=fsm["rk4"]["wall_s"],
-        fsm_periods=fsm["rk4"]["periods"], sq_table=_trace_table(sq), sq_t=fmt_t(sq_t),
-        sq_wall=fmt_w(sq), sq_periods=sq["envelope"]["periods"],
-    )
+        fsm_periods=fsm["rk4"]["periods"], sq_table=_trace_table(sq), sq_t=fmt_t(res["sqrt_timing"]),
+        sq_wall=fmt_w(sq), sq_periods=sq["envelope"]["periods"])
     (d / "sequential.md").write_text(text)
-    (d / "sqrt.md").write_text(SQRT_MD.format(env_desc=env_desc, machine=MACHINE, sq_table=_trace_table(sq), sq_t=fmt_t(sq_t),
-                                              sq_wall=fmt_w(sq), sq_periods=sq["envelope"]["periods"],
-                                              counts=counts_md, sq_latches=len(sq_nl.latches()),
-                                              sq_logic=len(sq_nl.gates()), sq_rk4=sq_rk4_md))
+    (d / "sqrt.md").write_text(SQRT_MD.format(env_desc=env_desc, machine=machine, sq_table=_trace_table(sq),
+                                              sq_t=fmt_t(res["sqrt_timing"]), sq_wall=fmt_w(sq),
+                                              sq_periods=sq["envelope"]["periods"], counts=counts_md,
+                                              sq_latches=res["sqrt_latches"], sq_logic=res["sqrt_logic"],
+                                              sq_rk4=sq_rk4_md))
     return d / "sequential.md"
 
 
@@ -210,4 +195,4 @@ A one-hot state register of 4 latches and a registered `found` flag detect the i
 ## The square root of 2809
 
 See [sqrt.md](sqrt.md).
-""".replace("{fsm_x}", str(FSM_X))
+"""

@@ -1,70 +1,30 @@
-"""reports/spice.md: the electrical analogy and the ngspice-vs-RK4 comparison suite.
+"""reports/spice.md: the electrical analogy and the ngspice-vs-RK4 comparison suite, rendered from spice.json
+(mech2spice/studies/spice.py measures it).
 
-Run: mech2spice report spice
+Run: mech2spice report spice [--render]
 """
 from __future__ import annotations
 
 import textwrap
-import time
 from pathlib import Path
 
-import numpy as np
-
-from ..experiments import characterise
-from ..physics import network, nor
-from ..spice import runner as ngspice, carrier as spice
-from ..backends import rk4
-from ..synthesis import synth
-from ..physics.params import DEFAULT
-from ..physics.stimulus import Stimulus
-from .. import data
-from ._common import MACHINE, out_dir, read_json
-from ..experiments.scenes import ADDER_INPUTS
+from ._common import out_dir, read_json, stored, write_json
 
 
-def compare(model, periods: int, stim: Stimulus) -> dict:
-    """Settled amplitude and phase of every probe, ngspice (defaults) vs RK4 (80 steps/period)."""
-    u_r = DEFAULT.u_r
-    t0 = time.time()
-    ref = rk4.integrate(model, periods, stimulus=stim)
-    t_rk4 = time.time() - t0
-    t0 = time.time()
-    ng = ngspice.run_batch(model, periods, stimulus=stim)
-    t_ng = time.time() - t0
-    rows = [ng.probe_names.index(n) for n in ref.probe_names]
-    a, b = ref.amp[-1], ng.amp[-1, rows]
-    damp = np.abs(np.abs(a) - np.abs(b)) / u_r
-    dphase = np.degrees(np.abs(np.angle(b / a)))
-    return {"probes": len(ref.probe_names), "cases": stim.batch, "periods": periods,
-            "max_amp_err": float(damp.max()), "max_phase_err": float(dphase.max()),
-            "rk4_s": t_rk4, "ngspice_s": t_ng}
-
-
-def scenes() -> dict:
-    """The suite's scenes by name, each (model, periods, stimulus): gate, 3-gate chain, fan-out 2, adder."""
-    p = DEFAULT
-    out = {}
-    out["NOR gate, 4 input pairs"] = (nor.single_gate(p), 2500, characterise.truth_table_stimulus(p))
-    ch = nor.chain(p, 3)
-    out["3-gate chain, inputs 00"] = (ch, 1500, Stimulus.constant(ch))
-    fo = nor.fanout(p, 2)
-    out["fan-out 2, driver inputs 00"] = (fo, 2000, Stimulus.constant(fo))
-    nl = synth.synthesize(data.verilog("adder2.v"))
-    m = network.build(nl, p)
-    vals = list(ADDER_INPUTS)
-    out["2-bit adder, all 16 inputs"] = (m, 2900, network.stimulus(m, nl, p, [(0, vals)]))
-    return out
-
-
-def write(directory="reports") -> Path:
-    """Run the comparison suite and write spice.md (its form paragraph from DIR/speed_accuracy.json)."""
+def write(directory="reports", render: bool = False) -> Path:
+    """Run the comparison suite into spice.json (unless `render`) and write spice.md from it (its form paragraph
+    from DIR/speed_accuracy.json)."""
     d = out_dir(directory)
-    res = {name: compare(*args) for name, args in scenes().items()}
+    if not render:
+        from ..studies import spice as study          # measuring loads the engines; rendering does not
+        write_json(d / "spice.json", study.measure())
+    data = stored(d / "spice.json", "spice")
+    res = data["scenes"]
     table = "\n".join(f"| {n} | {r['cases']} | {r['probes']} | {r['periods']} | {r['max_amp_err']:.1e} | "
                       f"{r['max_phase_err']:.2f} | {r['rk4_s']:.1f} | {r['ngspice_s']:.1f} |" for n, r in res.items())
     ok = all(r["max_amp_err"] < 0.01 and r["max_phase_err"] < 2 for r in res.values())
-    (d / "spice.md").write_text(SPICE_MD.format(machine=MACHINE, table=table, opts=spice.SpiceOptions(),
-                                                verdict="all within" if ok else "NOT all within",
+    (d / "spice.md").write_text(SPICE_MD.format(machine=data["conditions"]["machine"], table=table,
+                                                opts=data["options"], verdict="all within" if ok else "NOT all within",
                                                 why=why_this_form(d / "speed_accuracy.json")))
     return d / "spice.md"
 

@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import DivergenceError, Mech2SpiceError
 from ..inputs import check_fields
 from ..physics.model import MechModel
+from ..run_result import blowup_bound
 
 METHODS = ("trap", "gear")   # ngspice's integration methods
 
@@ -155,7 +156,6 @@ def probe_dof_names(model: MechModel) -> list[str]:
 def check_samples(model: MechModel, t: np.ndarray, values: np.ndarray, names: list[str]) -> None:
     """DivergenceError at the first sample (row) where a probe (column; `names` its DOF) is non-finite or past
     the bound."""
-    from ..backends._base import blowup_bound
     mag = np.abs(values)
     bad = ~np.isfinite(mag) | (mag > blowup_bound(model))
     if bad.any():

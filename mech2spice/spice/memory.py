@@ -19,19 +19,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..physics.params import BAND0, BAND1, DEFAULT, NOMINAL0, NOMINAL1, GateParams
-from ._common import num
+from ..physics.params import DEFAULT, GateParams
+from .openvaf import compile_va, module_text
 
 FILE = "m2s_memory.va"
 BITS = 8
 WIDTH = 0.01                      # u_R: the decoders' tanh width (bands are >= 0.125 u_R from the threshold)
-THRESHOLD = (BAND0[1] + BAND1[0]) / 2
+THRESHOLD = (DEFAULT.levels.band0[1] + DEFAULT.levels.band1[0]) / 2   # the default block's; a block's own: threshold(p)
 
 
-def _module(name: str, ports: list[str], internal: list[str], params: list[tuple[str, float, bool]],
-            body: list[str], doc: str) -> str:
-    from .veriloga import _module as module
-    return module(name, ports, internal, params, body, doc)
+def threshold(p: GateParams) -> float:
+    """The amplitude (u_R) between p's bands at which a memory cell reads a written bit as '1'."""
+    return (p.levels.band0[1] + p.levels.band1[0]) / 2
 
 
 def _select(addr: str, bus: str) -> str:
@@ -41,9 +40,9 @@ def _select(addr: str, bus: str) -> str:
 
 def modules(p: GateParams = DEFAULT) -> list[str]:
     """The three memory modules' Verilog-A text."""
-    bit = _module("m2s_mem_bit", ["ar", "ai", "q"], [], [("th", THRESHOLD, False), ("w", WIDTH, False)],
-                  ["I(q) <+ V(q) - 0.5*(1 + tanh((V(ar)*V(ar) + V(ai)*V(ai) - th*th)/(2*th*w)));"],
-                  "m2s_mem_bit: a bus bit (0/1 voltage) from an envelope amplitude node pair (u_R).")
+    bit = module_text("m2s_mem_bit", ["ar", "ai", "q"], [], [("th", threshold(p), False), ("w", WIDTH, False)],
+                      ["I(q) <+ V(q) - 0.5*(1 + tanh((V(ar)*V(ar) + V(ai)*V(ai) - th*th)/(2*th*w)));"],
+                      "m2s_mem_bit: a bus bit (0/1 voltage) from an envelope amplitude node pair (u_R).")
     r, w, d, o = ([f"{x}{b}" for b in range(BITS)] for x in "rwdo")
     s = [f"s{b}" for b in range(BITS)]
     body = [f"selr = {_select('a', 'r')};", f"g = V(wclk)*V(we)*{_select('a', 'w')};"]
@@ -57,17 +56,17 @@ def modules(p: GateParams = DEFAULT) -> list[str]:
     body.append(f'if ($abstime >= tend) $strobe("m2s_mem %g{" %g" * BITS}", {addr}, {stored});')
     params = [("tau", p.period, False), ("tend", 1e30, False)] + [(f"a{b}", 0.0, True) for b in range(BITS)] \
         + [(f"i{b}", 0.0, True) for b in range(BITS)]
-    byte = _module("m2s_mem_byte", [*r, *w, *d, "we", "wclk", *o], s, params, body,
-                   "m2s_mem_byte: one memory address: bits i_b + V(s_b), written while V(wclk) V(we) and the\n"
-                   "write address select it, read into the sum nodes o_b while the read address selects it;\n"
-                   "prints 'm2s_mem ADDR BITS' at the time points from tend on (a model parameter: the run's end).")
+    byte = module_text("m2s_mem_byte", [*r, *w, *d, "we", "wclk", *o], s, params, body,
+                       "m2s_mem_byte: one memory address: bits i_b + V(s_b), written while V(wclk) V(we) and the\n"
+                       "write address select it, read into the sum nodes o_b while the read address selects it;\n"
+                       "prints 'm2s_mem ADDR BITS' at the time points from tend on (a model parameter: the run's end).")
     byte = byte.replace("  analog begin", "  real selr, g;\n  analog begin", 1)
-    read = _module("m2s_mem_read", ["o", "wclk", "amp"], ["h"],
-                   [("tau", p.period, False), ("f0", p.force(NOMINAL0), False), ("f1", p.force(NOMINAL1), False)],
-                   ["I(o) <+ V(o);", "I(h) <+ ddt(tau*V(h)) + (1 - V(wclk))*(V(h) - V(o));",
-                    "I(amp) <+ V(amp) - (f0 + (f1 - f0)*V(h));"],
-                   "m2s_mem_read: one rdata bit: the sum node's resistor, a track-and-hold (holding while\n"
-                   "V(wclk) = 1) and the pair drives' force level V(amp) = f0 + (f1 - f0) V(h).")
+    read = module_text("m2s_mem_read", ["o", "wclk", "amp"], ["h"],
+                       [("tau", p.period, False), ("f0", p.force(p.levels.nominal0), False), ("f1", p.force(p.levels.nominal1), False)],
+                       ["I(o) <+ V(o);", "I(h) <+ ddt(tau*V(h)) + (1 - V(wclk))*(V(h) - V(o));",
+                        "I(amp) <+ V(amp) - (f0 + (f1 - f0)*V(h));"],
+                       "m2s_mem_read: one rdata bit: the sum node's resistor, a track-and-hold (holding while\n"
+                       "V(wclk) = 1) and the pair drives' force level V(amp) = f0 + (f1 - f0) V(h).")
     return [bit, byte, read]
 
 
@@ -81,7 +80,6 @@ def library(p: GateParams = DEFAULT) -> str:
 
 def compiled(p: GateParams = DEFAULT) -> Path:
     """The memory library compiled to OSDI (cached)."""
-    from .veriloga import compile_va
     return compile_va(library(p), FILE)[0]
 
 

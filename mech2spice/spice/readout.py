@@ -13,7 +13,6 @@ import re
 from dataclasses import dataclass
 
 from ..physics.model import MechModel
-from ..physics.params import BAND0, BAND1
 from ._common import comment_text, num
 
 MAX_VALUE_BITS = 53        # a port's integer is printed from doubles: exact up to 2^53
@@ -59,14 +58,14 @@ def bits_and_ports(model: MechModel) -> tuple[list[Bit], list[Port]]:
 def header(model: MechModel, nodes: list[str], what: str, about_line: str, prints: bool, run_with: str) -> list[str]:
     """Comment text (no comment marker) explaining how to read the result; `nodes`: each probe's node(s),
     `what`: how the amplitude is taken from them."""
-    p = model.params
+    p, lv = model.params, model.levels
     bits, ports = bits_and_ports(model)
     u = f"u_R = {num(p.u_r)} (reference output amplitude), F_R = {num(p.f_r)} (reference input force)" \
         if p is not None else "u_R = 1 (a model without gate parameters)"
     out = ["--- reading the result (docs/spice.md, 'Netlists that read their own result')"]
     out += [comment_text(about_line)] if about_line else []
     out += [u, f"output bit = {what}",
-            f"bands: '0' {BAND0[0]:g}..{BAND0[1]:g} u_R, '1' {BAND1[0]:g}..{BAND1[1]:g} u_R, "
+            f"bands: '0' {lv.band0[0]:g}..{lv.band0[1]:g} u_R, '1' {lv.band1[0]:g}..{lv.band1[1]:g} u_R, "
             "anything else invalid", "probed node -> port bit:"]
     for b in bits:
         src = nodes[b.probe] if b.probe is not None else f"(constant {b.const}, no oscillator)"
@@ -124,12 +123,14 @@ def envelope_amplitude(k: int, re_node: str, im_node: str) -> list[str]:
     return [f"let m2s_a{k} = sqrt({last[0]}^2 + {last[1]}^2)"]
 
 
-def _decode_bit(k: int, label: str) -> list[str]:
-    """m2s_b<k> = 0, 1 or -1 (invalid) from m2s_a<k> and the bands (inclusive, as params.band_of); print it."""
+def _decode_bit(k: int, label: str, levels) -> list[str]:
+    """m2s_b<k> = 0, 1 or -1 (invalid) from m2s_a<k> and the block's bands (inclusive, as Levels.band_of);
+    print it."""
     a, b = f"m2s_a{k}", f"m2s_b{k}"
+    (lo0, hi0), (lo1, hi1) = levels.band0, levels.band1
     return [f"let {b} = -1",
-            f"if {a} ge {BAND0[0]!r} and {a} le {BAND0[1]!r}", f"  let {b} = 0", "end",
-            f"if {a} ge {BAND1[0]!r} and {a} le {BAND1[1]!r}", f"  let {b} = 1", "end",
+            f"if {a} ge {lo0!r} and {a} le {hi0!r}", f"  let {b} = 0", "end",
+            f"if {a} ge {lo1!r} and {a} le {hi1!r}", f"  let {b} = 1", "end",
             f"if {b} lt 0", f'  echo "{label} = $&{a} u_R -> invalid"',
             "else", f'  echo "{label} = $&{a} u_R -> $&{b}"', "end"]
 
@@ -171,7 +172,7 @@ def control_block(model: MechModel, amplitude, what: str, setup: list[str] = ())
         if b.probe is None:
             out.append(f'echo "{_label(b.name)} = constant -> {b.const}"')
             continue
-        out += amplitude(k, b.probe) + _decode_bit(k, _label(b.name))
+        out += amplitude(k, b.probe) + _decode_bit(k, _label(b.name), model.levels)
     for j, port in enumerate(ports):
         out += _print_port(j, port, bits)
     # the exit status says whether every bit was in a band, as `simulate` does (ngspice's own would be 1:

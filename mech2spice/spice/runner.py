@@ -1,4 +1,4 @@
-"""Running emitted netlists under ngspice and reading the results back as a `backends.Run`.
+"""Running emitted netlists under ngspice and reading the results back as a `run_result.Run`.
 
 Default path: a subprocess `ngspice -b -n -r out.raw file.cir` in a temporary directory (binary raw file,
 streamed to disk by ngspice, read here with a header parse + np.frombuffer).  ngspice's own time
@@ -25,9 +25,9 @@ import numpy as np
 
 from ..errors import Mech2SpiceError, ToolMissingError
 from ..physics.model import MechModel
-from ..backends._base import Run
+from ..run_result import Run
 from ._common import DEFAULT_TIMEOUT_S, check_samples, failure, map_batch, probe_dof_names
-from .carrier import SpiceOptions, emit_with_probes
+from .oscillator_netlist import SpiceOptions, emit_with_probes
 from ..physics.stimulus import Stimulus
 
 MISSING = "ngspice not found: apt-get install -y ngspice libngspice0"

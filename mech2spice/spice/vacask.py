@@ -3,13 +3,13 @@
 Two forms from one emitter, as for ngspice (docs/vacask.md):
 
 * carrier level: the mobility analogy, every element an OSDI device (m2s_nor2, m2s_couple, m2s_pairdrive,
-  m2s_osc, ...); transient with trapezoidal steps pinned at max_step and the prewarp of spice/carrier.py;
+  m2s_osc, ...); transient with trapezoidal steps pinned at max_step and the prewarp of spice/oscillator_netlist.py;
   per-period phasors by runner.demodulate.  The same netlist takes VACASK's harmonic-balance analysis
   (`emit_hb`, `run_hb`): the periodic steady state directly, phasors at omega and its harmonics.
 * envelope level: physics/envelope.py's equations as m2s_env_* devices (two amplitude nodes per oscillating
   DOF); steps of whole periods; amplitudes at each period's end.
 
-Which gate blocks become m2s_nor2 instances is decided as for ngspice (spice.carrier's plan), plus: a
+Which gate blocks become m2s_nor2 instances is decided as for ngspice (spice.oscillator_netlist's plan), plus: a
 gate whose insulator is probed is emitted DOF by DOF (the insulator is internal to the block device).
 Drive amplitudes are voltage nodes, one per distinct schedule (spice._common.drive_schedule): a DC source,
 or a chain of series pulse sources, one ramp per change (VACASK has no PWL source).
@@ -31,10 +31,11 @@ from ..inputs import check_fields
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
 from ..physics.stimulus import Stimulus
+from ..run_result import Run
 from ._common import (check_samples, check_transient, comment_text, DEFAULT_TIMEOUT_S, drive_schedule,
                       map_batch, Namer, num, prewarp_scale, probe_dof_names)
 from . import readout
-from .carrier import (Incidence, coupling_links, coupling_overrides, drive_split, gate_overrides,
+from .oscillator_netlist import (Incidence, coupling_links, coupling_overrides, drive_split, gate_overrides,
                       gate_plan)
 
 METHODS = ("trap", "gear")
@@ -55,7 +56,7 @@ class VacaskOptions:
     vntol: float = 1e-9               # node (displacement, velocity) tolerance
     chgtol: float = 1e-14
     lteratio: float = 1e4             # tran_lteratio: a loose LTE bound keeps every step at max_step
-    prewarp: bool = True              # trap only: exact phasor response at omega (spice/carrier.py)
+    prewarp: bool = True              # trap only: exact phasor response at omega (spice/oscillator_netlist.py)
     # Newton's relative tolerance against each unknown's value at this point, as SPICE does; VACASK's default
     # ('local': its largest value so far) stopped early on oscillating nodes: the gate's '10' output settled
     # 4.6e-4 u_R off (1.6e-3 at T/80); 'pointlocal' matches HB and ngspice to 1e-10 at the same cost
@@ -142,7 +143,7 @@ class _Emitter:
 
     def _replan(self) -> None:
         """Recompute what the kept gate blocks cover (after dropping some)."""
-        from .carrier import nor_quads
+        from .oscillator_netlist import nor_quads
         self.plan.quads, self.plan.in_gate = set(), set()
         for g in self.plan.gates:
             self.plan.quads |= set(nor_quads(self.m, self.inc, g).values())
@@ -419,8 +420,9 @@ def run_netlist_raws(text: str, analyses: tuple[str, ...], timeout: float | None
     """`run_netlist` for a netlist of several analyses: ({analysis: (names, data)}, log); the first
     analysis must write data, the others may be missing (empty) when the first failed."""
     from . import veriloga as va
+    from .openvaf import tools
     from .runner import run_guarded       # the process guard: timeout, interrupt and SIGTERM kill the child
-    exe, _ = va.tools()
+    exe, _ = tools()
     timeout = timeout or DEFAULT_TIMEOUT_S
     raws = {}
     with tempfile.TemporaryDirectory(prefix="m2s_vc_") as tmp:
@@ -495,7 +497,6 @@ def run(model: MechModel, periods: int, stimulus: Stimulus | None = None, option
         batch_index: int = 0, keep_netlist: str | Path | None = None):
     """One batch member under VACASK (carrier level): a Run with per-period phasors."""
     from .runner import demodulate
-    from ..backends._base import Run
     options = options or VacaskOptions()
     t0 = time.perf_counter()
     net = emit(model, periods, stimulus, batch_index, options)
@@ -558,7 +559,6 @@ def run_envelope(model: MechModel, periods: int, stimulus: Stimulus | None = Non
 def run_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
               options: VacaskOptions | None = None, workers: int | None = None):
     """Every batch member as its own VACASK process (carrier level), stacked along the batch axis."""
-    from ..backends._base import Run
     B = stimulus.batch if stimulus is not None else 1
     runs = map_batch(lambda b: run(model, periods, stimulus, options, b), B, workers)
     first = runs[0]
@@ -575,7 +575,6 @@ def run_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
 def run_envelope_batch(model: MechModel, periods: int, stimulus: Stimulus | None = None,
                        options: VacaskEnvelopeOptions | None = None, workers: int | None = None):
     """Every batch member of the envelope netlist as its own VACASK process; amplitudes at period ends."""
-    from ..backends._base import Run
     options = options or VacaskEnvelopeOptions()
     B = stimulus.batch if stimulus is not None else 1
     parts = map_batch(lambda b: run_envelope(model, periods, stimulus, options, b), B, workers)

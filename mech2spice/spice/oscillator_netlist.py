@@ -1,4 +1,4 @@
-"""The mechanical model as an ngspice circuit (mobility analogy) and its netlist.
+"""The mechanical model as an oscillator-level ngspice circuit (mobility analogy) and its netlist.
 
 Two nodes per DOF (velocity v, displacement x), trapezoidal prewarping for an exact phasor response at
 the drive frequency, and hierarchical emission through the `.subckt` library (m2s_osc, m2s_nor2, ...).
@@ -62,7 +62,7 @@ OSC = """\
 * m2s_osc: one mechanical oscillator, mobility analogy.
 *   V(v) = velocity, V(x) = displacement; forces are currents injected into v.
 *   m u'' = -k u - c u' + forces;  k, c are LOCAL values (may be negative).
-*   w scales both capacitors (trapezoidal prewarp, see mech2spice.spice.carrier); w = 1 for slow DOFs.
+*   w scales both capacitors (trapezoidal prewarp, see mech2spice.spice.oscillator_netlist); w = 1 for slow DOFs.
 .subckt m2s_osc x v params: m=1 k=1 c=0 w={warp}
 Cm v 0 {m*w}
 Gc v 0 v 0 {c}

@@ -11,7 +11,7 @@ DEFAULT_OUT = "reports/design_search.json"
 
 def add_parser(subparsers) -> None:
     """Register the `design` command."""
-    from .grammar import STRUCTURES
+    from ..design.grammar import STRUCTURES
     s = subparsers.add_parser(
         "design", help="search block structures for a NOR gate that tolerates element spread",
         description="For each block structure of the grammar (docs/design.md), optimise its parameters with "
@@ -41,14 +41,13 @@ def add_parser(subparsers) -> None:
                         "loads and its nominal gate works (else exit 2, the installed block untouched)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_design)
-    from . import centering
-    centering.add_parser(subparsers)                 # `mech2spice center`: design/centering.py
+    add_center_parser(subparsers)
 
 
 def _check_files(args) -> None:
     """Before any search: --out (never a --merge file; a search record, whole, if it exists), every --merge
     record whole, and that the package's blocks folder takes --install-robust."""
-    from . import search
+    from ..design import search
     merges = [("the --merge file", f) for f in args.merge or ()]
     out = inputs.check_output_file(args.out, merges, "search record", kind=search.RECORD_KIND,
                                    remedy="give another --out", parents=True)      # write_atomic makes folders
@@ -64,8 +63,8 @@ def _check_files(args) -> None:
 
 def cmd_design(args) -> int:
     """Run (or resume) the search; print per structure its best parameters, tolerance, margin, DOFs."""
-    from ..cli import _log, _print_json, _progress
-    from . import search
+    from ._output import log as _log, print_json as _print_json, progress as _progress
+    from ..design import search
     settings = {"sigma": args.sigma, "samples": args.samples, "seed": args.seed, "maxiter": args.maxiter,
                 "popsize": args.popsize, "budget_s": args.budget_s, "tol_samples": args.tol_samples}
     structures = [s.strip() for s in args.structures.split(",") if s.strip()]
@@ -93,4 +92,47 @@ def cmd_design(args) -> int:
               f"q1 {r['margin_quantiles']['1%']:+.3f}  ({r['search']['evaluations']} evaluations, "
               f"{r['search']['wall_s']:.0f} s)")
     print(f"best: {out['best']}" + (" (installed as --params robust)" if args.install_robust and out["best"] else ""))
+    return 0
+
+
+def add_center_parser(subparsers) -> None:
+    """Register the `center` command (design/centering.py)."""
+    from ..design.centering import GROWTH_FLOOR, TRIMS
+    s = subparsers.add_parser(
+        "center", help="design centering of the NOR block by worst-case distance (docs/design.md)",
+        description="Maximise the smallest worst-case distance beta = margin / ||sigma o grad margin|| over the "
+                    "loaded gate's margin, fold and stability constraints (every valid input point) under a spread "
+                    "spec, by trust-region linear programming over the block's parameters and bands, seeded by a "
+                    "working block.  Resumable: the record DIR/centering.json is written after every step; "
+                    "DIR/best.json is the best block (a --params file).")
+    s.add_argument("--from", dest="seed", default="robust", help="seed block: a preset or block file (robust)")
+    s.add_argument("--spread", type=inputs.number(0, 1), default=0.01, help="relative spread (0.01)")
+    s.add_argument("--trim", choices=TRIMS, default="none", help="trim k/m (f) or k/m and c/m (fc) (none)")
+    s.add_argument("--trim-residual", type=inputs.number(0, 1), default=0.0, help="trim residual (0)")
+    s.add_argument("--steps", type=inputs.integer(0, 10_000), default=50, help="steps in all (50)")
+    s.add_argument("--fixed-levels", action="store_true", help="keep the seed's bands (default: optimise them)")
+    s.add_argument("--growth-floor", type=inputs.number(0), default=GROWTH_FLOOR,
+                   help=f"slowest decay rate (1/time) of any stable state over the grid ({GROWTH_FLOOR})")
+    s.add_argument("--out", required=True, metavar="DIR", help="record and best block folder")
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.set_defaults(func=cmd_center)
+
+
+def cmd_center(args) -> int:
+    """Run or resume a centering; print the best block's figures."""
+    from ._output import log as _log, print_json as _print_json
+    from ..design import centering
+    from ..physics.params import load_params
+    if args.trim == "none" and args.trim_residual:
+        raise Mech2SpiceError("--trim-residual needs --trim f or fc")
+    spec = centering.SpreadSpec(args.spread, args.trim, args.trim_residual)
+    spec.validate()
+    settings = centering.Settings(args.seed, spec, levels=not args.fixed_levels, growth_floor=args.growth_floor)
+    out = centering.run(load_params(args.seed), settings, args.out, args.steps, _log(args))
+    if args.json:
+        _print_json(out)
+        return 0
+    print(f"best step {out['best_step']} of {out['steps']}: linear tolerance {out['tolerance_linear']:.3g} "
+          f"(seed {out['seed']['tolerance_linear']:.3g}), beta at the target {out['beta_target']:.3g}, "
+          f"nominal margin {out['nominal_margin']:+.4f}; block: {out['best_file']}")
     return 0

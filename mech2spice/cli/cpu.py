@@ -12,11 +12,13 @@ from pathlib import Path
 
 from ..errors import Mech2SpiceError
 from ..inputs import (MAX_CPU_CYCLES, check_output_file, envelope_speed_args, force_arg, head, integer, number,
-                      params_file, write_bytes, write_text)
-from .physical import PROCESSOR_STEP, SETTLE_TOL
-from .machines import BACKENDS
-from .isa import MEM_SIZE
-from .run import check_run_outputs, load_program, run_program
+                      write_bytes, write_text)
+from ..backends import BACKENDS as ENGINES
+from ..cpu.physical import PHYSICAL, PROCESSOR_STEP, SETTLE_TOL
+from ..cpu.machines import BACKENDS, CIRCUIT
+from ..cpu.isa import MEM_SIZE
+from ..physics.params import params_file
+from ..cpu.run import check_run_outputs, load_program, run_program
 
 MAX_CIRCUIT_CYCLES = 2000    # one VACASK process; the sieve needs 457
 
@@ -96,13 +98,13 @@ def add_parser(subparsers) -> None:
     r.add_argument("--json", action="store_true", help="machine-readable output")
     r.set_defaults(func=cmd_run)
 
-    from ..experiments.mc_cli import add_cpu_parser
+    from .montecarlo import add_cpu_parser
     add_cpu_parser(sub)                     # `cpu montecarlo`
 
 
 def circuit_args(parser) -> None:
     """Options of the circuit netlist (`cpu emit`, `cpu run --backend vacask-envelope`)."""
-    from .circuit import MAX_STEP
+    from ..cpu.circuit import MAX_STEP
     parser.add_argument("--max-step", type=number(0), default=None, metavar="PERIODS",
                         help=f"vacask-envelope: VACASK's largest time step in drive periods (default {MAX_STEP:g})")
     parser.add_argument("--reltol", type=number(0), default=None, metavar="TOL",
@@ -126,7 +128,7 @@ def _circuit_options(args) -> dict:
 
 def cmd_emit(args) -> int:
     """`cpu emit`: write the processor with PROG in its memory as one VACASK netlist; returns 0."""
-    from .circuit import emit_cpu
+    from ..cpu.circuit import emit_cpu
     if args.cycles > MAX_CIRCUIT_CYCLES:
         raise Mech2SpiceError(f"--cycles {args.cycles}: at most {MAX_CIRCUIT_CYCLES} cycles in one netlist")
     from ..spice._common import NETLIST
@@ -173,6 +175,13 @@ def is_image(path) -> bool:
 IMAGE = ("a memory image", is_image)
 
 
+def _takes(backend: str, option: str) -> bool:
+    """Whether the engine `backend` has the option `option` (the processor's flags follow its engine's options)."""
+    from dataclasses import fields
+    cls = ENGINES.get(backend)
+    return cls is not None and option in {f.name for f in fields(cls.Options)}
+
+
 def cmd_run(args) -> int:
     """`cpu run`: run a program on the chosen backend; returns 0 if it halted, 1 if it ran out of cycles."""
     check_run_outputs(args.checkpoint, args.trace, args.program, args.resume, args.force, params_file(args.params))
@@ -185,26 +194,27 @@ def cmd_run(args) -> int:
         physical["latency"] = args.latency or None
     physical.update({k: getattr(args, k) == "on" for k in ("exponential", "parallel") if getattr(args, k)})
     carrier = {k: v for k, v in (("steps_per_period", args.steps), ("threads", args.threads)) if v is not None}
-    if args.threads is not None and args.backend != "carrier":
+    if args.threads is not None and not _takes(args.backend, "threads"):
         raise Mech2SpiceError("--threads applies to the carrier backend only")
-    if args.steps is not None and args.backend not in ("carrier", "rk4"):
+    if args.steps is not None and not _takes(args.backend, "steps_per_period"):
         raise Mech2SpiceError("--steps applies to the carrier and rk4 backends only")
-    own = {"carrier": {"settle", "latency"}, "rk4": {"settle"}}.get(args.backend)
-    if own is not None and set(physical) - own:
+    oscillator_level = _takes(args.backend, "steps_per_period")      # rk4, carrier: no envelope step
+    own = {"settle", *(["latency"] if _takes(args.backend, "latency") else [])}
+    if oscillator_level and set(physical) - own:
         raise Mech2SpiceError(f"--step, --exponential and --parallel apply to the envelope backend; "
                               f"the {args.backend} backend's are --steps"
-                              f"{', --threads, --latency' if args.backend == 'carrier' else ''} and --settle")
-    if physical and args.backend not in ("envelope", "carrier", "rk4"):
+                              f"{', --threads, --latency' if _takes(args.backend, 'threads') else ''} and --settle")
+    if physical and args.backend not in PHYSICAL:
         raise Mech2SpiceError("--step, --settle, --latency, --exponential and --parallel apply to the envelope "
                               "backend only (--settle also to carrier and rk4, --latency also to carrier)")
     physical.update(carrier)
     if args.params is not None:
-        if args.backend not in ("envelope", "rk4", "carrier"):
+        if args.backend not in PHYSICAL:
             raise Mech2SpiceError("--params applies to the envelope, carrier and rk4 backends only")
         from ..physics.params import load_params
         physical["p"] = load_params(args.params)
     physical.update(_circuit_options(args))
-    if args.backend == "vacask-envelope":
+    if args.backend in CIRCUIT:
         if args.max_cycles > MAX_CIRCUIT_CYCLES:
             raise Mech2SpiceError(f"--backend vacask-envelope: give --max-cycles N <= {MAX_CIRCUIT_CYCLES} "
                                   "(the sieve halts after 457)")
@@ -218,10 +228,10 @@ def cmd_run(args) -> int:
         raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
     if args.trace is not None and args.resume and not Path(args.trace).exists():
         raise Mech2SpiceError(f"--resume with --trace {args.trace}: the trace to continue does not exist")
-    if args.stability == "end" and args.backend not in ("envelope", "carrier", "rk4"):
+    if args.stability == "end" and args.backend not in PHYSICAL:
         raise Mech2SpiceError(f"--stability end judges an oscillator-level machine (envelope, carrier, rk4), "
                               f"not --backend {args.backend}")
-    from ..cli import _progress
+    from ._output import progress as _progress
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=_progress(args),
                       checkpoint_every=args.checkpoint_every, trace=args.trace, force=args.force,

@@ -4,9 +4,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from .. import inputs
+from ..backends import continuing, names
 from ..errors import Mech2SpiceError
+from ..experiments.trim import add_trim_arguments, spread_spec, trim_json
 
-BACKENDS = ("envelope", "rk4", "ngspice")
+BACKENDS = names(lambda caps: caps.noise, first="envelope")     # each sample may carry its own thermal noise
 
 
 def add_parser(subparsers) -> None:
@@ -43,6 +45,7 @@ def add_sweep_arguments(s) -> None:
                    help='relative sigma on every element, or {"local": SIGMA|{KIND: SIGMA}, "wafer": '
                         'SIGMA|{KIND: SIGMA}, "wafer_rho": RHO} (inline or a file); kinds k m c spring '
                         'dashpot gamma drive, "*" for all')
+    add_trim_arguments(s)
     s.add_argument("--noise", type=inputs.number(0, lo_open=False), default=0.0, metavar="T",
                    help="thermal noise: k_B T in model energy units (docs/robustness.md gives kelvin for a "
                         "1 MHz silicon scaling); a Langevin force on every dashpot, each sample its own seed; "
@@ -60,10 +63,11 @@ def add_sweep_arguments(s) -> None:
 def check_out(args, read: dict) -> None:
     """--out, before any work: none of the command's files (design or program, --stimulus, --params,
     --spread), and if it exists a results file (resumed; its records are checked before any sample runs)."""
-    from . import montecarlo as mc
-    from .mc_run import RESULTS_KIND
+    from ..experiments import montecarlo as mc
+    from ..experiments.mc_run import RESULTS_KIND
+    from ..physics.params import params_file
     if args.out:
-        read = {**read, "the --params file": inputs.params_file(args.params),
+        read = {**read, "the --params file": params_file(args.params),
                 "the --spread file": mc.spread_file(args.spread)}
         inputs.check_output_file(args.out, read, "results file", kind=RESULTS_KIND, remedy="give another --out")
 
@@ -71,7 +75,7 @@ def check_out(args, read: dict) -> None:
 def _scheduler(text: str) -> str:
     """An argparse type: mc_run.check_scheduler, its refusal as a usage error (before any work)."""
     import argparse
-    from .mc_run import check_scheduler
+    from ..experiments.mc_run import check_scheduler
     try:
         return check_scheduler(text)
     except Mech2SpiceError as err:
@@ -81,7 +85,7 @@ def _scheduler(text: str) -> str:
 def vectors_of(args, netlist) -> list[dict[str, int]]:
     """The input vectors: --set (one), --stimulus (a list of sets) or every combination."""
     from ..synthesis.ports import pack_inputs
-    from . import montecarlo as mc
+    from ..experiments import montecarlo as mc
     if args.set and args.stimulus:
         raise Mech2SpiceError("give --set or --stimulus, not both")
     if args.stimulus:
@@ -99,13 +103,13 @@ def job_of(args) -> dict:
     """The job a results file is keyed by."""
     from ..physics import network
     from ..synthesis.synth import synthesize
-    from . import montecarlo as mc
+    from ..experiments import montecarlo as mc
     path = mc.design_path(args.design).resolve()
     nl = synthesize(path, max_fanout=network.MAX_FANOUT)
     if nl.clock:
         return _clocked_job(args, nl, path)
     job = {"design": str(path), "params": args.params, "vectors": vectors_of(args, nl), "backend": args.backend,
-           "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "periods": args.periods,
+           "spread": spread_spec(args).describe(), "seed": args.seed, "periods": args.periods,
            "union": args.batch}
     if args.noise:                   # only then: results files of noiseless sweeps keep their keys
         job["noise"] = args.noise
@@ -114,8 +118,7 @@ def job_of(args) -> dict:
 
 def _clocked_job(args, nl, path) -> dict:
     """A clocked design's job: its stimulus of clock cycles (--stimulus), run one sample per task."""
-    from . import montecarlo as mc
-    from .mc_clocked import CLOCKED_BACKENDS
+    from ..experiments.mc_clocked import CLOCKED_BACKENDS
     if not args.stimulus:
         raise Mech2SpiceError(f"{nl.top} is clocked: give its cycles with --stimulus FILE.json "
                               "([{\"set\": {PORT: INT}, \"cycles\": N}, ...])")
@@ -124,7 +127,7 @@ def _clocked_job(args, nl, path) -> dict:
     if args.backend not in CLOCKED_BACKENDS:
         raise Mech2SpiceError(f"clocked montecarlo runs on {', '.join(CLOCKED_BACKENDS)}, not '{args.backend}'")
     job = {"design": str(path), "params": args.params, "steps": inputs.stimulus_steps(args.stimulus, {}, args.backend),
-           "backend": args.backend, "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed,
+           "backend": args.backend, "spread": spread_spec(args).describe(), "seed": args.seed,
            "union": 1}
     if args.noise:
         job["noise"] = args.noise
@@ -134,8 +137,8 @@ def _clocked_job(args, nl, path) -> dict:
 def cmd_montecarlo(args) -> int:
     """Run the sweep; print the summary (text or JSON); 0 if every sample passed, else 1."""
     import tempfile
-    from ..cli import _log, _print_json, _progress
-    from . import mc_run, montecarlo as mc
+    from ._output import log as _log, print_json as _print_json, progress as _progress
+    from ..experiments import mc_run, montecarlo as mc
     check_out(args, {"the design": mc.design_path(args.design), "the --stimulus file": args.stimulus})
     job = job_of(args)
     log = _log(args)
@@ -144,7 +147,7 @@ def cmd_montecarlo(args) -> int:
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=_progress(args), log=log)
     res.update({"design": job["design"], "backend": job["backend"], "spread": job["spread"], "seed": job["seed"],
-                "noise": job.get("noise", 0.0)})
+                "noise": job.get("noise", 0.0), **trim_json(job["spread"])})
     if not args.out:
         res.pop("out")
     if args.json:
@@ -188,7 +191,7 @@ def add_cpu_parser(sub) -> None:
                     "sample passed, 1 otherwise.")
     c.add_argument("program", help="assembly source (.asm) or binary image")
     c.add_argument("--cycles", type=inputs.integer(1, 100_000), default=30, help="clock cycles per sample (default 30)")
-    c.add_argument("--backend", default="envelope", choices=("envelope", "carrier", "rk4"))
+    c.add_argument("--backend", default="envelope", choices=names(continuing, first="envelope"))
     add_sweep_arguments(c)
     c.set_defaults(func=cmd_cpu_montecarlo)
 
@@ -196,21 +199,20 @@ def add_cpu_parser(sub) -> None:
 def cpu_job_of(args) -> dict:
     """The processor job a results file is keyed by (the program by path and content hash)."""
     import hashlib
-    from . import montecarlo as mc
     path = Path(args.program)
     if not path.exists():
         raise Mech2SpiceError(f"no such program: {args.program}")
     return {"program": str(path.resolve()), "program_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
             "cycles": args.cycles, "params": args.params, "backend": args.backend,
-            "spread": mc.parse_spread(args.spread).describe(), "seed": args.seed, "union": 1,
+            "spread": spread_spec(args).describe(), "seed": args.seed, "union": 1,
             **({"noise": args.noise} if args.noise else {})}      # noiseless files keep their keys
 
 
 def cmd_cpu_montecarlo(args) -> int:
     """Run the processor sweep; print the summary; 0 if every sample passed, else 1."""
     import tempfile
-    from ..cli import _log, _print_json, _progress
-    from . import mc_run
+    from ._output import log as _log, print_json as _print_json, progress as _progress
+    from ..experiments import mc_run
     check_out(args, {"the program": args.program})
     job = cpu_job_of(args)
     with tempfile.TemporaryDirectory() as tmp:
@@ -218,7 +220,7 @@ def cmd_cpu_montecarlo(args) -> int:
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=_progress(args), log=_log(args))
     res.update({"program": job["program"], "cycles": job["cycles"], "backend": job["backend"],
-                "spread": job["spread"], "seed": job["seed"], "noise": job.get("noise", 0.0)})
+                "spread": job["spread"], "seed": job["seed"], "noise": job.get("noise", 0.0), **trim_json(job["spread"])})
     if not args.out:
         res.pop("out")
     if args.json:

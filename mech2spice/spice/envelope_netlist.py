@@ -20,6 +20,7 @@ from ..physics.model import MechModel
 from ._common import (NgspiceSettings, Namer, check_samples, comment_text, drive_schedule, failure, map_batch, num,
                       probe_dof_names)
 from ..physics.stimulus import Stimulus
+from ..run_result import Run
 
 DRIVE_RAMP_PERIODS = 0.25       # tanh time constant of a drive-amplitude change (see _EnvEmitter._source)
 
@@ -325,7 +326,6 @@ def run_envelope_spice(model: MechModel, periods: int, stimulus: Stimulus | None
                        timeout: float | None = None):
     """The envelope netlist of every batch member of `stimulus` under ngspice (one process each, up to
     `workers` at a time); a Run whose per-period amplitudes are the envelope at each period's end."""
-    from ..backends._base import Run
     B = stimulus.batch if stimulus is not None else 1
     parts = map_batch(lambda b: run_one(model, periods, stimulus, opts, b, timeout), B, workers)
     T = model.period

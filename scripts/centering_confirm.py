@@ -21,36 +21,6 @@ from mech2spice.experiments import tolerance as tol
 from mech2spice.physics.params import load_params
 
 
-def trim(model, nominal, dofs: list[int], mode: str, residual: float, z: np.ndarray):
-    """`model` with each DOF of `dofs` trimmed: total k (and with 'fc' c) = m x nominal ratio x (1 + residual z)."""
-    from dataclasses import replace
-    k, c = list(model.k_total), list(model.c_total)
-    for n, d in enumerate(dofs):
-        ratio = model.mass[d] / nominal.mass[d]
-        k[d] = nominal.k_total[d] * ratio * (1 + residual * z[0, n])
-        if mode == "fc":
-            c[d] = nominal.c_total[d] * ratio * (1 + residual * z[1, n])
-    return replace(model, names=list(model.names), slow=list(model.slow), probes=dict(model.probes),
-                   mass=list(model.mass), k_total=k, c_total=c, springs=list(model.springs),
-                   dashpots=list(model.dashpots), quads=list(model.quads), drives=list(model.drives))
-
-
-class TrimmedSampler(tol.Sampler):
-    """tolerance.Sampler whose samples are trimmed after the spread (the same trim draws at every sigma)."""
-
-    def __init__(self, p, samples: int, seed: int, per_band: int, n_grid: int, mode: str, residual: float):
-        super().__init__(p, samples, seed, per_band, n_grid)
-        self.mode, self.residual = mode, residual
-        self.dofs = [d for d in self.base.block_dofs if not self.base.model.slow[d]]
-        self.z = np.random.default_rng(seed + 1).standard_normal((samples, 2, len(self.dofs)))
-
-    def model(self, sigma: float, i: int | None):
-        m = super().model(sigma, i)
-        if i is None or self.mode == "none":
-            return m
-        return trim(m, self.base.model, self.dofs, self.mode, self.residual, self.z[i])
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("block")
@@ -68,7 +38,7 @@ def main() -> None:
     a = ap.parse_args()
     t0, load0 = time.time(), os.getloadavg()[0]
     p = load_params(a.block)
-    s = TrimmedSampler(p, a.samples, a.seed, a.per_band, a.n_grid, a.trim, a.residual)
+    s = tol.Sampler(p, a.samples, a.seed, a.per_band, a.n_grid, a.trim, a.residual)
     if a.only:
         s.eps[:, [e.kind != a.only for e in s.elements]] = 0.0
     res = s.run(a.spread)

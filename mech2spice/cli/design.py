@@ -41,7 +41,7 @@ def add_parser(subparsers) -> None:
                         "loads and its nominal gate works (else exit 2, the installed block untouched)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_design)
-    add_center_parser(subparsers)                    # `mech2spice center`: design/centering.py
+    add_center_parser(subparsers)
 
 
 def _check_files(args) -> None:
@@ -95,17 +95,16 @@ def cmd_design(args) -> int:
     return 0
 
 
-# --- `mech2spice center` (design/centering.py) ------------------------------------------------------
 def add_center_parser(subparsers) -> None:
-    """Register the `center` command."""
+    """Register the `center` command (design/centering.py)."""
     from ..design.centering import GROWTH_FLOOR, TRIMS
     s = subparsers.add_parser(
         "center", help="design centering of the NOR block by worst-case distance (docs/design.md)",
         description="Maximise the smallest worst-case distance beta = margin / ||sigma o grad margin|| over the "
-                    "loaded gate's margin and fold constraints (every valid input point) under a spread spec, "
-                    "by trust-region linear programming over the block's parameters, seeded by a working block. "
-                    "Resumable: the record DIR/centering.json is written after every step; DIR/best.json is "
-                    "the best block (a --params file).")
+                    "loaded gate's margin, fold and stability constraints (every valid input point) under a spread "
+                    "spec, by trust-region linear programming over the block's parameters and bands, seeded by a "
+                    "working block.  Resumable: the record DIR/centering.json is written after every step; "
+                    "DIR/best.json is the best block (a --params file).")
     s.add_argument("--from", dest="seed", default="robust", help="seed block: a preset or block file (robust)")
     s.add_argument("--spread", type=inputs.number(0, 1), default=0.01, help="relative spread (0.01)")
     s.add_argument("--trim", choices=TRIMS, default="none", help="trim k/m (f) or k/m and c/m (fc) (none)")
@@ -121,15 +120,15 @@ def add_center_parser(subparsers) -> None:
 
 def cmd_center(args) -> int:
     """Run or resume a centering; print the best block's figures."""
-    from ..design.centering import Settings, SpreadSpec, run
     from ._output import log as _log, print_json as _print_json
+    from ..design import centering
     from ..physics.params import load_params
     if args.trim == "none" and args.trim_residual:
         raise Mech2SpiceError("--trim-residual needs --trim f or fc")
-    spec = SpreadSpec(args.spread, args.trim, args.trim_residual)
+    spec = centering.SpreadSpec(args.spread, args.trim, args.trim_residual)
     spec.validate()
-    settings = Settings(args.seed, spec, levels=not args.fixed_levels, growth_floor=args.growth_floor)
-    out = run(load_params(args.seed), settings, args.out, args.steps, _log(args))
+    settings = centering.Settings(args.seed, spec, levels=not args.fixed_levels, growth_floor=args.growth_floor)
+    out = centering.run(load_params(args.seed), settings, args.out, args.steps, _log(args))
     if args.json:
         _print_json(out)
         return 0

@@ -39,7 +39,7 @@ from ..physics import loaded, spread, steady_batch
 from ..physics.params import GateParams, Levels
 
 Z99 = 2.3263478740408408        # one-sided standard normal quantile of 99 %
-TRIMS = ("none", "f", "fc")
+TRIMS = spread.TRIMS
 
 
 # --- the spread spec and its noise matrices ---------------------------------------------------------
@@ -62,29 +62,13 @@ class SpreadSpec:
             raise Mech2SpiceError("--spread must be > 0: centering needs a spread to center against")
 
 
-def noise_matrices(model, elems: list[spread.Element], trimmed: list[int], trim: str):
-    """(Sa, Sb, residual names): t = spread Sa xi + residual Sb zeta for the elements `elems`, the DOFs
-    `trimmed` trimmed as `trim` says (module docstring)."""
-    n = len(elems)
-    Sa, cols, names = np.eye(n), [], []
-    where = {(e.kind, e.index): j for j, e in enumerate(elems)}
-    if trim == "none":
-        return Sa, np.zeros((n, 0)), names
-    kinds = (("k", "spring", model.k_total, model.k_local, model.springs),
-             ("c", "dashpot", model.c_total, model.c_local, model.dashpots))[:1 if trim == "f" else 2]
-    for i in trimmed:
-        for own, link, total, local, links in kinds:
-            j = where[(own, i)]
-            Sa[j] = 0.0
-            Sa[j, where[("m", i)]] = total[i] / local[i]
-            for e, (a, b, v) in enumerate(links):
-                if i in (a, b):
-                    Sa[j, where[(link, e)]] = -v / local[i]
-            col = np.zeros(n)
-            col[j] = total[i] / local[i]
-            cols.append(col)
-            names.append(f"trim residual {elems[j].name}")
-    return Sa, np.array(cols).T, names
+def noise_matrices(model, elems: list[spread.Element], trim: str):
+    """(Sa, Sb, residual names): t = spread Sa xi + residual Sb zeta for the elements `elems`, trimmed as
+    `trim` says: physics/spread.py's linearised trim (trim_map), its coordinates split by what spreads them."""
+    J = spread.trim_map(model, elems, trim)
+    by_spread = spread.sigmas(elems, model, 1.0, trim, 0.0) == 1.0      # the rest: trim residuals
+    names = [f"trim residual {e.name}" for e, s in zip(elems, by_spread) if not s]
+    return J[:, by_spread], J[:, ~by_spread], names
 
 
 # --- states and their first-order changes ------------------------------------------------------------
@@ -319,8 +303,7 @@ def analyse(p: GateParams, spec: SpreadSpec, per_band: int = 6, n_grid: int = 10
     fx = Fast.of(p)
     levels, expect = loaded.input_grid(per_band, p.levels)
     cons = constraints(fx, levels, expect, p, n_grid)
-    trimmed = [d for d in fx.lg.block_dofs if not fx.lg.model.slow[d]]
-    Sa, Sb, res_names = noise_matrices(fx.lg.model, fx.elems, trimmed, spec.trim)
+    Sa, Sb, res_names = noise_matrices(fx.lg.model, fx.elems, spec.trim)
     a, b = cons.variances(Sa, Sb)
     sources = np.concatenate([cons.grad @ Sa, cons.grad @ Sb], axis=1)
     return Analysis(p, spec, cons, a, b, levels, [e.name for e in fx.elems] + res_names, sources, len(fx.elems),

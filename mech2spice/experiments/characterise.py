@@ -203,7 +203,7 @@ def fanout_test(p: GateParams, n_loads: int, periods: int = 2500) -> dict:
     sc = fanout_scene(p, n_loads, periods)
     run = rk4.integrate(sc.model, sc.periods, stimulus=sc.stimulus)
     amp = np.abs(run.amp[-20:]).mean(axis=0) / p.u_r        # (1 + n_loads, B)
-    ok, worst, lv = True, math.inf, p.levels
+    ok, worst = True, math.inf
     for b, (a, bb, c) in enumerate(FANOUT_CASES):
         d = _nor(a, bb)
         ok &= p.levels.band_of(amp[0, b]) == d

@@ -24,6 +24,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..errors import Mech2SpiceError
 from .envelope import Envelope
 
 DENSE_LIMIT = 400         # real unknowns up to which the whole spectrum is computed densely (exact; the dense
@@ -164,10 +165,19 @@ def _cayley(E, J, sigma: float, k: int):
     lu = spla.splu((J - sigma * E).tocsc())
     K = (J + sigma * E).tocsr()
     op = spla.LinearOperator(J.shape, matvec=lambda x: lu.solve(K @ x), dtype=float)
-    mu, vec = spla.eigs(op, k=min(k, J.shape[0] - 2), which="LM", tol=1e-8, maxiter=20 * J.shape[0],
-                        ncv=min(J.shape[0] - 1, max(4 * k, 40)),  # room for clustered, repeated modes
-                        v0=np.ones(J.shape[0]))
-    return sigma * (mu + 1) / (mu - 1), vec
+    n = J.shape[0]
+    ncv = min(n - 1, max(4 * k, 40))             # room for clustered, repeated modes
+    for attempt in range(3):
+        # ARPACK can stall on a start vector (error 3: no shifts could be applied): start elsewhere, with
+        # a larger subspace; the starts are seeded, so a verdict is reproducible
+        v0 = np.ones(n) if attempt == 0 else np.random.default_rng(attempt).standard_normal(n)
+        try:
+            mu, vec = spla.eigs(op, k=min(k, n - 2), which="LM", tol=1e-8, maxiter=20 * n,
+                                ncv=min(n - 1, ncv * 2 ** attempt), v0=v0)
+            return sigma * (mu + 1) / (mu - 1), vec
+        except (spla.ArpackError, spla.ArpackNoConvergence) as err:
+            last = err
+    raise Mech2SpiceError(f"the stability verdict's eigenvalue solver did not converge on {n} unknowns: {last}")
 
 
 def _mode(env: Envelope, lam: complex, v: np.ndarray, T: float) -> Mode:

@@ -13,7 +13,7 @@ import numpy as np
 
 from . import verdict
 from .backends import logic, make_engine
-from .backends._base import progress_bar
+from .backends import progress_bar
 from .errors import Mech2SpiceError
 from .experiments.clocking import period_budget
 # re-exported for cli.py and reports/, which are being moved (#28); new code imports experiments.clocking

@@ -362,7 +362,7 @@ def _physical(backend: str) -> bool:
 def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, params, progress) -> list[dict]:
     """Per vector / cycle: {bits, valid, stable, min_margin, amplitudes} of the network on the backend."""
     from . import simulation
-    from .backends._base import progress_bar
+    from .backends import progress_bar
     from .experiments import clocking
     from .backends.logic import evaluate_batch
     physical = _physical(backend)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from ..errors import Mech2SpiceError
 from ..run_result import Run
-from ._base import Capabilities, Engine
+from ._base import Capabilities, Engine, progress_bar
 from .carrier import CarrierEngine
 from .envelope import EnvelopeEngine
 from .logic import LogicEngine
@@ -55,3 +55,4 @@ def make_engine(name: str, options=None):
 
 __all__ = ["BACKENDS", "Capabilities", "Engine", "Run", "continuing", "engine_class", "engine_options", "make_engine",
            "names"]
+

@@ -300,7 +300,7 @@ class _NoBar:
 def _cycle_bar(enabled: bool, done: int, total: int, backend: str):
     """A progress bar over cycles with rate and ETA (to --max-cycles: a halt comes sooner)."""
     if callable(enabled):                      # a redirected stderr: a line now and then (backends._base)
-        from ..backends._base import progress_bar
+        from ..backends import progress_bar
         return progress_bar(total, enabled, "cycle", initial=done)
     if not enabled:
         return _NoBar()

@@ -94,7 +94,7 @@ def search_structure(name: str, samples: int, seed: int, maxiter: int, popsize: 
                      budget_s: float, log=lambda msg: None, progress: bool = False) -> dict:
     """Differential evolution on one structure; returns the search record and the best parameters."""
     from scipy.optimize import differential_evolution
-    from ..backends._base import progress_bar
+    from ..backends import progress_bar
     st = grammar.Structure(name)
     obj = Objective(st, samples, seed)
     bounds = list(st.bounds.values())

@@ -18,7 +18,7 @@ import resource
 import time
 from pathlib import Path
 
-from ..backends._base import progress_bar
+from ..backends import progress_bar
 from ..errors import Mech2SpiceError
 from ..inputs import first_json_line, is_int
 from . import montecarlo as mc

@@ -10,6 +10,7 @@ import pytest
 
 import mech2spice as m2s
 from mech2spice import simulation
+from mech2spice.physics.params import PRESETS
 from mech2spice.backends.envelope import EnvelopeOptions
 from mech2spice.backends.rk4 import RK4Options
 from mech2spice.errors import Mech2SpiceError
@@ -90,7 +91,7 @@ SIMULATE = [
     ({"stimulus": [{"hold": 3}]}, "unknown field(s) 'hold'"),
     ({"stimulus": "no/such/stimulus.json"}, "cannot read stimulus file"),
     # params
-    ({"params": 3}, "params must be a preset (default, printed, robust, classic) or a JSON file path"),
+    ({"params": 3}, f"params must be a preset ({', '.join(PRESETS)}) or a JSON file path"),
     ({"params": {"q_g": 150}}, "params must be a preset"),
     ({"params": "no-such-preset"}, "cannot read parameter file no-such-preset"),
     ({"params": m2s.GateParams(q_g="150")}, "gate parameter q_g = '150' is not a finite number"),

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from mech2spice.physics.params import BLOCK_PRESETS
+
 from mech2spice import api, data
 from mech2spice.cli import main
 from mech2spice.errors import Mech2SpiceError
@@ -319,7 +321,7 @@ def test_install_robust_installs_a_checked_block_atomically(tmp_path, capsys, pa
     installed = json.loads((package_blocks / "robust.json").read_text())
     assert installed["block"] == _record()["structures"]["classic"]["block_file"]["block"]
     assert installed["name"] == "robust"
-    assert sorted(f.name for f in package_blocks.iterdir()) == ["classic.json", "robust.json"]
+    assert sorted(f.name for f in package_blocks.iterdir()) == sorted(f"{n}.json" for n in BLOCK_PRESETS)  # no temp file left
 
 
 # ------------------------------------------------------------------ report --out

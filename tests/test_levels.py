@@ -52,7 +52,7 @@ def test_levels_from_a_parameter_file_and_a_block_file(tmp_path):
     g.write_text(json.dumps(block))
     p = load_params(str(g))
     assert p.levels == NARROW and p.structure == robust.structure
-    assert type(p).from_dict(p.to_dict()) == p
+    assert type(p)(**p.to_dict()) == p
 
 
 def test_the_input_grid_spans_the_blocks_own_bands():

@@ -16,9 +16,9 @@ from ..backends import make_engine, rk4
 from ..run_result import Run
 from ..backends.envelope import EnvelopeOptions
 from ..errors import DivergenceError
-from ..physics import nor, steady
+from ..physics import loaded, nor, steady
 from ..physics.envelope import Envelope
-from ..physics.params import GateParams, Levels
+from ..physics.params import GateParams
 from ..physics.stimulus import Stimulus
 from .scenes import (FANOUT_CASES, PAIRS, Scene, cascade_edges, mid, chain_scene, fanout_scene, gate_scene,
                      input_amps, latch_scene, levels_stimulus, nominal_levels)
@@ -85,16 +85,11 @@ def steady_map(p: GateParams, n: int = 61, lo: float = 0.2, hi: float = 1.15):
     return xs, out.reshape(X1.shape), nstable.reshape(X1.shape)
 
 
-def _grid(levels: Levels, per_band: int) -> np.ndarray:
-    """per_band input levels across each band."""
-    return np.concatenate([np.linspace(*levels.band0, per_band), np.linspace(*levels.band1, per_band)])
-
-
 def valid_region_margin(p: GateParams, per_band: int = 15) -> dict:
     """Worst output margin (fraction of band width) over every valid input pair; multistability or no stable
     state counts as failure at that point."""
     lv = p.levels
-    levels = _grid(lv, per_band)
+    levels = loaded.band_levels(lv, per_band)
     X1, X2 = np.meshgrid(levels, levels, indexing="ij")
     x1, x2 = X1.ravel(), X2.ravel()
     res = steady_outputs(p, x1, x2)
@@ -255,7 +250,7 @@ def stability(p: GateParams, per_band: int = 8, periods: int = 3000) -> dict:
     (an envelope run settled, then the network's verdict).  Growth per drive period: < 0 decays."""
     from ..backends import make_engine
     from ..physics import stability as stab
-    levels = _grid(p.levels, per_band)
+    levels = loaded.band_levels(p.levels, per_band)
     worst = {"growth_rate": -math.inf}
     x1, x2 = (g.ravel() for g in np.meshgrid(levels, levels, indexing="ij"))
     env, F, ch = gate_forcing(p, x1, x2)

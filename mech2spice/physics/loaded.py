@@ -87,9 +87,14 @@ def at_inputs(lg: LoadedGate, x1: float, x2: float, model: MechModel | None = No
     return scaled(model if model is not None else lg.model, ins, np.array([x1, x2], float))
 
 
+def band_levels(levels: Levels, per_band: int) -> np.ndarray:
+    """per_band input levels across each of the two bands, band 0 first."""
+    return np.concatenate([np.linspace(*levels.band0, per_band), np.linspace(*levels.band1, per_band)])
+
+
 def input_grid(per_band: int = PER_BAND, levels: Levels = DEFAULT_LEVELS) -> tuple[np.ndarray, np.ndarray]:
     """Drive-group levels (P, 3) = (1, x1, x2) over both bands of both inputs, and NOR of each point."""
-    lv = np.concatenate([np.linspace(*levels.band0, per_band), np.linspace(*levels.band1, per_band)])
+    lv = band_levels(levels, per_band)
     X1, X2 = np.meshgrid(lv, lv, indexing="ij")
     x1, x2 = X1.ravel(), X2.ravel()
     expect = np.array([int(not (levels.band_of(a) or levels.band_of(b))) for a, b in zip(x1, x2)])

@@ -226,11 +226,6 @@ class GateParams:
             out["block"] = self.block.to_dict()
         return out
 
-    @classmethod
-    def from_dict(cls, data: dict) -> "GateParams":
-        """The inverse of to_dict."""
-        return cls(**data)
-
 
 PRINTED = GateParams(
     k_g=25.582, k_i=0.394784, q_i=1.5, q_c=1.5, gamma_ig=12.0, gamma_ic=6.0,

@@ -161,3 +161,20 @@ def test_step_bound_is_the_spectral_rate_with_margin(p):
     assert envelope.spectral_rate(env) == pytest.approx(want, rel=1e-6)
     assert envelope.rate_bound(m) == pytest.approx(envelope.RATE_SAFETY * want)
     assert envelope.rate_bound(m) < envelope.gershgorin_rate(env)
+
+
+
+@pytest.mark.parametrize("keep", [7, 2300, 5000])
+def test_a_run_keeping_its_last_periods_keeps_exactly_those(p, keep):
+    """keep_periods: the Run holds the full record's last periods (integrated and held alike), the same
+    final state and the matching times; more than the run keeps everything."""
+    m, stim = _chain_scene(p)
+    opts = dict(step_periods=4.0, stimulus=stim, settle_tol=0.02, latency=0.05)
+    full = envelope.integrate(m, 4000, **opts)
+    last = envelope.integrate(m, 4000, keep_periods=keep, **opts)
+    assert full.settled_periods > 0            # the held stretch is inside what a small keep covers
+    n = min(keep, 4000)
+    assert last.amp.shape[0] == n
+    np.testing.assert_array_equal(last.amp, full.amp[-n:])
+    np.testing.assert_array_equal(last.t_end, full.t_end[-n:])
+    np.testing.assert_array_equal(last.state[0], full.state[0])

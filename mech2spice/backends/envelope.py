@@ -84,7 +84,7 @@ CHUNK_PERIODS = 2000         # periods per compiled call: bounds the progress-ba
 def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stimulus=None, state=None,
               start_period: int = 0, probes: list[str] | None = None, progress: bool = False,
               settle_tol: float | None = None, compiled: bool = True, latency: float | None = None,
-              parallel: bool = False, exponential: bool = False) -> Run:
+              parallel: bool = False, exponential: bool = False, keep_periods: int | None = None) -> Run:
     """RK4 on the envelope equations with a step of `step_periods` drive periods (must divide 1 or be whole).
 
     Returns a Run whose per-period amplitudes are the envelope itself.  A step beyond the measured
@@ -96,7 +96,9 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     blocks are frozen until their inputs move by more than `latency` (_envelope_latency.py); the state
     then carries the blocks' latency record too.  parallel: the compiled loop's rates on all cores
     (without latency: its active rows are too few to share out).  exponential: the insulators' linear
-    oscillators are stepped exactly (Lawson RK4), which lifts the stability bound they set."""
+    oscillators are stepped exactly (Lawson RK4), which lifts the stability bound they set.  keep_periods:
+    the Run keeps only the last so many periods' amplitudes (a caller that reads the end of each of many
+    long pauses need not have every period written: the processor)."""
     env = Envelope.of(model)
     T = model.period
     _check_step(model, step_periods, exponential)
@@ -109,7 +111,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
         (state[0].copy(), state[1].copy(), state[2].copy())
     names = list(probes or model.probes)
     prow = _probe_rows(env, probe_dofs(model, names))
-    amp = np.empty((periods, len(names), B), complex)     # every period is written: integrated or held
+    rec = _Record(periods, keep_periods, len(names), B)
     tol = settle_tol * model.amplitude_unit if settle_tol else 0.0
     check = sub * max(1, int(round(SETTLE_WINDOW / per)))
     kern = kernel(model) if compiled else None
@@ -146,21 +148,42 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
         if status == _envelope_kernel.DIVERGED:
             check_divergence(model, A, t + (done + 1) * h, dofs=env.fast, bound=bound)
         n = min(nchunks * per, periods - k)
-        amp[k:k + n] = seg[:n]
+        rec.put(k, seg[:n])
         if status == _envelope_kernel.SETTLED:        # hold the settled state up to the stimulus change
             got = done // sub * per
             n = min(to_change * per, periods - k)
-            amp[k + got:k + n] = A[prow]
+            rec.hold(k + got, k + n, A[prow])
             settled_periods += n - got
         k += n
         since += n
         bar.update(n)
     bar.close()
-    t_end = (start_period + 1 + np.arange(periods)) * T
+    t_end = (start_period + 1 + np.arange(periods - rec.amp.shape[0], periods)) * T
     extra = {"block_steps": block_steps, "blocks": kern.blocks.n} if lat is not None else {}
+    amp = rec.amp
     return Run(names, T, t_end, amp, np.zeros(amp.shape), None, None, (start_period + periods) * T,
                state=(A, s, sd, *lat) if lat is not None else (A, s, sd), settled_periods=settled_periods,
                extra=extra)
+
+
+class _Record:
+    """The per-period amplitudes a run keeps: every period, or only the last `keep` of them."""
+
+    def __init__(self, periods: int, keep: int | None, n_probes: int, batch: int):
+        self.first = periods - min(periods, keep) if keep else 0        # the first period kept
+        self.amp = np.empty((periods - self.first, n_probes, batch), complex)   # every one written
+
+    def put(self, k: int, seg: np.ndarray) -> None:
+        """Periods k .. k + len(seg) integrated."""
+        lo = max(k, self.first)
+        if lo < k + len(seg):
+            self.amp[lo - self.first:k + len(seg) - self.first] = seg[lo - k:]
+
+    def hold(self, k0: int, k1: int, value: np.ndarray) -> None:
+        """Periods k0 .. k1 held at `value` (a settled state)."""
+        lo = max(k0, self.first)
+        if lo < k1:
+            self.amp[lo - self.first:k1 - self.first] = value
 
 
 LATENCY_WINDOW = 32          # periods between freeze checks
@@ -265,6 +288,7 @@ class EnvelopeOptions:
     latency: float | None = None         # u_R; None: integrate every gate at every step
     parallel: bool = False               # the compiled loop's rates on all cores (without latency)
     exponential: bool = False            # the insulators stepped exactly: lifts the stability bound
+    keep_periods: int | None = None      # the Run keeps only the last so many periods (None: all)
 
     def __post_init__(self):
         self.validate()              # a bad value fails where it is set, not later inside a run
@@ -278,6 +302,8 @@ class EnvelopeOptions:
             _step_layout(self.step_periods)
         if self.settle_tol is not None and not (np.isfinite(self.settle_tol) and self.settle_tol > 0):
             raise Mech2SpiceError(f"settle tolerance {self.settle_tol!r} u_R: must be a positive number")
+        if self.keep_periods is not None and self.keep_periods < 1:
+            raise Mech2SpiceError(f"keep_periods {self.keep_periods!r}: must be at least 1")
         if self.latency is not None and not (np.isfinite(self.latency) and 0 < self.latency < 1):
             raise Mech2SpiceError(f"latency threshold {self.latency!r} u_R: must be a number between 0 and 1 "
                                   "(or off)")
@@ -334,4 +360,4 @@ class EnvelopeEngine(Engine):
                          start_period=start_period, probes=probes, progress=progress,
                          settle_tol=self.options.settle_tol, compiled=self.options.compiled,
                          latency=self.options.latency, parallel=self.options.parallel,
-                         exponential=self.options.exponential)
+                         exponential=self.options.exponential, keep_periods=self.options.keep_periods)

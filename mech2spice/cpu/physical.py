@@ -36,6 +36,7 @@ SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fid
 LATENCY = 0.1           # u_R: per-gate latency threshold (None: off; docs/latency.md)
 CARRIER_LATENCY = 0.05  # u_R: the carrier's (docs/carrier.md: its cost against the carrier without it)
 OWN_LATENCY = "own"     # latency: the backend's own default (LATENCY, CARRIER_LATENCY; rk4 has none)
+READ_PERIODS = 10       # periods a read averages over, at the end of each pulse or pause: all a run keeps
 EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability bound; docs/latency.md)
 
 
@@ -77,7 +78,7 @@ class PhysicalCPU:
         if latency == OWN_LATENCY:           # the carrier's latency loop is serial: threads ask for every gate integrated
             latency = {"envelope": LATENCY, "carrier": CARRIER_LATENCY if threads == 1 else None}.get(backend)
         options = _options(backend, step=step, latency=latency, exponential=exponential, parallel=parallel,
-                           steps_per_period=steps_per_period, threads=threads)
+                           steps_per_period=steps_per_period, threads=threads, keep_periods=READ_PERIODS)
         # only pauses may end early once settled; pulses always run in full
         self.pulse_engine = make_engine(backend, options)
         self.pause_engine = make_engine(backend, replace(options, settle_tol=settle or None))
@@ -107,7 +108,7 @@ class PhysicalCPU:
         self.simulated += periods - run.settled_periods
         self.block_steps += run.extra.get("block_steps", 0)
         self.period += periods
-        amp = np.abs(run.amp[-10:, :, 0]).mean(axis=0) / self.p.u_r
+        amp = np.abs(run.amp[-READ_PERIODS:, :, 0]).mean(axis=0) / self.p.u_r
         return dict(zip(self.probes, amp))
 
     def _reset(self) -> dict[str, float]:

@@ -3,8 +3,8 @@
 Two independent checks of one synthesised design:
 
 * equivalence -- the NOR netlist is written back as structural Verilog and proved equal to the source by
-  Yosys (a miter, SAT; temporal induction from the all-zero register state for clocked designs, the
-  state the mapping's latches start in).  See docs/verify.md for what is and is not proved.
+  Yosys (a miter, SAT with x modelled; temporal induction from the all-zero register state for clocked
+  designs, the state the mapping's latches start in).  See docs/verify.md for what is and is not proved.
 * co-simulation -- the source runs on Icarus Verilog (an independent simulator), the network on a
   backend, on the same vectors (clocked: a reset cycle, then random inputs per cycle); every
   differing output bit is listed.
@@ -138,7 +138,8 @@ def equivalence(path, netlist: Netlist) -> dict:
         # The strengthened miter also compares the matched registers: a failure there may be a wrong
         # match, not a wrong output; only the plain miter's verdict stands.
         res = _prove(Path(path), netlist, [])
-    matched = f", {len(res['regs'])} matched registers" if res["regs"] else ""
+    n = len(res["regs"])
+    matched = f", {n} matched register{'s' * (n != 1)}" if n else ""
     method = (f"yosys miter + sat -tempinduct from the all-zero state (depth <= {INDUCTION_STEPS}{matched})"
               if sequential else "yosys miter + sat (all input vectors; -tempinduct, closing at step 1)")
     if res["cex"] and "cycle" not in res["cex"][0]:

@@ -121,8 +121,8 @@ def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
     # away (`q <= q` is a constant 0), which a plain SAT proof cannot model.  It closes at step 1 otherwise.
     # -enable_undef: without it sat reads the miter's `x` as 0, so -ignore_gold_x's `gold === x` becomes
     # `~gold` and each output check only "gold 1 => gate 1" (a stuck-at-1 output passed).  Inputs and the
-    # start state are defined; -tempinduct-def keeps the induction step's state defined too.
-    lines.append(f"sat -verify -prove-asserts -tempinduct -tempinduct-def -enable_undef -set-def-inputs "
+    # start state are defined; the induction step's state may hold x (a source register assigned x).
+    lines.append(f"sat -verify -prove-asserts -tempinduct -enable_undef -set-def-inputs "
                  f"-set-init-zero -maxsteps {INDUCTION_STEPS} -show-inputs {PREFIX}miter")
     return "\n".join(lines + [""])
 

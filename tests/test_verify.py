@@ -111,6 +111,19 @@ def test_clocked_output_stuck_at_one_is_a_counterexample():
     assert V.equivalence(VERILOG / "counter4.v", nl)["status"] == "counterexample"
 
 
+@pytest.mark.parametrize("body", [
+    "output y); assign y = a ? b : 1'bx;",                                        # a don't-care output
+    "output reg y); always @(posedge clk) y <= a ? b : 1'bx;",                   # a register assigned x
+])
+def test_source_x_matches_either_value_but_not_a_wrong_one(tmp_path, body):
+    """`x` in the source is a don't-care (synthesis picks a value); where it is not x, a wrong bit still fails."""
+    src = tmp_path / "dc.v"
+    src.write_text(f"module dc(input clk, input a, input b, {body}\nendmodule\n")
+    nl = synthesize(src)
+    assert V.equivalence(src, nl)["status"] == "proved"
+    assert V.equivalence(src, _stuck_at_one(nl, "y[0]"))["status"] == "counterexample"   # a=1, b=0
+
+
 def _replay_after_reset(path, nl, cex) -> list[str]:
     """The output bits where Icarus (source) and the logic backend (network) differ on a counterexample
     from the zero state, run after one reset cycle (Icarus starts registers at x; the network's reset

@@ -3,8 +3,8 @@
 Two independent checks of one synthesised design:
 
 * equivalence -- the NOR netlist is written back as structural Verilog and proved equal to the source by
-  Yosys (a miter, SAT; temporal induction from the all-zero register state for clocked designs, the
-  state the mapping's latches start in).  See docs/verify.md for what is and is not proved.
+  Yosys (a miter, SAT with x modelled; temporal induction from the all-zero register state for clocked
+  designs, the state the mapping's latches start in).  See docs/verify.md for what is and is not proved.
 * co-simulation -- the source runs on Icarus Verilog (an independent simulator), the network on a
   backend, on the same vectors (clocked: a reset cycle, then random inputs per cycle); every
   differing output bit is listed.
@@ -119,8 +119,11 @@ def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
               f"hierarchy -top {PREFIX}miter", "opt_clean"]
     # Induction even for a combinational network: the source may keep registers that synthesis folded
     # away (`q <= q` is a constant 0), which a plain SAT proof cannot model.  It closes at step 1 otherwise.
-    lines.append(f"sat -verify -prove-asserts -tempinduct -set-init-zero -maxsteps {INDUCTION_STEPS} "
-                 f"-show-inputs {PREFIX}miter")
+    # -enable_undef: without it sat reads the miter's `x` as 0, so -ignore_gold_x's `gold === x` becomes
+    # `~gold` and each output check only "gold 1 => gate 1" (a stuck-at-1 output passed).  Inputs and the
+    # start state are defined; the induction step's state may hold x (a source register assigned x).
+    lines.append(f"sat -verify -prove-asserts -tempinduct -enable_undef -set-def-inputs "
+                 f"-set-init-zero -maxsteps {INDUCTION_STEPS} -show-inputs {PREFIX}miter")
     return "\n".join(lines + [""])
 
 
@@ -135,7 +138,8 @@ def equivalence(path, netlist: Netlist) -> dict:
         # The strengthened miter also compares the matched registers: a failure there may be a wrong
         # match, not a wrong output; only the plain miter's verdict stands.
         res = _prove(Path(path), netlist, [])
-    matched = f", {len(res['regs'])} matched registers" if res["regs"] else ""
+    n = len(res["regs"])
+    matched = f", {n} matched register{'s' * (n != 1)}" if n else ""
     method = (f"yosys miter + sat -tempinduct from the all-zero state (depth <= {INDUCTION_STEPS}{matched})"
               if sequential else "yosys miter + sat (all input vectors; -tempinduct, closing at step 1)")
     if res["cex"] and "cycle" not in res["cex"][0]:

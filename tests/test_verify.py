@@ -8,6 +8,7 @@ import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from mech2spice import cli, verify as V
@@ -83,6 +84,76 @@ def test_broken_clocked_mapping_gives_a_counterexample_sequence():
     assert eq["status"] == "counterexample"
     assert [s["cycle"] for s in eq["counterexample"]] == list(range(len(eq["counterexample"])))
     assert not res["cosim"]["agree"] and res["verdict"] == "fail"
+
+
+def _stuck_at_one(nl, out: str):
+    """Drive output bit `out` from const1: a network that is right only where the source outputs 1."""
+    g = nl.graph
+    (src,) = g.predecessors(out)
+    g.remove_edge(src, out)
+    g.add_node("const1", kind="const")
+    g.add_edge("const1", out)
+    nl.__dict__.pop("_order_cache", None)
+    return nl
+
+
+def test_output_stuck_at_one_is_a_counterexample():
+    """-ignore_gold_x in 2-valued SAT compared only "source 1 => network 1": this network passed as proved."""
+    nl = _stuck_at_one(synthesize(VERILOG / "mult2.v"), "p[0]")
+    eq = V.equivalence(VERILOG / "mult2.v", nl)
+    assert eq["status"] == "counterexample"
+    (step,) = eq["counterexample"]
+    assert step["source"]["p"][-1] == "0" and step["network"]["p"][-1] == "1"
+
+
+def test_clocked_output_stuck_at_one_is_a_counterexample():
+    nl = _stuck_at_one(synthesize(VERILOG / "counter4.v"), "q[3]")
+    assert V.equivalence(VERILOG / "counter4.v", nl)["status"] == "counterexample"
+
+
+@pytest.mark.parametrize("body", [
+    "output y); assign y = a ? b : 1'bx;",                                        # a don't-care output
+    "output reg y); always @(posedge clk) y <= a ? b : 1'bx;",                   # a register assigned x
+])
+def test_source_x_matches_either_value_but_not_a_wrong_one(tmp_path, body):
+    """`x` in the source is a don't-care (synthesis picks a value); where it is not x, a wrong bit still fails."""
+    src = tmp_path / "dc.v"
+    src.write_text(f"module dc(input clk, input a, input b, {body}\nendmodule\n")
+    nl = synthesize(src)
+    assert V.equivalence(src, nl)["status"] == "proved"
+    assert V.equivalence(src, _stuck_at_one(nl, "y[0]"))["status"] == "counterexample"   # a=1, b=0
+
+
+def _replay_after_reset(path, nl, cex) -> list[str]:
+    """The output bits where Icarus (source) and the logic backend (network) differ on a counterexample
+    from the zero state, run after one reset cycle (Icarus starts registers at x; the network's reset
+    cycle keeps it at zero): read after the last cycle's predecessors' edges, its inputs on."""
+    order = V.input_bits(nl)
+    steps = [{"rst": 1, "rdata": 0}] + [s["inputs"] for s in cex]
+    x = np.array([[bool(ins[b[:b.index("[")]] >> int(b[b.index("[") + 1:-1]) & 1) for b in order]
+                  for ins in steps])
+    ref = V.icarus(path, nl, x, clocked=True)[len(cex) - 1]
+    got = V.run_backend(nl, x, True, "logic", None, False)[len(cex) - 1]["bits"]
+    return [b for b, want in ref.items() if want in "01" and int(want) != got[b]]
+
+
+def test_processor_proved_with_its_registers_matched():
+    """cpu.v (43 latches): induction closes once every register is matched and compared (~3 s here)."""
+    nl = synthesize(VERILOG / "cpu.v")
+    regs = V.register_names(nl)
+    assert len(regs) == len(nl.latches()) == 43
+    eq = V.equivalence(VERILOG / "cpu.v", nl)
+    assert eq["status"] == "proved" and "43 matched registers" in eq["method"]
+
+
+def test_broken_processor_mapping_gives_a_counterexample_icarus_confirms():
+    """Two write-address bits swapped: the sequence found (load B, read it) makes the outputs differ on
+    Icarus against the network too."""
+    path = VERILOG / "cpu.v"
+    nl = _swap_outputs(synthesize(path), "waddr[0]", "waddr[1]")
+    eq = V.equivalence(path, nl)
+    assert eq["status"] == "counterexample" and len(eq["counterexample"]) >= 2
+    assert set(_replay_after_reset(path, nl, eq["counterexample"])) == {"waddr[0]", "waddr[1]"}
 
 
 def test_broken_mapping_through_the_cli_exit_1_and_junit_failure(tmp_path, monkeypatch, capsys):

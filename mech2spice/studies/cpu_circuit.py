@@ -91,8 +91,9 @@ def measure_profile(max_step: float, reltol: float) -> dict:
 
 # --- the oscillator-level references ---------------------------------------------------------------------------
 def measure_envelope(cycles: int, step: float = ENVELOPE_STEP) -> dict:
-    """The envelope engine's probes just before each clock pulse (PhysicalCPU, full pauses)."""
-    return measure_physical("envelope", cycles, step=step)
+    """The envelope engine's probes just before each clock pulse (PhysicalCPU, full pauses), at the fidelity
+    report's reference: no per-gate latency, no exponential step (the processor's defaults since)."""
+    return measure_physical("envelope", cycles, step=step, latency=None, exponential=False)
 
 
 def measure_physical(backend: str, cycles: int, **options) -> dict:
@@ -135,6 +136,6 @@ def measure(out: Path, only=None, cycles: int = 30, max_step: float = 32.0, relt
             data["profile"] = measure_profile(max_step, reltol)
         else:                      # envelope, carrier: as many cycles as the circuit ran (at least one)
             n = min(data.get("circuit", {}).get("cycles", cycles), max(cycles, 1))
-            data[name] = measure_envelope(n) if name == "envelope" else measure_physical("carrier", n)
+            data[name] = measure_envelope(n) if name == "envelope" else measure_physical("carrier", n, latency=None)
         write_json(path, data)
     return data

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import Mech2SpiceError
 from ._common import out_dir, pyplot, read_json, save_figure, stored, write_json
 from .cpu import fig_sieve, plot_traffic
 
@@ -72,13 +73,16 @@ def write(directory="reports", cycles: int = 0, program: str = "programs/sieve.a
     out = out_dir(directory)
     if not render:
         from ..studies import cpu_physical as study      # measuring loads the processor; rendering does not
-        a = study.Options(cycles, program, backend, **{k: v for k, v in (("step", step), ("settle", settle))
-                                                          if v is not None}, checkpoint=checkpoint, resume=resume,
-                          name=name)
+        given = {k: v for k, v in (("step", step), ("settle", settle)) if v is not None}
+        a = study.Options(cycles, program, backend, checkpoint=checkpoint, resume=resume, name=name, **given)
         write_json(out / f"{name}.json", study.measure(out, a), default=None)
+    return render_json(out, name)
+
+
+def render_json(out: Path, name: str) -> Path:
+    """NAME.md and the figures from NAME.json (a JSON written before the study kept its rows: one error line)."""
     res = stored(out / f"{name}.json", "cpu_physical")
     if "rows" not in res:
-        from ..errors import Mech2SpiceError
         raise Mech2SpiceError(f"{out / (name + '.json')} has no per-cycle rows (written before the report kept "
                               f"them): measure it again with `{res.get('command', 'mech2spice report cpu_physical')}`")
     o = res["options"]
@@ -86,10 +90,10 @@ def write(directory="reports", cycles: int = 0, program: str = "programs/sieve.a
         fig_sieve(res["moments"], out / "cpu_sieve_physical.png",
                   f"the processor's oscillators at {o['backend']} fidelity "
                   f"({res.get('simulated_periods', 0):,} periods integrated)")
-    fig_activity(res["rows"], out / f"{o['name']}_trace.png", o["backend"])
-    (out / f"{o['name']}.md").write_text(_markdown(res, out))
-    print(out / f"{o['name']}.md", f"{res['wall_s']:.0f} s")
-    return out / f"{o['name']}.md"
+    fig_activity(res["rows"], out / f"{name}_trace.png", o["backend"])
+    (out / f"{name}.md").write_text(_markdown(res, out, name))
+    print(out / f"{name}.md", f"{res['wall_s']:.0f} s")
+    return out / f"{name}.md"
 
 
 def _speedups_txt(res: dict) -> str:
@@ -102,7 +106,7 @@ def _speedups_txt(res: dict) -> str:
     return "; " + ", ".join(parts) + " (docs/latency.md)" if parts else ""
 
 
-def _markdown(res: dict, out: Path) -> str:
+def _markdown(res: dict, out: Path, name: str) -> str:
     o, rows, sieve = res["options"], res["rows"], res["sieve"]
     wall, per_cycle, primes = res["wall_s"], res["s_per_cycle"], res["primes"]
     paper_wall = f" (the paper's sieve run: {PAPER_WALL})" if sieve else ""
@@ -132,7 +136,7 @@ commits writes at the clock edge (`mech2spice/cpu/physical.py`). Every cycle is 
 
 {'![sieve memory, physical run](cpu_sieve_physical.png)' if res['moments'] else ''}
 {devices_md(res)}
-![memory traffic, physical run]({o['name']}_trace.png)
+![memory traffic, physical run]({name}_trace.png)
 {fidelity_section(out / 'fidelity.json')}
 ## Every cycle
 

@@ -1,207 +1,38 @@
-"""reports/cpu.md and reports/cpu_*.png: the 8-bit processor, its programs, Turing machines.
+"""reports/cpu.md and reports/cpu_*.png: the 8-bit processor, its programs, Turing machines, rendered from
+cpu.json (mech2spice/studies/cpu.py measures it).
 
-Run: mech2spice report cpu [--skip-slow]
+Run: mech2spice report cpu [--skip-slow] [--render]
 
-Every number in the report is measured by this module on the machine running it.  --skip-slow
-leaves out the logic-level run of Minsky's machine (about 2.5 minutes).
+Every number in the report is measured by the study on the machine named in the JSON.  --skip-slow leaves out
+the logic-level run of Minsky's machine (about 2.5 minutes); --render measures nothing.
 """
 
 from __future__ import annotations
 
-import collections
-import os
-import platform
-import time
 from pathlib import Path
 
 import matplotlib
 from matplotlib.patches import Rectangle
 
-from .. import data
-from ..cpu import tm
-from ..cpu.asm import assemble_program
-from ..cpu.isa import CYCLES, OPCODES, SEMANTICS
-from ..cpu.iss import ISS
-from ..cpu.machines import LogicCPU
-from ..cpu.netlist import CPU_VERILOG, cpu_netlist
-from ..cpu.run import load_program, make_memory, run_program
-from ..physics import network, params
-from ..synthesis.synth import synthesize
-from ._common import md_table, out_dir, pyplot, read_json, save_figure
+from ._common import md_table, out_dir, pyplot, read_json, save_figure, stored, write_json
 
 plt = pyplot()
 
 PAPER = {"gates": 1959, "oscillators": 11754, "linear_springs": 2744, "nonlinear_springs": 9795,
          "dashpots": 2744, "sieve_cycles": 719, "sieve_bytes": 48}
 
-# The same processor written behaviourally, for comparison: what Yosys/ABC alone make of it.
-BEHAVIOURAL = """
-module cpu(input clk, input rst, input [7:0] rdata, output [7:0] raddr, output [7:0] waddr,
-           output [7:0] wdata, output we);
-  reg [7:0] pc, a, b, c, d;
-  reg ov, ld, nx;
-  wire fetch = ~(ld | nx | rst);
-  wire [3:0] op = rdata[3:0];
-  wire [15:0] is = fetch ? (16'd1 << op) : 16'd0;
-  wire [8:0] sum = a + b;
-  wire skip = is[12] & (a > b) | is[13] & (a != b) | is[14] & ov;
-  assign raddr = ld ? a : pc;
-  assign waddr = b;
-  assign wdata = a;
-  assign we = is[10];
-  always @(posedge clk) begin
-    ld <= is[11];
-    nx <= is[15];
-    pc <= rst ? 8'd0 : is[9] ? c : pc + {6'd0, skip, ~(skip | ld)};
-    a <= nx ? rdata : is[2] ? b : is[0] ? c : a;
-    b <= ld ? rdata : is[2] ? a : is[3] ? d : b;
-    c <= is[7] ? ~(a | b) : is[8] ? ~c : (is[0] | is[1]) ? a : c;
-    d <= (is[4] | is[5]) ? {is[5] & d[7], d[7:1]} : is[6] ? sum[7:0] : is[3] ? b : d;
-    ov <= is[6] ? sum[8] : ov;
-  end
-endmodule
-"""
-
-# Gate nets of verilog/cpu.v by block (prefix before '[' or '.'); ABC's own inverters feed the adder.
-BLOCKS = {
-    "decoder and selects": "no f0 nf0 f nf g0 g1 ng0 ng1 H nH L nL s_ac s_c s_ab s_bd s_sh s_add s_nor "
-                           "s_not s_jmp we next_ld next_nx n_ac n_c n_ab n_bd n_sh n_add n_nor n_not n_jmp "
-                           "n_ld n_nx",
-    "adder A+B (9-NOR full adders)": "n t u x xo m v w s cy $abc",
-    "A>B and A==B": "ngt gq p np r nr eq",
-    "skip condition": "nov t_gt t_ne t_ov k1 k2 nin skip",
-    "pc + 1 + skip": "np_ pn pk ps ki nki nk",
-    "register multiplexers (A, B, C, D, pc, overflow)": "ma1 ma2 ma3 mb1 mb2 mb3 mc1 mc2 mc3 md1 md2 md3 mp "
-                                                        "next_a next_b next_c next_d p1 nc nd7 sh7 ot ou next_ov",
-    "synchronous reset of pc": "np1 next_pc",
-    "read-address multiplexer (pc / A)": "mr raddr",
-}
-
-
-def block_of(net: str) -> str:
-    """The block of BLOCKS a gate's Yosys net belongs to ('other' if none)."""
-    top = "$abc" if net.startswith("$abc") else net.split("[")[0].split(".")[0]
-    for block, names in BLOCKS.items():
-        if top in names.split():
-            return block
-    return "other"
-
-
-# --------------------------------------------------------------------------- measurements
-
-def hardware() -> dict:
-    """Synthesize verilog/cpu.v: time, depth, counts with/without fan-out buffers, gates by block, behavioural."""
-    t0 = time.perf_counter()
-    plain = synthesize(CPU_VERILOG)
-    synth_s = time.perf_counter() - t0
-    buffered = synthesize(CPU_VERILOG, max_fanout=network.MAX_FANOUT)
-    out = {"synth_s": synth_s, "latches": len(plain.latches()), "depth": network.logic_depth(plain)}
-    for key, nl in (("plain", plain), ("buffered", buffered)):
-        model = network.build(nl, params.DEFAULT)
-        out[key] = {"logic": len(nl.gates()), "blocks": len(model.design.gates), **model.counts()}
-    out["behavioural"] = behavioural_check()
-    g = plain.graph
-    out["by_block"] = collections.Counter(block_of(str(g.nodes[n].get("net", "?"))) for n in plain.gates())
-    return out
-
-
-def behavioural_check() -> dict:
-    """Synthesize BEHAVIOURAL and check it against the ISS on the sieve, cycle by cycle (ports)."""
-    import tempfile
-    from ..backends.logic import ClockedLogic
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "cpu_behavioural.v"
-        path.write_text(BEHAVIOURAL)
-        nl = synthesize(path)
-    prog = load_program(data.program("sieve.asm"))
-    iss, mem, cl = ISS(make_memory(prog)), make_memory(prog), ClockedLogic(nl)
-    same = True
-    while not iss.halted:
-        rec = iss.step()
-        raddr = cl.evaluate({"rdata": 0})["raddr"]
-        outs = cl.evaluate({"rdata": mem.read(raddr)})
-        cl.tick({"rdata": mem.read(raddr)})
-        mem.commit(outs["waddr"], outs["wdata"], outs["we"])
-        same &= (raddr, outs["we"], outs["waddr"], outs["wdata"]) == (rec.raddr, rec.we, rec.waddr, rec.wdata)
-    return {"logic": len(nl.gates()), "latches": len(nl.latches()), "sieve_same": same and
-            mem.snapshot() == iss.mem.snapshot()}
-
-
-def sieve_runs() -> dict:
-    """The sieve on the ISS frame by frame (with Fig. 8's moments), and its ISS and logic runs."""
-    prog = load_program(data.program("sieve.asm"))
-    frames, moments = [], []
-    iss = ISS(make_memory(prog))
-    while not iss.halted:
-        mem_before = iss.mem.snapshot()
-        rec = iss.step()
-        frames.append((rec, mem_before, iss.mem.snapshot()))
-    runs = {b: run_program(data.program("sieve.asm"), b) for b in ("iss", "logic")}
-    moments = sieve_moments(frames)
-    return {"prog": prog, "frames": frames, "runs": runs, "moments": moments,
-            "writes": sum(1 for rec, _, _ in frames if rec.we)}
-
-
-def tm_runs(skip_slow: bool) -> dict:
-    """The TM programs on the ISS (and logic level) checked against the reference machines; a tag-system run."""
-    out = {}
-    net = cpu_netlist()
-    for name, machine in (("tm_increment.asm", tm.INCREMENT), ("tm_minsky.asm", tm.MINSKY)):
-        text = data.program(name).read_text()
-        prog = assemble_program(text)
-        t0 = time.perf_counter()
-        emu = tm.run_emulation(text, 10_000_000)
-        iss_s = time.perf_counter() - t0
-        ref = tm.compare_emulation(machine, prog.tape.cells, prog.tape.head, emu)
-        row = {"bytes": len(prog.image), "cycles": emu["cycles"], "steps": emu["tape"].steps,
-               "halted": emu["halted"], "ref_steps": len(ref.steps), "ref_halted": ref.halted,
-               "iss_s": iss_s, "emu": emu, "ref": ref, "tape_in": prog.tape.cells,
-               "tape_out": emu["tape"].digits()}
-        if name == "tm_increment.asm" or not skip_slow:
-            t0 = time.perf_counter()
-            lemu = tm.run_emulation(text, 10_000_000, lambda mem: LogicCPU(mem, net))
-            row["logic_s"] = time.perf_counter() - t0
-            tm.compare_emulation(machine, prog.tape.cells, prog.tape.head, lemu)
-            row["logic_same"] = lemu["cycles"] == emu["cycles"] and lemu["tape"].log == emu["tape"].log
-        out[name] = row
-    rules, word = [[1, 0, 0], [2], None], [0, 0, 0]
-    digits, head, _ = tm.tag_system_tape(rules, word)
-    text = tm.emulator_source(tm.MINSKY, digits, head)
-    t0 = time.perf_counter()
-    emu = tm.run_emulation(text, 10_000_000)
-    s = time.perf_counter() - t0
-    ref = tm.compare_emulation(tm.MINSKY, digits, head, emu)
-    words, _ = tm.utm_words(rules, word, 100_000)
-    out["long"] = {"rules": rules, "word": word, "cycles": emu["cycles"], "steps": emu["tape"].steps,
-                   "halted": emu["halted"], "ref_halted": ref.halted, "iss_s": s, "words": words,
-                   "tag": tm.tag_system_run(rules, word, 50)}
-    ex_words, _ = tm.utm_words(**tm.MINSKY_EXAMPLE, max_steps=100_000)
-    out["example_words"] = ex_words
-    out["example_tag"] = tm.tag_system_run(**tm.MINSKY_EXAMPLE, max_steps=50)
-    return out
-
-
 # --------------------------------------------------------------------------- figures
-
-def sieve_moments(frames) -> list[int]:
-    """Four moments of the sieve like the paper's Fig. 8: the last mark of 2's multiples, of 3's, the
-    first mark of 5's, and the end."""
-    writes = [k for k, (rec, _, _) in enumerate(frames) if rec.we]
-    last = {frames[k][0].wdata: k for k in writes}       # last write of each step p (the value written)
-    first5 = next(k for k in writes if frames[k][0].wdata == 5)
-    return [last[2], last[3], first5, len(frames) - 1]
-
 
 def _grid_xy(addr: int) -> tuple[int, int]:
     return addr % 16, addr // 16               # address 0 bottom-left, along rows, then up
 
 
-def fig_sieve(frames, moments, path, source: str) -> None:
-    """The paper's Fig. 8: memory at four moments (frames: (Cycle, memory before, memory after))."""
+def fig_sieve(moments: list[dict], path, source: str) -> None:
+    """The paper's Fig. 8: memory at four moments (each its cycle's ports and the memory after it)."""
     fig, axes = plt.subplots(1, 4, figsize=(14, 5.6))
     norm = matplotlib.colors.PowerNorm(0.3, vmin=0, vmax=255)     # marks are small values (2..5)
-    for ax, k in zip(axes, moments):
-        rec, _, mem = frames[k]
+    for ax, rec in zip(axes, moments):
+        mem = rec["memory"]
         img = [[mem[16 * r + c] for c in range(16)] for r in range(16)]
         ax.imshow(img, origin="lower", cmap="viridis", norm=norm, extent=(0, 16, 0, 16))
         # magnified primality region (addresses 128..159 = n 0..31) above the grid
@@ -212,7 +43,7 @@ def fig_sieve(frames, moments, path, source: str) -> None:
             ax.text(x + 0.5, y + 1, str(n), ha="center", va="center", fontsize=5.5,
                     color="w" if norm(val) < 0.5 else "k")
         ax.add_patch(Rectangle((0, 8), 16, 2, fill=False, ls=":", ec="w", lw=1.2))
-        for addr, color in ((rec.raddr, "lime"), (rec.waddr if rec.we else None, "red")):
+        for addr, color in ((rec["raddr"], "lime"), (rec["waddr"] if rec["we"] else None, "red")):
             if addr is not None:
                 x, y = _grid_xy(addr)
                 ax.add_patch(Rectangle((x, y), 1, 1, fill=False, ec=color, lw=2))
@@ -220,9 +51,9 @@ def fig_sieve(frames, moments, path, source: str) -> None:
         ax.set_ylim(0, 21.4)
         ax.set_xticks([])
         ax.set_yticks([])
-        what = f"{rec.instr}" if rec.instr else f"{rec.phase} data"
-        ax.set_title(f"cycle {rec.cycle} ({what})\nread {rec.raddr}" + (f", write {rec.waddr}" if rec.we else ""),
-                     fontsize=9)
+        what = f"{rec['instr']}" if rec["instr"] else f"{rec['phase']} data"
+        wrote = f", write {rec['waddr']}" if rec["we"] else ""
+        ax.set_title(f"cycle {rec['cycle']} ({what})\nread {rec['raddr']}{wrote}", fontsize=9)
     fig.suptitle(f"Sieve of Eratosthenes on {source}: memory (address 0 bottom left, 16 per row); green: read, "
                  "red: write;\ndotted: primality array 128..159, magnified above (label n, non-zero = composite)",
                  fontsize=10)
@@ -244,13 +75,13 @@ def plot_traffic(ax, rows, read_label: str) -> None:
 
 def fig_iss_sieve(s: dict, path: Path) -> None:
     """Fig. 8 (memory at four moments) from the ISS's sieve run."""
-    fig_sieve(s["frames"], s["moments"], path, "the ISS")
+    fig_sieve(s["moments"], path, "the ISS")
 
 
 def fig_trace(s: dict, path: Path) -> None:
     """The sieve's memory traffic per cycle on the ISS."""
     fig, ax = plt.subplots(figsize=(10, 3.4))
-    plot_traffic(ax, ((r.cycle, r.raddr, r.we, r.waddr) for r, _, _ in s["frames"]), "read address")
+    plot_traffic(ax, s["traffic"], "read address")
     ax.legend(loc="center right", fontsize=8)
     ax.set_title("Sieve on the ISS: memory traffic per cycle (grey band: primality array)", fontsize=10)
     save_figure(fig, path, dpi=130)
@@ -259,12 +90,12 @@ def fig_trace(s: dict, path: Path) -> None:
 def fig_tm(t: dict, path: Path) -> None:
     """The tape of Minsky's U(7,4) after every 4th step, as an image."""
     row = t["tm_minsky.asm"]
-    log = row["emu"]["tape"].log
-    cells = dict(tm.Tape.from_digits(row["tape_in"], 0).cells)
+    log = row["tape_log"]                                   # (head, symbol written) per step
+    cells = {i: int(c) for i, c in enumerate(row["tape_in"]) if c != "0"}
     lo = min(h for h, *_ in log + [(0,)]) - 1
     hi = max(max(h for h, *_ in log), len(row["tape_in"])) + 1
     rows = []
-    for k, (h, _, write, _) in enumerate(log):
+    for k, (h, write) in enumerate(log):
         cells[h] = write
         if k % 4 == 0:
             rows.append([cells.get(i, 0) for i in range(lo, hi + 1)])
@@ -279,19 +110,22 @@ def fig_tm(t: dict, path: Path) -> None:
 
 # --------------------------------------------------------------------------- report
 
-def write(directory="reports", skip_slow: bool = False) -> Path:
-    """Measure everything and write cpu.md with its figures (`skip_slow`: no logic-level Minsky run)."""
+def write(directory="reports", skip_slow: bool = False, render: bool = False) -> Path:
+    """Measure into cpu.json (unless `render`; `skip_slow`: no logic-level Minsky run) and write cpu.md with its
+    figures from it."""
     out = out_dir(directory)
-    t_start = time.perf_counter()
-    hw, s, t = hardware(), sieve_runs(), tm_runs(skip_slow)
+    if not render:
+        from ..studies import cpu as study            # measuring loads the processor's runners; rendering does not
+        write_json(out / "cpu.json", study.measure(skip_slow=skip_slow))
+    res = stored(out / "cpu.json", "cpu")
+    hw, s, t = res["hardware"], res["sieve"], res["tm"]
     fig_iss_sieve(s, out / "cpu_sieve.png")
     fig_trace(s, out / "cpu_trace.png")
     fig_tm(t, out / "cpu_tm.png")
     L = []
     add = L.append
     add("# The 8-bit mechanical processor, its programs, and Turing completeness\n")
-    add(f"Generated by `mech2spice report cpu` in {time.perf_counter() - t_start:.0f} s on "
-        f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; every number "
+    add(f"Generated by `mech2spice report cpu` in {res['wall_s']:.0f} s on {res['platform']}; every number "
         "below was measured by that run unless it is marked as the paper's.\n")
     add("```sh\nmech2spice cpu asm programs/sieve.asm -o sieve.bin --listing\n"
         "mech2spice cpu run programs/sieve.asm --backend logic          # or iss\n"
@@ -307,16 +141,15 @@ def write(directory="reports", skip_slow: bool = False) -> Path:
         "(`mech2spice/cpu/iss.py`) is cycle-exact with `verilog/cpu.v`: the tests step both and compare "
         "every cycle's read address, data, write port and all registers.\n")
     L.extend(md_table(["opcode", "mnemonic", "operation", "cycles"],
-                      ([f"0x{op:X}", f"`{name}`", SEMANTICS[name], CYCLES[name]]
-                       for name, op in sorted(OPCODES.items(), key=lambda kv: kv[1]))))
+                      ([f"0x{op:X}", f"`{name}`", semantics, cycles] for op, name, semantics, cycles in res["isa"])))
     add("")
     add("## Hardware: `verilog/cpu.v`\n")
     add("Paper Fig. 7 architecture: registers (pc, A, B, C, D, overflow, and two phase bits saying that "
         "this cycle's byte is LOAD_AB / LDNX_AB data), a datapath computing every candidate next value, "
         "and per register a chain of 2:1 multiplexers (3 NOR gates per bit) selected by the decoded "
         "opcode. The design is written at the NOR-gate level with `(* keep *)` so Yosys/ABC keep its "
-        f"structure: the same processor written behaviourally (embedded in the report script) synthesizes "
-        f"to {hw['behavioural']['logic']} logic gates and {hw['behavioural']['latches']} latches, against "
+        "structure: the same processor written behaviourally (`BEHAVIOURAL` in `mech2spice/studies/cpu.py`) "
+        f"synthesizes to {hw['behavioural']['logic']} logic gates and {hw['behavioural']['latches']} latches, against "
         f"{hw['plain']['logic']} (it runs the sieve with the same port activity every cycle as the ISS: "
         f"{hw['behavioural']['sieve_same']}). Differences from the paper's register list, to "
         "save gates: the write port is wired straight to the registers (waddr = B, wdata = A, we decoded "
@@ -342,7 +175,7 @@ def write(directory="reports", skip_slow: bool = False) -> Path:
     add("## The sieve of Eratosthenes (`programs/sieve.asm`)\n")
     r_iss, r_log = s["runs"]["iss"], s["runs"]["logic"]
     arr = r_iss["memory"][128:160]
-    add(f"{len(s['prog'].image)} bytes including constants (paper: {PAPER['sieve_bytes']}). It marks the "
+    add(f"{s['bytes']} bytes including constants (paper: {PAPER['sieve_bytes']}). It marks the "
         "multiples 2p, 3p, ... of every p = 2..5 (p*p < 32) in the array at 128..159 and halts. Unlike the "
         "paper's program it does not skip p = 4 (already marked): that costs 6 redundant marks. 0 and 1 are "
         "left 0 (never marked). The halt trick: the constant 6 (first p not needed) is also the address of "
@@ -384,10 +217,8 @@ def write(directory="reports", skip_slow: bool = False) -> Path:
     add(f"| (generated, not checked in) | Minsky U(7,4), tag system {lg['rules']} from {lg['word']} | | "
         f"{lg['steps']} | {lg['cycles']} | {lg['halted']} / {lg['ref_halted']} | {lg['iss_s']:.2f} s | |")
     add("")
-    inc = t["tm_increment.asm"]
-    add(f"Binary increment: tape {tm.INCREMENT.encode(tm.INCREMENT_EXAMPLE['tape'])} "
-        f"({tm.INCREMENT_EXAMPLE['tape']}) becomes {inc['tape_out']} "
-        f"({''.join(tm.INCREMENT.symbols[int(c)] for c in inc['tape_out'])}).\n")
+    inc, ex = t["tm_increment.asm"], t["increment_example"]
+    add(f"Binary increment: tape {ex['digits']} ({ex['tape']}) becomes {inc['tape_out']} ({ex['out_symbols']}).\n")
     add("**Which universal machine, and how its table was checked.** The paper uses Neary and Woods' "
         "U(5,5); no transcription of its table that could be checked was found (the sources searched gave the paper's text without the table), so this uses Minsky's "
         "7-state, 4-symbol machine (M. Minsky, *Computation: Finite and Infinite Machines*, 1967, "

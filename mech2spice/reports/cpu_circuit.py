@@ -1,112 +1,23 @@
-"""The whole processor in a circuit simulator (VACASK, envelope level, memory inside): reports/cpu_circuit.md.
+"""The whole processor in a circuit simulator (VACASK, envelope level, memory inside): reports/cpu_circuit.md,
+rendered from cpu_circuit.json (mech2spice/studies/cpu_circuit.py measures it, section by section).
 
-Run: mech2spice report cpu_circuit [--cycles N] [--max_step P] [--reltol TOL] [--only circuit,envelope]
+Run: mech2spice report cpu_circuit [--cycles N] [--only SECTION ...] [--render]
+     python -m mech2spice.reports.cpu_circuit [--cycles N] [--max_step P] [--reltol TOL] [--only circuit,envelope]
      [--render]
-Measures, in this order (each part cached in cpu_circuit.json, `--only` re-measures some, `--render` none):
-* circuit: the sieve's first N cycles (`cycles` 0: to the ISS's halt + 1) as one VACASK netlist
-  (cpu/circuit.py); every cycle against the ISS (port activity, registers, memory), the circuit's final
-  memory, VACASK's cost counters (time points, Newton iterations, where the time went);
-* envelope: the same cycles on the envelope engine (PhysicalCPU, step 2, full pauses: the fidelity reference),
-  the probes (output bits, 43 latch outputs) sampled before each clock pulse as in the circuit; the per-cycle
-  worst amplitude difference between the two;
-* setting: another VACASK setting (--max_step, --reltol) on --cycles cycles, kept beside the others (a row of
-  the settings table; the main run is one too);
-* profile: the reset and one cycle with and without the memory devices (rdata held at 0): the memory's
-  share of VACASK's cost.
+Sections (studies/cpu_circuit.py): circuit, setting, profile, envelope, carrier; each merged into the JSON,
+`--render` measures none.
 """
 from __future__ import annotations
 
-import platform
-import time
 from pathlib import Path
 
 import numpy as np
 
-from ..cpu import run as R
-from ..cpu.iss import ISS
 from ..errors import Mech2SpiceError
-from ._common import HOST, out_dir, pyplot, read_json, save_figure, write_json
+from ._common import out_dir, pyplot, read_json, save_figure
 
-PROGRAM = "programs/sieve.asm"
 TARGET = 0.02            # u_R: the issue's per-cycle bound against the envelope model
-ENVELOPE_STEP = 2.0      # the fidelity report's reference setting (full pauses)
 SIEVE_CYCLES = 458       # the sieve halts after 457 cycles; the halt is seen one cycle later
-
-
-def _machine() -> str:
-    import os
-    return f"{HOST}, {os.cpu_count()} cores (shared with other jobs), {platform.node() or 'sandbox'}"
-
-
-# --- the circuit -----------------------------------------------------------------------------------------
-def measure_circuit(cycles: int, max_step: float, reltol: float, settle: int | None = None) -> dict:
-    """The circuit run and its cycle-by-cycle comparison with the ISS."""
-    from ..cpu.circuit import CircuitCPU
-    prog = R.load_program(PROGRAM)
-    if cycles == 0:
-        cycles = R.run_program(PROGRAM, "iss")["cycles"] + 1
-    t0 = time.perf_counter()
-    cpu = CircuitCPU(R.make_memory(prog), cycles=cycles, max_step=max_step, reltol=reltol, settle=settle)
-    wall = time.perf_counter() - t0
-    iss, rows, stopped = ISS(R.make_memory(prog)), [], None
-    try:
-        while cpu.cycle < cycles and not cpu.halted:
-            got, want = cpu.step(), iss.step()
-            same = got == want and cpu.registers() == iss.registers() and cpu.mem.snapshot() == iss.mem.snapshot()
-            rows.append({"cycle": got.cycle, "pc": got.pc, "instr": got.instr or got.phase, "raddr": got.raddr,
-                         "rdata": got.rdata, "we": got.we, "waddr": got.waddr, "wdata": got.wdata, "same": same})
-    except Mech2SpiceError as err:
-        stopped = str(err)
-    t = cpu.result["t_periods"]
-    sched = cpu.net.schedule
-    edges = [0, sched.start(0)] + [sched.start(k) for k in range(1, cycles + 1)]
-    points = np.histogram(t, bins=edges)[0].tolist()
-    return {"cycles": cycles, "max_step": max_step, "reltol": reltol, "schedule": vars(sched),
-            "wall_s": wall, "simulator_wall_s": cpu.result["wall_s"], "stats": cpu.result["stats"],
-            "time_points": cpu.result["points"], "points_reset": points[0], "points_per_cycle": points[1:],
-            "rows": rows, "stopped": stopped, "halted": cpu.halted,
-            "circuit_memory": cpu.result["memory"], "iss_memory": R.run_program(PROGRAM, "iss")["memory"],
-            "probes": cpu.net.probes, "amps": cpu.result["amps"].tolist(), "machine": _machine()}
-
-
-def measure_profile(max_step: float, reltol: float) -> dict:
-    """VACASK's counters for the reset and one cycle, with and without the memory devices."""
-    from ..cpu.circuit import emit_cpu, run_cpu_netlist
-    image = R.load_program(PROGRAM).image
-    out = {"max_step": max_step, "reltol": reltol, "machine": _machine()}
-    for key, mem in (("without_memory", False), ("with_memory", True)):
-        r = run_cpu_netlist(emit_cpu(image, 1, max_step=max_step, reltol=reltol, memory=mem))
-        out[key] = {"points": r["points"], "wall_s": r["wall_s"], **r["stats"]}
-    return out
-
-
-# --- the envelope reference --------------------------------------------------------------------------------
-def measure_envelope(cycles: int, step: float = ENVELOPE_STEP) -> dict:
-    """The envelope engine's probes just before each clock pulse (PhysicalCPU, full pauses)."""
-    return measure_physical("envelope", cycles, step=step)
-
-
-def measure_physical(backend: str, cycles: int, **options) -> dict:
-    """An oscillator-level processor's probes just before each clock pulse (PhysicalCPU, full pauses), where
-    the circuit is sampled."""
-    from ..cpu.physical import PhysicalCPU
-    prog = R.load_program(PROGRAM)
-    t0 = time.perf_counter()
-    cpu = PhysicalCPU(R.make_memory(prog), backend, settle=None, **options)
-    samples, last = [], {"amps": cpu.amps}
-    run = cpu._run
-
-    def recording(periods, values, clock):            # keep the last settled amplitudes before each pulse
-        if clock:
-            samples.append([last["amps"][p] for p in cpu.probes])
-        last["amps"] = run(periods, values, clock)
-        return last["amps"]
-    cpu._run = recording
-    for _ in range(cycles):
-        cpu.step()
-    samples.append([cpu.amps[p] for p in cpu.probes])   # the state after the last edge
-    return {"cycles": cycles, "backend": backend, **options, "probes": cpu.probes, "amps": samples,
-            "wall_s": time.perf_counter() - t0, "machine": _machine()}
 
 
 def amplitude_differences(circ: dict, env: dict) -> list[float]:
@@ -124,32 +35,19 @@ def amplitude_differences(circ: dict, env: dict) -> list[float]:
 # --- the report ------------------------------------------------------------------------------------------------
 def write(directory="reports", cycles: int = 30, max_step: float = 32.0, reltol: float = 1e-2,
           only="", render: bool = False) -> Path:
-    """Measure (or re-render) and write cpu_circuit.md, cpu_circuit.json and cpu_circuit.png."""
+    """Measure the sections in `only` (unless `render`) into cpu_circuit.json and write cpu_circuit.md and
+    cpu_circuit.png from it."""
     out = out_dir(directory)
     path = out / "cpu_circuit.json"
-    data = read_json(path, {}) or {}
-    only = ",".join(only) if isinstance(only, (list, tuple)) else (only or "")
-    parts = set(filter(None, only.split(","))) or {"circuit", "envelope", "profile"}
     if not render:
-        if "circuit" in parts:
-            data["circuit"] = measure_circuit(cycles, max_step, reltol)
-            write_json(path, data)
-        if "setting" in parts:
-            data.setdefault("settings", {})[f"{max_step:g}/{reltol:g}"] = measure_circuit(cycles, max_step, reltol)
-            write_json(path, data)
-        if "profile" in parts:
-            data["profile"] = measure_profile(max_step, reltol)
-            write_json(path, data)
-        if "envelope" in parts:
-            n = min(data.get("circuit", {}).get("cycles", cycles), max(cycles, 1))
-            data["envelope"] = measure_envelope(n)
-            write_json(path, data)
-        if "carrier" in parts:         # oscillator level (not in the default parts: ~1 min per cycle here)
-            n = min(data.get("circuit", {}).get("cycles", cycles), max(cycles, 1))
-            data["carrier"] = measure_physical("carrier", n)
-            write_json(path, data)
+        from ..studies import cpu_circuit as study      # measuring loads VACASK and the processor; rendering does not
+        study.measure(out, only, cycles, max_step, reltol)
+    data = read_json(path, {}) or {}
     if "circuit" not in data:
         raise Mech2SpiceError(f"{path} has no circuit run: run without --render first")
+    if not data["circuit"]["halted"] and "iss_memory_after" not in data["circuit"]:
+        raise Mech2SpiceError(f"{path}'s circuit run predates the study (no iss_memory_after): measure it again "
+                              "with `--only circuit`")
     diffs = amplitude_differences(data["circuit"], data["envelope"]) if "envelope" in data else []
     _figure(data, diffs, out / "cpu_circuit.png")
     md = out / "cpu_circuit.md"
@@ -205,7 +103,7 @@ def _markdown(data: dict, diffs: list[float]) -> str:
                                         f"step) {'equals' if mem_ok else 'DIFFERS from'} the ISS's golden memory."
                                         if mem_ok is not None else
                                         f" (ran {c['cycles']} cycles); the circuit's memory after them "
-                                        f"{'equals' if c['circuit_memory'] == _iss_memory_after(len(rows)) else 'differs from'} "
+                                        f"{'equals' if c['circuit_memory'] == c['iss_memory_after'] else 'differs from'} "
                                         "the ISS's after as many cycles."),
         f"- one VACASK process: {c['simulator_wall_s']:.0f} s wall for the reset and {c['cycles']} cycles "
         f"({s['settle'] + s['pulse']:,} drive periods each), **{per_cycle:.1f} s per cycle**; "
@@ -315,13 +213,6 @@ def _gap_md(data: dict) -> list[str]:
             f"{best['s_per_cycle']:.1f} s per cycle here, {best['sieve_h']:.1f} h for the sieve's {SIEVE_CYCLES} "
             f"cycles; an hour allows {need:.1f} s per cycle, {best['s_per_cycle'] / need:.1f}x less. What would "
             "close the gap: docs/cpu_circuit.md."]
-
-
-def _iss_memory_after(cycles: int) -> list[int]:
-    iss = ISS(R.make_memory(R.load_program(PROGRAM)))
-    for _ in range(cycles):
-        iss.step()
-    return iss.mem.snapshot()
 
 
 def main(argv=None) -> int:

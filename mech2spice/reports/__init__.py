@@ -58,7 +58,7 @@ REPORTS: dict[str, Report] = {
     "robustness": Report("yield of the gate, a 3-gate chain and the adder under per-element spread (Monte-Carlo "
                          "on Dask), per-gate failure rate, the processor extrapolated", "~30 min",
                          ("robustness.md", "robustness.json", "robustness_yield.png", "robustness_noise.png"),
-                         ("quick",)),
+                         ("quick", "render")),
     "design": Report("automated block design: the structures searched, tolerance/margin/delay/energy Pareto "
                      "front, what limits each, the best block on the adder, sqrt and the sieve (needs "
                      "`mech2spice design`)", "~20 min", ("design.md", "design.json", "design_pareto.png"),

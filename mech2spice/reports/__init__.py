@@ -43,7 +43,7 @@ REPORTS: dict[str, Report] = {
     "cpu": Report("the 8-bit processor: ISA, gate counts, the sieve, Turing machines", "~2 min", ("cpu.md",),
                   ("skip_slow",)),
     "envelope": Report("where the envelope model agrees with RK4, why it differs, the step bound", "~10 min",
-                       ("envelope.md",), ("cache", "render")),
+                       ("envelope.md", "envelope.json"), ("quick", "cache", "render")),
     "performance": Report("what every fidelity level costs as circuits grow, and where the time goes",
                           "~15 min", ("performance.md",), ("only", "quick", "sqrt_rk4_full", "render")),
     "carrier": Report("the carrier engine (Lawson RK4): accuracy against RK4, convergence against wall time, its rate "

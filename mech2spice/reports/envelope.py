@@ -1,5 +1,5 @@
 """reports/envelope.md and envelope_*.png: where the envelope model agrees with RK4, why it differs, the step
-bound; rendered from reports/envelope.json (mech2spice/studies/envelope.py measures it).
+bound; rendered from envelope.json in the report directory (mech2spice/studies/envelope.py measures it).
 
 usage: mech2spice report envelope [--quick] [--cache DIR] [--render]
 """

@@ -1,5 +1,5 @@
 """Envelope vs RK4, scene by scene; the envelope step on the adder; the enforced stability bound, measured
-into reports/envelope.json (mech2spice/reports/envelope.py renders envelope.md and envelope_*.png from it).
+into envelope.json in the report directory (mech2spice/reports/envelope.py renders envelope.md and its PNGs).
 
 Scenes (mech2spice/experiments/scenes.py): single gate (4 nominal inputs; 16 band-edge input pairs), the 3-gate
 chain with its 00 -> 10 -> 00 switching transient and band-edge members (characterise.cascade), fan-out

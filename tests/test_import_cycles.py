@@ -1,4 +1,5 @@
-"""No import circles among mech2spice's modules (issue #28).
+"""No import circles among mech2spice's modules, and the lower layers import nothing above them (issue #28;
+docs/architecture.md, "Import order").
 
 Every `import` counts, at module level or inside a function: a function-level import that closes a circle
 still ties the two modules together (each needs the other to work) and hides the dependency.  The graph is
@@ -78,6 +79,9 @@ def _describe(g: nx.DiGraph, group: set[str]) -> str:
 
 def test_no_import_circles_beyond_the_allowed_ones():
     g = import_graph(PACKAGE)
+    # the graph sees the package's relative, lazy and `from pkg import module` imports
+    assert {("simulation", "experiments.clocking"), ("experiments.clocking", "experiments.characterise"),
+            ("spice.memory", "spice.openvaf")} <= set(g.edges)
     new = [c for c in circles(g) if not any(c <= allowed for allowed in ALLOWED)]
     assert not new, "import circles: " + "; ".join(_describe(g, c) for c in new)
 
@@ -117,3 +121,14 @@ def test_the_graph_sees_function_level_and_relative_circles(tmp_path):
     (pkg / "sub" / "e.py").write_text("def f():\n    from .._gone import x\n")
     assert unresolved(pkg) == ["pkg/sub/e.py:2: .._gone"]
     assert set(g.edges) == {("a", "sub.b"), ("sub.b", "a"), ("c", "sub.b"), ("d", "c"), ("d", "sub")}
+
+
+def test_lower_layers_import_nothing_above_them():
+    above = ("backends", "experiments", "simulation", "spice")
+    for name, target in import_graph(PACKAGE).edges:
+        if name.startswith("physics."):
+            assert not target.startswith(above), (name, target)
+        if name.startswith("spice."):
+            assert not target.startswith("backends"), (name, target)
+        if name == "simulation" and target.startswith("experiments."):
+            assert target == "experiments.clocking", target

@@ -173,7 +173,7 @@ def test_every_combinational_design_is_stable(design):
 
 
 def _clocked_cases():
-    from mech2spice.reports.fidelity import clocked_designs
+    from mech2spice.studies.fidelity import clocked_designs
     cases = {name: (str(path), steps) for name, (path, steps) in clocked_designs().items()}
     cases["dff"] = (str(ROOT / "verilog/dff.v"), [{"set": {"d": 1}, "cycles": 2}, {"set": {"d": 0}, "cycles": 2}])
     return cases

@@ -197,40 +197,32 @@ def test_a_state_file_holding_a_pickle_is_never_unpickled(tmp_path, capsys):
 
 # ------------------------------------------------------------------ report caches
 
-def _render(capsys, cache: Path, out: Path, needle: str) -> str:
+def _render(capsys, out: Path, needle: str) -> str:
     """`report envelope --render` refused: exit 2, one error line, the last (after the report's progress)."""
-    rc, _, err = run(capsys, "report", "envelope", "--render", "--cache", cache, "--out", out)
+    rc, _, err = run(capsys, "report", "envelope", "--render", "--out", out)
     errors = [s for s in err.splitlines() if "error" in s.lower()]
     assert rc == 2 and "Traceback" not in err and errors == err.splitlines()[-1:], err
     assert needle in errors[0], err
     return errors[0]
 
 
-def test_a_pickle_in_the_render_cache_is_never_loaded(tmp_path, capsys):
-    """(b) `report envelope --render --cache DIR` re-renders DIR/all.npz, a data file; the pickle an older
-    version kept there (or anyone put there) is never opened."""
+def test_a_pickle_as_the_rendered_json_is_never_loaded(tmp_path, capsys):
+    """(b) `report envelope --render` reads OUT/envelope.json as JSON: a pickle put there is refused, never
+    opened."""
     import pickle
-    marker, cache = tmp_path / "UNPICKLED", tmp_path / "cache"
-    cache.mkdir()
-    (cache / "all.pkl").write_bytes(pickle.dumps(_Payload(marker)))
-    _render(capsys, cache, tmp_path / "out", needle="is never opened")
+    marker, out = tmp_path / "UNPICKLED", tmp_path / "out"
+    out.mkdir()
+    (out / "envelope.json").write_bytes(pickle.dumps(_Payload(marker)))
+    _render(capsys, out, needle="is not the JSON a report wrote")
     assert not marker.exists()
 
 
-def test_a_crafted_results_file_in_the_render_cache_is_refused(tmp_path, capsys):
-    """(b) An all.npz holding a pickled object array, or a tree that is not the report's: one line, no code."""
-    marker, cache = tmp_path / "UNPICKLED", tmp_path / "cache"
-    cache.mkdir()
-    payload = np.empty(1, object)
-    payload[0] = _Payload(marker)
-    (cache / "all.npz").write_bytes(_npz(format="mech2spice-results", version=1, tree='{"$a": 0}', a0=payload))
-    _render(capsys, cache, tmp_path / "out", needle="is not a mech2spice results file")
-    assert not marker.exists()
-    (cache / "all.npz").write_bytes(_npz(format="mech2spice-results", version=1, tree='{"$x": 1}'))
-    _render(capsys, cache, tmp_path / "out", needle="unknown or malformed node")
-    from mech2spice.reports import _datafile
-    _datafile.dump(cache / "all.npz", ([{"scene": "x"}], {}, {}))
-    _render(capsys, cache, tmp_path / "out", needle="lacks what `report envelope` renders")
+def test_a_json_that_is_not_the_reports_is_refused_in_one_line(tmp_path, capsys):
+    """(b) JSON that lacks what the envelope report renders: one line, no traceback."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "envelope.json").write_text('{"scenes": [{"scene": "x"}]}')
+    _render(capsys, out, needle="lacks what `report envelope` renders")
 
 
 def test_the_measurement_cache_refuses_foreign_entries_and_never_reads_pickles(tmp_path):
@@ -238,8 +230,8 @@ def test_the_measurement_cache_refuses_foreign_entries_and_never_reads_pickles(t
     kept under that key, is refused; a .pkl beside it is ignored (measured again)."""
     import pickle
     from mech2spice.errors import Mech2SpiceError
-    from mech2spice.reports import _datafile
-    from mech2spice.reports.envelope import _is_run, cached
+    from mech2spice.studies import _datafile
+    from mech2spice.studies.envelope import _is_run, cached
     marker = tmp_path / "UNPICKLED"
     (tmp_path / "k.pkl").write_bytes(pickle.dumps(_Payload(marker)))
     run = {"amp": np.zeros((2, 1, 1)), "t": np.arange(2.0), "wall_s": 0.5}
@@ -256,7 +248,7 @@ def test_the_measurement_cache_refuses_foreign_entries_and_never_reads_pickles(t
 
 
 def test_results_files_round_trip_every_stored_type(tmp_path):
-    from mech2spice.reports import _datafile
+    from mech2spice.studies import _datafile
     obj = ({"a": np.arange(3.0), 2.0: {"x": (1, 2.5, None, True)}, (1, "b"): [np.float64(3.5), np.bool_(True),
             complex(1, -2), float("nan"), -np.inf]}, [np.array(["u", "vv"]), np.zeros((2, 3), complex)], "end")
     _datafile.dump(tmp_path / "r.npz", obj)

@@ -44,7 +44,7 @@ REPORTS: dict[str, Report] = {
     "cpu": Report("the 8-bit processor: ISA, gate counts, the sieve, Turing machines", "~2 min", ("cpu.md", "cpu.json"),
                   ("skip_slow", "render")),
     "envelope": Report("where the envelope model agrees with RK4, why it differs, the step bound", "~10 min",
-                       ("envelope.md",), ("cache", "render")),
+                       ("envelope.md", "envelope.json"), ("quick", "cache", "render")),
     "performance": Report("what every fidelity level costs as circuits grow, and where the time goes",
                           "~15 min", ("performance.md",), ("only", "quick", "sqrt_rk4_full", "render")),
     "carrier": Report("the carrier engine (Lawson RK4): accuracy against RK4, convergence against wall time, its rate "
@@ -59,7 +59,7 @@ REPORTS: dict[str, Report] = {
     "robustness": Report("yield of the gate, a 3-gate chain and the adder under per-element spread (Monte-Carlo "
                          "on Dask), per-gate failure rate, the processor extrapolated", "~30 min",
                          ("robustness.md", "robustness.json", "robustness_yield.png", "robustness_noise.png"),
-                         ("quick",)),
+                         ("quick", "render")),
     "design": Report("automated block design: the structures searched, tolerance/margin/delay/energy Pareto "
                      "front, what limits each, the best block on the adder, sqrt and the sieve (needs "
                      "`mech2spice design`)", "~20 min", ("design.md", "design.json", "design_pareto.png"),

@@ -1,125 +1,16 @@
-"""reports/design.md: automated design of the NOR block (issue #13).
+"""reports/design.md: automated design of the NOR block (issue #13), rendered from reports/design.json and the
+search record of `mech2spice design` (reports/design_search.json); mech2spice/studies/design.py measures it.
+The grammar and objective: docs/design.md.
 
-Reads the search record of `mech2spice design` (reports/design_search.json), adds per block (each
-structure's best, today's default, the paper's printed set) its energy per operation and switching delay
-(physics/energy.py), what limits its tolerance (physics/sensitivity.py: the limiting input point and the
-elements its margin is most sensitive to), and the command-line checks of the best block (`--params
-robust`): yield at 1 % spread, the six requirements, the adder, sqrt(2809) and the sieve.  Slow results are
-cached in reports/design.json (a rerun only adds what is missing).  The grammar and objective: docs/design.md.
+Run: mech2spice report design [--skip-slow] [--render]
 """
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
-import time
 from pathlib import Path
 
-import numpy as np
-
-from ..errors import Mech2SpiceError
-from ..studies._common import load_average
-from ._common import MACHINE, md_table, out_dir, pyplot, read_json, save_figure, write_json
-
-SEARCH = Path("reports/design_search.json")
-CACHE_NAME = "design.json"
-TOL_SAMPLES = 100
-SIGMA = 0.01
-CHECKS = {     # name -> argv after `mech2spice` (the issue's commands, on the robust preset and the default)
-    "robust_spread": ["gate", "--params", "robust", "--spread", "0.01", "--samples", "1000", "--json"],
-    "default_spread": ["gate", "--spread", "0.01", "--samples", "1000", "--json"],
-    "robust_gate": ["gate", "--params", "robust", "--json"],
-    "robust_sqrt": ["simulate", "verilog/sqrt.v", "--stimulus", "verilog/sqrt_2809.json", "--backend", "envelope",
-                    "--params", "robust", "--json"],
-    "robust_sieve": ["cpu", "run", "programs/sieve.asm", "--backend", "envelope", "--params", "robust", "--json"],
-}
-SLOW = ("robust_sieve",)
-ADDER_BACKENDS = ("rk4", "envelope", "ngspice")   # the issue: the adder on RK4 and ngspice (carrier level)
-
-
-def blocks(search: dict) -> dict:
-    """name -> GateParams: the best block of every searched structure, the default and the printed set."""
-    from ..physics.params import DEFAULT, PRINTED, block_params
-    out = {"default": DEFAULT, "printed": PRINTED}
-    for name, rec in search["structures"].items():
-        out[name] = block_params(rec["block_file"], name)
-    return out
-
-
-def block_figures(name: str, p, rec: dict | None, log) -> dict:
-    """Tolerance, margin, energy, delay and the limiting elements of one block."""
-    from ..design.search import measure
-    from ..experiments import energy
-    from ..physics import sensitivity
-    t0 = time.time()
-    m = rec["measured"] if rec else measure(p, SIGMA, 200, TOL_SAMPLES, 0, log)
-    e = energy.gate_energy(p)
-    out = {"dofs_per_gate": p.structure.n_dofs, "nominal_margin": m["nominal_margin"], "tolerance": m["tolerance"],
-           "tolerance_bracket": m["tolerance_bracket"], "yield_1pct": m["yield"],
-           "q1_1pct": m["margin_quantiles"]["1%"], "yield_samples": m["samples"], "energy": e}
-    sw = [v for v in e["switching"].values()]
-    out["delay_periods"] = max(v["delay_periods"] for v in sw) if all(v["delay_periods"] for v in sw) else None
-    out["energy_per_period"] = e["steady"]["00"]["per_period_model"] if e["steady"]["00"] else None
-    out["energy_per_switch"] = max(v["energy_model"] for v in sw) if out["delay_periods"] else None
-    out["threshold_gap"] = threshold_gap(p)
-    if m["nominal_margin"] > 0:
-        s = sensitivity.gate_sensitivity(p, per_band=8)
-        lim = s["limiting"]
-        top = np.argsort(-np.abs(lim["gradient"]))[:3]
-        out["limiting"] = {"inputs": lim["inputs"], "margin": lim["margin"], "sigma_1": lim["sigma_1"],
-                           "elements": [(s["elements"][k], float(lim["gradient"][k])) for k in top]}
-    out["wall_s"] = time.time() - t0
-    return out
-
-
-def threshold_gap(p) -> dict:
-    """The insulator position at the hardest '1' input point (both inputs at the top of band 0) and at the
-    hardest '0' one (one input at the bottom of band 1, the other at the bottom of band 0): the relative
-    change of the insulator's pull that has to separate the two output bands.  With equal input weights the
-    pull goes as P = x1^2 + x2^2: 0.898 against 0.980, a 9 % window."""
-    from ..physics import loaded, steady_batch
-    from ..physics.params import BAND0, BAND1
-    lg = loaded.build(p)
-    pts = np.array([[1.0, BAND0[1], BAND0[1]], [1.0, BAND1[0], BAND0[0]]])
-    st = steady_batch.stack([lg.model], lg.input_groups(), lg.gate.channel)
-    r = steady_batch.roots(st, 0, pts)
-    s = [r.s[(r.point == k) & r.stable] for k in range(2)]
-    P = [float(x1 ** 2 + x2 ** 2) for _, x1, x2 in pts]
-    out = {"P": P, "P_gap": P[1] / P[0] - 1}
-    if all(v.size == 1 for v in s):
-        out["s"] = [float(s[0][0]), float(s[1][0])]
-    return out
-
-
-def run_check(argv: list[str]) -> dict:
-    """One command line run through `python -m mech2spice.cli`; its JSON, exit code and wall time."""
-    t0, load0 = time.time(), load_average()[0]
-    root = Path(__file__).resolve().parents[2]
-    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *argv], capture_output=True, text=True, cwd=root,
-                       env={**os.environ, "PYTHONPATH": str(root)})
-    try:
-        data = json.loads(r.stdout)
-    except json.JSONDecodeError:
-        data = {"stdout": r.stdout[-2000:], "stderr": r.stderr[-2000:]}
-    return {"argv": argv, "rc": r.returncode, "wall_s": time.time() - t0, "json": data,
-            "loadavg_1min": [load0, load_average()[0]]}
-
-
-def adder_check(p, backend: str) -> dict:
-    """The 2-bit adder's 16 sums in one batch from rest on `backend`, decoded against the logic oracle."""
-    from .. import data, simulation
-    from ..backends import logic
-    from ..experiments.scenes import ADDER_INPUTS
-    from ..synthesis import synth
-    nl = synth.synthesize(data.verilog("adder2.v"))
-    t0, load0 = time.time(), load_average()[0]
-    res = simulation.run_physical(nl, p, list(ADDER_INPUTS), backend)
-    rows = [{"inputs": v, "s": r["outputs"].get("s"), "expected": logic.evaluate(nl, v)["s"],
-             "min_margin": r.get("min_margin")} for v, r in zip(ADDER_INPUTS, res)]
-    return {"backend": backend, "correct": sum(r["s"] == r["expected"] for r in rows), "of": len(rows),
-            "min_margin": min((r["min_margin"] for r in rows if r["min_margin"] is not None), default=None),
-            "rows": rows, "wall_s": time.time() - t0, "loadavg_1min": [load0, load_average()[0]]}
+from ..studies.design import ADDER_BACKENDS, CHECKS, SIGMA, TOL_SAMPLES, block_names, same_block, search_record
+from ._common import md_table, out_dir, pyplot, save_figure, stored
 
 
 def plot_pareto(figs: dict, path: Path, machine: str) -> None:
@@ -152,69 +43,18 @@ def plot_pareto(figs: dict, path: Path, machine: str) -> None:
 
 
 def write(directory="reports", skip_slow: bool = False, render: bool = False, search: str | None = None) -> Path:
-    """Write design.md and design_pareto.png from the search record; cache slow results in design.json
-    (render=True: measure nothing, use what the cache holds)."""
+    """Measure what design.json lacks (unless `render`) and write design.md and design_pareto.png from it."""
     d = out_dir(directory)
-    log = lambda msg: print(f"[design] {msg}", file=sys.stderr, flush=True)   # noqa: E731
-    rec = read_json(Path(search) if search else SEARCH)
-    if rec is None:
-        raise Mech2SpiceError(f"no search record at {search or SEARCH}: run `mech2spice design` first")
-    cache_path = d / CACHE_NAME
-    cache = read_json(cache_path, {})
-    figs = cache.setdefault("blocks", {})
-    for name, p in blocks(rec).items():
-        if name in figs and not _same_block(figs[name], rec["structures"].get(name)):
-            del figs[name]                  # the search record has a new best for this structure: measure it
-        if name not in figs and not render:
-            log(f"block {name}")
-            figs[name] = block_figures(name, p, rec["structures"].get(name), log)
-            write_json(cache_path, cache)
-    checks = cache.setdefault("checks", {})
-    robust = _robust_digest()
-    cache.pop("robust_sha256", None)          # an earlier layout kept one digest for all checks
-    stale = [k for k, v in checks.items() if k.startswith("robust") and v.get("robust_sha256") != robust]
-    if stale and not render:           # checks of another robust.json (or of one not recorded): run again
-        log(f"robust.json differs from the one {', '.join(stale)} ran on: rerunning them")
-        checks = cache["checks"] = {k: v for k, v in checks.items() if k not in stale}
-    todo = [n for n in CHECKS if n not in checks and not (skip_slow and n in SLOW) and not render]
-    from concurrent.futures import ThreadPoolExecutor, as_completed
-    with ThreadPoolExecutor(max_workers=2) as pool:     # the command checks are subprocesses: two at a time
-        futures = {pool.submit(run_check, CHECKS[n]): n for n in todo}
-        for n in todo:
-            log(f"check {n}: mech2spice {' '.join(CHECKS[n])}")
-        from ..physics.params import load_params
-        for backend in ADDER_BACKENDS:
-            key = f"robust_adder_{backend}"
-            if key not in checks and not render:
-                log(f"check {key}")
-                checks[key] = {**adder_check(load_params("robust"), backend), "robust_sha256": robust}
-                write_json(cache_path, cache)
-        for f in as_completed(futures):
-            checks[futures[f]] = {**f.result(), "robust_sha256": robust}
-            log(f"check {futures[f]} done ({checks[futures[f]]['wall_s']:.0f} s)")
-            write_json(cache_path, cache)
-    cache["machine"] = MACHINE         # the load of each search and check is recorded with it
-    write_json(cache_path, cache)
-    figs = {n: f for n, f in figs.items() if n in blocks(rec)}
+    if not render:
+        from ..studies import design as study          # measuring loads the engines; rendering does not
+        study.measure_into(d / "design.json", search, skip_slow)
+    rec, cache = search_record(search), stored(d / "design.json", "design")
+    figs = {n: f for n, f in cache["blocks"].items()
+            if n in block_names(rec) and same_block(f, rec["structures"].get(n))}
     plot_pareto(figs, d / "design_pareto.png", cache["machine"])
     md = d / "design.md"
-    md.write_text(markdown(rec, figs, checks, cache["machine"]))
+    md.write_text(markdown(rec, figs, cache.get("checks", {}), cache["machine"]))
     return md
-
-
-def _same_block(fig: dict, rec: dict | None) -> bool:
-    """Whether cached figures were measured on this search entry (its measured margin and tolerance)."""
-    if rec is None:
-        return True                         # default / printed: not from the search
-    m = rec["measured"]
-    return fig["nominal_margin"] == m["nominal_margin"] and fig["tolerance"] == m["tolerance"]
-
-
-def _robust_digest() -> str:
-    """sha256 of the shipped robust block file: its checks are valid for this content only."""
-    import hashlib
-    from .. import data
-    return hashlib.sha256(Path(data.path("blocks", "robust.json")).read_bytes()).hexdigest()
 
 
 def _load(x) -> str:

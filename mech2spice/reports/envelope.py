@@ -1,168 +1,67 @@
-"""Envelope vs RK4, scene by scene; the envelope step on the adder; the enforced stability bound.
+"""reports/envelope.md and envelope_*.png: where the envelope model agrees with RK4, why it differs, the step
+bound; rendered from envelope.json in the report directory (mech2spice/studies/envelope.py measures it).
 
-Writes reports/envelope.md and reports/envelope_*.png (~6 min on a 2-core machine).
-
-Scenes (mech2spice/experiments/scenes.py): single gate (4 nominal inputs; 16 band-edge input pairs), the 3-gate
-chain with its 00 -> 10 -> 00 switching transient and band-edge members (characterise.cascade), fan-out
-2 and 3 (characterise.fanout_test), the 2-bit adder (all 16 inputs after 2900 periods at 0, as in
-mech2spice/reports/adder.py) and the latch pulse sequence (characterise.latch_sequence).  Each runs on RK4 at 80
-steps/period (the reference the issue names), on RK4 at 160 (to measure the reference's own error) and
-on the envelope model; variants of the envelope equations (validate.VARIANTS) apportion what is left.
-
-usage: mech2spice report envelope [--cache DIR [--render]]
+usage: mech2spice report envelope [--quick] [--cache DIR] [--render]
 """
 from __future__ import annotations
 
 import math
-import platform
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import Mech2SpiceError
-from ..experiments import characterise as ch
-from ..experiments import validate as V
-from ..experiments import scenes as S
-from ..backends import envelope
 from ..physics.params import DEFAULT
-from . import _datafile
-from ._common import SANDBOX, log, out_dir, pyplot, save_figure, shade_bands, timed
+from ._common import out_dir, pyplot, save_figure, shade_bands, stored, write_json
 
 plt = pyplot()
-MACHINE = f"{SANDBOX}, shared"
 P = DEFAULT
-STEPS = sorted({0.5, 2.0, envelope.DEFAULT_STEP})   # envelope steps per scene (periods); 2 was the default until 5c6b8d2
-SWEEP = [0.25, 0.5, 1, 2, 4, 6, 8, 12]          # adder, through envelope.integrate
-REFUSE = [16, 20, 24]                            # beyond the enforced bound: must be refused (24: unstable)
-FREE = [6, 8, 10, 12, 16, 20, 21, 22, 23, 24, 26, 28, 32]   # adder, no bound check (validate.integrate_free)
-STAB_AT = [0, 20, 100, 300, 1000, 2900, 2920, 3000, 3200, 3500, 4000, 5800]
 
 
-def cached(cache: Path | None, key: str, fn, valid):
-    """fn()'s result, kept as CACHE/KEY.npz (a data file: _datafile.py) and read back from there later (no
-    cache: just fn()).  The cache may hold anyone's files: one that is not a results file, or whose content
-    fails `valid`, is refused in one line (delete it to measure again); a pickle there is never opened."""
-    if cache is None:
-        return fn()
-    f = cache / f"{key}.npz"
-    if f.exists():
-        out = _datafile.load(f)
-        if not valid(out):
-            raise Mech2SpiceError(f"{f} does not hold what `report envelope` keeps there: delete it to measure again")
-        return out
-    out = fn()
-    cache.mkdir(parents=True, exist_ok=True)
-    _datafile.dump(f, out)
-    return out
-
-
-def _is_run(r) -> bool:
-    """validate.run's result: amplitudes (periods, probes, batch) and times."""
-    return (isinstance(r, dict) and isinstance(r.get("amp"), np.ndarray) and r["amp"].ndim == 3
-            and isinstance(r.get("t"), np.ndarray) and isinstance(r.get("wall_s"), float))
-
-
-def _is_timed(r) -> bool:
-    """timed(latch_sequence): (its dict, wall seconds)."""
-    return isinstance(r, tuple) and len(r) == 2 and isinstance(r[0], dict) and isinstance(r[1], float)
-
-
-# --- measurements --------------------------------------------------------------------------------
-def scenes() -> list[S.Scene]:
-    """The seven scenes: the gate (nominal, band edge), the chain, fan-out 2 and 3, the adder, the latch."""
-    return [S.gate_scene(P, "nominal"), S.gate_scene(P, "edge"), S.chain_scene(P), S.fanout_scene(P, 2),
-            S.fanout_scene(P, 3), S.adder_scene(P), S.latch_scene(P)]
-
-
-def measure_scene(sc: S.Scene, cache) -> dict:
-    """One scene on RK4 at 80 and 160 steps/period and on the envelope (steps, variants), compared."""
-    log(f"{sc.name}: RK4 80 and 160 steps/period, {sc.periods} periods, batch {sc.stimulus.batch}")
-    r80 = cached(cache, f"{sc.name}_rk4_80", lambda: V.run(sc, "rk4", 80), _is_run)
-    r160 = cached(cache, f"{sc.name}_rk4_160", lambda: V.run(sc, "rk4", 160), _is_run)
-    out = {"scene": sc.name, "description": sc.description, "oscillators": sc.model.n, "batch": sc.stimulus.batch,
-           "periods": sc.periods, "bound": envelope.max_step_periods(sc.model),
-           "wall_rk4_80": r80["wall_s"], "wall_rk4_160": r160["wall_s"],
-           "rk4_80_vs_160": V.compare(sc, r160, r80), "env": {}, "variants": {}}
-    steps = STEPS + ([1.0] if sc.name == "latch" else [])       # clocked designs run at 1 period
-    for step in steps:
-        e = V.run(sc, "envelope", step)
-        out["env"][step] = {"wall_s": e["wall_s"], "vs80": V.compare(sc, r80, e), "vs160": V.compare(sc, r160, e),
-                            "run": e}
-        log(f"  envelope step {step:g}: {e['wall_s']:.2f} s, vs RK4-80 {_short(out['env'][step]['vs80'])}")
-    vstep = 0.5 if sc.model.n < 60 else 1.0
-    for name, cls in V.VARIANTS.items():
-        e = V.run(sc, "envelope", vstep, env=cls(sc.model))
-        out["variants"][name] = {"step": vstep, "wall_s": e["wall_s"], "vs160": V.compare(sc, r160, e),
-                                 "vs80": V.compare(sc, r80, e)}
-        log(f"  variant {name:8s} step {vstep:g}: vs RK4-160 {_short(out['variants'][name]['vs160'])}")
-    out["r80"], out["r160"] = r80, r160
-    return out
-
-
-def _short(c: dict) -> str:
-    return f"amp {c['amp_err']:.2e} u_R, time {100 * c['time_err']:.2f} %, traj {c['traj_err']:.3f} u_R"
-
-
-def latch_official(cache) -> dict:
-    """characterise.latch_sequence on both backends; if its envelope path fails, the identical model, schedule
-    and decoding through scenes.latch_scene / characterise.latch_decode (checked equal on RK4), with the error recorded."""
-    log("latch: characterise.latch_sequence on rk4 and envelope")
-    r = cached(cache, "latch_seq_rk4", lambda: timed(lambda: ch.latch_sequence(P, "rk4")), _is_timed)
-    error = None
+def write(directory="reports", quick: bool = False, cache=None, render: bool = False) -> Path:
+    """Measure every scene into envelope.json (unless `render`; RK4 runs kept in `cache` if given) and write
+    envelope.md and its figures from it."""
+    out = out_dir(directory)
+    if not render:
+        from ..studies import envelope as study        # measuring loads the engines; rendering does not
+        write_json(out / "envelope.json", study.measure(quick=quick, cache=cache))
+    path = out / "envelope.json"
     try:
-        e = timed(lambda: ch.latch_sequence(P, "envelope"))
-    except Exception as ex:                       # noqa: BLE001 - reported, not hidden
-        error = f"{type(ex).__name__}: {ex}"
-        log(f"  characterise.latch_sequence(p, 'envelope') failed: {error}; using validate.latch_scene")
-        sc = S.latch_scene(P)
-        run = V.run(sc, "envelope", 0.5)
-        e = (ch.latch_decode(sc, run["amp"][1:, :, 0]), run["wall_s"])
-    res = V.latch_compare(P, env_result=e[0], rk4_result=r[0])
-    res["wall_rk4"], res["wall_env"], res["envelope_error"] = r[1], e[1], error
-    return res
+        return render_report(loaded(stored(path, "envelope")), out)
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as err:   # JSON is anyone's file
+        raise Mech2SpiceError(f"{path} lacks what `report envelope` renders ({type(err).__name__}: "
+                              f"{str(err)[:120]})") from None
 
 
-def adder_sweep(sc: S.Scene, r80: dict, r160: dict) -> dict:
-    """The adder over envelope steps: the sweep, steps that must be refused, unchecked steps, eigenvalues."""
-    log("adder: envelope step sweep")
-    rows = []
-    for step in SWEEP:
-        e = V.run(sc, "envelope", step)
-        rows.append({"step": step, "wall_s": e["wall_s"], "vs80": V.compare(sc, r80, e),
-                     "vs160": V.compare(sc, r160, e), "path": "envelope.integrate"})
-        log(f"  step {step:g}: {e['wall_s']:.2f} s {_short(rows[-1]['vs80'])}")
-    refused = []
-    for step in REFUSE:
-        try:
-            V.run(sc, "envelope", step)
-            refused.append({"step": step, "refused": False})
-        except Mech2SpiceError as ex:
-            refused.append({"step": step, "refused": True, "message": str(ex)})
-    free = []
-    env = envelope.Envelope(sc.model)
-    for step in FREE:
-        e = V.run(sc, "envelope", step, env=env)
-        ok = bool(np.isfinite(e["amp"]).all())
-        row = {"step": step, "wall_s": e["wall_s"], "finite": ok, "path": "validate.integrate_free"}
-        if ok:
-            row["vs80"] = V.compare(sc, r80, e)
-        else:
-            bad = np.flatnonzero(~np.isfinite(e["amp"]).all(axis=(1, 2)))[0]
-            row["blowup_period"] = float(e["t"][bad])
-        free.append(row)
-        log(f"  free step {step:g}: {'finite ' + _short(row['vs80']) if ok else 'BLEW UP at %.0f' % row['blowup_period']}")
-    log("adder: linearised envelope eigenvalues along the trajectory")
-    stab = V.stability_along(sc, STAB_AT)
-    gate_stab = V.stability_along(S.gate_scene(P, "nominal"), [0, 100, 2500])
-    chain_stab = V.stability_along(S.chain_scene(P, edges=False), [0, 200, 1500, 1700, 3000, 3200, 4500])
-    env = envelope.Envelope(sc.model)
-    return {"sweep": rows, "refused": refused, "free": free, "stability": stab, "bound": envelope.max_step_periods(sc.model),
-            "gershgorin_rate": envelope.gershgorin_rate(env), "spectral_rate": envelope.spectral_rate(env),
-            "rate_safety": envelope.RATE_SAFETY, "gate_stability": gate_stab, "chain_stability": chain_stab,
-            "gate_bound": envelope.max_step_periods(S.gate_scene(P).model),
-            "chain_bound": envelope.max_step_periods(S.chain_scene(P).model),
-            "T": P.period}
+def render_report(d: dict, out: Path) -> Path:
+    """envelope.md and its figures from the loaded JSON."""
+    by = {r["scene"]: r for r in d["scenes"]}
+    tr = d["traces"]
+    fig_chain(tr["chain3"], d["settings"], out / "envelope_chain.png")
+    fig_adder(tr["adder2"], by["adder2"]["periods"] // 2, d["settings"], out / "envelope_adder.png")
+    fig_latch(tr["latch"], out / "envelope_latch.png")
+    fig_sweep(d["sweep"], d["settings"], out / "envelope_step_sweep.png")
+    (out / "envelope.md").write_text(report(d, by))
+    return out / "envelope.md"
+
+
+def loaded(d: dict) -> dict:
+    """The JSON with what JSON cannot key or hold put back: envelope steps (float) and periods (int) as keys,
+    traces as arrays, the worst state's eigenvalues as complex numbers."""
+    for r in d["scenes"]:
+        r["env"] = {float(k): v for k, v in r["env"].items()}
+    sw = d["sweep"]
+    sw["two_omega"] = {int(k): v for k, v in sw["two_omega"].items()}
+    sw["eigs_worst"] = np.asarray(sw["eigs_worst"]["re"]) + 1j * np.asarray(sw["eigs_worst"]["im"])
+    for runs in d["traces"].values():
+        for run in [v for v in runs.values() if isinstance(v, dict) and "amp" in v] + list(runs.get("sequence", {}).values()):
+            run["t"], run["amp"] = np.asarray(run["t"], float), np.asarray(run["amp"], float)
+    return d
+
+
+def rk4_growth(z):
+    """|R(z)| of classic RK4 (its amplification per step of h lambda = z): the stability region is |R| <= 1."""
+    return np.abs(1 + z + z ** 2 / 2 + z ** 3 / 6 + z ** 4 / 24)
 
 
 # --- figures ---------------------------------------------------------------------------------------
@@ -170,37 +69,35 @@ def _bands(ax, off=0.0):
     shade_bands(ax, off, alpha=0.08)
 
 
-def fig_chain(res: dict, path: Path) -> None:
+def fig_chain(tr: dict, st: dict, path: Path) -> None:
     """The chain's 00 -> 10 -> 00 transient and its (0.67, 0.67) band-edge member: RK4 vs envelope."""
-    sc_name = "chain3"
-    r, e = res["r80"], res["env"][envelope.DEFAULT_STEP]["run"]
-    r160 = res["r160"]
+    sc_name, E = "chain3", st["default_step"]
+    r, e, r160 = tr["rk4_80"], tr["envelope"], tr["rk4_160"]
     fig, axs = plt.subplots(1, 2, figsize=(13, 4.2))
     for j, col in enumerate(["tab:blue", "tab:orange", "tab:green"]):
         axs[0].plot(r["t"], r["amp"][:, j, 0], color=col, lw=1.2, label=f"g{j} RK4 80/T")
         axs[0].plot(e["t"], e["amp"][:, j, 0], color="k", lw=0.8, ls="--")
-    axs[0].plot([], [], "k--", lw=0.8, label=f"envelope, step {envelope.DEFAULT_STEP:g} T")
+    axs[0].plot([], [], "k--", lw=0.8, label=f"envelope, step {E:g} T")
     _bands(axs[0])
-    axs[0].axhline(S.MID, color="grey", lw=0.5, ls=":")
+    axs[0].axhline(st["mid"], color="grey", lw=0.5, ls=":")
     axs[0].set(xlabel="drive periods", ylabel="|A| [u_R]", title=f"{sc_name}: inputs 00 -> 10 -> 00 (member 0)")
     axs[0].legend(fontsize=8)
-    b = 3                                      # the 0.67, 0.67 member: the slowest, most marginal switch
+    b = 1                  # the traces' second member, 3 of the scene: (0.67, 0.67), the slowest, most marginal switch
     for j, col in enumerate(["tab:blue", "tab:orange", "tab:green"]):
         axs[1].plot(r["t"], r["amp"][:, j, b], color=col, lw=1.2, label=f"g{j} RK4 80/T")
         axs[1].plot(r160["t"], r160["amp"][:, j, b], color=col, lw=0.8, ls=":", label=f"g{j} RK4 160/T")
         axs[1].plot(e["t"], e["amp"][:, j, b], color="k", lw=0.8, ls="--")
     _bands(axs[1])
-    axs[1].axhline(S.MID, color="grey", lw=0.5, ls=":")
+    axs[1].axhline(st["mid"], color="grey", lw=0.5, ls=":")
     axs[1].set(xlim=(0, 3000), xlabel="drive periods",
                title="band-edge member: inputs held at (0.67, 0.67) F_R; dashed = envelope")
     axs[1].legend(fontsize=7, ncol=2)
     save_figure(fig, path, dpi=100)
 
 
-def fig_adder(res: dict, path: Path) -> None:
+def fig_adder(tr: dict, hold: int, st: dict, path: Path) -> None:
     """The adder's three sum amplitudes for all 16 inputs: RK4 at 80 steps/period vs the envelope."""
-    r, e = res["r80"], res["env"][envelope.DEFAULT_STEP]["run"]
-    hold = res["periods"] // 2
+    r, e = tr["rk4_80"], tr["envelope"]
     fig, axs = plt.subplots(4, 4, figsize=(13, 9), sharex=True, sharey=True)
     for b in range(16):
         ax = axs[b // 4, b % 4]
@@ -215,22 +112,22 @@ def fig_adder(res: dict, path: Path) -> None:
     for ax in axs[-1]:
         ax.set_xlabel("periods after the inputs change")
     fig.suptitle(f"2-bit adder: |s[0]| (top), |s[1]|, |s[2]| [u_R]; RK4 80 steps/period (colour) vs envelope "
-                 f"step {envelope.DEFAULT_STEP:g} periods (black dashed)")
+                 f"step {st['default_step']:g} periods (black dashed)")
     save_figure(fig, path, dpi=90)
 
 
-def fig_latch(res: dict, latch: dict, path: Path) -> None:
+def fig_latch(tr: dict, path: Path) -> None:
     """The latch pulse sequence on RK4 and on the envelope, and their difference."""
-    r, e = res["r80"], res["env"][1.0]["run"]
-    ra, ea = latch["rk4"]["amplitude"], latch["env"]["amplitude"]
+    r, e = tr["rk4_80"], tr["envelope_1"]
+    ra, ea = tr["sequence"]["rk4"]["amp"], tr["sequence"]["env"]["amp"]
     fig, axs = plt.subplots(2, 1, figsize=(13, 6), sharex=True)
-    t = np.arange(1, ra.shape[0] + 1)
+    t = tr["sequence"]["rk4"]["t"]
     axs[0].plot(t, ra[:, 0], lw=1.2, label="q[0] RK4 80/T (latch_sequence)")
     axs[0].plot(t, ea[:, 0], "k--", lw=0.8, label="q[0] envelope, step 1/2 T (latch_sequence)")
     axs[0].plot(t, ra[:, 1], lw=1.0, color="tab:green", label="q0.m (loop node) RK4")
     axs[0].plot(t, ea[:, 1], ls="--", color="tab:olive", lw=0.8, label="q0.m envelope")
     _bands(axs[0])
-    for s in latch["rk4"]["starts"]:
+    for s in tr["starts"]:
         axs[0].axvline(s, color="grey", lw=0.4)
     axs[0].set(ylabel="|A| [u_R]", title="latch pulse sequence (verilog/dff.v)")
     axs[0].legend(fontsize=8, ncol=2)
@@ -242,7 +139,7 @@ def fig_latch(res: dict, latch: dict, path: Path) -> None:
     save_figure(fig, path, dpi=90)
 
 
-def fig_sweep(sw: dict, path: Path) -> None:
+def fig_sweep(sw: dict, st: dict, path: Path) -> None:
     """The adder's error against envelope step and wall time; the RK4 stability region and the eigenvalues."""
     fig, axs = plt.subplots(1, 3, figsize=(15, 4.2))
     rows = [r for r in sw["sweep"]]
@@ -271,7 +168,7 @@ def fig_sweep(sw: dict, path: Path) -> None:
     ax.legend(fontsize=7)
     ax = axs[2]
     x, y = np.meshgrid(np.linspace(-3.5, 1, 400), np.linspace(-3.5, 3.5, 400))
-    ax.contour(x, y, V.rk4_growth(x + 1j * y), levels=[1.0], colors="k")
+    ax.contour(x, y, rk4_growth(x + 1j * y), levels=[1.0], colors="k")
     T = sw["T"]
     ev = sw["eigs_worst"]
     for h, c in ((sw["bound"], "r"), (lin, "purple")):
@@ -293,7 +190,6 @@ def scene_rows(results: list[dict]) -> str:
     """Markdown rows: each scene at each envelope step against RK4 80 and 160, pass or FAIL."""
     out = []
     for r in results:
-        step = envelope.DEFAULT_STEP
         for st, e in r["env"].items():
             c80, c160 = e["vs80"], e["vs160"]
             ok = c80["amp_ok"] and c80["time_ok"] and c80["crossing_count_mismatch"] == 0
@@ -303,7 +199,6 @@ def scene_rows(results: list[dict]) -> str:
                        f"{fmt_pct(c160['time_err'])} | {r['rk4_80_vs_160']['amp_err']:.1e} | "
                        f"{fmt_pct(r['rk4_80_vs_160']['time_err'])} | {e['wall_s']:.1f} / {r['wall_rk4_80']:.1f} | "
                        f"{'**pass**' if ok else 'FAIL'} |")
-        del step
     return "\n".join(out)
 
 
@@ -333,78 +228,10 @@ def variant_rows(results: list[dict]) -> str:
     return "\n".join(out)
 
 
-def write(directory="reports", cache=None, render: bool = False) -> Path:
-    """Measure every scene (RK4 runs kept in `cache` if given) and write envelope.md and its figures;
-    `render`: only re-render from CACHE/all.npz."""
-    out = out_dir(directory)
-    cache = Path(cache) if cache else None
-    if render:
-        if cache is None:
-            raise Mech2SpiceError("envelope: --render needs --cache DIR (it re-renders DIR/all.npz)")
-        return _render_stored(out, cache)
-    t_start = time.perf_counter()
-    results = [measure_scene(sc, cache) for sc in scenes()]
-    by = {r["scene"]: r for r in results}
-    latch = latch_official(cache)
-    adder = scenes()[5]
-    sw = adder_sweep(adder, by["adder2"]["r80"], by["adder2"]["r160"])
-    sw.update(worst_state(adder, sw))
-    sw["total_s"] = time.perf_counter() - t_start
-    if cache is not None:
-        _datafile.dump(cache / "all.npz", (results, latch, sw))
-    return _render(out, results, latch, sw, sw["total_s"])
-
-
-def _render_stored(out: Path, cache: Path) -> Path:
-    """--render: the report from CACHE/all.npz.  What the report reads is its schema: a file that lacks it
-    is refused in one line (like one that is no results file at all)."""
-    f = cache / "all.npz"
-    if not f.exists():
-        old = " (its all.pkl, a pickle of an older mech2spice, is never opened: code could run)" \
-            if (cache / "all.pkl").exists() else ""
-        raise Mech2SpiceError(f"envelope: no stored results {f}{old}: run `mech2spice report envelope --cache "
-                              f"{cache}` first")
-    stored = _datafile.load(f)
-    if not (isinstance(stored, tuple) and len(stored) == 3 and isinstance(stored[0], list)
-            and isinstance(stored[1], dict) and isinstance(stored[2], dict)):
-        raise Mech2SpiceError(f"{f} is not `report envelope`'s results (results, latch, sweep)")
-    results, latch, sw = stored
-    try:
-        return _render(out, results, latch, sw, float(sw.get("total_s", 0.0)))
-    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as err:
-        raise Mech2SpiceError(f"{f} lacks what `report envelope` renders ({type(err).__name__}: "
-                              f"{str(err)[:120]})") from None
-
-
-def worst_state(adder: S.Scene, sw: dict) -> dict:
-    """Eigenvalues at the state that limits the step most (for the stability-region plot) and the
-    2-omega split of the insulators' forcing along the adder's trajectory."""
-    worst = min(sw["stability"], key=lambda s: s["rk4_stable_step_periods"])
-    env = envelope.Envelope(adder.model)
-    st = V.trajectory_states(adder, 2.0, [worst["period"]])[worst["period"]]
-    F = env.forcing(adder.stimulus.at(worst["period"] * P.period + 1e-9))
-    eigs = [V.jacobian_eigs(env, st[0][:, b], st[1][:, b], st[2][:, b], F[:, b]) for b in range(16)]
-    return {"eigs_worst": np.concatenate(eigs),
-            "two_omega": {t: V.two_omega_split(adder.model, x[0])
-                          for t, x in V.trajectory_states(adder, 2.0, [2920, 3100, 5800]).items()},
-            "Zs2": abs(P.k_i - 4 * P.omega ** 2 * P.m_i + 2j * P.omega * P.c_i)}
-
-
-def _render(out: Path, results, latch, sw, total) -> Path:
-    by = {r["scene"]: r for r in results}
-    log("figures")
-    fig_chain(by["chain3"], out / "envelope_chain.png")
-    fig_adder(by["adder2"], out / "envelope_adder.png")
-    fig_latch(by["latch"], latch, out / "envelope_latch.png")
-    fig_sweep(sw, out / "envelope_step_sweep.png")
-    (out / "envelope.md").write_text(report(results, by, latch, sw, total))
-    log(f"wrote {out / 'envelope.md'} ({total / 60:.1f} min)")
-    return out / "envelope.md"
-
-
-def report(results, by, latch, sw, total) -> str:
+def report(d: dict, by: dict) -> str:
     """The text of envelope.md."""
-    E = envelope.DEFAULT_STEP
+    results, latch, sw, total, st = d["scenes"], d["latch"], d["sweep"], d["total_s"], d["settings"]
+    E = st["default_step"]
     worst_amp = max(r["env"][E]["vs80"]["amp_err"] for r in results)
     worst_time = max(r["env"][E]["vs80"]["time_err"] for r in results)
     worst_scene = max(results, key=lambda r: r["env"][E]["vs80"]["time_err"])
@@ -465,7 +292,7 @@ def report(results, by, latch, sw, total) -> str:
     lines = f"""# The envelope model against RK4
 
 Generated by `mech2spice report envelope` (scenes and comparisons in `mech2spice/experiments/validate.py`) on
-the **{MACHINE}** (Python {platform.python_version()}), {total / 60:.1f} min in all. The machine is shared with
+the **{d['machine']}** (Python {d['python']}), {total / 60:.1f} min in all. The machine is shared with
 other jobs, so the wall times here are indicative only; `reports/performance.md` measures speed properly.
 
 ## Verdict
@@ -473,7 +300,7 @@ other jobs, so the wall times here are indicative only; `reports/performance.md`
 **Every scene meets both criteria at the default envelope step ({E:g} drive periods, `envelope.DEFAULT_STEP`;
 `backends/envelope.default_step` would lower it below a model's stability bound, which does not bind in any scene here),
 at 2 periods (the default when this study started) and at 1/2 period**: settled amplitudes within {worst_amp:.1e} u_R of RK4 at 80 steps/period (criterion
-{V.AMP_TOL} u_R), threshold-crossing times within {100 * worst_time:.2f} % (criterion {100 * V.TIME_TOL:.0f} %;
+{st['amp_tol']} u_R), threshold-crossing times within {100 * worst_time:.2f} % (criterion {100 * st['time_tol']:.0f} %;
 worst: {worst_scene['scene']}), the same number of crossings in all {ncross} (output, input change, batch member)
 cases that cross the threshold ({mism} mismatches), and the latch sequence decoded identically
 ({'all pass' if all_pass else 'NOT all pass'}).
@@ -491,19 +318,19 @@ cases that cross the threshold ({mism} mismatches), and the latch sequence decod
   largest |eigenvalue| of the linear part at rest x {sw['rate_safety']}), where the linearised envelope
   equations along the trajectory allow RK4 steps up to {lin:.1f} periods and the measured onset lies between
   {last_ok:g} (finite) and {first_bad:g} periods (blew up): **safe, {lin / sw['bound']:.1f}x below the onset**. The
-  Gershgorin bound used before allowed {envelope.RK4_STABILITY / sw['gershgorin_rate'] / sw['T']:.2f} periods
-  ({lin * sw['gershgorin_rate'] * sw['T'] / envelope.RK4_STABILITY:.1f}x conservative). Accuracy, not stability,
+  Gershgorin bound used before allowed {st['rk4_stability'] / sw['gershgorin_rate'] / sw['T']:.2f} periods
+  ({lin * sw['gershgorin_rate'] * sw['T'] / st['rk4_stability']:.1f}x conservative). Accuracy, not stability,
   limits the step: errors are flat up to 4 periods and grow beyond (switching times within 2 % up to 8).
 
 ## Scenes
 
 All from rest; RK4 at 80 steps/period is the reference the criteria use, RK4 at 160 shows the reference's own
 error. 'time err' = largest relative difference of the first and of the last threshold crossing (the midpoint
-between the bands, `scenes.MID` = {S.MID:.4f} u_R) after each input change, over every output and batch
+between the bands, `scenes.MID` = {st['mid']:.4f} u_R) after each input change, over every output and batch
 member that crosses it; 'crossings' counts those cases (in brackets: cases where the two backends cross a
 different number of times, i.e. a hazard one of them misses). 'traj' = largest |envelope - RK4| anywhere on the
 per-period amplitude trajectory (envelope interpolated to RK4's period midpoints), transients included; it has
-no criterion. Settled = mean of the {V.AVG} periods before each input change and before the end.
+no criterion. Settled = mean of the {st['avg']} periods before each input change and before the end.
 
 | scene | oscillators x batch | periods | envelope step | settled diff vs RK4-80 [u_R] | time err vs RK4-80 | crossings (mismatch) | traj vs RK4-80 [u_R] | settled diff vs RK4-160 | time err vs RK4-160 | RK4-80 vs RK4-160 settled | RK4-80 vs RK4-160 time | wall envelope / RK4-80 [s] | criteria |
 |---|---|---|---|---|---|---|---|---|---|---|---|---|---|
@@ -627,7 +454,7 @@ Steps beyond the bound through `envelope.integrate`:
 
 **Is the bound right?** It is {sw['rate_safety']} x the largest |eigenvalue| of the envelope equations' linear
 part at rest (`envelope.spectral_rate`: ARPACK on -Bop^-1 Z0 for the amplitudes, exact roots for the insulators):
-{sw['spectral_rate']:.3f} 1/s -> {envelope.RK4_STABILITY} / ({sw['rate_safety']} x rate) = {sw['bound']:.2f} periods
+{sw['spectral_rate']:.3f} 1/s -> {st['rk4_stability']} / ({sw['rate_safety']} x rate) = {sw['bound']:.2f} periods
 on the adder ({sw['gate_bound']:.2f} on a lone gate, {sw['chain_bound']:.2f} on the chain). Until this version it
 was a Gershgorin bound, rate {sw['gershgorin_rate']:.3f} 1/s. The eigenvalues of the
 linearised envelope equations (Jacobian at the actual states, every batch member) along the adder's trajectory:

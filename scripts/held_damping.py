@@ -40,6 +40,7 @@ def main() -> int:
     p, t0 = load_params(args.params), time.time()
     if args.damp is None:
         out = held.held_growth(p)
+        out["growth"] = held.json_rate(out["growth"])
     else:
         p, out = held.damp_insulator(p, log=lambda m: print(m, file=sys.stderr, flush=True))
         args.damp.write_text(json.dumps(block_file(args.params, p, out), indent=1) + "\n")

@@ -37,13 +37,13 @@ Q_MIN = 0.2               # below it the insulator is so overdamped that its own
 
 def held_growth(p: GateParams) -> dict:
     """counter4 through HELD_STEPS on the envelope: the largest growth rate (per drive period) of any cycle's
-    held state (inf where a cycle found no fixed point: the network circles it), per cycle, and whether every
-    read was valid."""
+    held state (inf where a cycle found no fixed point: the network circles it), per cycle (None for inf),
+    and whether every read was valid."""
     nl = synth.synthesize(str(verilog("counter4.v")))
     cycles = simulation.expand_steps(HELD_STEPS)
     run = simulation.run_clocked_physical(nl, p, cycles, "envelope", clocking.clock_timing(nl, p=p))
     rates = [_growth(e["stability"]) for e in run["trace"]]
-    return {"growth": max(rates), "per_cycle": rates, "valid": run["valid"],
+    return {"growth": max(rates), "per_cycle": [json_rate(r) for r in rates], "valid": run["valid"],
             "outputs": [e["outputs"]["q"] for e in run["trace"]]}
 
 
@@ -51,6 +51,11 @@ def _growth(stability: dict) -> float:
     """A read's leading growth rate; inf where no fixed point was found near the state."""
     g = stability.get("growth_rate")
     return math.inf if g is None or not stability.get("fixed_point_found") else float(g)
+
+
+def json_rate(rate: float) -> float | None:
+    """A growth rate for JSON: None for inf (no fixed point found)."""
+    return None if math.isinf(rate) else rate
 
 
 def with_insulator_q(p: GateParams, q: float) -> GateParams:
@@ -75,7 +80,7 @@ def damp_insulator(p: GateParams, floor: float = HELD_GROWTH_FLOOR, log=lambda m
     q, tried = insulator_q(p), []
     while True:
         h = held_growth(p)
-        tried.append({"q_insulator": q, "growth": h["growth"], "valid": h["valid"]})
+        tried.append({"q_insulator": q, "growth": json_rate(h["growth"]), "valid": h["valid"]})
         log(f"insulator Q {q:.3f}: held counter4 growth {h['growth']:+.2e} per period")
         if h["growth"] <= -floor or q * Q_STEP < Q_MIN:
             return p, {"floor": floor, "reached": h["growth"] <= -floor, "q_insulator": q, "tried": tried}

@@ -51,3 +51,15 @@ def test_damping_stops_at_the_floor():
     q = [t["q_insulator"] for t in rec["tried"]]
     assert rec["reached"] and len(q) >= 2 and held.insulator_q(damped) == q[-1] == pytest.approx(0.5 * held.Q_STEP ** (len(q) - 1))
     assert rec["tried"][-1]["growth"] <= -held.HELD_GROWTH_FLOOR < rec["tried"][-2]["growth"]
+
+
+def test_center_damps_its_best_block(tmp_path):
+    """`center` ends with the held check; robust's loops already settle, so its Q stays and one run is recorded."""
+    import json, subprocess, sys
+    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", "center", "--from", "robust", "--steps", "0",
+                        "--out", str(tmp_path), "--json"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    hd = json.loads(r.stdout)["held_damping"]
+    assert hd["reached"] and len(hd["tried"]) == 1 and hd["tried"][0]["growth"] <= -held.HELD_GROWTH_FLOOR
+    best = load_params(str(tmp_path / "best.json"))
+    assert held.insulator_q(best) == held.insulator_q(load_params("robust"))

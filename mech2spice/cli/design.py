@@ -135,4 +135,8 @@ def cmd_center(args) -> int:
     print(f"best step {out['best_step']} of {out['steps']}: linear tolerance {out['tolerance_linear']:.3g} "
           f"(seed {out['seed']['tolerance_linear']:.3g}), beta at the target {out['beta_target']:.3g}, "
           f"nominal margin {out['nominal_margin']:+.4f}; block: {out['best_file']}")
+    hd = out["held_damping"]
+    print(f"insulator Q {hd['q_insulator']:.3g} ({len(hd['tried']) - 1} damping steps): the held counter4 "
+          + ("settles" if hd["reached"] else "still circles (not a block for latches)")
+          + f", growth {out['held_growth']} per period (floor -{hd['floor']:g})")
     return 0

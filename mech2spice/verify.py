@@ -390,15 +390,17 @@ def run_backend(netlist: Netlist, x: np.ndarray, clocked: bool, backend: str, pa
 
 def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], clocked: bool,
             levels=None) -> list[dict]:
-    """Every output bit where Icarus and the backend differ (x/z from Icarus and invalid bits included); margins
-    in the block's `levels` (default: the default block's)."""
+    """Every output bit where Icarus and the backend differ (an invalid bit included); margins in the block's
+    `levels` (default: the default block's).  Where Icarus reads x (a register the source never defines, e.g.
+    without a reset) any valid bit agrees, as `-ignore_gold_x` in the proof: the source allows either value.
+    A z, or an invalid bit against an x, is a mismatch."""
     from .physics.params import DEFAULT_LEVELS
     levels = levels or DEFAULT_LEVELS
     mismatches = []
     for k, (r, g) in enumerate(zip(ref, got)):
         for bit in output_bits(netlist):
             want, have = r[bit], g["bits"].get(bit)
-            if want in "01" and have is not None and int(want) == have:
+            if have is not None and (want in "xX" or (want in "01" and int(want) == have)):
                 continue
             amp = g.get("amplitudes", {}).get(bit)
             m = {("cycle" if clocked else "vector"): k, "inputs": _as_ports(netlist, x[k]), "bit": bit,
@@ -430,7 +432,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     got = run_backend(netlist, x, clocked, backend, params, progress)
     mismatches = compare(netlist, x, ref, got, clocked, None if params is None else params.levels)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
-           "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0}
+           "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
+           "undefined_bits": sum(v in "xX" for r in ref for v in r.values())}
     if clocked:
         out["reset"] = None if rst is None else {"port": rst[0], "level": rst[1]}
     if physical:
@@ -520,6 +523,8 @@ def text(result: dict) -> str:
     what = "cycles" if "cycles" in co else ("vectors (exhaustive)" if co["exhaustive"] else "random vectors")
     lines.append(f"co-simulation vs Icarus on {co['backend']}: {n} {what}, "
                  f"{len(co['mismatches'])} mismatches ({co['wall_s']:.1f} s)"
+                 + (f"; {co['undefined_bits']} bits the source leaves undefined (x: either value agrees)"
+                    if co.get("undefined_bits") else "")
                  + (f"; valid {co['valid']}, stable {co['stable']}, min margin {co['min_margin']:+.3f}"
                     if "valid" in co and co["min_margin"] is not None else ""))
     lines += ["  " + _mismatch_text(m) for m in co["mismatches"][:20]]

@@ -28,6 +28,8 @@ def row(path: Path) -> str:
     what = "cycles" if "cycles" in co else ("(exhaustive)" if co["exhaustive"] else "random")
     icarus = collections.Counter(m["icarus"] for m in co["mismatches"])
     mism = ", ".join(f"{k} where Icarus says {v}" for v, k in sorted(icarus.items())) or "0"
+    if co.get("undefined_bits"):
+        mism += f" ({co['undefined_bits']} bits x in Icarus: either value agrees)"
     return (f"| {res['top']} | {res['gates']} / {res['latches']} | {eq['status']}"
             f"{' (' + matched + ')' if matched else ''}, {eq['wall_s']:.1f} s | {n} {what}, mismatches: {mism}, "
             f"{co['wall_s']:.1f} s | {res['verdict']} |")

@@ -179,15 +179,26 @@ def test_junit_of_a_passing_design_has_no_failure(tmp_path, capsys):
     assert code == 0 and suite.get("failures") == "0" and suite.find("testcase/failure") is None
 
 
-def test_icarus_x_is_a_mismatch(tmp_path):
-    """A register Icarus never defines (no reset) reads x there: every such bit is listed."""
+def test_icarus_x_agrees_with_either_value_and_is_counted(tmp_path):
+    """A register Icarus never defines (no reset) reads x there: the source allows either value, as the
+    proof's -ignore_gold_x does, so a valid bit agrees; the undefined bits are counted, not hidden."""
     src = tmp_path / "toggle.v"
     src.write_text("module toggle(input clk, input d, output reg q);\n"
                    "  always @(posedge clk) q <= q ^ d;\nendmodule\n")
     res = V.verify(src, vectors=5)
     assert res["equivalence"]["status"] == "proved"          # equal from the zero state
-    assert len(res["cosim"]["mismatches"]) == 5 and {m["icarus"] for m in res["cosim"]["mismatches"]} == {"x"}
-    assert res["verdict"] == "fail"
+    assert res["cosim"]["mismatches"] == [] and res["cosim"]["undefined_bits"] == 5
+    assert res["verdict"] == "pass" and "5 bits the source leaves undefined" in V.text(res)
+
+
+def test_an_invalid_bit_against_icarus_x_is_still_a_mismatch():
+    """Either value agrees with x; no value (an invalid amplitude) does not."""
+    nl = synthesize(VERILOG / "dff.v")
+    bit = V.output_bits(nl)[0]
+    x = np.zeros((1, len(V.input_bits(nl))), int)
+    got = [{"bits": {bit: None}, "amplitudes": {bit: 0.6}}]
+    m = V.compare(nl, x, [{bit: "x"}], got, clocked=True)
+    assert len(m) == 1 and m[0]["icarus"] == "x" and m[0]["backend"] is None
 
 
 def test_source_register_folded_away_by_synthesis(tmp_path):

@@ -89,10 +89,11 @@ def add_parser(subparsers) -> None:
     r.add_argument("--trace", metavar="FILE", help="write one JSON line per cycle to FILE: the cycle's record, the "
                    "registers after it and (envelope, carrier, rk4) every probed amplitude in u_R")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
-    r.add_argument("--stability", choices=("off", "end"), default="off",
+    r.add_argument("--stability", choices=("off", "end", "cycle"), default="off",
                    help="end: the oscillator-level machine's stability verdict at its halt (envelope, carrier, "
-                        "rk4; adds `stable` and `stability` to the JSON; 1-2 min on the processor; "
-                        "docs/stability.md)")
+                        "rk4; adds `stable` and `stability` to the JSON; 10-15 s on the processor); cycle: after "
+                        "every cycle too, stopping at the first unstable one (adds `stability_cycles`; 10-15 s a "
+                        "cycle; docs/stability.md)")
     force_arg(r, "--checkpoint or --trace")
     circuit_args(r)
     r.add_argument("--json", action="store_true", help="machine-readable output")
@@ -228,14 +229,14 @@ def cmd_run(args) -> int:
         raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
     if args.trace is not None and args.resume and not Path(args.trace).exists():
         raise Mech2SpiceError(f"--resume with --trace {args.trace}: the trace to continue does not exist")
-    if args.stability == "end" and args.backend not in PHYSICAL:
-        raise Mech2SpiceError(f"--stability end judges an oscillator-level machine (envelope, carrier, rk4), "
+    if args.stability != "off" and args.backend not in PHYSICAL:
+        raise Mech2SpiceError(f"--stability {args.stability} judges an oscillator-level machine (envelope, carrier, rk4), "
                               f"not --backend {args.backend}")
     from ._output import progress as _progress
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=_progress(args),
                       checkpoint_every=args.checkpoint_every, trace=args.trace, force=args.force,
-                      stability=args.stability == "end", **physical)
+                      stability=args.stability, **physical)
     if args.json:
         print(json.dumps(res, indent=2))
     else:
@@ -264,8 +265,11 @@ def _print_run(res: dict) -> None:
     print("registers: " + " ".join(f"{k}={v}" for k, v in regs.items()))
     if "stability" in res:
         st = res["stability"]
-        print(f"stable: {res['stable']} (least stable mode: growth {st['growth_rate']} per drive period, "
-              f"period {st['mode_period']}, in {', '.join(st['mode_dofs'][:3])})")
+        judged = res.get("stability_cycles")
+        where = f"every one of {len(judged)} cycles judged" if judged and res["stable"] else \
+            f"cycle {st['cycle']}" if judged else "at the end"
+        print(f"stable: {res['stable']}, {where} (least stable mode: growth {st['growth_rate']} per drive "
+              f"period, period {st['mode_period']}, in {', '.join(st['mode_dofs'][:3])})")
     mem = res["memory"]
     print("memory (hex, row = 16 addresses):")
     for row in range(16):

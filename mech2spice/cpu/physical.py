@@ -97,6 +97,7 @@ class PhysicalCPU:
         self.simulated = 0          # periods actually integrated (a settled pause skips the rest)
         self.state, self.period, self.rdata = None, 0, 0
         self.cycle, self.halted = 0, False
+        self._eigen_start = None     # the last verdict's eigenvectors (stability())
         self.amps = self._reset() if power_up else None      # else: load() a checkpoint
 
     # --- integration -----------------------------------------------------------------------
@@ -187,7 +188,9 @@ class PhysicalCPU:
         stim = network.stimulus(self.model, self.netlist, self.p, [(0, [{"rdata": self.rdata}])], clock=[[0]])
         F = Envelope.of(self.model).forcing(stim.at(0))[:, 0]
         watch = {f"{g.name}.C": g.channel for g in self.model.design.gates}
-        return stability.verdict(self.model, A[:, 0], s[:, 0], F, watch)
+        v = stability.verdict(self.model, A[:, 0], s[:, 0], F, watch, start=self._eigen_start)
+        self._eigen_start = v.start          # the next cycle's state is near this one: start the search here
+        return v
 
     # --- one clock cycle --------------------------------------------------------------------
     def step(self) -> Cycle:

@@ -355,13 +355,25 @@ class TraceFile:
         self.file.close()
 
 
+def _judge_cycle(cpu) -> dict:
+    """The stability verdict of the machine as it stands after a cycle, with its cost."""
+    t = time.perf_counter()
+    v = cpu.stability()
+    return {"cycle": cpu.cycle, **v.to_json(), "wall_s": time.perf_counter() - t}
+
+
 def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpoint=None,
                 resume: bool = False, progress: bool = False, checkpoint_every: int | None = None,
-                trace=None, force: bool = False, stability: bool = False, **physical) -> dict:
+                trace=None, force: bool = False, stability: bool | str = False, **physical) -> dict:
     """Run until halted or ``max_cycles`` (total) and return the result dict.  Checkpoints are written
     every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level and circuit backends).  ``trace``:
     a callable(record, cpu) called after each cycle, or a path for a TraceFile.  Neither file may be the
-    program; one of another kind is replaced only with ``force``."""
+    program; one of another kind is replaced only with ``force``.  ``stability``: "end" (or True) judges the
+    oscillator-level machine at its halt, "cycle" after every cycle as well, stopping at the first unstable
+    one (docs/stability.md; ~10-15 s a cycle on the processor)."""
+    stability = {True: "end", False: "off", None: "off"}.get(stability, stability)
+    if stability not in ("off", "end", "cycle"):
+        raise Mech2SpiceError(f"stability {stability!r}: choose off, end or cycle")
     checkpoint_every = checkpoint_every or (10 if backend in PHYSICAL + CIRCUIT else 1000)
     if max_cycles < 0 or checkpoint_every < 1:
         raise Mech2SpiceError("max_cycles must be >= 0 and checkpoint_every >= 1")
@@ -383,10 +395,15 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         trace = TraceFile(trace, cpu.cycle if resume else None)
     bar = _cycle_bar(progress if backend != "iss" else False, cpu.cycle, max_cycles, backend)
     shadow = IssCheck(cpu) if backend != "iss" else None
+    judged = [] if stability == "cycle" and backend in PHYSICAL else None
     while not cpu.halted and cpu.cycle < max_cycles:
         rec = cpu.step()
         if shadow is not None:
             shadow.compare(rec, cpu)
+        if judged is not None:
+            judged.append(_judge_cycle(cpu))
+            if not judged[-1]["stable"]:
+                break
         bar.update(1)
         if trace is not None:
             trace(rec, cpu)
@@ -409,10 +426,13 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     if backend in PHYSICAL:
         result.update(periods=cpu.period, simulated_periods=cpu.simulated, step=cpu.step_periods,
                       settle=cpu.settle, latency=cpu.latency, block_steps=cpu.block_steps)
-        if stability:
-            t1 = time.perf_counter()
-            v = cpu.stability()
-            result.update(stable=v.stable, stability={**v.to_json(), "wall_s": time.perf_counter() - t1})
+        if judged is not None:
+            result["stability_cycles"] = judged
+        if judged and not judged[-1]["stable"]:      # stopped there: that cycle's verdict is the run's
+            result.update(stable=False, stability=judged[-1])
+        elif stability != "off":
+            result.update(stable=True, stability=_judge_cycle(cpu)) if judged is None else \
+                result.update(stable=True, stability=judged[-1])
     if hasattr(cpu, "extra"):                      # the circuit backend: simulator cost, the circuit's memory
         result.update(cpu.extra())
     for addr, dev in cpu.mem.devices.items():

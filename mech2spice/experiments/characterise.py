@@ -257,7 +257,7 @@ def stability(p: GateParams, per_band: int = 8, periods: int = 3000) -> dict:
     T = env.model.period
     for k in range(F.shape[1]):
         for st in steady.steady_states(env, F[:, k]) if env.slow.size == 1 and env.diagonal else []:
-            mode = stab.leading_modes(env, st.A, st.s, k=1)[0]
+            mode = stab.leading_modes(env, st.A, st.s, k=1)[0][0]
             if mode.growth > worst["growth_rate"]:
                 worst = {"growth_rate": mode.growth, "mode_period": mode.period,
                          "at_inputs": [float(x1[k]), float(x2[k])]}

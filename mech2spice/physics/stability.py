@@ -58,6 +58,8 @@ class Verdict:
     converged: bool           # Newton found a fixed point near the run's state
     fixed: dict = field(default_factory=dict)   # probe -> fixed-point amplitude (u_R)
     modes: list = field(default_factory=list)   # the leading modes, least stable first
+    start: np.ndarray | None = None   # the leading eigenvectors in one real vector: a warm start for the next
+                                      # verdict on a nearby state (the sparse search only)
 
     def to_json(self) -> dict:
         """The JSON fields of a run's stability verdict (no mode where no fixed point was found: the network
@@ -142,26 +144,32 @@ def operating_point(env: Envelope, A0: np.ndarray, s0: np.ndarray, F: np.ndarray
 
 # --- the leading eigenvalues -----------------------------------------------------------------
 
-def leading_modes(env: Envelope, A: np.ndarray, s: np.ndarray, k: int = MODES) -> list[Mode]:
-    """The k eigenvalues of the linearisation at (A, s) with the largest real parts, largest first.
+def leading_modes(env: Envelope, A: np.ndarray, s: np.ndarray, k: int = MODES,
+                  start: np.ndarray | None = None) -> tuple[list[Mode], np.ndarray | None]:
+    """The k eigenvalues of the linearisation at (A, s) with the largest real parts, largest first, and
+    (sparse search) their eigenvectors folded into one real vector to start the next search from.
 
     Small networks: the whole spectrum (generalised dense eigenproblem).  Large ones: ARPACK on the
     Cayley transform (J - sigma E)^-1 (J + sigma E), whose largest-magnitude eigenvalues are the
     rightmost ones of the network (|mu| > 1 exactly when Re lambda > 0), with sigma near the rates of the
-    slow modes; one sparse LU."""
+    slow modes; one sparse LU.  `start`: such a vector from a nearby state (the processor's last cycle):
+    ARPACK converges from it in ~15x fewer products than from a flat start (563 against 8141 on the sieve's
+    cycle-20 state when started from its own vectors)."""
     E, J = linearise(env, A, s)
     T = env.model.period
+    folded = None
     if J.shape[0] <= DENSE_LIMIT:
         lam, vec = sla.eig(J.toarray(), E.toarray())
         ok = np.isfinite(lam)
         lam, vec = lam[ok], vec[:, ok]
     else:
-        lam, vec = _cayley(E, J, sigma=2 * np.pi / (50 * T), k=k)
+        lam, vec = _cayley(E, J, sigma=2 * np.pi / (50 * T), k=k, start=start)
+        folded = np.real(vec).sum(axis=1) + np.imag(vec).sum(axis=1)
     order = np.argsort(-lam.real)[:k]
-    return [_mode(env, lam[i], vec[:, i], T) for i in order]
+    return [_mode(env, lam[i], vec[:, i], T) for i in order], folded
 
 
-def _cayley(E, J, sigma: float, k: int):
+def _cayley(E, J, sigma: float, k: int, start: np.ndarray | None = None):
     lu = spla.splu((J - sigma * E).tocsc())
     K = (J + sigma * E).tocsr()
     op = spla.LinearOperator(J.shape, matvec=lambda x: lu.solve(K @ x), dtype=float)
@@ -170,7 +178,9 @@ def _cayley(E, J, sigma: float, k: int):
     for attempt in range(3):
         # ARPACK can stall on a start vector (error 3: no shifts could be applied): start elsewhere, with
         # a larger subspace; the starts are seeded, so a verdict is reproducible
-        v0 = np.ones(n) if attempt == 0 else np.random.default_rng(attempt).standard_normal(n)
+        warm = attempt == 0 and start is not None and start.shape == (n,) and np.isfinite(start).all() \
+            and np.abs(start).max() > 0
+        v0 = start if warm else np.ones(n) if attempt == 0 else np.random.default_rng(attempt).standard_normal(n)
         # tol 1e-6 on mu: growth rates within ~1e-8 per period of tol 1e-8's (sieve, cycle 20: -1.1494793e-3
         # both), in 10 s instead of 15 s on the processor's 12972 unknowns
         try:
@@ -199,12 +209,14 @@ def _mode(env: Envelope, lam: complex, v: np.ndarray, T: float) -> Mode:
 
 # --- the verdict -----------------------------------------------------------------------------
 
-def verdict(model, A: np.ndarray, s: np.ndarray, F: np.ndarray, watch: dict[str, int] | None = None) -> Verdict:
+def verdict(model, A: np.ndarray, s: np.ndarray, F: np.ndarray, watch: dict[str, int] | None = None,
+            start: np.ndarray | None = None) -> Verdict:
     """The stability verdict at a run's state (A, s) under forcing F (n_fast,): the fixed point nearest it,
-    the leading modes there, and how far the run's watched amplitudes (probe -> DOF) are from it."""
+    the leading modes there, and how far the run's watched amplitudes (probe -> DOF) are from it.
+    `start`: a previous verdict's `start`, to begin the eigenvalue search from (leading_modes)."""
     env = Envelope.of(model)
     Af, sf, ok = operating_point(env, A, s, F)
-    modes = leading_modes(env, Af, sf)
+    modes, folded = leading_modes(env, Af, sf, start=start)
     lead = modes[0]
     stable = ok and lead.growth < STABLE_MARGIN
     decaying = [m for m in modes if m.growth < 0]
@@ -216,4 +228,4 @@ def verdict(model, A: np.ndarray, s: np.ndarray, F: np.ndarray, watch: dict[str,
     rows = {name: pos[d] for name, d in watch.items() if pos[d] >= 0}
     fixed = {name: float(abs(Af[r]) / u) for name, r in rows.items()}
     dist = max((abs(abs(A[r]) - abs(Af[r])) / u for r in rows.values()), default=0.0)
-    return Verdict(stable, lead.growth, lead, slowest, float(dist), ok, fixed, modes)
+    return Verdict(stable, lead.growth, lead, slowest, float(dist), ok, fixed, modes, folded)

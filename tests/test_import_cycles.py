@@ -132,3 +132,25 @@ def test_lower_layers_import_nothing_above_them():
             assert not target.startswith("backends"), (name, target)
         if name == "simulation" and target.startswith("experiments."):
             assert target == "experiments.clocking", target
+
+
+# A private module (name starting with _) is its package's own: another package reaches it only through the
+# package's public names.  The exceptions measure an engine's insides, which no public name exposes: two
+# studies time the compiled kernels themselves, and the noise check compares the noisy envelope's own
+# integrator (its step and batch) with linear response.
+PRIVATE_ALLOWED = {("studies.speed_accuracy", "backends._envelope_kernel"),
+                   ("studies.speed_accuracy", "backends._rk4_kernel"),
+                   ("studies.performance", "backends._rk4_kernel"),
+                   ("experiments.noise_agreement", "backends._noise_envelope")}
+
+
+def _private_imports(g: nx.DiGraph) -> set[tuple[str, str]]:
+    def package(m: str) -> str:
+        return m.rsplit(".", 1)[0] if "." in m else ""
+    return {(a, b) for a, b in g.edges
+            if b.rsplit(".", 1)[-1].startswith("_") and package(b) and not (a + ".").startswith(package(b) + ".")}
+
+
+def test_no_module_imports_another_packages_private_module():
+    found = _private_imports(import_graph(PACKAGE)) - PRIVATE_ALLOWED
+    assert not found, sorted(found)

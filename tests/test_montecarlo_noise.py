@@ -42,7 +42,7 @@ def test_spread_zero_noise_zero_is_the_deterministic_run_bit_for_bit(backend, no
 
 
 def test_ngspice_noise_zero_is_the_deterministic_netlist(nor_v):
-    from mech2spice.backends._noise_envelope import noisy_engine
+    from mech2spice.backends import noisy_engine
     from mech2spice.spice.oscillator_netlist import emit
     _, d = _design(nor_v, "ngspice", 0.0)
     eng = noisy_engine("ngspice", None, 0.0, 4)

@@ -1,7 +1,10 @@
 """The engines, by name.  Each is one module; adding one is a module and a line in `_ENGINES`."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 from ..errors import Mech2SpiceError
+from ..physics.noise import check_temperature
 from ..run_result import Run
 from ._base import Capabilities, Engine, progress_bar
 from .carrier import CarrierEngine
@@ -10,6 +13,7 @@ from .logic import LogicEngine
 from .ngspice import NgspiceEngine, NgspiceEnvelopeEngine
 from .rk4 import RK4Engine
 from .vacask import VacaskEngine, VacaskEnvelopeEngine
+from ._noise_envelope import NoisyEnvelopeEngine, NoisyEnvelopeOptions
 
 _ENGINES = (LogicEngine, RK4Engine, CarrierEngine, EnvelopeEngine, NgspiceEngine, NgspiceEnvelopeEngine, VacaskEngine, VacaskEnvelopeEngine)
 BACKENDS: dict[str, type] = {e.name: e for e in _ENGINES}
@@ -53,6 +57,24 @@ def make_engine(name: str, options=None):
     return engine_class(name)(engine_options(name, options))
 
 
+def noisy_engine(backend: str, options, temperature: float, seed: int):
+    """The engine `backend` with thermal noise T = `temperature` (model units) and `seed`; T = 0 gives the
+    plain engine with its options unchanged (the deterministic result, bit for bit)."""
+    T = check_temperature(temperature)
+    if T == 0:
+        return make_engine(backend, options)
+    if backend == "envelope":
+        step = getattr(options, "step_periods", None)
+        return NoisyEnvelopeEngine(NoisyEnvelopeOptions(T, int(seed), step if step and step <= 1 else None))
+    base = make_engine(backend, options).options
+    if not hasattr(base, "noise_temperature"):
+        raise Mech2SpiceError(f"the {backend} backend has no thermal noise (rk4, envelope and ngspice do)")
+    if backend == "ngspice":
+        from ..spice.oscillator_netlist import noisy_options
+        return make_engine(backend, noisy_options(base, T, int(seed)))
+    return make_engine(backend, replace(base, noise_temperature=T, noise_seed=int(seed)))
+
+
 __all__ = ["BACKENDS", "Capabilities", "Engine", "Run", "continuing", "engine_class", "engine_options", "make_engine",
-           "names"]
+           "names", "noisy_engine"]
 

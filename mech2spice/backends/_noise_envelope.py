@@ -150,24 +150,3 @@ class NoisyEnvelopeEngine(Engine):
         return integrate(model, periods, temperature=self.options.noise_temperature, seed=self.options.noise_seed,
                          step_periods=self.step(model), stimulus=stimulus, state=state,
                          start_period=start_period, probes=probes, progress=progress)
-
-
-def noisy_engine(backend: str, options, temperature: float, seed: int):
-    """The engine `backend` with thermal noise T = `temperature` (model units) and `seed`; T = 0 gives the
-    plain engine with its options unchanged (the deterministic result, bit for bit)."""
-    from dataclasses import replace
-
-    from . import make_engine
-    T = thermal.check_temperature(temperature)
-    if T == 0:
-        return make_engine(backend, options)
-    if backend == "envelope":
-        step = getattr(options, "step_periods", None)
-        return NoisyEnvelopeEngine(NoisyEnvelopeOptions(T, int(seed), step if step and step <= 1 else None))
-    base = make_engine(backend, options).options
-    if not hasattr(base, "noise_temperature"):
-        raise Mech2SpiceError(f"the {backend} backend has no thermal noise (rk4, envelope and ngspice do)")
-    if backend == "ngspice":
-        from ..spice.oscillator_netlist import noisy_options
-        return make_engine(backend, noisy_options(base, T, int(seed)))
-    return make_engine(backend, replace(base, noise_temperature=T, noise_seed=int(seed)))

@@ -145,7 +145,7 @@ def _precheck(args) -> None:
         load_params(args.params)
     design_file, command = getattr(args, "design", None), args.command
     if command == "emit":
-        from ..spice._common import NETLIST
+        from ..spice import NETLIST
         read = {"the design": design_file, "the --params file": params_file(args.params)}
         inputs.check_output_file(args.output, read, "netlist file", kind=NETLIST, force=args.force)
     elif command == "subckts":

@@ -132,7 +132,7 @@ def cmd_emit(args) -> int:
     from ..cpu.circuit import emit_cpu
     if args.cycles > MAX_CIRCUIT_CYCLES:
         raise Mech2SpiceError(f"--cycles {args.cycles}: at most {MAX_CIRCUIT_CYCLES} cycles in one netlist")
-    from ..spice._common import NETLIST
+    from ..spice import NETLIST
     check_output_file(args.output, {"the program": args.program}, "netlist", kind=NETLIST, force=args.force)
     prog = load_program(args.program)
     if prog.tape is not None:

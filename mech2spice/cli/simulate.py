@@ -7,7 +7,7 @@ from .. import inputs
 from ..backends import BACKENDS
 from ..errors import Mech2SpiceError
 from ..physics.network import MAX_FANOUT
-from ..spice._common import DEFAULT_TIMEOUT_S
+from ..spice import DEFAULT_TIMEOUT_S
 from ._output import jsonable as _jsonable, log as _log, print_json as _print_json, progress as _progress
 
 

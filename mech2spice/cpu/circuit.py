@@ -33,7 +33,7 @@ from ..inputs import is_number
 from ..physics import network
 from ..physics.params import DEFAULT
 from ..spice import memory as vmem
-from ..spice._common import num
+from ..spice import num
 from . import state_file
 from ..spice.vacask import ENVELOPE, OSDI, VacaskEnvelopeOptions, _Emitter, netlist_unknowns, run_netlist_raws
 from .isa import MEM_SIZE, mnemonic

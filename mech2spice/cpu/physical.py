@@ -85,7 +85,7 @@ class PhysicalCPU:
         if backend == "carrier":     # its own step is the one reported (rk4 reports the envelope's, as it always has)
             step = 1.0 / options.steps_per_period      # the step, in drive periods
         if noise and noise[0]:          # thermal noise (k_B T, seed): the noisy engine, never settled or frozen
-            from ..backends._noise_envelope import noisy_engine
+            from ..backends import noisy_engine
             self.pulse_engine = self.pause_engine = noisy_engine(backend, self.pulse_engine.options, *noise)
         t = clocking.clock_timing(self.netlist, p=p)
         averaged = engine_class(backend).capabilities.averaged      # steps of whole periods, `step` long

@@ -204,7 +204,7 @@ class DesignMC:
         """The engine sample i runs on: with noise, the backend with sample i's own noise seed."""
         if not self.noise:
             return self.engine
-        from ..backends._noise_envelope import noisy_engine
+        from ..backends import noisy_engine
         return noisy_engine(self.backend, self.options, self.noise, noise_seed(self.seed, i))
 
     def sample(self, i: int):

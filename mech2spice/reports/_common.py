@@ -13,7 +13,7 @@ from pathlib import Path
 
 
 from ..physics.params import BAND0, BAND1
-from ..studies._common import SANDBOX, json_default, log, read_json, timed, write_json  # noqa: F401 (the studies')
+from ..studies import SANDBOX, json_default, log, read_json, timed, write_json  # noqa: F401 (the studies')
 
 HOST = f"{platform.machine()} {platform.system()}"
 MACHINE = f"{HOST}, {os.cpu_count()} cores"       # the machine running this report

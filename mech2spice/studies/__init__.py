@@ -5,3 +5,7 @@ those files into markdown and PNG, so `mech2spice report NAME --render` rebuilds
 What every study records about where it ran (machine, load, versions) and how it picks sections is in
 `_common.py`, once.
 """
+
+from ._common import SANDBOX, json_default, log, read_json, timed, write_json  # what reports/ reads through
+
+__all__ = ["SANDBOX", "json_default", "log", "read_json", "timed", "write_json"]

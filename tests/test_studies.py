@@ -118,6 +118,8 @@ REPORTS_DIR = PACKAGE.parent / "reports"
 @pytest.mark.parametrize("name, inputs, outputs, options", [
     ("adder", ["adder.json"], ["adder.md"], {}),
     ("cpu_circuit", ["cpu_circuit.json"], ["cpu_circuit.md"], {}),
+    ("cpu", ["cpu.json", "cpu_physical.json", "cpu_physical_tm_increment.json"], ["cpu.md"], {}),
+    ("cpu_physical", ["cpu_physical.json", "fidelity.json"], ["cpu_physical.md"], {}),
     ("speed_accuracy", ["speed_accuracy.json", "envelope_spice.json", "vacask.json", "carrier.json"],
      ["speed_accuracy.md"], {}),
     ("fidelity", ["fidelity.json", "carrier.json"], ["fidelity.md"], {}),
@@ -137,11 +139,19 @@ def test_render_rebuilds_the_checked_in_report_from_its_json(tmp_path, name, inp
         assert (tmp_path / f).read_text() == (REPORTS_DIR / f).read_text(), f
 
 
+def _without(d, key):
+    """`d` with every entry named `key` removed, at any depth."""
+    if isinstance(d, dict):
+        return {k: _without(v, key) for k, v in d.items() if k != key}
+    return [_without(v, key) for v in d] if isinstance(d, list) else d
+
+
 def test_cpu_physical_render_refuses_a_json_without_its_rows(capsys, tmp_path):
-    """The checked-in cpu_physical.json predates the study (no per-cycle rows): --render says to measure again."""
-    import shutil
+    """A cpu_physical.json written before the study kept its per-cycle rows: --render says to measure again."""
+    import json
     from cli_helpers import run
-    shutil.copy(REPORTS_DIR / "cpu_physical.json", tmp_path / "cpu_physical.json")
+    old = _without(json.loads((REPORTS_DIR / "cpu_physical.json").read_text()), "rows")
+    (tmp_path / "cpu_physical.json").write_text(json.dumps(old))
     rc, _, err = run(capsys, "report", "cpu_physical", "--render", "--out", str(tmp_path))
     last = err.strip().splitlines()[-1]
     assert rc == 2 and "Traceback" not in err and "has no per-cycle rows" in last, err

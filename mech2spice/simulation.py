@@ -82,7 +82,7 @@ def _announce(engine, model, periods: int, batch: int, log) -> None:
 
 
 def _engine(backend: str, options, noise: tuple[float, int] | None):
-    """The engine, with thermal noise (T, seed) when T > 0 (backends/_noise_envelope.noisy_engine)."""
+    """The engine, with thermal noise (T, seed) when T > 0 (backends.noisy_engine)."""
     if noise and noise[0]:
         from .backends import noisy_engine
         return noisy_engine(backend, options, *noise)

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mech2spice import backends
 from mech2spice.backends import _noise_envelope as noisy_env
 from mech2spice.backends import rk4
 from mech2spice.backends.envelope import EnvelopeEngine
@@ -37,7 +38,7 @@ def test_rk4_zero_noise_is_bit_identical_to_the_deterministic_scheme():
 
 def test_zero_noise_engines_are_the_plain_engines():
     """--noise 0: the envelope engine is the deterministic one; the ngspice netlist has no noise source."""
-    eng = noisy_env.noisy_engine("envelope", None, 0.0, 3)
+    eng = backends.noisy_engine("envelope", None, 0.0, 3)
     assert type(eng) is EnvelopeEngine
     m = nor.single_gate(params.DEFAULT)
     assert emit(m, 5, options=SpiceOptions(noise_temperature=0.0)) == emit(m, 5)
@@ -66,7 +67,7 @@ def test_bad_noise_input_is_refused():
     with pytest.raises(Mech2SpiceError):
         noisy_env.NoisyEnvelopeOptions(noise_temperature=float("nan")).validate()
     with pytest.raises(Mech2SpiceError):
-        noisy_env.noisy_engine("logic", None, 1e-3, 0)
+        backends.noisy_engine("logic", None, 1e-3, 0)
 
 
 def test_negative_local_damping_has_no_noise_of_its_own():

@@ -131,7 +131,7 @@ class NoisyEnvelopeOptions:
 class NoisyEnvelopeEngine(Engine):
     """The envelope equations with thermal noise (stochastic RK4 splitting, steps of at most one period).
 
-    Not in the registry: `noisy_engine` picks it for `--backend envelope --noise T` with T > 0."""
+    Not in the registry: `backends.noisy_engine` picks it for `--backend envelope --noise T` with T > 0."""
 
     name = "envelope"
     capabilities = Capabilities(batch=True, state=True, checkpoint=True, averaged=True)

@@ -92,6 +92,19 @@ def drive_pair(model: MechModel, p: GateParams, pair: tuple[int, ...], level: fl
     return tuple(out)
 
 
+def gate_array(p: GateParams, n: int, level: float, declare: bool = True) -> MechModel:
+    """n independent NOR gates, both inputs of each driven at `level`; `declare`: listed as the design's gate
+    blocks (block devices in the circuit simulators, the envelope's latency blocks)."""
+    m = new_model(p)
+    for k in range(n):
+        g = add_nor(m, p, f"g{k}")
+        drive_pair(m, p, g.inputs[0], level, f"a{k}")
+        drive_pair(m, p, g.inputs[1], level, f"b{k}")
+        if declare:
+            m.design.gates.append(g)
+    return m
+
+
 # --- small circuits used by characterisation, tests and benchmarks ----------
 def _zero(p: GateParams, x: float | None) -> float:
     """x, or the block's nominal '0' where not given."""

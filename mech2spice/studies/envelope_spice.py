@@ -226,12 +226,7 @@ def failures(quick: bool) -> dict:
 # --- scaling --------------------------------------------------------------------------------------------
 def gate_array(n: int):
     """A model of `n` independent NOR gates, both inputs of each driven at the nominal 0 (0.5 F_R)."""
-    m = nor.new_model(P)
-    for k in range(n):
-        g = nor.add_nor(m, P, f"g{k}")
-        nor.drive_pair(m, P, g.inputs[0], NOMINAL0, f"a{k}")
-        nor.drive_pair(m, P, g.inputs[1], NOMINAL0, f"b{k}")
-    return m
+    return nor.gate_array(P, n, NOMINAL0, declare=False)
 
 
 def acct(model, periods: int, opts, drop_b: bool = False) -> dict:

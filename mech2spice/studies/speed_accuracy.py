@@ -332,15 +332,7 @@ def pinning() -> dict:
 # --- scaling ------------------------------------------------------------------------------------------
 def gate_array(n: int) -> MechModel:
     """n independent NOR gates, both inputs at a constant '0' (each gate's output a '1')."""
-    m = nor.new_model(P)
-    gates = []
-    for k in range(n):
-        g = nor.add_nor(m, P, f"g{k}")
-        nor.drive_pair(m, P, g.inputs[0], NOMINAL0, f"a{k}")
-        nor.drive_pair(m, P, g.inputs[1], NOMINAL0, f"b{k}")
-        gates.append(g)
-    m.design.gates = gates
-    return m
+    return nor.gate_array(P, n, NOMINAL0)
 
 
 def scaling(quick: bool) -> dict:

@@ -328,13 +328,7 @@ def envelope() -> dict:
 
 def gate_array(n: int):
     """n independent NOR gates (inputs '0'), declared as gate blocks so both simulators use their block devices."""
-    m = nor.new_model(P)
-    for k in range(n):
-        g = nor.add_nor(m, P, f"g{k}")
-        nor.drive_pair(m, P, g.inputs[0], NOMINAL0, f"a{k}")
-        nor.drive_pair(m, P, g.inputs[1], NOMINAL0, f"b{k}")
-        m.design.gates.append(g)
-    return m
+    return nor.gate_array(P, n, NOMINAL0)
 
 
 SIZES = (1, 10, 50, 170, 350, 700, 1000)

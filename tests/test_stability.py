@@ -271,6 +271,18 @@ def test_processor_stops_at_the_first_unstable_cycle(capsys, monkeypatch):
     assert res["stability"]["cycle"] == 2 and res["stability"]["growth_rate"] == 2e-4
 
 
+def test_processor_unstable_at_its_end_is_not_stable(capsys, monkeypatch):
+    """--stability end: the one verdict at the end decides `stable` (stubbed unstable: exit 1)."""
+    from mech2spice.cpu.physical import PhysicalCPU
+    mode = stability.Mode(3e-4, 90.0, ["g7.I"])
+    monkeypatch.setattr(PhysicalCPU, "stability",
+                        lambda cpu: stability.Verdict(False, mode.growth, mode, float("inf"), 0.0, True, {}, [mode]))
+    rc, res, err = _simulate(capsys, "cpu", "run", ROOT / "programs/sieve.asm", "--backend", "envelope",
+                             "--stability", "end", "--max-cycles", "2")
+    assert rc == 1 and res["stable"] is False and "stability_cycles" not in res
+    assert res["stability"]["cycle"] == 2 and res["stability"]["growth_rate"] == 3e-4
+
+
 @pytest.mark.slow
 def test_processor_judged_every_cycle(capsys):
     """The real verdict after each of the sieve's first two cycles: stable, decaying at ~1e-3 per period."""

@@ -402,13 +402,13 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
             shadow.compare(rec, cpu)
         if judged is not None:
             judged.append(_judge_cycle(cpu))
-            if not judged[-1]["stable"]:
-                break
         bar.update(1)
         if trace is not None:
             trace(rec, cpu)
         if checkpoint is not None and cpu.cycle % checkpoint_every == 0:
             save_checkpoint(cpu, checkpoint, program, backend, cost.totals())
+        if judged and not judged[-1]["stable"]:       # the machine is not at a stable state: stop here
+            break
     bar.close()
     if isinstance(trace, TraceFile):
         trace.close()
@@ -428,11 +428,9 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
                       settle=cpu.settle, latency=cpu.latency, block_steps=cpu.block_steps)
         if judged is not None:
             result["stability_cycles"] = judged
-        if judged and not judged[-1]["stable"]:      # stopped there: that cycle's verdict is the run's
-            result.update(stable=False, stability=judged[-1])
-        elif stability != "off":
-            result.update(stable=True, stability=_judge_cycle(cpu)) if judged is None else \
-                result.update(stable=True, stability=judged[-1])
+        if stability != "off":         # the verdict where the run ended (per cycle: the last one judged)
+            last = judged[-1] if judged else _judge_cycle(cpu)
+            result.update(stable=last["stable"], stability=last)
     if hasattr(cpu, "extra"):                      # the circuit backend: simulator cost, the circuit's memory
         result.update(cpu.extra())
     for addr, dev in cpu.mem.devices.items():

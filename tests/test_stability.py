@@ -291,3 +291,32 @@ def test_processor_judged_every_cycle(capsys):
     assert rc == 1 and not res["halted"]            # exit 1: did not halt within 2 cycles
     assert [c["cycle"] for c in res["stability_cycles"]] == [1, 2]
     assert all(c["stable"] and -3e-3 < c["growth_rate"] < -5e-4 for c in res["stability_cycles"])
+
+
+def test_processor_reads_are_settled_at_the_defaults(capsys):
+    """--settle-check: each of the sieve's first reads continued 6000 periods with nothing skipped moves by
+    far less than its margin (measured over the whole sieve: at most 0.0106 band widths, reports/fidelity.md)."""
+    rc, res, err = _simulate(capsys, "cpu", "run", ROOT / "programs/sieve.asm", "--backend", "envelope",
+                             "--settle-check", "--max-cycles", "3")
+    sc = res["settle_check"]
+    assert rc == 1 and not res["halted"]            # exit 1: did not halt within 3 cycles
+    assert res["settled"] and sc["reads"] == 8     # the power-up's two pauses, two a cycle and sc["reads_not_settled"] == 0 and sc["reads_unconverged"] == 0
+    assert 1e-4 < sc["worst_still_to_come_bw"] < 0.02
+
+
+def test_processor_read_cut_short_is_not_settled(capsys):
+    """Pauses ended far too early (settle and latency 0.3 u_R): every decoded value still equals the ISS,
+    but a read is still moving by a large part of its margin, so the run is not `settled` and exits 1."""
+    rc, res, err = _simulate(capsys, "cpu", "run", ROOT / "programs/sieve.asm", "--backend", "envelope",
+                             "--settle", "0.3", "--latency", "0.3", "--settle-check", "--max-cycles", "2")
+    sc = res["settle_check"]
+    assert rc == 1 and res["iss_check"]["mismatches"] == 0
+    assert res["settled"] is False and sc["reads_not_settled"] >= 1 and sc["worst_still_to_come_bw"] > 0.05
+    bad = sc["not_settled"][0]
+    assert abs(bad["reached"] - bad["read"]) > 0.01
+
+
+def test_settle_check_needs_an_oscillator_level_machine(capsys):
+    rc, res, err = _simulate(capsys, "cpu", "run", ROOT / "programs/sieve.asm", "--backend", "logic",
+                             "--settle-check")
+    assert rc == 2 and "--settle-check judges an oscillator-level machine" in err

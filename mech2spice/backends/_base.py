@@ -86,6 +86,11 @@ class Engine(FromFlags, ABC):
         its distance from one is what is still to come); else the verdict trusts only its own trend."""
         return self.capabilities.averaged
 
+    def dynamical_state(self, state):
+        """A state this engine returned without its per-gate latency record, so that a run continuing it
+        integrates every gate (the state alone where the engine keeps no record)."""
+        return state
+
     def phasors(self, model: MechModel, state, t: float) -> tuple[np.ndarray, np.ndarray] | None:
         """A state this engine returned (Run.state, at time t) as envelope phasors: (A (n_fast, B) complex,
         s (n_slow, B)), what the stability verdict linearises at (physics/stability.py); None where the

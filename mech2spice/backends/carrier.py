@@ -358,6 +358,10 @@ class CarrierEngine(Engine):
         """Stimulus changes must fall on whole drive periods."""
         return 1.0
 
+    def dynamical_state(self, state):
+        """(x, v): the latency record (integrate's state[2:]) dropped."""
+        return state[:2]
+
     def phasors(self, model, state, t):
         """The displacements and velocities as phasors (_base.oscillator_phasors)."""
         return oscillator_phasors(model, state[0], state[1], t)

@@ -345,6 +345,10 @@ class EnvelopeEngine(Engine):
         """The step this engine takes on `model`, in drive periods."""
         return self.options.step_periods or default_step(model, exponential=self.options.exponential)
 
+    def dynamical_state(self, state):
+        """(A, s, s'): the latency record (integrate's state[3:]) dropped."""
+        return state[:3]
+
     def phasors(self, model, state, t):
         """The envelope state itself: (A, s)."""
         return state[0], state[1]

@@ -15,6 +15,7 @@ from ..inputs import (MAX_CPU_CYCLES, check_output_file, envelope_speed_args, fo
                       write_bytes, write_text)
 from ..backends import BACKENDS as ENGINES
 from ..cpu.physical import PHYSICAL, PROCESSOR_STEP, SETTLE_TOL
+from ..cpu.settle_check import PERIODS as SETTLE_CHECK_PERIODS
 from ..cpu.machines import BACKENDS, CIRCUIT
 from ..cpu.isa import MEM_SIZE
 from ..physics.params import params_file
@@ -89,6 +90,11 @@ def add_parser(subparsers) -> None:
     r.add_argument("--trace", metavar="FILE", help="write one JSON line per cycle to FILE: the cycle's record, the "
                    "registers after it and (envelope, carrier, rk4) every probed amplitude in u_R")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
+    r.add_argument("--settle-check", type=integer(100, 10**6), nargs="?", const=SETTLE_CHECK_PERIODS, default=None,
+                   metavar="PERIODS", help="envelope, carrier, rk4: judge every read against its own future: a copy "
+                   f"of the state continues PERIODS more (default {SETTLE_CHECK_PERIODS}) with nothing skipped; a read "
+                   "is settled when no bit changes band and each moves by at most a quarter of its margin "
+                   "(JSON settle_check, exit 1 if not; ~0.2 s a read on the processor, ~3.5 min for the sieve)")
     r.add_argument("--stability", choices=("off", "end", "cycle"), default="off",
                    help="end: the oscillator-level machine's stability verdict at its halt (envelope, carrier, "
                         "rk4; adds `stable` and `stability` to the JSON; 10-15 s on the processor); cycle: after "
@@ -186,6 +192,10 @@ def _takes(backend: str, option: str) -> bool:
 def cmd_run(args) -> int:
     """`cpu run`: run a program on the chosen backend; returns 0 if it halted, 1 if it ran out of cycles."""
     check_run_outputs(args.checkpoint, args.trace, args.program, args.resume, args.force, params_file(args.params))
+    for flag, value in (("--settle-check", args.settle_check), (f"--stability {args.stability}", args.stability != "off")):
+        if value and args.backend not in PHYSICAL:
+            raise Mech2SpiceError(f"{flag} judges an oscillator-level machine ({', '.join(PHYSICAL)}), "
+                                  f"not --backend {args.backend}")
     physical = {}
     if args.step is not None:
         physical["step"] = args.step
@@ -193,6 +203,8 @@ def cmd_run(args) -> int:
         physical["settle"] = args.settle or None
     if args.latency is not None:
         physical["latency"] = args.latency or None
+    if args.settle_check is not None:
+        physical["settle_check"] = args.settle_check
     physical.update({k: getattr(args, k) == "on" for k in ("exponential", "parallel") if getattr(args, k)})
     carrier = {k: v for k, v in (("steps_per_period", args.steps), ("threads", args.threads)) if v is not None}
     if args.threads is not None and not _takes(args.backend, "threads"):
@@ -200,7 +212,7 @@ def cmd_run(args) -> int:
     if args.steps is not None and not _takes(args.backend, "steps_per_period"):
         raise Mech2SpiceError("--steps applies to the carrier and rk4 backends only")
     oscillator_level = _takes(args.backend, "steps_per_period")      # rk4, carrier: no envelope step
-    own = {"settle", *(["latency"] if _takes(args.backend, "latency") else [])}
+    own = {"settle", "settle_check", *(["latency"] if _takes(args.backend, "latency") else [])}
     if oscillator_level and set(physical) - own:
         raise Mech2SpiceError(f"--step, --exponential and --parallel apply to the envelope backend; "
                               f"the {args.backend} backend's are --steps"
@@ -229,9 +241,6 @@ def cmd_run(args) -> int:
         raise Mech2SpiceError("--checkpoint-every needs --checkpoint FILE")
     if args.trace is not None and args.resume and not Path(args.trace).exists():
         raise Mech2SpiceError(f"--resume with --trace {args.trace}: the trace to continue does not exist")
-    if args.stability != "off" and args.backend not in PHYSICAL:
-        raise Mech2SpiceError(f"--stability {args.stability} judges an oscillator-level machine (envelope, carrier, rk4), "
-                              f"not --backend {args.backend}")
     from ._output import progress as _progress
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=_progress(args),
@@ -242,7 +251,7 @@ def cmd_run(args) -> int:
     else:
         _print_run(res)
     agrees = res.get("iss_check", {}).get("mismatches", 0) == 0
-    return 0 if res["halted"] and res.get("stable", True) and agrees else 1
+    return 0 if res["halted"] and res.get("stable", True) and res.get("settled", True) and agrees else 1
 
 
 def _print_run(res: dict) -> None:
@@ -270,6 +279,11 @@ def _print_run(res: dict) -> None:
             f"cycle {st['cycle']}" if judged else "at the end"
         print(f"stable: {res['stable']}, {where} (least stable mode: growth {st['growth_rate']} per drive "
               f"period, period {st['mode_period']}, in {', '.join(st['mode_dofs'][:3])})")
+    if "settle_check" in res:
+        sc, w = res["settle_check"], res["settle_check"]["worst"]
+        print(f"settled: {sc['settled']}: {sc['reads']} reads each continued {sc['periods']} periods; "
+              f"{sc['reads_not_settled']} not settled; most still to come {sc['worst_still_to_come_bw']:.4f} band "
+              f"widths ({w.get('bit')}, cycle {w.get('cycle')})")
     mem = res["memory"]
     print("memory (hex, row = 16 addresses):")
     for row in range(16):

@@ -25,6 +25,7 @@ from . import state_file
 from .isa import mnemonic
 from .iss import FETCH, Cycle
 from .memory import Memory
+from .settle_check import SettleCheck
 from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
 
 PHYSICAL = names(continuing, first="envelope")   # engines that continue from a state, so a cycle can follow the last
@@ -65,7 +66,8 @@ class PhysicalCPU:
     def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float | None = None,
                  settle: float | None = SETTLE_TOL, latency: float | None | str = OWN_LATENCY,
                  exponential: bool = EXPONENTIAL, parallel: bool = False, power_up: bool = True,
-                 noise: tuple[float, int] | None = None, steps_per_period: int | None = None, threads: int = 1):
+                 noise: tuple[float, int] | None = None, steps_per_period: int | None = None, threads: int = 1,
+                 settle_check: int | None = None):
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
         self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
@@ -96,21 +98,34 @@ class PhysicalCPU:
         self.block_steps = 0        # gate blocks x steps integrated (latency); 0 without it
         self.simulated = 0          # periods actually integrated (a settled pause skips the rest)
         self.state, self.period, self.rdata = None, 0, 0
+        self._stimuli = {}          # (rdata, clock) -> its Stimulus: 512 at most, rebuilt 1372 times in a sieve
+        # every pause's read judged against its own future (cpu/settle_check.py); None: not checked
+        self.settle_check = SettleCheck(settle_check, p.levels) if settle_check else None
+        self._check_engine = self.settle_check.engine_for(self.pause_engine) if settle_check else None
         self.cycle, self.halted = 0, False
         self._eigen_start = None     # the last verdict's eigenvectors (stability())
         self.amps = self._reset() if power_up else None      # else: load() a checkpoint
 
     # --- integration -----------------------------------------------------------------------
+    def _stimulus(self, values: dict, clock: int):
+        key = (tuple(sorted(values.items())), clock)
+        if key not in self._stimuli:
+            self._stimuli[key] = network.stimulus(self.model, self.netlist, self.p, [(0, [values])], clock=[[clock]])
+        return self._stimuli[key]
+
     def _run(self, periods: int, values: dict, clock: int) -> dict[str, float]:
-        stim = network.stimulus(self.model, self.netlist, self.p, [(0, [values])], clock=[[clock]])
+        stim = self._stimulus(values, clock)
         engine = self.pulse_engine if clock else self.pause_engine
         run = engine.run(self.model, periods, stim, state=self.state, start_period=self.period, probes=self.probes)
         self.state = run.state
         self.simulated += periods - run.settled_periods
         self.block_steps += run.extra.get("block_steps", 0)
         self.period += periods
-        amp = np.abs(run.amp[-READ_PERIODS:, :, 0]).mean(axis=0) / self.p.u_r
-        return dict(zip(self.probes, amp))
+        amp = dict(zip(self.probes, np.abs(run.amp[-READ_PERIODS:, :, 0]).mean(axis=0) / self.p.u_r))
+        if self.settle_check is not None and not clock:
+            self.settle_check.check(self._check_engine, self.model, stim, self.state, self.period, self.probes,
+                                    amp, self.cycle, self.p.u_r)
+        return amp
 
     def _reset(self) -> dict[str, float]:
         """Power up from rest with rst = 1, clock one edge, release rst."""
@@ -185,7 +200,7 @@ class PhysicalCPU:
         from ..physics import stability
         from ..physics.envelope import Envelope
         A, s = self.pause_engine.phasors(self.model, self.state, self.period * self.model.period)
-        stim = network.stimulus(self.model, self.netlist, self.p, [(0, [{"rdata": self.rdata}])], clock=[[0]])
+        stim = self._stimulus({"rdata": self.rdata}, 0)
         F = Envelope.of(self.model).forcing(stim.at(0))[:, 0]
         watch = {f"{g.name}.C": g.channel for g in self.model.design.gates}
         v = stability.verdict(self.model, A[:, 0], s[:, 0], F, watch, start=self._eigen_start)

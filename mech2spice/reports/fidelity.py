@@ -148,6 +148,7 @@ def markdown(d: dict) -> str:
               "*wall*: synthesis-free `run_clocked_physical`, model build included.", ""]
         L.append("")
     L += defaults_md(d)
+    L += settled_md(d.get("settled"))
     if "cone" in d:
         L += ["## Cone pruning (`--observe PORT`, `synth.observe`)", "",
               "comparator4, all 256 input pairs in one envelope batch: the full netlist against the netlist "
@@ -160,6 +161,42 @@ def markdown(d: dict) -> str:
                      f"{r['max_amp_diff']:.4f} | {r['wall_s']:.1f} / {r['wall_full_s']:.1f} |")
         L.append("")
     return "\n".join(L) + "\n"
+
+
+def settled_md(runs: list | None) -> list[str]:
+    """The processor's reads against their own future (`cpu run --settle-check`), one row a setting."""
+    if not runs:
+        return []
+    sc0 = runs[0]["settle_check"]
+    L = ["## Are the processor's reads settled? (`cpu run --settle-check`)", "",
+         "A processor pause ends early (idle skipping; frozen gates), so each read is judged against its own "
+         f"future: a copy of the state continues {sc0['periods']:,} periods (~7 of the sieve's slowest decays, "
+         "880 periods at its halt) at the same step with nothing skipped, and each probed bit's amplitude there "
+         "is where the read was heading (cpu/settle_check.py). *Still to come*: that distance in its band's "
+         f"widths; *margin share*: that distance over the bit's margin (a read is settled when no bit changes "
+         f"band and none moves by more than {sc0['margin_share']:g} of its margin); *over {sc0['settled_bw']:g}*: "
+         "bits with more than the clocked runs' settle tolerance (verdict.SETTLED_BW) still to come.", "",
+         "| latency (u_R) | cycles | = ISS | reads (bits) | settled | still to come: max / p99 / median (band "
+         f"widths) | bits over {sc0['settled_bw']:g} | largest margin share | gate-block steps | CPU s | wall s, "
+         "checked |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in runs:
+        sc = r["settle_check"]
+        L.append(f"| {r['latency']:g} | {r['cycles']}{' (halted)' if r['halted'] else ''} | "
+                 f"{'yes' if r['iss_mismatches'] == 0 else 'NO'} | {sc['reads']} ({sc['bits_checked']:,}) | "
+                 f"{sc['settled']} | {sc['worst_still_to_come_bw']:.4f} / {sc['p99_still_to_come_bw']:.4f} / "
+                 f"{sc['median_still_to_come_bw']:.4f} | {sc['bits_over_settled_bw']:,} | "
+                 f"{sc['largest_margin_share']:.3f} | {r['block_steps']:,} | {r['cpu_s']:.1f} | "
+                 f"{r['wall_s']:.1f}, {r['checked_wall_s']:.1f} |")
+    w = sc0["worst"]
+    L += ["", f"At the defaults the most still to come is {sc0['worst_still_to_come_bw']:.4f} band widths "
+          f"({w['bit']} in cycle {w['cycle']}: read {w['read']:.4f} u_R, heading to {w['reached']:.4f}); no bit "
+          f"changes band and none moves by more than {sc0['largest_margin_share']:.1%} of its margin; "
+          f"{sc0['reads_unconverged']} continuations had not come to rest. The clocked runs' tolerance "
+          f"({sc0['settled_bw']:g} band widths, judged there by the stability verdict) would need a lower latency "
+          "threshold, at the cost in gate-block steps the rows below the first show; so the processor keeps its "
+          "defaults and the check is `cpu run --settle-check` (exit 1 when a read is not settled), ~0.2 s a read "
+          "instead of the verdict's 10-30 s.", ""]
+    return L
 
 
 def write(directory="reports", only=None, cycles: int = 30, render: bool = False) -> Path:

@@ -15,7 +15,10 @@ Section cone: cone pruning (`--observe`) on comparator4, all 256 inputs.
 
 Each section is merged into reports/fidelity.json with the defaults it checks (`defaults()`);
 mech2spice/reports/fidelity.py renders fidelity.md from it.
-usage: mech2spice report fidelity [--only cpu|clocked|cone ...] [--cycles 30] [--render]  (~20 min, 2 cores)
+Section settled: the processor's reads judged against their own future (`cpu run --settle-check`): the whole
+sieve at the defaults, and its first cycles with lower latency thresholds.
+
+usage: mech2spice report fidelity [--only cpu|clocked|cone|settled ...] [--cycles 30] [--render]  (~30 min, 2 cores)
 """
 from __future__ import annotations
 
@@ -33,7 +36,12 @@ from ..synthesis.synth import synthesize
 from ._common import SANDBOX, load_average, read_json, sections, write_json
 from ..experiments.scenes import COUNTER_STEPS, FSM_STEPS, sqrt_steps
 
-SECTIONS = ("cpu", "clocked", "cone")
+SECTIONS = ("cpu", "clocked", "cone", "settled")
+
+# The processor's reads against their own future (cpu/settle_check.py): the whole sieve at the defaults, and
+# the first cycles with the latency threshold lowered (what a tighter rule costs).
+SETTLED_LATENCIES = (0.05, 0.02)
+SETTLED_CYCLES = 60
 
 # (label, envelope step in periods, settle tolerance in u_R or None, latency threshold in u_R or None,
 #  exponential step, rates on both cores).  "Alone" means on top of step 8, settle 0.1 (the default before
@@ -217,6 +225,27 @@ def cone() -> list[dict]:
     return rows
 
 
+def settled() -> dict:
+    """The sieve's reads judged against their own future (settle_check.PERIODS more, nothing skipped): at the
+    processor's defaults to its halt, then SETTLED_CYCLES cycles at each lower latency; with the cost of each
+    setting without the check (gate-block steps, CPU seconds)."""
+    from ..cpu.settle_check import PERIODS
+    prog = data.program("sieve.asm")
+    runs = []
+    for latency, cycles in ((None, 100_000), *((lat, SETTLED_CYCLES) for lat in SETTLED_LATENCIES)):
+        own = {} if latency is None else {"latency": latency}
+        c0 = time.process_time()
+        plain = R.run_program(prog, "envelope", cycles, **own)
+        cpu_s = time.process_time() - c0
+        checked = R.run_program(prog, "envelope", cycles, settle_check=PERIODS, **own)
+        runs.append({"latency": plain["latency"], "cycles": plain["cycles"], "halted": plain["halted"],
+                     "iss_mismatches": checked["iss_check"]["mismatches"], "block_steps": plain["block_steps"],
+                     "cpu_s": cpu_s, "wall_s": plain["wall_s"], "checked_wall_s": checked["wall_s"],
+                     "settle_check": checked["settle_check"]})
+        print(runs[-1]["latency"], runs[-1]["settle_check"]["worst_still_to_come_bw"], flush=True)
+    return {"settled": runs}
+
+
 def defaults() -> dict:
     """The envelope settings each command uses by default: the report checks them against the measured rows."""
     from ..backends.envelope import DEFAULT_STEP
@@ -237,6 +266,8 @@ def measure(section: str, quick: bool = False, cycles: int = 30) -> dict:
             res[label] = run_setting(prog, cycles, step, settle, latency, exponential, parallel)
             print(label, f"{res[label]['wall_s']:.0f} s", flush=True)
         return {"cpu": compare(res), "cycles": cycles, "parallel": parallel_ratio()}
+    if section == "settled":
+        return settled()
     return {section: {"clocked": clocked, "cone": cone}[section]()}
 
 

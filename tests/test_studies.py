@@ -116,7 +116,11 @@ REPORTS_DIR = PACKAGE.parent / "reports"
 
 
 @pytest.mark.parametrize("name, inputs, outputs, options", [
+    ("gate", ["gate.json"], ["gate.md"], {}),
     ("adder", ["adder.json"], ["adder.md"], {}),
+    ("sequential", ["sequential.json"], ["sequential.md", "sqrt.md"], {}),
+    ("spice", ["spice.json", "speed_accuracy.json"], ["spice.md"], {}),
+    ("envelope", ["envelope.json"], ["envelope.md"], {}),
     ("cpu_circuit", ["cpu_circuit.json"], ["cpu_circuit.md"], {}),
     ("cpu", ["cpu.json", "cpu_physical.json", "cpu_physical_tm_increment.json"], ["cpu.md"], {}),
     ("cpu_physical", ["cpu_physical.json", "fidelity.json"], ["cpu_physical.md"], {}),

@@ -128,6 +128,8 @@ REPORTS_DIR = PACKAGE.parent / "reports"
      ["speed_accuracy.md"], {}),
     ("fidelity", ["fidelity.json", "carrier.json"], ["fidelity.md"], {}),
     ("robustness", ["robustness.json"], ["robustness.md"], {}),
+    ("performance", ["performance.json", "cpu_physical.json", "carrier.json"], ["performance.md"], {}),
+    ("carrier", ["carrier.json"], ["carrier.md"], {}),
     ("design", ["design.json"], ["design.md"], {"search": str(REPORTS_DIR / "design_search.json")}),
 ])
 def test_render_rebuilds_the_checked_in_report_from_its_json(tmp_path, name, inputs, outputs, options):

@@ -124,6 +124,8 @@ REPORTS_DIR = PACKAGE.parent / "reports"
     ("cpu_circuit", ["cpu_circuit.json"], ["cpu_circuit.md"], {}),
     ("cpu", ["cpu.json", "cpu_physical.json", "cpu_physical_tm_increment.json"], ["cpu.md"], {}),
     ("cpu_physical", ["cpu_physical.json", "fidelity.json"], ["cpu_physical.md"], {}),
+    ("cpu_physical", ["cpu_physical_tm_increment.json", "fidelity.json"], ["cpu_physical_tm_increment.md"],
+     {"name": "cpu_physical_tm_increment"}),
     ("speed_accuracy", ["speed_accuracy.json", "envelope_spice.json", "vacask.json", "carrier.json"],
      ["speed_accuracy.md"], {}),
     ("fidelity", ["fidelity.json", "carrier.json"], ["fidelity.md"], {}),

@@ -16,7 +16,7 @@ import numpy as np
 
 from dataclasses import replace
 
-from ..backends import continuing, engine_class, make_engine, names
+from ..backends import continuing, engine_class, envelope, make_engine, names
 from ..errors import Mech2SpiceError
 from ..experiments import clocking
 from ..physics import network
@@ -33,9 +33,8 @@ PHYSICAL = names(continuing, first="envelope")   # engines that continue from a 
 PROCESSOR_STEP = 16.0   # envelope periods with the exponential step (its bound: 27.5)
 RK4_PROCESSOR_STEP = 8.0   # the step without it (RK4's bound: 15.1 periods)
 SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fidelity.md)
-LATENCY = 0.1           # u_R: per-gate latency threshold (None: off; docs/latency.md)
-CARRIER_LATENCY = 0.05  # u_R: the carrier's (docs/carrier.md: its cost against the carrier without it)
-OWN_LATENCY = "own"     # latency: the backend's own default (LATENCY, CARRIER_LATENCY; rk4 has none)
+LATENCY = envelope.PROCESSOR_LATENCY   # u_R: the envelope's per-gate latency threshold (docs/latency.md)
+OWN_LATENCY = "own"     # latency: the engine's own default (Engine.processor_latency; rk4 has none)
 READ_PERIODS = 10       # periods a read averages over, at the end of each pulse or pause: all a run keeps
 EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability bound; docs/latency.md)
 
@@ -75,15 +74,14 @@ class PhysicalCPU:
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
         step = step or (PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP)
-        if latency == OWN_LATENCY:           # the carrier's latency loop is serial: threads ask for every gate integrated
-            latency = {"envelope": LATENCY, "carrier": CARRIER_LATENCY if threads == 1 else None}.get(backend)
+        if latency == OWN_LATENCY:
+            latency = engine_class(backend).processor_latency(threads)
         options = _options(backend, step=step, latency=latency, exponential=exponential, parallel=parallel,
                            steps_per_period=steps_per_period, threads=threads, keep_periods=READ_PERIODS)
         # only pauses may end early once settled; pulses always run in full
         self.pulse_engine = make_engine(backend, options)
         self.pause_engine = make_engine(backend, replace(options, settle_tol=settle or None))
-        if backend == "carrier":     # its own step is the one reported (rk4 reports the envelope's, as it always has)
-            step = 1.0 / options.steps_per_period      # the step, in drive periods
+        step = self.pulse_engine.reported_step(step)   # carrier: its own; rk4 the envelope's, as it always has
         if noise and noise[0]:          # thermal noise (k_B T, seed): the noisy engine, never settled or frozen
             from ..backends import noisy_engine
             self.pulse_engine = self.pause_engine = noisy_engine(backend, self.pulse_engine.options, *noise)

@@ -25,7 +25,7 @@ from . import state_file
 from .isa import mnemonic
 from .iss import FETCH, Cycle
 from .memory import Memory
-from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
+from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_amplitudes
 
 PHYSICAL = names(continuing, first="envelope")   # engines that continue from a state, so a cycle can follow the last
 # The defaults: 0.0098 u_R from the full envelope at step 2 over the first 30 sieve cycles, 7.2x faster than
@@ -123,16 +123,7 @@ class PhysicalCPU:
 
     def registers(self, amps=None) -> dict:
         """The architectural registers decoded from the latch outputs' amplitudes (an invalid bit stops the run)."""
-        amps = amps or self.amps
-
-        def bit(q: str) -> int:
-            b = self.p.levels.band_of(amps[f"latch.{q}"])
-            if b is None:
-                reg, k = self.regmap[q]
-                raise Mech2SpiceError(f"cycle {self.cycle}: register {reg} bit {k} (latch {q}) is invalid "
-                                      f"(amplitude {amps[f'latch.{q}']:.3f} u_R)")
-            return b
-        return registers_from_latches(self.regmap, bit)
+        return registers_from_amplitudes(self.regmap, self.p.levels, amps or self.amps, self.cycle)
 
     def set_registers(self, regs: dict) -> None:
         """Registers cannot be forced into oscillators: after load(), check that the restored state

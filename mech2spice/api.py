@@ -8,7 +8,7 @@ import os
 
 from . import inputs as check
 from . import simulation
-from .backends import BACKENDS, engine_options
+from .backends import BACKENDS, engine_class, engine_options
 from .errors import Mech2SpiceError
 from .experiments import clocking
 from .physics import network
@@ -85,14 +85,14 @@ def _steps(values: dict, backend: str, cycles, stimulus) -> list[dict] | None:
         raise Mech2SpiceError("give cycles or stimulus, not both")
     if cycles is not None:
         cycles = check.whole_number(cycles, "cycles", 1, check.MAX_CYCLES)
-        check.check_cycles(cycles, backend, "cycles asks for")
+        check.check_cycles(cycles, engine_class(backend), "cycles asks for")
         return [{"set": values, "cycles": cycles}]
     if stimulus is None:
         return None
     if isinstance(stimulus, list):
-        return check.check_steps(stimulus, values, backend)
+        return check.check_steps(stimulus, values, engine_class(backend))
     return check.stimulus_steps(check.path_value(stimulus, "stimulus (a list of steps or a JSON file)"),
-                                values, backend)
+                                values, engine_class(backend))
 
 
 def emit(design, inputs: dict[str, int] | None = None, *, params="default", periods: int | None = None,

@@ -162,13 +162,14 @@ def is_number(value) -> bool:
         return False
 
 
-def stimulus_steps(path, base: dict[str, int], backend: str) -> list[dict]:
-    """A --stimulus file checked: [{"set": {PORT: INT}, "cycles": N}, ...], the --set values under each step's."""
-    return check_steps(read_json(path, "stimulus file"), base, backend, f"stimulus file {path}")
+def stimulus_steps(path, base: dict[str, int], engine) -> list[dict]:
+    """A --stimulus file checked: [{"set": {PORT: INT}, "cycles": N}, ...], the --set values under each step's;
+    `engine` (a registry class) states the cycle cap."""
+    return check_steps(read_json(path, "stimulus file"), base, engine, f"stimulus file {path}")
 
 
-def check_steps(data, base: dict[str, int], backend: str, where: str = "stimulus") -> list[dict]:
-    """A stimulus (a file's content, or the API's list) checked: shape, types, the cycle cap."""
+def check_steps(data, base: dict[str, int], engine, where: str = "stimulus") -> list[dict]:
+    """A stimulus (a file's content, or the API's list) checked: shape, types, the cycle cap (`engine`'s)."""
     if not isinstance(data, list):
         raise Mech2SpiceError(f"{where} must hold a list of steps "
                               f"([{{\"set\": {{\"PORT\": INT}}, \"cycles\": N}}, ...]), not {type_name(data)}")
@@ -185,15 +186,16 @@ def check_steps(data, base: dict[str, int], backend: str, where: str = "stimulus
         if not is_integral(cycles) or cycles < 0:
             raise Mech2SpiceError(f"{where}, step {k}: 'cycles' must be a whole number >= 0, got {cycles!r}")
         steps.append({"set": {**base, **sets}, "cycles": int(cycles)})
-    check_cycles(sum(s["cycles"] for s in steps), backend, f"{where} asks for")
+    check_cycles(sum(s["cycles"] for s in steps), engine, f"{where} asks for")
     return steps
 
 
-def check_cycles(total: int, backend: str, what: str = "--cycles asks for") -> None:
-    """Refuse runs longer than the stated cap (memory and time grow with every cycle)."""
-    cap = MAX_CYCLES if backend == "logic" else MAX_PHYSICAL_CYCLES
+def check_cycles(total: int, engine, what: str = "--cycles asks for") -> None:
+    """Refuse runs longer than the cap the engine (a class of the backends' registry) states in its
+    `max_cycles` (memory and time grow with every cycle)."""
+    cap = engine.max_cycles
     if total > cap:
-        raise Mech2SpiceError(f"{what} {total:,} clock cycles; the {backend} backend is limited to {cap:,} "
+        raise Mech2SpiceError(f"{what} {total:,} clock cycles; the {engine.name} backend is limited to {cap:,} "
                               "per run (memory grows with every cycle): split the stimulus into shorter runs")
     if total < 1:
         raise Mech2SpiceError(f"{what} no clock cycles")

@@ -18,8 +18,8 @@ STEP = envelope.DEFAULT_STEP          # what run_physical uses
 
 
 def both(scene, step=STEP):
-    ref = V.run(scene, "rk4")
-    env = V.run(scene, "envelope", step)
+    ref = V.run_rk4(scene)
+    env = V.run_envelope(scene, step)
     return ref, env, V.compare(scene, ref, env)
 
 

@@ -116,14 +116,22 @@ REPORTS_DIR = PACKAGE.parent / "reports"
 
 
 @pytest.mark.parametrize("name, inputs, outputs, options", [
+    ("gate", ["gate.json"], ["gate.md"], {}),
     ("adder", ["adder.json"], ["adder.md"], {}),
+    ("sequential", ["sequential.json"], ["sequential.md", "sqrt.md"], {}),
+    ("spice", ["spice.json", "speed_accuracy.json"], ["spice.md"], {}),
+    ("envelope", ["envelope.json"], ["envelope.md"], {}),
     ("cpu_circuit", ["cpu_circuit.json"], ["cpu_circuit.md"], {}),
     ("cpu", ["cpu.json", "cpu_physical.json", "cpu_physical_tm_increment.json"], ["cpu.md"], {}),
     ("cpu_physical", ["cpu_physical.json", "fidelity.json"], ["cpu_physical.md"], {}),
+    ("cpu_physical", ["cpu_physical_tm_increment.json", "fidelity.json"], ["cpu_physical_tm_increment.md"],
+     {"name": "cpu_physical_tm_increment"}),
     ("speed_accuracy", ["speed_accuracy.json", "envelope_spice.json", "vacask.json", "carrier.json"],
      ["speed_accuracy.md"], {}),
     ("fidelity", ["fidelity.json", "carrier.json"], ["fidelity.md"], {}),
     ("robustness", ["robustness.json"], ["robustness.md"], {}),
+    ("performance", ["performance.json", "cpu_physical.json", "carrier.json"], ["performance.md"], {}),
+    ("carrier", ["carrier.json"], ["carrier.md"], {}),
     ("design", ["design.json"], ["design.md"], {"search": str(REPORTS_DIR / "design_search.json")}),
 ])
 def test_render_rebuilds_the_checked_in_report_from_its_json(tmp_path, name, inputs, outputs, options):

@@ -19,6 +19,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import Mech2SpiceError
+from ..inputs import MAX_PHYSICAL_CYCLES
 from ..physics.model import MechModel
 from ..physics.stimulus import Stimulus
 from ..run_result import Run
@@ -40,6 +41,9 @@ class Capabilities:
 
 class FromFlags:
     """An engine's options read from the command line (the logic oracle has no model but takes the flags too)."""
+
+    max_cycles: ClassVar[int] = MAX_PHYSICAL_CYCLES   # clock cycles one clocked run may ask for (memory grows
+                                                      # with every cycle; inputs.check_cycles)
 
     @classmethod
     def options_from_flags(cls, flags):
@@ -80,6 +84,17 @@ class Engine(FromFlags, ABC):
     def step(self, model: MechModel) -> float | None:
         """The step (drive periods) that stimulus changes must fall on, for engines with whole-period steps."""
         return None
+
+    @classmethod
+    def processor_latency(cls, threads: int = 1) -> float | None:
+        """The per-gate latency threshold (u_R) a processor run on this engine uses unless told otherwise, with
+        `threads` threads (docs/latency.md); None: every gate integrated at every step."""
+        return None
+
+    def reported_step(self, step: float) -> float:
+        """The step (drive periods) a processor run records for this engine, given the whole-period step
+        `step` it schedules with; by default that step itself."""
+        return step
 
     def rests_on_fixed_point(self) -> bool:
         """Whether this engine, as configured, settles exactly onto the envelope equations' fixed points (so

@@ -333,6 +333,7 @@ class CarrierOptions:
             raise Mech2SpiceError("the carrier's latency loop runs on one thread: choose latency or threads")
 
 
+PROCESSOR_LATENCY = 0.05  # u_R: a processor run's default (docs/carrier.md: its cost against the carrier without it)
 OSCILLATOR_STEPS_PER_S = 4.7e7   # one thread on the processor model, this 2-core machine (docs/carrier.md, "Measured")
 
 
@@ -361,6 +362,15 @@ class CarrierEngine(Engine):
     def dynamical_state(self, state):
         """(x, v): the latency record (integrate's state[2:]) dropped."""
         return state[:2]
+
+    @classmethod
+    def processor_latency(cls, threads: int = 1) -> float | None:
+        """PROCESSOR_LATENCY on one thread; with more, every gate (the latency loop is serial)."""
+        return PROCESSOR_LATENCY if threads == 1 else None
+
+    def reported_step(self, step: float) -> float:
+        """Its own step, one carrier step in drive periods."""
+        return 1.0 / self.options.steps_per_period
 
     def phasors(self, model, state, t):
         """The displacements and velocities as phasors (_base.oscillator_phasors)."""

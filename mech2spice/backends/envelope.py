@@ -31,6 +31,7 @@ RATE_SAFETY = 1.5            # x the largest |eigenvalue| at rest: along switchi
 
 
 DEFAULT_STEP = 4.0           # periods, at most: no accuracy cost on the adder (reports/envelope.md; bound 15.1)
+PROCESSOR_LATENCY = 0.1      # u_R: a processor run's per-gate latency threshold by default (docs/latency.md)
 EXPONENTIAL_STEP = 16.0      # periods, at most, with the exponential step: 0.005 u_R on the chain (docs/latency.md)
 
 
@@ -340,6 +341,11 @@ class EnvelopeEngine(Engine):
         kern = kernel(model) if self.options.compiled else None
         sub, per = _step_layout(step)
         _propagators(kern, Envelope.of(model), self.options.exponential, model.period * per / sub)
+
+    @classmethod
+    def processor_latency(cls, threads: int = 1) -> float | None:
+        """PROCESSOR_LATENCY, whatever the threads (its options have none)."""
+        return PROCESSOR_LATENCY
 
     def step(self, model: MechModel) -> float:
         """The step this engine takes on `model`, in drive periods."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import Mech2SpiceError
+from ..inputs import MAX_CYCLES
 from ..synthesis.ports import input_bits, output_bits, pack_inputs, port_values
 from ..synthesis.synth import Netlist
 from ._base import Capabilities, FromFlags, NoOptions
@@ -99,6 +100,7 @@ class LogicEngine(FromFlags):
     name = "logic"
     capabilities = Capabilities(physical=False, batch=True)
     Options = NoOptions
+    max_cycles = MAX_CYCLES              # a trace entry per cycle, no oscillators: far more cycles than the others
 
     def __init__(self, options=None):
         self.options = options if options is not None else NoOptions()

@@ -12,6 +12,7 @@ import signal
 import sys
 
 from .. import inputs
+from ..backends import engine_class
 from ..errors import Mech2SpiceError
 from . import cpu, design, gate, montecarlo, simulate, verify
 
@@ -153,4 +154,4 @@ def _precheck(args) -> None:
     elif command == "gate" and args.report:
         inputs.check_output_dir(args.report, "report directory")
     if getattr(args, "stimulus", None):
-        inputs.stimulus_steps(args.stimulus, {}, args.backend)
+        inputs.stimulus_steps(args.stimulus, {}, engine_class(args.backend))

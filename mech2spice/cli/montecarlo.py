@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .. import inputs
-from ..backends import continuing, names
+from ..backends import continuing, engine_class, names
 from ..errors import Mech2SpiceError
 from ..experiments.trim import add_trim_arguments, spread_spec, trim_json
 
@@ -89,7 +89,8 @@ def vectors_of(args, netlist) -> list[dict[str, int]]:
     if args.set and args.stimulus:
         raise Mech2SpiceError("give --set or --stimulus, not both")
     if args.stimulus:
-        vecs = [step.get("set", {}) for step in inputs.stimulus_steps(args.stimulus, {}, args.backend)]
+        engine = engine_class(args.backend)
+        vecs = [step.get("set", {}) for step in inputs.stimulus_steps(args.stimulus, {}, engine)]
     elif args.set:
         vecs = [inputs.parse_sets(args.set)]
     else:
@@ -126,7 +127,8 @@ def _clocked_job(args, nl, path) -> dict:
         raise Mech2SpiceError("--set and --periods apply to combinational designs (a clocked one takes --stimulus)")
     if args.backend not in CLOCKED_BACKENDS:
         raise Mech2SpiceError(f"clocked montecarlo runs on {', '.join(CLOCKED_BACKENDS)}, not '{args.backend}'")
-    job = {"design": str(path), "params": args.params, "steps": inputs.stimulus_steps(args.stimulus, {}, args.backend),
+    steps = inputs.stimulus_steps(args.stimulus, {}, engine_class(args.backend))
+    job = {"design": str(path), "params": args.params, "steps": steps,
            "backend": args.backend, "spread": spread_spec(args).describe(), "seed": args.seed,
            "union": 1}
     if args.noise:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from .. import inputs
-from ..backends import BACKENDS
+from ..backends import BACKENDS, engine_class
 from ..errors import Mech2SpiceError
 from ..physics.network import MAX_FANOUT
 from ..spice import DEFAULT_TIMEOUT_S
@@ -156,10 +156,10 @@ def _clocked_steps(args, nl) -> list[dict]:
     if args.stimulus and args.cycles:
         raise Mech2SpiceError("give --cycles or --stimulus, not both")
     if args.stimulus:
-        return inputs.stimulus_steps(args.stimulus, _parse_sets(args.set), args.backend)
+        return inputs.stimulus_steps(args.stimulus, _parse_sets(args.set), engine_class(args.backend))
     if not args.cycles:
         raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N or --stimulus FILE.json")
-    inputs.check_cycles(args.cycles, args.backend)
+    inputs.check_cycles(args.cycles, engine_class(args.backend))
     return [{"set": _parse_sets(args.set), "cycles": args.cycles}]
 
 
@@ -276,7 +276,6 @@ def cmd_emit(args) -> int:
 def _engine_options(args, backend: str | None = None):
     """The engine's options from the flags: each engine reads the flags it takes and refuses the others
     (backends/_base.py `Engine.options_from_flags`)."""
-    from ..backends import engine_class
     return engine_class(backend or args.backend).options_from_flags(args)
 
 

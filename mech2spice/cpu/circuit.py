@@ -39,7 +39,7 @@ from ..spice.vacask import ENVELOPE, OSDI, VacaskEnvelopeOptions, _Emitter, netl
 from .isa import MEM_SIZE, mnemonic
 from .iss import FETCH, Cycle
 from .memory import Memory
-from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
+from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_amplitudes
 
 NAME = "vacask-envelope"
 BUSES = ("raddr", "waddr", "wdata", "we")
@@ -499,16 +499,7 @@ class CircuitCPU:
     def registers(self, k: int | None = None) -> dict:
         """The registers decoded from the latch outputs at sample k (default: now)."""
         k = self.cycle if k is None else k
-        amps = self._sample(k)[0]
-
-        def bit(q: str) -> int:
-            b = self.p.levels.band_of(amps[f"latch.{q}"])
-            if b is None:
-                reg, i = self.regmap[q]
-                raise Mech2SpiceError(f"cycle {k}: register {reg} bit {i} (latch {q}) is invalid "
-                                      f"(amplitude {amps[f'latch.{q}']:.3f} u_R)")
-            return b
-        return registers_from_latches(self.regmap, bit)
+        return registers_from_amplitudes(self.regmap, self.p.levels, self._sample(k)[0], k)
 
     def set_registers(self, regs: dict) -> None:
         """Registers cannot be forced into the circuit: after load(), check that the restored samples

@@ -12,10 +12,12 @@ from .isa import mnemonic
 from .iss import FETCH, ISS, Cycle
 from .memory import Memory
 from .netlist import cpu_netlist, latches_from_registers, register_map, registers_from_latches
+from ..backends import names
 from .physical import PHYSICAL, PhysicalCPU
 
 CIRCUIT = ("vacask-envelope",)   # the whole processor, memory included, in a circuit simulator (cpu/circuit.py)
-BACKENDS = ("iss", "logic", *PHYSICAL, *CIRCUIT)
+LOGIC = names(lambda caps: not caps.physical)   # the NOR netlist as Boolean logic (the registry's oracle)
+BACKENDS = ("iss", *LOGIC, *PHYSICAL, *CIRCUIT)
 
 
 class Machine(Protocol):
@@ -84,7 +86,7 @@ def make_cpu(backend: str, memory: Memory, power_up: bool = True, **physical) ->
     cycles / max_step / settle for the circuit (CircuitCPU)."""
     if backend == "iss":
         return ISS(memory)
-    if backend == "logic":
+    if backend in LOGIC:
         return LogicCPU(memory)
     if backend in PHYSICAL:
         return PhysicalCPU(memory, backend, power_up=power_up, **physical)

@@ -41,6 +41,20 @@ def registers_from_latches(regmap: dict[str, tuple[str, int]], latch_bit) -> dic
     return {**{r: vals[r] for r in REGISTERS if r != "phase"}, "phase": LOAD if ld else LDNX if nx else FETCH}
 
 
+def registers_from_amplitudes(regmap: dict[str, tuple[str, int]], levels, amps, cycle: int) -> dict:
+    """The architectural registers decoded from the latch outputs' amplitudes `amps` ('latch.Q' -> u_R) in the
+    bands `levels` (physics.params.Levels); a latch outside both bands is one Mech2SpiceError naming cycle
+    `cycle`, the register and the bit (an invalid bit stops a processor run)."""
+    def bit(q: str) -> int:
+        b = levels.band_of(amps[f"latch.{q}"])
+        if b is None:
+            reg, i = regmap[q]
+            raise Mech2SpiceError(f"cycle {cycle}: register {reg} bit {i} (latch {q}) is invalid "
+                                  f"(amplitude {amps[f'latch.{q}']:.3f} u_R)")
+        return b
+    return registers_from_latches(regmap, bit)
+
+
 def latches_from_registers(regmap: dict[str, tuple[str, int]], regs: dict) -> dict[str, int]:
     """Each latch's bit for the architectural registers `regs` (the inverse of registers_from_latches)."""
     vals = {r: regs[r] for r in REGISTERS if r != "phase"}

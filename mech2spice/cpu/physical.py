@@ -16,7 +16,7 @@ import numpy as np
 
 from dataclasses import replace
 
-from ..backends import continuing, engine_class, make_engine, names
+from ..backends import continuing, engine_class, envelope, make_engine, names
 from ..errors import Mech2SpiceError
 from ..experiments import clocking
 from ..physics import network
@@ -26,7 +26,7 @@ from .isa import mnemonic
 from .iss import FETCH, Cycle
 from .memory import Memory
 from .settle_check import SettleCheck
-from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_latches
+from .netlist import CPU_VERILOG, cpu_netlist, register_map, registers_from_amplitudes
 
 PHYSICAL = names(continuing, first="envelope")   # engines that continue from a state, so a cycle can follow the last
 # The defaults: 0.0098 u_R from the full envelope at step 2 over the first 30 sieve cycles, 7.2x faster than
@@ -34,9 +34,8 @@ PHYSICAL = names(continuing, first="envelope")   # engines that continue from a 
 PROCESSOR_STEP = 16.0   # envelope periods with the exponential step (its bound: 27.5)
 RK4_PROCESSOR_STEP = 8.0   # the step without it (RK4's bound: 15.1 periods)
 SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fidelity.md)
-LATENCY = 0.1           # u_R: per-gate latency threshold (None: off; docs/latency.md)
-CARRIER_LATENCY = 0.05  # u_R: the carrier's (docs/carrier.md: its cost against the carrier without it)
-OWN_LATENCY = "own"     # latency: the backend's own default (LATENCY, CARRIER_LATENCY; rk4 has none)
+LATENCY = envelope.PROCESSOR_LATENCY   # u_R: the envelope's per-gate latency threshold (docs/latency.md)
+OWN_LATENCY = "own"     # latency: the engine's own default (Engine.processor_latency; rk4 has none)
 READ_PERIODS = 10       # periods a read averages over, at the end of each pulse or pause: all a run keeps
 EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability bound; docs/latency.md)
 
@@ -70,6 +69,8 @@ class PhysicalCPU:
                  settle_check: int | None = None):
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
+        if settle_check and noise and noise[0]:
+            raise Mech2SpiceError("a settle check needs a deterministic machine: not with thermal noise")
         self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
         self.model = network.build(self.netlist, p)
         self.regmap = register_map(self.netlist)
@@ -77,15 +78,14 @@ class PhysicalCPU:
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
         step = step or (PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP)
-        if latency == OWN_LATENCY:           # the carrier's latency loop is serial: threads ask for every gate integrated
-            latency = {"envelope": LATENCY, "carrier": CARRIER_LATENCY if threads == 1 else None}.get(backend)
+        if latency == OWN_LATENCY:
+            latency = engine_class(backend).processor_latency(threads)
         options = _options(backend, step=step, latency=latency, exponential=exponential, parallel=parallel,
                            steps_per_period=steps_per_period, threads=threads, keep_periods=READ_PERIODS)
         # only pauses may end early once settled; pulses always run in full
         self.pulse_engine = make_engine(backend, options)
         self.pause_engine = make_engine(backend, replace(options, settle_tol=settle or None))
-        if backend == "carrier":     # its own step is the one reported (rk4 reports the envelope's, as it always has)
-            step = 1.0 / options.steps_per_period      # the step, in drive periods
+        step = self.pulse_engine.reported_step(step)   # carrier: its own; rk4 the envelope's, as it always has
         if noise and noise[0]:          # thermal noise (k_B T, seed): the noisy engine, never settled or frozen
             from ..backends import noisy_engine
             self.pulse_engine = self.pause_engine = noisy_engine(backend, self.pulse_engine.options, *noise)
@@ -140,16 +140,7 @@ class PhysicalCPU:
 
     def registers(self, amps=None) -> dict:
         """The architectural registers decoded from the latch outputs' amplitudes (an invalid bit stops the run)."""
-        amps = amps or self.amps
-
-        def bit(q: str) -> int:
-            b = self.p.levels.band_of(amps[f"latch.{q}"])
-            if b is None:
-                reg, k = self.regmap[q]
-                raise Mech2SpiceError(f"cycle {self.cycle}: register {reg} bit {k} (latch {q}) is invalid "
-                                      f"(amplitude {amps[f'latch.{q}']:.3f} u_R)")
-            return b
-        return registers_from_latches(self.regmap, bit)
+        return registers_from_amplitudes(self.regmap, self.p.levels, amps or self.amps, self.cycle)
 
     def set_registers(self, regs: dict) -> None:
         """Registers cannot be forced into oscillators: after load(), check that the restored state

@@ -39,8 +39,9 @@ def _recording(engine, log: list):
 def continue_cycles(checkpoint: str, program: str, backend: str, cycles: int, steps: int | None,
                     full_pauses: bool = False, rows_file: str | None = None, latency: float | None = None) -> dict:
     """Load the carrier checkpoint's oscillator state into a `backend` processor and run `cycles` cycles
-    (`full_pauses`: every pause integrated to its end, no idle skipping; `latency`: the carrier's per-gate
-    latency threshold in u_R, None for every gate integrated).  With `rows_file`, each finished
+    (`steps`: steps per period where the engine takes them, None for its default; `full_pauses`: every pause
+    integrated to its end, no idle skipping; `latency`: the engine's per-gate latency threshold in u_R, None
+    for every gate integrated).  With `rows_file`, each finished
     cycle is appended to it as a JSON line and the machine's state after it is kept beside it (an RK4 run
     takes hours): a run whose every cycle is there is read back, an unfinished one continues from its last
     finished cycle."""
@@ -49,9 +50,9 @@ def continue_cycles(checkpoint: str, program: str, backend: str, cycles: int, st
     if len(done) >= cycles:
         return {"probes": done[0]["probes"], "rows": done[:cycles], "unit": done[0]["unit"]}
     prog = cpu_run.load_program(program)
-    options = {"steps_per_period": steps} if steps and backend != "carrier" else {}
+    options = {"steps_per_period": steps} if steps else {}
     options.update({"settle": None} if full_pauses else {})
-    options.update({"latency": latency} if backend == "carrier" else {})
+    options["latency"] = latency                 # None: every gate integrated (not the engine's own default)
     cpu, wall0 = _resumed(rows_file, label, checkpoint, steps, done, backend, prog, options)
     if cpu is None:
         done, wall0 = [], 0.0
@@ -78,7 +79,7 @@ def _from_checkpoint(checkpoint, prog, backend, options, full_pauses):
     cpu = make_cpu("carrier", cpu_run.make_memory(prog), power_up=False, latency=options.get("latency"),
                    **({"settle": None} if full_pauses else {}))
     cpu_run._restore(cpu, state, checkpoint)
-    if backend != "carrier":
+    if backend != cpu.backend:
         other = make_cpu(backend, cpu_run.make_memory(prog), power_up=False, **options)
         other.mem = cpu.mem
         other.state, other.period, other.rdata, other.cycle, other.amps = \

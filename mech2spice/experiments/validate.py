@@ -13,7 +13,6 @@ import numpy as np
 
 from ..backends import envelope, rk4
 from ..compare import AVG
-from ..errors import Mech2SpiceError
 from ..physics.model import MechModel
 from ..physics.params import DEFAULT, GateParams
 from ..physics.steady import Envelope2w   # the steady-state solver's correction too
@@ -25,37 +24,41 @@ TIME_TOL = 0.10         # relative, threshold-crossing times
 
 
 # --- running ---------------------------------------------------------------------------------
-def run(scene: Scene, backend: str, step: float | None = None, env: envelope.Envelope | None = None) -> dict:
-    """Amplitudes (P, probes, B) in u_R, the time each sample stands for (periods), and wall time.
-
-    backend 'rk4' (step = steps per period, default 80) or 'envelope' (step in periods, default
-    envelope.DEFAULT_STEP); `env` runs a variant Envelope (this module's classes) instead."""
-    p = scene.model.params
+def run_rk4(scene: Scene, steps: int | None = None) -> dict:
+    """The scene on RK4 at `steps` per period (default 80): amplitudes (P, probes, B) in u_R, the time each
+    sample stands for (periods), and wall time."""
     t0 = time.perf_counter()
-    if backend == "rk4":
-        steps = int(step or rk4.DEFAULT_STEPS_PER_PERIOD)
-        r = rk4.integrate(scene.model, scene.periods, steps_per_period=steps, stimulus=scene.stimulus,
-                          probes=scene.probes)
-        amp = np.abs(r.amp) / p.u_r
-        t = np.arange(scene.periods) + 0.5             # each sample demodulates one whole period
-    elif backend == "envelope":
-        step = float(step or envelope.DEFAULT_STEP)
-        if env is None:
-            r = envelope.integrate(scene.model, scene.periods, step_periods=step, stimulus=scene.stimulus,
-                                   probes=scene.probes)
-            a = np.abs(r.amp) / p.u_r
-            per = max(1, int(round(step)))
-            amp = a[per - 1::per]                        # integrate() repeats the value over each chunk
-            t = per * (np.arange(amp.shape[0]) + 1.0)
-        else:
-            amp, t = integrate_free(env, scene, step)
-            if step < 1:                                 # keep one sample per period, like integrate()
-                k = int(round(1 / step))
-                amp, t = amp[k - 1::k], t[k - 1::k]
-        amp = np.concatenate([np.zeros((1,) + amp.shape[1:]), amp])      # every scene starts from rest
-        t = np.concatenate([[0.0], t])
+    steps = int(steps or rk4.DEFAULT_STEPS_PER_PERIOD)
+    r = rk4.integrate(scene.model, scene.periods, steps_per_period=steps, stimulus=scene.stimulus,
+                      probes=scene.probes)
+    amp = np.abs(r.amp) / scene.model.params.u_r
+    t = np.arange(scene.periods) + 0.5             # each sample demodulates one whole period
+    return _ran(amp, t, t0, "rk4", steps)
+
+
+def run_envelope(scene: Scene, step: float | None = None, env: envelope.Envelope | None = None) -> dict:
+    """The scene on the envelope model with `step` periods (default envelope.DEFAULT_STEP); `env` runs a
+    variant Envelope (this module's classes) instead.  Returns what run_rk4 does, from rest."""
+    t0 = time.perf_counter()
+    step = float(step or envelope.DEFAULT_STEP)
+    if env is None:
+        r = envelope.integrate(scene.model, scene.periods, step_periods=step, stimulus=scene.stimulus,
+                               probes=scene.probes)
+        a = np.abs(r.amp) / scene.model.params.u_r
+        per = max(1, int(round(step)))
+        amp = a[per - 1::per]                        # integrate() repeats the value over each chunk
+        t = per * (np.arange(amp.shape[0]) + 1.0)
     else:
-        raise Mech2SpiceError(f"unknown backend {backend}")
+        amp, t = integrate_free(env, scene, step)
+        if step < 1:                                 # keep one sample per period, like integrate()
+            k = int(round(1 / step))
+            amp, t = amp[k - 1::k], t[k - 1::k]
+    amp = np.concatenate([np.zeros((1,) + amp.shape[1:]), amp])      # every scene starts from rest
+    t = np.concatenate([[0.0], t])
+    return _ran(amp, t, t0, "envelope", step)
+
+
+def _ran(amp, t, t0: float, backend: str, step) -> dict:
     return {"amp": amp, "t": t, "wall_s": time.perf_counter() - t0, "backend": backend, "step": step}
 
 

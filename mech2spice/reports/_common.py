@@ -41,6 +41,15 @@ def save_figure(fig, path: Path, dpi: int = 110, tight: bool = True) -> None:
     pyplot().close(fig)
 
 
+def measured_on(conditions: dict) -> str:
+    """A study's recorded conditions (studies/_common.conditions) as one phrase for a report: the machine, its
+    load averages when the measurement ended, the date and the versions that shape the numbers."""
+    load = " / ".join(f"{x:.2f}" for x in conditions["load_avg"])
+    versions = ", ".join(f"{k} {v}" for k, v in conditions["versions"].items() if v)
+    return (f"{conditions['machine']} (load averages {load} over 1, 5, 15 min when it ended; "
+            f"{conditions['date']}; Python {conditions['python']}, {versions})")
+
+
 def md_table(header: list[str], rows) -> list[str]:
     """A markdown table as lines: the header, the separator, one line per row of cells."""
     out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import out_dir, pyplot, save_figure, shade_bands, stored, write_json
+from ._common import measured_on, out_dir, pyplot, save_figure, shade_bands, stored, write_json
 
 plt = pyplot()
 
@@ -51,7 +51,7 @@ def write(directory="reports", render: bool = False) -> Path:
         + " | ".join(f"{r['amplitudes'][n]:.3f}" for n in res["names"]) + f" | {r['min_margin']:+.3f} |"
         for r in res["rows"])
     ok = all(r["valid"] and r["outputs"]["s"] == r["expected"] for r in res["rows"])
-    text = ADDER_MD.format(machine=res["conditions"]["machine"], counts=counts, table=table,
+    text = ADDER_MD.format(machine=measured_on(res["conditions"]), counts=counts, table=table,
                            ok="all 16 correct and valid" if ok
                            else "NOT all correct", wall=res["wall_s"], hold=res["hold"], depth=res["depth"],
                            worst=min(r["min_margin"] for r in res["rows"]))

@@ -11,7 +11,7 @@ import matplotlib
 import numpy as np
 
 from ..physics.params import BAND0, BAND1, GateParams
-from ._common import log, md_table, out_dir, pyplot, save_figure, shade_bands, stored, write_json
+from ._common import log, md_table, measured_on, out_dir, pyplot, save_figure, shade_bands, stored, write_json
 
 plt = pyplot()
 
@@ -146,7 +146,7 @@ def render_report(data: dict, d: Path) -> Path:
                    f"{f['driver_swing_with_load_state']:.1e} | {f['branch_spread']:.1e} |" for f in fo_rows)
     vm = out["min_margin_detail"]
     text = GATE_MD.format(
-        machine=data["conditions"]["machine"], tt=_tt_table(out), rk4_ss=out["rk4_vs_steady"],
+        machine=measured_on(data["conditions"]), tt=_tt_table(out), rk4_ss=out["rk4_vs_steady"],
         halving=out["step_halving_change"],
         steps=out["steps_per_period"], steps2=2 * out["steps_per_period"], conv40=conv40,
         mm=out["min_margin"], mm_at=vm["at_inputs"], mm_out=vm["output"] or float("nan"),

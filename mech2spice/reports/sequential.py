@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import md_table, out_dir, pyplot, save_figure, shade_bands, stored, write_json
+from ._common import md_table, measured_on, out_dir, pyplot, save_figure, shade_bands, stored, write_json
 
 plt = pyplot()
 
@@ -81,7 +81,7 @@ def write(directory="reports", sqrt_rk4: bool = False, render: bool = False) -> 
     plot_latch(latch, d / "latch.png")
     plot_trace(fsm["rk4"], d / "fsm.png", "FSM (1101 detector), RK4: output amplitudes; dotted = read points")
     plot_trace(sq["envelope"], d / "sqrt.png", "sqrt(2809), envelope model: |root[i]| over time; dotted = read points")
-    counts, machine = res["sqrt_counts"], res["conditions"]["machine"]
+    counts, machine = res["sqrt_counts"], measured_on(res["conditions"])
     latch_rows = "\n".join(f"| {ph['phase']} | {ph['d']} | {ph['clock']} | {ph['output']:.3f} | {ph['logic']} |"
                            for ph in latch["decoded"])
     fmt_t = lambda t: f"pulse {t['pulse']}, pause {t['pause']} periods (logic depth {t['logic_depth']})"

@@ -8,7 +8,7 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
-from ._common import out_dir, read_json, stored, write_json
+from ._common import measured_on, out_dir, read_json, stored, write_json
 
 
 def write(directory="reports", render: bool = False) -> Path:
@@ -23,7 +23,7 @@ def write(directory="reports", render: bool = False) -> Path:
     table = "\n".join(f"| {n} | {r['cases']} | {r['probes']} | {r['periods']} | {r['max_amp_err']:.1e} | "
                       f"{r['max_phase_err']:.2f} | {r['rk4_s']:.1f} | {r['ngspice_s']:.1f} |" for n, r in res.items())
     ok = all(r["max_amp_err"] < 0.01 and r["max_phase_err"] < 2 for r in res.values())
-    (d / "spice.md").write_text(SPICE_MD.format(machine=data["conditions"]["machine"], table=table,
+    (d / "spice.md").write_text(SPICE_MD.format(machine=measured_on(data["conditions"]), table=table,
                                                 opts=data["options"], verdict="all within" if ok else "NOT all within",
                                                 why=why_this_form(d / "speed_accuracy.json")))
     return d / "spice.md"

@@ -60,7 +60,7 @@ def cached(cache: Path | None, key: str, fn, valid):
 
 
 def _is_run(r) -> bool:
-    """validate.run's result: amplitudes (periods, probes, batch) and times."""
+    """validate.run_rk4's or run_envelope's result: amplitudes (periods, probes, batch) and times."""
     return (isinstance(r, dict) and isinstance(r.get("amp"), np.ndarray) and r["amp"].ndim == 3
             and isinstance(r.get("t"), np.ndarray) and isinstance(r.get("wall_s"), float))
 
@@ -80,21 +80,21 @@ def scenes() -> list[S.Scene]:
 def measure_scene(sc: S.Scene, cache, steps=STEPS) -> dict:
     """One scene on RK4 at 80 and 160 steps/period and on the envelope (`steps`, variants), compared."""
     log(f"{sc.name}: RK4 80 and 160 steps/period, {sc.periods} periods, batch {sc.stimulus.batch}")
-    r80 = cached(cache, f"{sc.name}_rk4_80", lambda: V.run(sc, "rk4", 80), _is_run)
-    r160 = cached(cache, f"{sc.name}_rk4_160", lambda: V.run(sc, "rk4", 160), _is_run)
+    r80 = cached(cache, f"{sc.name}_rk4_80", lambda: V.run_rk4(sc, 80), _is_run)
+    r160 = cached(cache, f"{sc.name}_rk4_160", lambda: V.run_rk4(sc, 160), _is_run)
     out = {"scene": sc.name, "description": sc.description, "oscillators": sc.model.n, "batch": sc.stimulus.batch,
            "periods": sc.periods, "bound": envelope.max_step_periods(sc.model),
            "wall_rk4_80": r80["wall_s"], "wall_rk4_160": r160["wall_s"],
            "rk4_80_vs_160": V.compare(sc, r160, r80), "env": {}, "variants": {}}
     steps = list(steps) + ([1.0] if sc.name == "latch" else [])   # clocked designs run at 1 period
     for step in steps:
-        e = V.run(sc, "envelope", step)
+        e = V.run_envelope(sc, step)
         out["env"][step] = {"wall_s": e["wall_s"], "vs80": V.compare(sc, r80, e), "vs160": V.compare(sc, r160, e),
                             "run": e}
         log(f"  envelope step {step:g}: {e['wall_s']:.2f} s, vs RK4-80 {_short(out['env'][step]['vs80'])}")
     vstep = 0.5 if sc.model.n < 60 else 1.0
     for name, cls in V.VARIANTS.items():
-        e = V.run(sc, "envelope", vstep, env=cls(sc.model))
+        e = V.run_envelope(sc, vstep, env=cls(sc.model))
         out["variants"][name] = {"step": vstep, "wall_s": e["wall_s"], "vs160": V.compare(sc, r160, e),
                                  "vs80": V.compare(sc, r80, e)}
         log(f"  variant {name:8s} step {vstep:g}: vs RK4-160 {_short(out['variants'][name]['vs160'])}")
@@ -118,7 +118,7 @@ def latch_official(cache) -> dict:
         error = f"{type(ex).__name__}: {ex}"
         log(f"  characterise.latch_sequence(p, 'envelope') failed: {error}; using validate.latch_scene")
         sc = S.latch_scene(P)
-        run = V.run(sc, "envelope", 0.5)
+        run = V.run_envelope(sc, 0.5)
         e = (ch.latch_decode(sc, run["amp"][1:, :, 0]), run["wall_s"])
     res = V.latch_compare(P, env_result=e[0], rk4_result=r[0])
     res["wall_rk4"], res["wall_env"], res["envelope_error"] = r[1], e[1], error
@@ -131,21 +131,21 @@ def adder_sweep(sc: S.Scene, r80: dict, r160: dict, quick: bool = False) -> dict
     log("adder: envelope step sweep")
     rows = []
     for step in sweep:
-        e = V.run(sc, "envelope", step)
+        e = V.run_envelope(sc, step)
         rows.append({"step": step, "wall_s": e["wall_s"], "vs80": V.compare(sc, r80, e),
                      "vs160": V.compare(sc, r160, e), "path": "envelope.integrate"})
         log(f"  step {step:g}: {e['wall_s']:.2f} s {_short(rows[-1]['vs80'])}")
     refused = []
     for step in refuse:
         try:
-            V.run(sc, "envelope", step)
+            V.run_envelope(sc, step)
             refused.append({"step": step, "refused": False})
         except Mech2SpiceError as ex:
             refused.append({"step": step, "refused": True, "message": str(ex)})
     free = []
     env = envelope.Envelope(sc.model)
     for step in free_steps:
-        e = V.run(sc, "envelope", step, env=env)
+        e = V.run_envelope(sc, step, env=env)
         ok = bool(np.isfinite(e["amp"]).all())
         row = {"step": step, "wall_s": e["wall_s"], "finite": ok, "path": "validate.integrate_free"}
         if ok:

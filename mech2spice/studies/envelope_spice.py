@@ -80,7 +80,7 @@ def scenes(quick: bool) -> dict[str, S.Scene]:
 # --- runners -----------------------------------------------------------------------------------------
 def run_spice(sc: S.Scene, opts: se.EnvelopeSpiceOptions, timeout: float | None = None) -> dict:
     """ngspice-envelope on every member (WORKERS processes at a time); amplitudes in u_R at each period's
-    end, like validate.run's envelope samples.  wall_s: the sum of the processes' own times (one-core
+    end, like validate.run_envelope's samples.  wall_s: the sum of the processes' own times (one-core
     cost); elapsed_s: the wall clock with WORKERS processes."""
     t0 = time.perf_counter()
     try:
@@ -109,8 +109,8 @@ def accuracy(quick: bool) -> dict:
     out = {}
     for name, sc in scenes(quick).items():
         log(f"[accuracy] {name}: {sc.model.n} oscillators, {sc.stimulus.batch} members, {sc.periods} periods")
-        ref = V.run(sc, "envelope", REF_STEP)
-        chk = V.run(sc, "envelope", CHECK_STEP)
+        ref = V.run_envelope(sc, REF_STEP)
+        chk = V.run_envelope(sc, CHECK_STEP)
         d = {"description": sc.description, "oscillators": sc.model.n, "members": sc.members,
              "periods": sc.periods, "stability_bound_periods": envelope.max_step_periods(sc.model),
              "reference": {"step": REF_STEP, "wall_s": ref["wall_s"],
@@ -118,14 +118,14 @@ def accuracy(quick: bool) -> dict:
              "spice": [], "python": []}
         rk = None
         if name == "nor_gate":
-            rk = V.run(sc, "rk4", 160)
+            rk = V.run_rk4(sc, 160)
             d["rk4_160"] = {"wall_s": rk["wall_s"], "vs_reference": scored(sc, rk, ref)}
         for step in PY_STEPS:
             if step > d["stability_bound_periods"]:
                 d["python"].append({"step": step, "refused": f"beyond the stability bound "
                                                              f"{d['stability_bound_periods']:.1f} periods"})
                 continue
-            r = V.run(sc, "envelope", step)
+            r = V.run_envelope(sc, step)
             row = {"step": step, "wall_s": r["wall_s"], **scored(sc, ref, r)}
             if rk is not None:
                 row["vs_rk4_160"] = scored(sc, rk, r)
@@ -212,7 +212,7 @@ def failures(quick: bool) -> dict:
                     + ("STALLED" if r["stalled"] else f"{r['wall_s']:.2f} s"))
     log("[failures] very large max steps")
     for name, s in scenes(quick).items():
-        ref = V.run(s, "envelope", REF_STEP)
+        ref = V.run_envelope(s, REF_STEP)
         rows = []
         for ms in LARGE_STEPS:
             for rt in RELTOLS:
@@ -303,7 +303,7 @@ def measure(directory: Path, only=None, quick: bool = False) -> dict:
     res = read_json(jpath, {}) if only else {}
     # compile the Python envelope loop and start ngspice once, outside every timing
     g = S.gate_scene(P, "nominal", periods=20)
-    V.run(g, "envelope", 1.0)
+    V.run_envelope(g, 1.0)
     se.run_envelope_spice(g.model, 20, g.stimulus, workers=1)
     t0 = time.perf_counter()
     pre = "rerun_" if only else ""

@@ -99,11 +99,12 @@ def clocked_job(name: str, sigma: float, params: str = "default") -> dict:
     sigma, with parameters `params`."""
     import hashlib
     from .. import data, inputs
+    from ..backends import engine_class
     base = {"params": params, "backend": "envelope", "spread": mc.spec_of(sigma).describe(), "seed": SEED,
             "union": 1}
     if name == "sqrt":
         return {"design": str(Path(data.verilog("sqrt.v")).resolve()),
-                "steps": inputs.stimulus_steps(data.verilog("sqrt_2809.json"), {}, "envelope"), **base}
+                "steps": inputs.stimulus_steps(data.verilog("sqrt_2809.json"), {}, engine_class("envelope")), **base}
     prog = Path(data.program(CPU_PROGRAM)).resolve()
     return {"program": str(prog), "program_sha256": hashlib.sha256(prog.read_bytes()).hexdigest(),
             "cycles": SIEVE_CYCLES if name == "sieve" else CPU_CYCLES, **base}

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 
 from .. import data, simulation
-from ..backends import envelope
+from ..backends import engine_class, envelope
 from ..experiments import characterise
 from ..experiments.scenes import COUNTER_STEPS, FSM_STEPS, FSM_X, sqrt_steps
 from ..physics import network
@@ -43,7 +43,7 @@ def _clocked(design: str, steps: list[dict], backends=("logic", "envelope"), dra
     timing = simulation.clock_timing(nl)
     runs = {}
     for b in backends:
-        runs[b] = simulation.run_clocked_logic(nl, cycles) if b == "logic" else \
+        runs[b] = simulation.run_clocked_logic(nl, cycles) if not engine_class(b).capabilities.physical else \
             simulation.run_clocked_physical(nl, DEFAULT, cycles, b, timing, progress=sys.stderr.isatty(),
                                           waveform=True)
     return nl, {b: _run(r, b == drawn) for b, r in runs.items()}, timing

@@ -60,7 +60,7 @@ def add_parser(subparsers) -> None:
     r.add_argument("program", help="assembly source (.asm) or binary image")
     r.add_argument("--backend", default="iss", choices=BACKENDS,
                    help="iss (instruction-set simulator), logic (the NOR netlist), envelope, carrier or rk4 (the "
-                        "netlist as 6486 oscillators; envelope ~0.05 s per cycle, the sieve in 22-23 s: "
+                        "netlist as 6486 oscillators; envelope ~0.04 s per cycle, the sieve in ~18 s on a quiet machine: "
                         "reports/cpu_physical.md; carrier: oscillator level, Lawson RK4, reports/carrier.md), "
                         "vacask-envelope (the whole processor and its memory as one VACASK netlist, run for "
                         "--max-cycles cycles in one process, or with --checkpoint one process per "

@@ -148,7 +148,7 @@ def markdown(d: dict) -> str:
               "*wall*: synthesis-free `run_clocked_physical`, model build included.", ""]
         L.append("")
     L += defaults_md(d)
-    L += settled_md(d.get("settled"))
+    L += settled_md(d.get("settled"), d.get("settled_load"))
     if "cone" in d:
         L += ["## Cone pruning (`--observe PORT`, `synth.observe`)", "",
               "comparator4, all 256 input pairs in one envelope batch: the full netlist against the netlist "
@@ -163,7 +163,7 @@ def markdown(d: dict) -> str:
     return "\n".join(L) + "\n"
 
 
-def settled_md(runs: list | None) -> list[str]:
+def settled_md(runs: list | None, load: str | None = None) -> list[str]:
     """The processor's reads against their own future (`cpu run --settle-check`), one row a setting."""
     if not runs:
         return []
@@ -195,7 +195,8 @@ def settled_md(runs: list | None) -> list[str]:
           f"({sc0['settled_bw']:g} band widths, judged there by the stability verdict) would need a lower latency "
           "threshold, at the cost in gate-block steps the rows below the first show; so the processor keeps its "
           "defaults and the check is `cpu run --settle-check` (exit 1 when a read is not settled), ~0.2 s a read "
-          "instead of the verdict's 10-30 s.", ""]
+          "instead of the verdict's 10-30 s. *CPU s*, *wall s*: the run without the check (CPU seconds of the "
+          f"process), then the checked run's wall; machine load at the start: {load or 'not recorded'}.", ""]
     return L
 
 

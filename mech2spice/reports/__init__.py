@@ -31,8 +31,8 @@ REPORTS: dict[str, Report] = {
                          ("sequential.md", "sqrt.md", "sequential.json"), ("sqrt_rk4", "render")),
     "spice": Report("the electrical analogy; ngspice against RK4 on four scenes", "~4 min", ("spice.md", "spice.json"),
                     ("render",)),
-    "fidelity": Report("what each envelope speed-up (step, settle detection, cone pruning) costs in accuracy",
-                       "~20 min", ("fidelity.md",), ("only", "cycles", "render")),
+    "fidelity": Report("what each envelope speed-up (step, settle detection, cone pruning) costs in accuracy; are the processor's reads settled",
+                       "~30 min", ("fidelity.md", "fidelity.json", "fidelity_options.png"), ("only", "cycles", "render")),
     "cpu_physical": Report("the processor as 6486 oscillators against the ISS, cycle by cycle, to the halt",
                            "~5 min", ("cpu_physical.md", "cpu_physical.json"),
                            ("cycles", "program", "backend", "step", "settle", "checkpoint", "resume", "name",
@@ -46,7 +46,7 @@ REPORTS: dict[str, Report] = {
     "envelope": Report("where the envelope model agrees with RK4, why it differs, the step bound", "~10 min",
                        ("envelope.md", "envelope.json"), ("quick", "cache", "render")),
     "performance": Report("what every fidelity level costs as circuits grow, and where the time goes",
-                          "~15 min", ("performance.md",), ("only", "quick", "sqrt_rk4_full", "render")),
+                          "~15 min", ("performance.md", "performance.json"), ("only", "quick", "sqrt_rk4_full", "render")),
     "carrier": Report("the carrier engine (Lawson RK4): accuracy against RK4, convergence against wall time, its rate "
                       "and roofline on the processor, processor cycles against RK4, the whole sieve against the envelope "
                       "and with per-gate latency",
@@ -55,7 +55,7 @@ REPORTS: dict[str, Report] = {
                        "carrier_sieve_fidelity.png", "carrier_latency_sieve.png"),
                       ("only", "quick", "render", "carrier_trace", "envelope_trace", "processor_check", "latency_trace")),
     "speed_accuracy": Report("RK4 and ngspice (carrier and envelope netlists): speed, accuracy, failure points",
-                             "~40 min", ("speed_accuracy.md",), ("only", "design", "quick", "render")),
+                             "~40 min", ("speed_accuracy.md", "speed_accuracy.json"), ("only", "design", "quick", "render")),
     "robustness": Report("yield of the gate, a 3-gate chain and the adder under per-element spread (Monte-Carlo "
                          "on Dask), per-gate failure rate, the processor extrapolated", "~30 min",
                          ("robustness.md", "robustness.json", "robustness_yield.png", "robustness_noise.png"),

@@ -31,10 +31,11 @@ def _value_at(p, model, cons, k):
     return other.value[same[np.argmin(np.abs(other.s[same] - cons.s[k]))]]
 
 
-@pytest.mark.parametrize("kind", ["margin", "fold"])
+@pytest.mark.parametrize("kind", ["margin", "fold", "stability"])
 def test_gradients_match_finite_differences(default, kind):
-    """The adjoint gradient of the smallest-beta margin and fold constraints against central differences
-    of the steady-state scan, for the three elements that move them most."""
+    """The adjoint gradient of the smallest-beta margin, fold and stability constraints against central
+    differences of the steady-state scan (its growth rates: eigenvalues of steady_batch.jacobian), for the
+    three elements that move them most."""
     p, an = default
     beta = np.where(an.cons.kind == kind, an.beta(), np.inf)
     k = int(np.argmin(beta))
@@ -58,6 +59,34 @@ def test_margin_gradients_equal_the_implicit_function_theorem(default):
     assert len(single) > 100
     got, want = an.cons.grad[single], ref[an.cons.point[single]]
     assert np.abs(got - want).max() <= 1e-9 * np.abs(want).max()
+
+
+def test_stability_constraints_are_every_stable_states_growth(default):
+    """One stability constraint per stable state: its value is minus the scan's growth rate there."""
+    p, an = default
+    fx = c.Fast.of(p)
+    levels, _ = loaded.input_grid(GRID["per_band"], p.levels)
+    r = c.steady_batch.roots(fx.st, 0, levels, GRID["n_grid"])
+    stab = an.cons.kind == "stability"
+    assert np.array_equal(an.cons.point[stab], r.point[r.stable])
+    assert np.allclose(-an.cons.value[stab], r.growth[r.stable], rtol=1e-9, atol=1e-12)
+    assert an.cons.growth == pytest.approx(-an.cons.value[stab].min())
+
+
+def test_stability_limits_where_the_slowest_state_is_not():
+    """centered_fc as centred (insulator Q 0.868, before the held-loop damping): the per-state stability
+    constraints limit at '1'-output points of band 0 with beta < 1 (about a quarter of trimmed samples at 1 %
+    lose the stable state there, docs/design.md), while the nominal block's slowest state, the one constraint
+    the centering followed before, sits at another point (1.165, 1.165) with about 2.5x more room."""
+    from mech2spice.experiments.held import with_insulator_q
+    p = with_insulator_q(load_params("centered_fc"), 0.8680033880034401)
+    an = c.analyse(p, c.SpreadSpec(0.01, "fc", 1e-4), **GRID)
+    lim = an.limiting()
+    assert lim["kind"] == "stability" and lim["beta"] < 1.0
+    assert max(lim["inputs"]) < p.levels.band0[1] + 1e-9
+    slowest = np.flatnonzero((an.cons.kind == "stability") & (an.cons.point == an.cons.growth_at[0]))
+    assert an.levels[an.cons.growth_at[0], 1:].min() > p.levels.band1[1] - 1e-9
+    assert an.beta()[slowest].min() > 2 * lim["beta"]
 
 
 def test_beta_agrees_with_sampled_yield(default):

@@ -8,13 +8,18 @@ inside the band NOR asks for and does not vanish.  Both are linearised in the re
   * a *fold constraint* per local extremum of the insulator's balance r(s) (steady_batch: r(s) = k_s s +
     1/2 sum h |A(s)|^2, one equation in s per input point): where an extremum's value r_e crosses zero a
     pair of steady states is born or dies, so a state jumps or a new one appears.  r_e's first-order
-    change is dr/dt at fixed s (dr/ds = 0 there), so its distance is linear in t, not a square root.
+    change is dr/dt at fixed s (dr/ds = 0 there), so its distance is linear in t, not a square root;
+  * a *stability constraint* per stable steady state: minus its growth rate (the leading eigenvalue of the
+    envelope Jacobian J there, steady_batch.jacobian), whose change is w^T (dJ/dt + dJ/dA dA/dt + dJ/ds ds/dt) v
+    / (w^T v) with v, w the right and left eigenvectors and dA/dt, ds/dt the state's own first-order change
+    (`Fast.growth`): under spread a state at another input point than the nominal block's slowest may lose
+    stability first (measured on centered_fc as centred, docs/design.md).
 
 Each constraint's worst-case distance is beta = m / ||S^T g|| (in standard deviations of the spread along
 its most dangerous direction).  Both come from one adjoint solve per state: the steady state reduces to
 r(s) = 0 with A = Z(s)^-1 F, so dA/dt = -Z^-1 (dZ/dt A - dF/dt) at fixed s and ds/dt = -dr/dt / r'(s);
 tests/test_centering.py checks the margin gradients against sensitivity.margin_gradients (the
-implicit-function theorem on the full residual) and against finite differences.
+implicit-function theorem on the full residual) and every kind against finite differences.
 
 Trimming (the sigma vector): after fabrication every oscillating DOF of the block has its total k/m (and
 with 'fc' its total c/m) set back to nominal through its local spring (dashpot), with a relative residual:
@@ -74,25 +79,28 @@ def noise_matrices(model, elems: list[spread.Element], trim: str):
 # --- states and their first-order changes ------------------------------------------------------------
 @dataclass
 class Fast:
-    """The loaded gate's envelope arrays at input level 1 (steady_batch's), plus what the derivatives need."""
+    """The loaded gate's envelope arrays at input level 1 (steady_batch's), plus what the derivatives need:
+    `d`, per element the change of the envelope's coefficients per unit relative change (`derivatives`)."""
     lg: loaded.LoadedGate
     elems: list[spread.Element]
     st: steady_batch.Stack
     fast: np.ndarray          # model DOF index of each fast row
     slow: int
+    d: dict
 
     @classmethod
     def of(cls, p: GateParams) -> "Fast":
         lg = loaded.build(p)
         m = lg.model
         st = steady_batch.stack([m], lg.input_groups(), lg.gate.channel)
-        return cls(lg, spread.elements(m, lg.block_dofs), st, np.flatnonzero(~np.asarray(m.slow, bool)),
-                   int(np.flatnonzero(m.slow)[0]))
+        elems, fast, slow = spread.elements(m, lg.block_dofs), np.flatnonzero(~np.asarray(m.slow, bool)), \
+            int(np.flatnonzero(m.slow)[0])
+        return cls(lg, elems, st, fast, slow, derivatives(m, elems, fast, slow, lg.input_groups(), st.groups))
 
     def state(self, levels: np.ndarray, s: np.ndarray) -> dict:
-        """At slow positions s (n,) and input levels (n, G): A, r, dr/ds, dA_out/ds, and at fixed s the
-        derivatives dr/dt (n, E) and dA_out/dt (n, E) for every element."""
-        st, w, m = self.st, self.lg.model.omega, self.lg.model
+        """At slow positions s (n,) and input levels (n, G): A, r, dr/ds, dA/ds, and at fixed s the
+        derivatives dr/dt (n, E) and dA/dt (n, nf, E) for every element (A_out etc.: the output row)."""
+        st, d = self.st, self.d
         nf = self.fast.size
         Z = st.Z0[0][None] + (st.g[0][None, :, None] * np.eye(nf)[None]) * s[:, None, None]
         F = np.einsum("fg,ng->nf", st.f[0], levels)
@@ -101,51 +109,86 @@ class Fast:
         h = st.h[0]
         r = st.ks[0] * s + 0.5 * (h * np.abs(A) ** 2).sum(axis=1)
         r_s = st.ks[0] + (h * (A.conj() * dA_ds).real).sum(axis=1)
-        D, direct = self._dz(A, s, levels, w, m)
+        D = (np.einsum("eij,nj->nie", d["Z0"], A) + d["g"].T[None] * (s[:, None] * A)[..., None]
+             - np.einsum("eig,ng->nie", d["F"], levels))                    # d(Z A - F)/dt at fixed s
+        direct = d["ks"][None] * s[:, None] + 0.5 * np.abs(A) ** 2 @ d["h"].T
         X = np.linalg.solve(Z, D)                                   # dA/dt = -X at fixed s
         r_t = direct - np.einsum("f,nf,nfe->ne", h, A.conj(), X).real
         o = st.out
         return {"A": A, "r": r, "r_s": r_s, "A_out": A[:, o], "dAo_ds": dA_ds[:, o], "r_t": r_t,
-                "dAo_dt": -X[:, o, :]}
+                "dAo_dt": -X[:, o, :], "dA_ds": dA_ds, "dA_dt": -X}
 
-    def _dz(self, A, s, levels, w, m):
-        """Per element: d(Z A - F)/dt (n, nf, E) and the direct part of dr/dt (n, E) at fixed s."""
+    def growth(self, A: np.ndarray, s: np.ndarray, dA: np.ndarray, ds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Growth rate (n,) of steady states (A, s) and its total derivative (n, E) for the states' own
+        first-order changes dA (n, nf, E), ds (n, E): d lambda = w^T dJ v / (w^T v) for the leading eigenvalue
+        of the envelope Jacobian J (steady_batch.jacobian, variables Re A, Im A, s, s'), v and w its right and
+        left eigenvectors, dJ = dJ/dt at fixed state + dJ/dA dA + dJ/ds ds (J is affine in A and s)."""
+        st, d = self.st, self.d
         n, nf = A.shape
-        pos = -np.ones(m.n, int)
-        pos[self.fast] = np.arange(nf)
-        D = np.zeros((n, nf, len(self.elems)), complex)
-        direct = np.zeros((n, len(self.elems)))
-        groups = self.lg.input_groups()
-        kl, cl = m.k_local, m.c_local
-        for j, e in enumerate(self.elems):
-            i = e.index
-            if e.kind in ("k", "m", "c") and i == self.slow:
-                direct[:, j] = kl[i] * s if e.kind == "k" else 0.0      # mass and damping: not in a steady state
-            elif e.kind in ("k", "m", "c"):
-                fac = {"k": kl[i], "m": -w * w * m.mass[i], "c": 1j * w * cl[i]}[e.kind]
-                D[:, pos[i], j] = fac * A[:, pos[i]]
-            elif e.kind in ("spring", "dashpot"):
-                a, b, v = (m.springs if e.kind == "spring" else m.dashpots)[i]
-                v = v if e.kind == "spring" else 1j * w * v
-                D[:, pos[a], j] = v * (A[:, pos[a]] - A[:, pos[b]])
-                D[:, pos[b], j] = -D[:, pos[a], j]
-            elif e.kind == "gamma":
-                f, _, g = m.quads[i]
-                D[:, pos[f], j] = 2 * g * s * A[:, pos[f]]
-                direct[:, j] = 0.5 * g * np.abs(A[:, pos[f]]) ** 2
-            else:                                                    # a drive: F moves, Z A - F by -dF
-                d = m.drives[i]
-                D[:, pos[d.dof], j] = 1j * d.amplitude * np.exp(1j * d.phase) * levels[:, groups[i]]
-        return D, direct
+        lam, V = np.linalg.eig(steady_batch.jacobian(st, 0, A, s))
+        k = np.argmax(lam.real, axis=1)
+        i = np.arange(n)
+        v, w = V[i, :, k], np.linalg.inv(V)[i, k, :]                # w V = 1: the left eigenvector, normalised
+        Bi, g, h, ms = st.Binv[0], st.g[0], st.h[0], st.ms[0]
+        eye = np.eye(nf)
+        M1 = -Bi @ (st.Z0[0][None] + g[None, :, None] * eye * s[:, None, None])
+        vA = -(Bi @ (g * A).T).T
+        dM1 = -Bi @ (np.einsum("eij,njk->neik", d["B"], M1) + d["Z0"][None]
+                     + d["g"][None, :, :, None] * eye * s[:, None, None, None] + g[:, None] * eye * ds[..., None, None])
+        dv = -np.einsum("ij,nej->nei", Bi, np.einsum("eij,nj->nei", d["B"], vA) + d["g"][None] * A[:, None]
+                        + g * dA.transpose(0, 2, 1))
+        drow = -(d["h"][None] * A[:, None] + h * dA.transpose(0, 2, 1)) / ms + (h * A / ms)[:, None] * d["ms"][:, None] / ms
+        dJ = np.zeros((n, len(self.elems), 2 * nf + 2, 2 * nf + 2))
+        dJ[..., :nf, :nf], dJ[..., :nf, nf:2 * nf] = dM1.real, -dM1.imag
+        dJ[..., nf:2 * nf, :nf], dJ[..., nf:2 * nf, nf:2 * nf] = dM1.imag, dM1.real
+        dJ[..., :nf, 2 * nf], dJ[..., nf:2 * nf, 2 * nf] = dv.real, dv.imag
+        dJ[..., 2 * nf + 1, :nf], dJ[..., 2 * nf + 1, nf:2 * nf] = drow.real, drow.imag
+        dJ[..., 2 * nf + 1, 2 * nf] = (-d["ks"] + st.ks[0] * d["ms"] / ms)[None] / ms
+        dJ[..., 2 * nf + 1, 2 * nf + 1] = (-d["cs"] + st.cs[0] * d["ms"] / ms)[None] / ms
+        return lam.real[i, k], np.einsum("ni,nei->ne", w, (dJ @ v[:, None, :, None])[..., 0]).real
+
+
+def derivatives(m, elems: list[spread.Element], fast: np.ndarray, slow: int, groups, n_groups: int) -> dict:
+    """Per element e, the change per unit relative change t_e of the envelope's coefficients (steady_batch's
+    arrays): Z0 and B = 2 i w M + C of the fast block (E, nf, nf), g = 2 gamma and h = gamma (E, nf), the
+    insulator's ks, cs, ms (E,), and the forcing F at level 1 (E, nf, groups)."""
+    nf, E, w = fast.size, len(elems), m.omega
+    pos = -np.ones(m.n, int)
+    pos[fast] = np.arange(nf)
+    d = {"Z0": np.zeros((E, nf, nf), complex), "B": np.zeros((E, nf, nf), complex), "g": np.zeros((E, nf)),
+         "h": np.zeros((E, nf)), "ks": np.zeros(E), "cs": np.zeros(E), "ms": np.zeros(E),
+         "F": np.zeros((E, nf, n_groups), complex)}
+    kl, cl = m.k_local, m.c_local
+    for j, e in enumerate(elems):
+        i = e.index
+        if e.kind in ("k", "m", "c") and i == slow:
+            d[e.kind + "s"][j] = {"k": kl, "m": m.mass, "c": cl}[e.kind][i]
+        elif e.kind in ("k", "m", "c"):
+            a = pos[i]
+            d["Z0"][j, a, a] = {"k": kl[i], "m": -w * w * m.mass[i], "c": 1j * w * cl[i]}[e.kind]
+            d["B"][j, a, a] = {"k": 0.0, "m": 2j * w * m.mass[i], "c": cl[i]}[e.kind]
+        elif e.kind in ("spring", "dashpot"):
+            a, b, v = (m.springs if e.kind == "spring" else m.dashpots)[i]
+            u = np.zeros(nf)
+            u[pos[a]], u[pos[b]] = 1.0, -1.0
+            d["Z0"][j] = (v if e.kind == "spring" else 1j * w * v) * np.outer(u, u)
+            d["B"][j] = (0.0 if e.kind == "spring" else v) * np.outer(u, u)
+        elif e.kind == "gamma":
+            f, _, gam = m.quads[i]
+            d["g"][j, pos[f]], d["h"][j, pos[f]] = 2 * gam, gam
+        else:                                                        # a drive: only the forcing moves
+            dr = m.drives[i]
+            d["F"][j, pos[dr.dof], groups[i]] = -1j * dr.amplitude * np.exp(1j * dr.phase)
+    return d
 
 
 @dataclass
 class Constraints:
     """Every linearised pass condition of one block over an input grid."""
-    kind: np.ndarray          # "margin" or "fold"
+    kind: np.ndarray          # "margin", "stability" or "fold"
     point: np.ndarray         # input-point index
     s: np.ndarray             # the state's (or extremum's) insulator position
-    value: np.ndarray         # margin (band widths) or |r_e|
+    value: np.ndarray         # margin (band widths), -growth rate (1/time) or |r_e|
     grad: np.ndarray          # (n, E) d value / dt
     nominal_margin: float     # the block's worst margin over the grid (point_margins)
     growth: float             # the largest growth rate (1/time) of any stable state over the grid
@@ -157,8 +200,8 @@ class Constraints:
 
 
 def constraints(fx: Fast, levels: np.ndarray, expect: np.ndarray, p: GateParams, n_grid: int) -> Constraints:
-    """The margin constraints (every stable state) and fold constraints (every extremum of r(s)) of the
-    loaded gate at the input points `levels` (P, G) with expected outputs `expect`."""
+    """The margin and stability constraints (every stable state) and fold constraints (every extremum of
+    r(s)) of the loaded gate at the input points `levels` (P, G) with expected outputs `expect`."""
     st, u_r = fx.st, p.u_r
     r = steady_batch.roots(st, 0, levels, n_grid)
     nominal = float(loaded.point_margins(r, expect, u_r, p.levels).min())
@@ -173,12 +216,13 @@ def constraints(fx: Fast, levels: np.ndarray, expect: np.ndarray, p: GateParams,
     da = (sr["A_out"].conj()[:, None] * dAo).real / np.abs(sr["A_out"])[:, None] / u_r
     m_val = np.minimum(a - lo, hi - a) / (hi - lo)
     m_grad = da * (sign / (hi - lo))[:, None]
+    g_val, g_grad = fx.growth(sr["A"], s_roots, sr["dA_dt"] + sr["dA_ds"][..., None] * ds_dt[:, None], ds_dt)
     ep, es = extrema(st, levels, n_grid)
     se = fx.state(levels[ep], es)
     f_val, f_grad = np.abs(se["r"]), np.sign(se["r"])[:, None] * se["r_t"]
-    kind = np.array(["margin"] * pts.size + ["fold"] * ep.size)
-    return Constraints(kind, np.concatenate([pts, ep]), np.concatenate([s_roots, es]),
-                       np.concatenate([m_val, f_val]), np.concatenate([m_grad, f_grad]), nominal,
+    kind = np.array(["margin"] * pts.size + ["stability"] * pts.size + ["fold"] * ep.size)
+    return Constraints(kind, np.concatenate([pts, pts, ep]), np.concatenate([s_roots, s_roots, es]),
+                       np.concatenate([m_val, -g_val, f_val]), np.concatenate([m_grad, -g_grad, f_grad]), nominal,
                        *_slowest(r.growth[keep], pts, s_roots))
 
 
@@ -188,22 +232,6 @@ def _slowest(growth: np.ndarray, pts: np.ndarray, s: np.ndarray) -> tuple[float,
         return -math.inf, (-1, math.nan)
     k = int(np.argmax(growth))
     return float(growth[k]), (int(pts[k]), float(s[k]))
-
-
-GROWTH_STEP = 1e-5          # relative element change of the growth rate's forward differences
-
-
-def growth_gradient(fx: Fast, levels: np.ndarray, point: int, s: float, n_grid: int) -> np.ndarray:
-    """d(growth rate)/dt of the stable state at (point, s) for every element: forward differences, every
-    perturbed copy in one stack (the growth rate is an eigenvalue: no adjoint here)."""
-    m, E = fx.lg.model, len(fx.elems)
-    copies = [spread.scaled(m, fx.elems, 1 + GROWTH_STEP * (np.arange(E) == j)) for j in range(E)]
-    st = steady_batch.stack([m, *copies], fx.lg.input_groups(), fx.lg.gate.channel)
-    out = np.empty(E + 1)
-    for b in range(E + 1):
-        r = steady_batch.roots(st, b, levels[point:point + 1], n_grid)
-        out[b] = r.growth[np.argmin(np.abs(r.s - s))] if r.s.size else np.nan
-    return (out[1:] - out[0]) / GROWTH_STEP
 
 
 def extrema(st: steady_batch.Stack, levels: np.ndarray, n_grid: int) -> tuple[np.ndarray, np.ndarray]:
@@ -240,48 +268,20 @@ class Analysis:
     noise: tuple             # (Sa, Sb)
     n_grid: int
 
-    def stability(self) -> dict:
-        """The stability constraint: the slowest stable state's growth rate, whose worst-case distance is
-        -growth / ||S^T grad growth|| (a state that starts to grow is a failing input point, `gate --spread`'s
-        -1); a, b as for the other constraints, and the sources of its variance at the target spread."""
-        if getattr(self, "_stability", None) is None:
-            Sa, Sb = self.noise
-            g = growth_gradient(self.fx, self.levels, *self.cons.growth_at, self.n_grid)
-            g = np.where(np.isfinite(g), g, 0.0)
-            ga, gb = g @ Sa, g @ Sb
-            parts = np.concatenate([ga * self.spec.spread, gb * self.spec.residual]) ** 2
-            top = np.argsort(-parts)[:3]
-            self._stability = {"value": -self.cons.growth, "a": float(ga @ ga), "b": float(gb @ gb),
-                               "inputs": self.levels[self.cons.growth_at[0], 1:].tolist(),
-                               "elements": [{"name": self.elements[i], "share": float(parts[i] / parts.sum())}
-                                            for i in top]}
-        return self._stability
-
-    def stability_beta(self, spread_: float | None = None) -> float:
-        """The stability constraint's beta at spread_ (default the spec's) and the spec's residual."""
-        st, s = self.stability(), self.spec.spread if spread_ is None else spread_
-        var = s * s * st["a"] + self.spec.residual ** 2 * st["b"]
-        return st["value"] / math.sqrt(var) if var > 0 else math.inf
-
     def beta(self, spread_: float | None = None) -> np.ndarray:
         """Per constraint worst-case distance at spread `spread_` (default the spec's) and the spec's residual."""
         s = self.spec.spread if spread_ is None else spread_
         var = s * s * self.a + self.spec.residual ** 2 * self.b
         return np.where(var > 0, self.cons.value / np.sqrt(np.maximum(var, 1e-300)), np.inf)
 
-    def tolerance(self, stability: bool = False) -> float:
-        """The linear tolerance: the largest spread at which every margin and fold constraint (and with
-        `stability` the stability constraint) keeps beta >= Z99 (0 where the residual alone brings one below
-        it, or the nominal block fails)."""
+    def tolerance(self) -> float:
+        """The linear tolerance: the largest spread at which every constraint keeps beta >= Z99 (0 where the
+        residual alone brings one below it, or the nominal block fails)."""
         if not self.cons.nominal_margin > 0:
             return 0.0
-        value, a, b = self.cons.value, self.a, self.b
-        if stability:
-            st = self.stability()
-            value, a, b = np.r_[value, st["value"]], np.r_[a, st["a"]], np.r_[b, st["b"]]
-        room = (value / Z99) ** 2 - self.spec.residual ** 2 * b
+        room = (self.cons.value / Z99) ** 2 - self.spec.residual ** 2 * self.b
         with np.errstate(divide="ignore"):
-            s = np.where(room > 0, np.sqrt(np.maximum(room, 0) / a), 0.0)
+            s = np.where(room > 0, np.sqrt(np.maximum(room, 0) / self.a), 0.0)
         return float(s.min())
 
     def limiting(self, spread_: float | None = None) -> dict:
@@ -433,7 +433,7 @@ class Settings:
     growth_floor: float = GROWTH_FLOOR
 
     def to_dict(self) -> dict:
-        return {"from": self.seed_name, "variables": Design(GateParams(), self.levels).names,
+        return {"from": self.seed_name, "variables": Design(GateParams(), self.levels).names, "stability": "per state",
                 "growth_floor": self.growth_floor, "spread": self.spec.spread, "trim": self.spec.trim,
                 "trim_residual": self.spec.residual, "per_band": self.per_band, "n_grid": self.n_grid}
 
@@ -466,7 +466,7 @@ class Centering:
 
     def working_spread(self, an: Analysis) -> float:
         """Continuation: the spread at which the block's smallest beta is Z99, within [1e-7, target]."""
-        return float(np.clip(an.tolerance(stability=True), 1e-7, self.settings.spec.spread))
+        return float(np.clip(an.tolerance(), 1e-7, self.settings.spec.spread))
 
     @staticmethod
     def score(an: Analysis | None, s_w: float) -> float:
@@ -518,25 +518,19 @@ class Centering:
         active = np.argsort(beta)[:ACTIVE_MAX]
         active = active[beta[active] <= ACTIVE_RATIO * beta[active[0]]]
         J, Jg = self.jacobian(x, an, active, s_w)
-        b_g = an.stability_beta(s_w)                 # the stability constraint, its sigma held for the step
-        sigma_g = an.stability()["value"] / b_g
         _, cap = self.growth_caps(an)
-        dx, predicted = self.lp(an, np.r_[beta[active], b_g], np.vstack([J, -Jg / sigma_g]), Jg,
-                                trust * self.trust0, x)
+        dx, predicted = self.lp(an, beta[active], J, Jg, trust * self.trust0, x)
         trial = self.analyse(x + dx)
         new = self.score(trial, s_w) if trial is not None and trial.cons.growth <= cap else -math.inf
         if an.cons.growth > -self.settings.growth_floor and trial is not None and new > -math.inf:
             new = new if trial.cons.growth < an.cons.growth else -math.inf    # above the floor: growth must fall
-        if new > -math.inf:
-            new = min(new, -trial.cons.growth / sigma_g)
-        gain, old = new - min(beta.min(), b_g), float(min(beta.min(), b_g))
+        old = float(beta.min())
         accepted = new > old and self.works_on_full_grid(trial.p)
-        rho = gain / predicted if predicted > 0 else 0.0
+        rho = (new - old) / predicted if predicted > 0 else 0.0
         trust_next = trust * (2.0 if accepted and rho > 0.5 else 0.5 if accepted and rho > 0.1 else 0.25)
         rec = {"working_spread": s_w, "beta_before": old, "beta_after": new, "predicted_gain": predicted,
                "accepted": bool(accepted), "trust": trust, "trust_next": float(min(trust_next, TRUST_MAX)),
-               "active": int(active.size), "limiting": an.limiting(s_w) if beta.min() <= b_g else
-               {"kind": "stability", "beta": b_g, **{k: an.stability()[k] for k in ("inputs", "elements")}}}
+               "active": int(active.size), "limiting": an.limiting(s_w)}
         done = trial if accepted else an
         rec.update(_figures(done))
         rec["x"] = [float(v) for v in (x + dx if accepted else x)]
@@ -573,13 +567,11 @@ def _figures(an: Analysis | None) -> dict:
     """What the record keeps of a block's analysis: nominal margin, linear tolerance, beta at the target."""
     if an is None:
         return {"nominal_margin": None, "tolerance_linear": 0.0, "beta_target": None}
-    st = an.stability()
-    beta, beta_g = float(an.beta().min()), an.stability_beta()
+    beta = an.beta()
+    stab = an.cons.kind == "stability"
     return {"nominal_margin": an.cons.nominal_margin, "growth": an.cons.growth, "tolerance_linear": an.tolerance(),
-            "tolerance_linear_stability": an.tolerance(stability=True), "beta_target": min(beta, beta_g),
-            "beta_stability_target": beta_g,
-            "limiting_target": an.limiting() if beta <= beta_g else
-            {"kind": "stability", "beta": beta_g, **{k: st[k] for k in ("inputs", "elements")}}}
+            "beta_target": float(beta.min()), "beta_stability_target": float(beta[stab].min()) if stab.any() else None,
+            "limiting_target": an.limiting()}
 
 
 # --- a resumable run ---------------------------------------------------------------------------------

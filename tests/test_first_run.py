@@ -30,11 +30,12 @@ def test_the_package_version_is_the_distribution_version():
 
 
 def test_presets_list_every_name_params_takes():
-    assert list(m2s.PRESETS) == ["default", "printed", "robust", "classic", "centered", "centered_fc"]
+    assert list(m2s.PRESETS) == ["default", "printed", "robust", "classic", "centered", "centered_fc", "centered2",
+                                 "centered_fc2"]
     for name in m2s.PRESETS:
         p = m2s.load_params(name)
         assert p.name == name and m2s.PRESETS[name] == p
-    assert "robust" in m2s.PRESETS and "nope" not in m2s.PRESETS and len(m2s.PRESETS) == 6
+    assert "robust" in m2s.PRESETS and "nope" not in m2s.PRESETS and len(m2s.PRESETS) == 8
     with pytest.raises(KeyError):
         m2s.PRESETS["nope"]
 

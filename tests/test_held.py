@@ -38,7 +38,7 @@ def test_centred_block_as_centred_circles_while_holding(name):
     assert h["growth"] > 0 and not h["valid"], h
 
 
-@pytest.mark.parametrize("name", ["default", "centered", "centered_fc"])
+@pytest.mark.parametrize("name", ["default", "centered", "centered_fc", "centered2", "centered_fc2"])
 def test_shipped_blocks_settle_while_holding(name):
     h = held.held_growth(load_params(name))
     assert h["valid"] and h["outputs"] == [0, 1, 2, 2, 3], h

@@ -7,6 +7,7 @@ from .. import inputs
 from ..backends import BACKENDS, engine_class
 from ..errors import Mech2SpiceError
 from ..physics.network import MAX_FANOUT
+from ..physics.params import PRESETS
 from ..spice import DEFAULT_TIMEOUT_S
 from ._output import jsonable as _jsonable, log as _log, print_json as _print_json, progress as _progress
 
@@ -15,7 +16,7 @@ def design_args(sp) -> None:
     """The arguments every command on one design takes."""
     sp.add_argument("design", help="Verilog file")
     sp.add_argument("--top", help="top module (default: the only/auto-detected top)")
-    sp.add_argument("--params", default="default", help="gate parameters: default, printed, robust, classic "
+    sp.add_argument("--params", default="default", help=f"gate parameters: {', '.join(PRESETS)} "
                     "or a JSON file (fields, or a block file: docs/design.md)")
     sp.add_argument("--max-fanout", type=inputs.integer(2, inputs.MAX_FANOUT_LIMIT), default=MAX_FANOUT,
                     help="insert NOR-pair buffers so no gate drives more loads (default 12, the largest "

@@ -235,7 +235,7 @@ PRINTED = GateParams(
 DEFAULT = GateParams()
 
 BUILTIN = {"default": DEFAULT, "printed": PRINTED}
-BLOCK_PRESETS = ("robust", "classic", "centered", "centered_fc")   # block files under mech2spice/data/blocks/
+BLOCK_PRESETS = ("robust", "classic", "centered", "centered_fc", "centered2", "centered_fc2")   # block files under mech2spice/data/blocks/
 
 
 class _Presets(Mapping):

@@ -9,7 +9,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..studies.design import ADDER_BACKENDS, CHECKS, SIGMA, TOL_SAMPLES, block_names, same_block, search_record
+from ..studies.design import (ADDER_BACKENDS, CHECKED, CHECKS, SIGMA, TOL_SAMPLES, block_names, same_block,
+                              search_record)
 from ._common import md_table, out_dir, pyplot, save_figure, stored
 
 
@@ -50,7 +51,7 @@ def write(directory="reports", skip_slow: bool = False, render: bool = False, se
         study.measure_into(d / "design.json", search, skip_slow)
     rec, cache = search_record(search), stored(d / "design.json", "design")
     figs = {n: f for n, f in cache["blocks"].items()
-            if n in block_names(rec) and same_block(f, rec["structures"].get(n))}
+            if n in block_names(rec) and same_block(f, rec["structures"].get(n), n)}
     plot_pareto(figs, d / "design_pareto.png", cache["machine"])
     md = d / "design.md"
     md.write_text(markdown(rec, figs, cache.get("checks", {}), cache["machine"]))
@@ -170,45 +171,79 @@ def search_runs(rec: dict) -> list[str]:
 
 
 def render_checks(checks: dict) -> list[str]:
-    """The command-line checks of the robust block, as found."""
-    out = []
-    for name in ("robust_spread", "default_spread"):
-        c = checks.get(name)
-        if not c:
-            out.append(f"- `mech2spice {' '.join(CHECKS[name])}`: not measured on this robust.json (not in the cache)")
-            continue
-        j = c["json"]
-        t = j.get("tolerance", {})
-        if "yield" not in j:
-            out.append(f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, {j}")
-            continue
-        lo, hi = j["yield_ci95"]
-        out.append(f"- `mech2spice {' '.join(c['argv'])}`: yield {j['yield']:.3f} ({j['samples']} samples, 95 % "
-                   f"Wilson {lo:.4f} .. {hi:.4f}), margin quantiles "
-                   f"{json.dumps({k: round(v, 3) for k, v in j['margin_quantiles'].items()})}, tolerance "
-                   f"{_fmt(t.get('sigma'))} (bracket {' .. '.join(_fmt(b) for b in t.get('bracket', []))}), nominal "
-                   f"margin {j['nominal_margin']:+.4f}; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
-    c = checks.get("robust_gate")
+    """The command-line checks of each checked preset, as found: robust under its heading, then the centred ones."""
+    out = preset_checks_md(checks, "robust", also="default_spread")
+    out += ["", "## The centred presets in networks", "",
+            "The blocks of design centering by worst-case distance with a stability constraint per steady state "
+            "(docs/design.md, \"Per-state stability constraints\"): `centered2` centred without trimming, "
+            "`centered_fc2` for trimming (fc, residual 1e-4) at 1 % spread.  Their figures are in the tables above; "
+            "the issue's commands on each:"]
+    for name in CHECKED:
+        if name != "robust":
+            out += ["", f"### `--params {name}`", "", *preset_checks_md(checks, name)]
+    return out
+
+
+def _spread_md(checks: dict, key: str) -> list[str]:
+    c = checks.get(key)
+    if not c:
+        return [f"- `mech2spice {' '.join(CHECKS[key])}`: not measured on this block file (not in the cache)"]
+    j = c["json"]
+    if "yield" not in j:
+        return [f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, {j}"]
+    t, (lo, hi) = j.get("tolerance", {}), j["yield_ci95"]
+    return [f"- `mech2spice {' '.join(c['argv'])}`: yield {j['yield']:.3f} ({j['samples']} samples, 95 % "
+            f"Wilson {lo:.4f} .. {hi:.4f}), margin quantiles "
+            f"{json.dumps({k: round(v, 3) for k, v in j['margin_quantiles'].items()})}, tolerance "
+            f"{_fmt(t.get('sigma'))} (bracket {' .. '.join(_fmt(b) for b in t.get('bracket', []))}), nominal "
+            f"margin {j['nominal_margin']:+.4f}; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})"]
+
+
+def preset_checks_md(checks: dict, name: str, also: str | None = None) -> list[str]:
+    """One preset's checks as bullets (a check not in the cache: said, or for the slow ones, not run); `also`:
+    another spread check to list after its own."""
+    out = _spread_md(checks, f"{name}_spread") + (_spread_md(checks, also) if also else [])
+    c = checks.get(f"{name}_gate")
     if c:
         req = c["json"].get("requirements", {})
         out.append(f"- `mech2spice {' '.join(c['argv'])}` (RK4 at nominal): switches {c['json'].get('switches')}; "
                    + "; ".join(f"{k}: {'pass' if v['pass'] else 'FAIL'}" for k, v in req.items())
                    + f"; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
     for backend in ADDER_BACKENDS:
-        c = checks.get(f"robust_adder_{backend}")
+        c = checks.get(f"{name}_adder_{backend}")
         if c:
-            out.append(f"- adder, 16 sums on {backend}: {c['correct']}/{c['of']} correct; {c['wall_s']:.0f} s "
-                       f"({_load(c.get('loadavg_1min'))})")
-    c = checks.get("robust_sqrt")
+            out.append(f"- adder, 16 sums on {backend}: {c['correct']}/{c['of']} correct"
+                       + (f", min margin {c['min_margin']:+.3f}" if name != "robust" and c.get("min_margin") is not None
+                          else "") + f"; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
+    c = checks.get(f"{name}_sqrt")
     if c:
         j = c["json"]
         out.append(f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, outputs {j.get('outputs')}, valid "
                    f"{j.get('valid')}, min margin {j.get('min_margin')}; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
-    c = checks.get("robust_sieve")
+    c = checks.get(f"{name}_sieve")
     if c:
         j = c["json"]
+        iss = j.get("iss_check", {})
         out.append(f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, halted {j.get('halted')} after "
-                   f"{j.get('cycles')} cycles; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
+                   f"{j.get('cycles')} cycles"
+                   + (f", primes {' '.join(map(str, j.get('results', {}).get('primes', [])))}, "
+                      f"{iss.get('cycles_checked')} cycles checked against the ISS, {iss.get('mismatches')} differ"
+                      if name != "robust" and iss else "") + f"; {c['wall_s']:.0f} s ({_load(c.get('loadavg_1min'))})")
     else:
-        out.append("- the sieve on the envelope with `--params robust`: not run (skip_slow)")
+        out.append(f"- the sieve on the envelope with `--params {name}`: not run (skip_slow)")
+    c = checks.get(f"{name}_cpu_montecarlo")
+    if c:
+        j = c["json"]
+        out.append(f"- `mech2spice {' '.join(c['argv'])}`: exit {c['rc']}, {_mc_summary(j)}; {c['wall_s']:.0f} s "
+                   f"({_load(c.get('loadavg_1min'))})")
     return out
+
+
+def _mc_summary(j: dict) -> str:
+    """The processor Monte-Carlo's yield and why samples failed (its first reasons)."""
+    if "yield" not in j:
+        return f"{j}"
+    lo, hi = j["yield_ci95"]
+    why = "; ".join(f"{r} ({n})" for r, n in list(j.get("reasons", {}).items())[:3])
+    return (f"{j['samples'] - j['failures']} of {j['samples']} samples equal to the ISS for {j['cycles']} cycles, "
+            f"yield {j['yield']:.3f} (95 % Wilson {lo:.3f} .. {hi:.3f})" + (f"; failures: {why}" if why else ""))

@@ -4,10 +4,12 @@
 Reads the search record of `mech2spice design` (reports/design_search.json) and measures per block (each
 structure's best, today's default, the paper's printed set) its energy per operation and switching delay
 (physics/energy.py), what limits its tolerance (physics/sensitivity.py: the limiting input point and the
-elements its margin is most sensitive to), and the command-line checks of the best block (`--params
-robust`): yield at 1 % spread, the six requirements, the adder, sqrt(2809) and the sieve.  design.json is a
-cache: a rerun only adds what is missing (a block whose search entry changed, checks of another robust.json
-are measured again).  The grammar and objective: docs/design.md.  One section, `all` (~20 min).
+elements its margin is most sensitive to); the same for the design centering's presets; and the command-line
+checks of the presets in CHECKED (robust and the centred ones that meet issue #27's figures): yield under the
+spread (trimmed where the preset was centred for trimming), the six requirements, the adder on three engines,
+sqrt(2809), the sieve and the processor's Monte-Carlo.  design.json is a cache: a rerun only adds what is
+missing (a block whose search entry or preset file changed, checks of another block file are measured
+again).  The grammar and objective: docs/design.md.  One section, `all` (~20 min).
 """
 from __future__ import annotations
 
@@ -28,15 +30,30 @@ SECTIONS = ("all",)
 SEARCH = Path("reports/design_search.json")
 TOL_SAMPLES = 100
 SIGMA = 0.01
-CHECKS = {     # name -> argv after `mech2spice` (the issue's commands, on the robust preset and the default)
-    "robust_spread": ["gate", "--params", "robust", "--spread", "0.01", "--samples", "1000", "--json"],
-    "default_spread": ["gate", "--spread", "0.01", "--samples", "1000", "--json"],
-    "robust_gate": ["gate", "--params", "robust", "--json"],
-    "robust_sqrt": ["simulate", "verilog/sqrt.v", "--stimulus", "verilog/sqrt_2809.json", "--backend", "envelope",
-                    "--params", "robust", "--json"],
-    "robust_sieve": ["cpu", "run", "programs/sieve.asm", "--backend", "envelope", "--params", "robust", "--json"],
-}
-SLOW = ("robust_sieve",)
+CHECKED = ("robust", "centered2", "centered_fc2")   # presets whose network checks the report shows
+CENTRED = ("centered", "centered_fc", "centered2", "centered_fc2")   # design centering's presets (docs/design.md)
+TRIM = ["--trim", "fc", "--trim-residual", "1e-4"]     # the trimmed presets' fabrication: trim fc, residual 1e-4
+
+
+def preset_checks(name: str) -> dict:
+    """Check name -> argv after `mech2spice`: the issue's commands on preset `name` (a trimmed preset, *_fc*, spread
+    at 1 % and trimmed; centered2 at 1e-3, the spread it was centred for; robust at 1 %)."""
+    spread = (["--spread", "0.01", *TRIM] if "_fc" in name else
+              ["--spread", "0.001" if name in CENTRED else "0.01"])
+    out = {f"{name}_spread": ["gate", "--params", name, *spread, "--samples", "1000", "--json"],
+           f"{name}_gate": ["gate", "--params", name, "--json"],
+           f"{name}_sqrt": ["simulate", "verilog/sqrt.v", "--stimulus", "verilog/sqrt_2809.json", "--backend",
+                            "envelope", "--params", name, "--json"],
+           f"{name}_sieve": ["cpu", "run", "programs/sieve.asm", "--backend", "envelope", "--params", name, "--json"]}
+    if "_fc" in name:
+        out[f"{name}_cpu_montecarlo"] = ["cpu", "montecarlo", "programs/sieve.asm", "--params", name, "--spread",
+                                         "0.01", *TRIM, "--samples", "8", "--cycles", "30", "--json"]
+    return out
+
+
+CHECKS = {k: v for name in CHECKED for k, v in preset_checks(name).items()}
+CHECKS["default_spread"] = ["gate", "--spread", "0.01", "--samples", "1000", "--json"]
+SLOW = tuple(k for k in CHECKS if k.endswith(("_sieve", "_cpu_montecarlo")))
 ADDER_BACKENDS = ("rk4", "envelope", "ngspice")   # the issue: the adder on RK4 and ngspice (carrier level)
 
 
@@ -49,17 +66,19 @@ def search_record(search: str | None = None) -> dict:
 
 
 def block_names(search: dict) -> list[str]:
-    """The blocks the report shows: the default, the printed set and every searched structure's best."""
-    return ["default", "printed", *search["structures"]]
+    """The blocks the report shows: the default, the printed set, every searched structure's best and the
+    centred presets."""
+    return ["default", "printed", *search["structures"], *CENTRED]
 
 
 def blocks(search: dict) -> dict:
-    """name -> GateParams: the best block of every searched structure, the default and the printed set."""
-    from ..physics.params import DEFAULT, PRINTED, block_params
+    """name -> GateParams: the best block of every searched structure, the default, the printed set and the
+    centred presets."""
+    from ..physics.params import DEFAULT, PRINTED, block_params, load_params
     out = {"default": DEFAULT, "printed": PRINTED}
     for name, rec in search["structures"].items():
         out[name] = block_params(rec["block_file"], name)
-    return out
+    return {**out, **{name: load_params(name) for name in CENTRED}}
 
 
 def block_figures(name: str, p, rec: dict | None, log) -> dict:
@@ -137,19 +156,22 @@ def adder_check(p, backend: str) -> dict:
             "rows": rows, "wall_s": time.time() - t0, "loadavg_1min": [load0, load_average()[0]]}
 
 
-def same_block(fig: dict, rec: dict | None) -> bool:
-    """Whether cached figures were measured on this search entry (its measured margin and tolerance)."""
+def same_block(fig: dict, rec: dict | None, name: str | None = None) -> bool:
+    """Whether cached figures were measured on this search entry (its measured margin and tolerance), or on
+    this preset file (its digest)."""
+    if name in CENTRED:
+        return fig.get("block_sha256") == block_digest(name)
     if rec is None:
         return True                         # default / printed: not from the search
     m = rec["measured"]
     return fig["nominal_margin"] == m["nominal_margin"] and fig["tolerance"] == m["tolerance"]
 
 
-def _robust_digest() -> str:
-    """sha256 of the shipped robust block file: its checks are valid for this content only."""
+def block_digest(name: str) -> str:
+    """sha256 of a shipped block file: its figures and checks are valid for this content only."""
     import hashlib
     from .. import data
-    return hashlib.sha256(Path(data.path("blocks", "robust.json")).read_bytes()).hexdigest()
+    return hashlib.sha256(Path(data.path("blocks", f"{name}.json")).read_bytes()).hexdigest()
 
 
 def _log(msg: str) -> None:
@@ -160,38 +182,49 @@ def measure_blocks(rec: dict, cache: dict, save) -> None:
     """Figures of every block the cache lacks or holds for another search entry, saved after each."""
     figs = cache.setdefault("blocks", {})
     for name, p in blocks(rec).items():
-        if name in figs and not same_block(figs[name], rec["structures"].get(name)):
-            del figs[name]                  # the search record has a new best for this structure: measure it
+        if name in figs and not same_block(figs[name], rec["structures"].get(name), name):
+            del figs[name]                  # a new best for this structure, or a changed preset: measure it
         if name not in figs:
             _log(f"block {name}")
             figs[name] = block_figures(name, p, rec["structures"].get(name), _log)
+            if name in CENTRED:
+                figs[name]["block_sha256"] = block_digest(name)
             save()
 
 
+def _preset_of(check: str) -> str | None:
+    return next((n for n in sorted(CHECKED, key=len, reverse=True) if check.startswith(n + "_")), None)
+
+
 def measure_checks(cache: dict, skip_slow: bool, save) -> None:
-    """The command-line checks and the adder runs the cache lacks for today's robust.json, saved after each."""
+    """The command-line checks and the adder runs the cache lacks for today's preset files, saved after each."""
     from ..physics.params import load_params
     checks = cache.setdefault("checks", {})
-    robust = _robust_digest()
+    digest = {n: block_digest(n) for n in CHECKED}
     cache.pop("robust_sha256", None)          # an earlier layout kept one digest for all checks
-    stale = [k for k, v in checks.items() if k.startswith("robust") and v.get("robust_sha256") != robust]
-    if stale:                          # checks of another robust.json (or of one not recorded): run again
-        _log(f"robust.json differs from the one {', '.join(stale)} ran on: rerunning them")
+    for v in checks.values():                 # ... and then one per check under the robust block's name
+        if "robust_sha256" in v:
+            v["block_sha256"] = v.pop("robust_sha256")
+    stale = [k for k, v in checks.items() if _preset_of(k) and v.get("block_sha256") != digest[_preset_of(k)]]
+    if stale:                          # checks of another block file (or of one not recorded): run again
+        _log(f"the block files differ from the ones {', '.join(stale)} ran on: rerunning them")
         checks = cache["checks"] = {k: v for k, v in checks.items() if k not in stale}
     todo = [n for n in CHECKS if n not in checks and not (skip_slow and n in SLOW)]
     with ThreadPoolExecutor(max_workers=2) as pool:     # the command checks are subprocesses: two at a time
         futures = {pool.submit(run_check, CHECKS[n]): n for n in todo}
         for n in todo:
             _log(f"check {n}: mech2spice {' '.join(CHECKS[n])}")
-        for backend in ADDER_BACKENDS:
-            key = f"robust_adder_{backend}"
-            if key not in checks:
-                _log(f"check {key}")
-                checks[key] = {**adder_check(load_params("robust"), backend), "robust_sha256": robust}
-                save()
+        for name in CHECKED:
+            for backend in ADDER_BACKENDS:
+                key = f"{name}_adder_{backend}"
+                if key not in checks:
+                    _log(f"check {key}")
+                    checks[key] = {**adder_check(load_params(name), backend), "block_sha256": digest[name]}
+                    save()
         for f in as_completed(futures):
-            checks[futures[f]] = {**f.result(), "robust_sha256": robust}
-            _log(f"check {futures[f]} done ({checks[futures[f]]['wall_s']:.0f} s)")
+            n = futures[f]
+            checks[n] = {**f.result(), **({"block_sha256": digest[_preset_of(n)]} if _preset_of(n) else {})}
+            _log(f"check {n} done ({checks[n]['wall_s']:.0f} s)")
             save()
 
 

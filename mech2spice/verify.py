@@ -260,8 +260,13 @@ def _testbench(netlist: Netlist, n: int, clocked: bool) -> str:
     return "\n".join(lines + ["    $finish;", "  end", "endmodule", ""])
 
 
-def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool) -> list[dict[str, str]]:
-    """Run the source on Icarus: per vector (or cycle), output bit -> '0', '1', 'x' or 'z'."""
+COERCED = re.compile(r"output port (\S+) is coerced to inout")   # iverilog: the source never drives it
+
+
+def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings: list | None = None) -> list[dict[str, str]]:
+    """Run the source on Icarus: per vector (or cycle), output bit -> '0', '1', 'x' or 'z'.  `warnings`, if
+    given, receives iverilog's lines on output ports it coerced to inout: ports the source never drives
+    (an `assign internal = port` written backwards), which read z on Icarus while Yosys joins the two nets."""
     iverilog, vvp = _icarus_tools()
     path = Path(path).resolve()
     order = input_bits(netlist)
@@ -271,8 +276,11 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool) -> list[d
         (Path(tmp) / "vectors.txt").write_text("".join(_vector_line(netlist, order, v) for v in vectors))
         std = ["-g2012"] if path.suffix == ".sv" else ["-g2005"]
         cmd = [iverilog, *std, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), str(path), "tb.v"]
-        _run_tool(cmd, tmp, "iverilog")
-        out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp")
+        built = _run_tool(cmd, tmp, "iverilog")
+        out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout
+    if warnings is not None:
+        warnings += sorted({f"output port {m.group(1)} is coerced to inout (iverilog): the source never drives it"
+                            for m in COERCED.finditer(built.stderr)})
     rows = [ln.split() for ln in out.splitlines() if ln.strip() and not ln.startswith(("VCD", "WARNING"))]
     rows = [r for r in rows if len(r) == len(netlist.outputs) and all(re.fullmatch(r"[01xzXZ]+", s) for s in r)]
     if len(rows) != len(vectors):
@@ -295,7 +303,7 @@ def _bits_of(netlist: Netlist, row: list[str]) -> dict[str, str]:
     return out
 
 
-def _run_tool(cmd: list[str], cwd: str, name: str) -> str:
+def _run_tool(cmd: list[str], cwd: str, name: str) -> subprocess.CompletedProcess:
     try:
         proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=ICARUS_TIMEOUT_S)
     except subprocess.TimeoutExpired:
@@ -303,7 +311,7 @@ def _run_tool(cmd: list[str], cwd: str, name: str) -> str:
     if proc.returncode != 0:
         first = next((ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()), "")
         raise Mech2SpiceError(f"{name} failed on the source design: {first.strip()}")
-    return proc.stdout
+    return proc
 
 
 # --------------------------------------------------------------------------- vectors
@@ -428,12 +436,14 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
         if physical and not exhaustive and len(x) > n:
             x = x[np.random.default_rng(seed).permutation(len(x))[:n]]
             complete = False
-    ref = icarus(path, netlist, x, clocked)
+    warnings = []
+    ref = icarus(path, netlist, x, clocked, warnings)
     got = run_backend(netlist, x, clocked, backend, params, progress)
     mismatches = compare(netlist, x, ref, got, clocked, None if params is None else params.levels)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
-           "undefined_bits": sum(v in "xX" for r in ref for v in r.values())}
+           "undefined_bits": sum(v in "xX" for r in ref for v in r.values()),
+           "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings}
     if clocked:
         out["reset"] = None if rst is None else {"port": rst[0], "level": rst[1]}
     if physical:
@@ -525,8 +535,12 @@ def text(result: dict) -> str:
                  f"{len(co['mismatches'])} mismatches ({co['wall_s']:.1f} s)"
                  + (f"; {co['undefined_bits']} bits the source leaves undefined (x: either value agrees)"
                     if co.get("undefined_bits") else "")
+                 + (f"; {co['undriven_bits']} bits the source does not drive (z on Icarus: a mismatch)"
+                    if co.get("undriven_bits") else "")
                  + (f"; valid {co['valid']}, stable {co['stable']}, min margin {co['min_margin']:+.3f}"
                     if "valid" in co and co["min_margin"] is not None else ""))
+    lines += [f"  source: {w} (Yosys joins the nets, so the proof is of that reading)"
+              for w in co.get("source_warnings", [])]
     lines += ["  " + _mismatch_text(m) for m in co["mismatches"][:20]]
     if len(co["mismatches"]) > 20:
         lines.append(f"  ... {len(co['mismatches']) - 20} more (--json lists all)")

@@ -271,3 +271,31 @@ def test_public_sequential_benchmark_s344(backend, cycles, capsys):
     assert co["agree"] and co["mismatches"] == [] and co["cycles"] == cycles
     if backend == "envelope":
         assert co["valid"] and co["stable"] and co["min_margin"] > 0
+
+
+BACKWARDS = """module inv (input a, output y);
+  assign y = ~a;
+endmodule
+
+module top (input a, output q);
+  wire w;
+  inv u (.a(a), .y(w));
+  assign w = q;   // written backwards: q is never driven
+endmodule
+"""
+
+
+def test_an_output_the_source_never_drives_is_named(tmp_path, capsys):
+    """An output joined to its logic only by a backwards `assign` (as in a public behavioural c432): Yosys joins
+    the nets, so the proof holds for its reading, but Icarus leaves the port undriven (z).  verify fails and
+    says why: the port iverilog coerced to inout, and every z bit counted as undriven."""
+    src = tmp_path / "backwards.v"
+    src.write_text(BACKWARDS)
+    code, out, err = _run(capsys, src, "--json")
+    res = json.loads(out)
+    assert code == 1 and res["verdict"] == "fail" and res["equivalence"]["status"] == "proved"
+    co = res["cosim"]
+    assert co["undriven_bits"] == len(co["mismatches"]) == 2 and co["undefined_bits"] == 0
+    assert co["source_warnings"] == ["output port q is coerced to inout (iverilog): the source never drives it"]
+    code, out, err = _run(capsys, src)
+    assert code == 1 and "source: output port q is coerced to inout" in out and "2 bits the source does not drive" in out

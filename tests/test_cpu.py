@@ -19,6 +19,7 @@ from mech2spice.cpu.machines import LogicCPU
 from mech2spice.cpu.netlist import cpu_netlist, register_map
 from mech2spice.cpu.run import load_program, make_memory, run_program
 from mech2spice.errors import Mech2SpiceError
+from mech2spice.physics.params import load_params
 
 ROOT = Path(__file__).resolve().parent.parent
 PROGRAMS = ROOT / "programs"
@@ -359,3 +360,11 @@ def test_sieve_at_envelope_fidelity_matches_iss_and_resumes_exactly(tmp_path):
     R.checkpoint_state_file(ck).write_bytes(b"junk")
     with pytest.raises(Mech2SpiceError, match="does not match its checkpoint"):
         run_program(PROGRAMS / "sieve.asm", "envelope", 4, checkpoint=ck, resume=True)
+
+
+def test_processor_step_within_a_faster_blocks_bound():
+    """centered2 (low Qs: envelope rates bound its step at 6.4 periods) runs the processor at the longest
+    whole step within that bound, not the default block's 16 (which the engine refuses), and its first cycle
+    equals the ISS."""
+    res = run_program(PROGRAMS / "sieve.asm", "envelope", 1, p=load_params("centered2"))
+    assert res["step"] == 4.0 and res["cycles"] == 1 and res["iss_check"]["mismatches"] == 0

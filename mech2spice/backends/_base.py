@@ -91,6 +91,11 @@ class Engine(FromFlags, ABC):
         `threads` threads (docs/latency.md); None: every gate integrated at every step."""
         return None
 
+    def longest_step(self, model: MechModel, cap: float) -> float:
+        """The longest step (drive periods) up to `cap` this engine may take on `model` (its stability bound);
+        `cap` itself for engines whose step is not in drive periods."""
+        return cap
+
     def reported_step(self, step: float) -> float:
         """The step (drive periods) a processor run records for this engine, given the whole-period step
         `step` it schedules with; by default that step itself."""

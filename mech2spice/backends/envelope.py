@@ -347,6 +347,10 @@ class EnvelopeEngine(Engine):
         """PROCESSOR_LATENCY, whatever the threads (its options have none)."""
         return PROCESSOR_LATENCY
 
+    def longest_step(self, model: MechModel, cap: float) -> float:
+        """The longest of 16, 8, 4, 2, 1 periods up to `cap` within the model's stability bound (default_step)."""
+        return default_step(model, cap, exponential=self.options.exponential)
+
     def step(self, model: MechModel) -> float:
         """The step this engine takes on `model`, in drive periods."""
         return self.options.step_periods or default_step(model, exponential=self.options.exponential)

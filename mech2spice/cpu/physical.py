@@ -77,11 +77,14 @@ class PhysicalCPU:
         for q, block in self.model.design.latch_outputs.items():
             self.model.add_probe(f"latch.{q}", block.channel)
         self.probes = list(self.model.probes)
-        step = step or (PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP)
         if latency == OWN_LATENCY:
             latency = engine_class(backend).processor_latency(threads)
-        options = _options(backend, step=step, latency=latency, exponential=exponential, parallel=parallel,
-                           steps_per_period=steps_per_period, threads=threads, keep_periods=READ_PERIODS)
+        settings = dict(latency=latency, exponential=exponential, parallel=parallel, steps_per_period=steps_per_period,
+                        threads=threads, keep_periods=READ_PERIODS)
+        if not step:      # the processor's step, shortened where a block's faster envelope rates bound it
+            step = PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP
+            step = make_engine(backend, _options(backend, step=step, **settings)).longest_step(self.model, step)
+        options = _options(backend, step=step, **settings)
         # only pauses may end early once settled; pulses always run in full
         self.pulse_engine = make_engine(backend, options)
         self.pause_engine = make_engine(backend, replace(options, settle_tol=settle or None))

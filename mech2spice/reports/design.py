@@ -36,9 +36,10 @@ def plot_pareto(figs: dict, path: Path, machine: str) -> None:
         ax.grid(alpha=0.3)
     axs[0].set_ylabel("tolerance: largest sigma with >= 99 % yield\n(1e-8: none, nominal fails)")
     axs[0].axhline(0.01, color="k", lw=0.5, ls="--")
-    fig.suptitle(f"Blocks searched by `mech2spice design`: tolerance of the loaded gate (steady-state scan, "
-                 f"{TOL_SAMPLES}-sample bisection); delay and energy from RK4 (40 steps/period) on a free-standing "
-                 f"gate\n{machine}; dashed: the issue's aim (1 %)", fontsize=9)
+    fig.suptitle(f"Blocks searched by `mech2spice design` and centred by `mech2spice center`: untrimmed tolerance of "
+                 f"the loaded gate (steady-state scan, {TOL_SAMPLES}-sample bisection); delay and energy from RK4 (40 "
+                 f"steps/period) on a free-standing gate\n{machine}; dashed: the issue's aim (1 %, reached by "
+                 "centered_fc2 trimmed: see the text)", fontsize=9)
     axs[0].legend(fontsize=7)
     save_figure(fig, path)
 

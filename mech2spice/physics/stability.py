@@ -202,7 +202,7 @@ def _mode(env: Envelope, lam: complex, v: np.ndarray, T: float) -> Mode:
     for idx, w in ((env.fast, fast), (env.slow, slow)):
         if w.size and w.max() > 0:
             share[idx] = w / w.max()
-    top = np.argsort(-share)[:8]
+    top = np.lexsort((np.arange(share.size), -np.round(share, 9)))[:8]   # equal shares (symmetric DOFs) by index
     period = 2 * np.pi / abs(lam.imag) / T if abs(lam.imag) * T > 1e-9 else None
     return Mode(float(lam.real * T), period, [env.model.names[i] for i in top if share[i] > 0.1])
 

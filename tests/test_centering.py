@@ -18,7 +18,7 @@ GRID = {"per_band": 6, "n_grid": 1000}
 @pytest.fixture(scope="module")
 def default():
     p = load_params("default")
-    return p, c.analyse(p, c.SpreadSpec(1e-5), **GRID)
+    return p, c.analyse(p, c.TrimmedSpread(1e-5), **GRID)
 
 
 def _value_at(p, model, cons, k):
@@ -80,7 +80,7 @@ def test_stability_limits_where_the_slowest_state_is_not():
     the centering followed before, sits at another point (1.165, 1.165) with about 2.5x more room."""
     from mech2spice.experiments.held import with_insulator_q
     p = with_insulator_q(load_params("centered_fc"), 0.8680033880034401)
-    an = c.analyse(p, c.SpreadSpec(0.01, "fc", 1e-4), **GRID)
+    an = c.analyse(p, c.TrimmedSpread(0.01, "fc", 1e-4), **GRID)
     lim = an.limiting()
     assert lim["kind"] == "stability" and lim["beta"] < 1.0
     assert max(lim["inputs"]) < p.levels.band0[1] + 1e-9
@@ -104,7 +104,7 @@ def test_beta_agrees_with_sampled_yield(default):
 def test_one_step_raises_beta():
     """One trust-region step from the robust block (deterministic: no random numbers) raises the smallest beta."""
     p = load_params("robust")
-    run = c.Centering(c.Design(p), c.Settings("robust", c.SpreadSpec(0.01)))
+    run = c.Centering(c.Design(p), c.Settings("robust", c.TrimmedSpread(0.01)))
     rec = run.step(run.design.x0(), 0.5)
     assert rec["accepted"] and rec["beta_after"] > rec["beta_before"] + 0.1
     assert rec["tolerance_linear"] > run.analyse(run.design.x0()).tolerance()
@@ -137,7 +137,7 @@ def test_design_vector_round_trip():
     d = c.Design(p)
     q = d.params(d.x0())
     assert q.levels == p.levels
-    a, b = c.analyse(p, c.SpreadSpec(1e-5), **GRID), c.analyse(q, c.SpreadSpec(1e-5), **GRID)
+    a, b = c.analyse(p, c.TrimmedSpread(1e-5), **GRID), c.analyse(q, c.TrimmedSpread(1e-5), **GRID)
     assert b.tolerance() == pytest.approx(a.tolerance(), rel=1e-9)
 
 

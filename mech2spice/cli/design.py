@@ -125,7 +125,7 @@ def cmd_center(args) -> int:
     from ..physics.params import load_params
     if args.trim == "none" and args.trim_residual:
         raise Mech2SpiceError("--trim-residual needs --trim f or fc")
-    spec = centering.SpreadSpec(args.spread, args.trim, args.trim_residual)
+    spec = centering.TrimmedSpread(args.spread, args.trim, args.trim_residual)
     spec.validate()
     settings = centering.Settings(args.seed, spec, levels=not args.fixed_levels, growth_floor=args.growth_floor)
     out = centering.run(load_params(args.seed), settings, args.out, args.steps, _log(args))

@@ -47,9 +47,9 @@ Z99 = 2.3263478740408408        # one-sided standard normal quantile of 99 %
 TRIMS = spread.TRIMS
 
 
-# --- the spread spec and its noise matrices ---------------------------------------------------------
+# --- the spread (one relative sigma, trimmed or not) and its noise matrices ---------------------------------------------------------
 @dataclass(frozen=True)
-class SpreadSpec:
+class TrimmedSpread:
     """Relative Gaussian spread on every element; optionally trimmed ('f': k/m, 'fc': k/m and c/m of every
     oscillating DOF of the block) back to nominal with a relative residual."""
     spread: float
@@ -256,7 +256,7 @@ def extrema(st: steady_batch.Stack, levels: np.ndarray, n_grid: int) -> tuple[np
 class Analysis:
     """One block's constraints under one spread spec."""
     p: GateParams
-    spec: SpreadSpec
+    spec: TrimmedSpread
     cons: Constraints
     a: np.ndarray            # per constraint: variance per unit spread^2
     b: np.ndarray            # ... per unit residual^2
@@ -298,7 +298,7 @@ class Analysis:
                 "elements": [{"name": self.elements[i], "share": float(contrib[i] / contrib.sum())} for i in top]}
 
 
-def analyse(p: GateParams, spec: SpreadSpec, per_band: int = 6, n_grid: int = 1000) -> Analysis:
+def analyse(p: GateParams, spec: TrimmedSpread, per_band: int = 6, n_grid: int = 1000) -> Analysis:
     """Every constraint of block p over the input grid (per_band levels per band) and its variances."""
     fx = Fast.of(p)
     levels, expect = loaded.input_grid(per_band, p.levels)
@@ -426,7 +426,7 @@ TRUST_MIN = 1e-3          # ... and where it stops shrinking: the run has conver
 class Settings:
     """What a centering run is: the seed, the spread spec, the grid; a resumed run must match it."""
     seed_name: str
-    spec: SpreadSpec
+    spec: TrimmedSpread
     per_band: int = 6
     n_grid: int = 1000
     levels: bool = True          # the band edges are design variables

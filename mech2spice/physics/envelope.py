@@ -184,6 +184,9 @@ def _slow_rate_bound(env: Envelope) -> float:
     return float(np.max(np.sqrt(np.abs(env.Ks.diagonal()) / env.ms) + np.abs(env.Cs.diagonal()) / env.ms))
 
 
+DENSE_RATE_MAX = 300      # fast DOFs up to which spectral_rate takes the dense spectrum (~0.1 s at 300)
+
+
 def spectral_rate(env: Envelope, slow_modes: bool = True) -> float | None:
     """The largest |eigenvalue| of the linear part at rest: ARPACK on A' = -Bop^-1 Z0 A for the amplitudes,
     exact roots for the insulators (each its own damped oscillator when Ks, Cs are diagonal; left out with
@@ -201,11 +204,11 @@ def spectral_rate(env: Envelope, slow_modes: bool = True) -> float | None:
         return slow
     op = spla.LinearOperator((nf, nf), matvec=lambda x: -env.solve_rate(env.Z0 @ x), dtype=complex)
     try:
-        if nf < 3:
+        if nf <= DENSE_RATE_MAX:     # small networks: every eigenvalue (ARPACK can stall on them, error 3)
             lam = np.linalg.eigvals(np.column_stack([op.matvec(e) for e in np.eye(nf, dtype=complex)]))
         else:
             lam = spla.eigs(op, k=1, which="LM", v0=np.ones(nf, complex), tol=1e-4, maxiter=5000,
                             return_eigenvectors=False)
-    except spla.ArpackNoConvergence:
-        return None
+    except (spla.ArpackNoConvergence, spla.ArpackError):
+        return None                  # the caller falls back to the Gershgorin bound
     return max(slow, float(np.abs(lam).max()))

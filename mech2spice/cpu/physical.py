@@ -101,7 +101,7 @@ class PhysicalCPU:
         self.block_steps = 0        # gate blocks x steps integrated (latency); 0 without it
         self.simulated = 0          # periods actually integrated (a settled pause skips the rest)
         self.state, self.period, self.rdata = None, 0, 0
-        self._stimuli = {}          # (rdata, clock) -> its Stimulus: 512 at most, rebuilt 1372 times in a sieve
+        self._stimuli = {}          # (model, inputs, clock) -> its Stimulus: built once, not 1372 times a sieve
         # every pause's read judged against its own future (cpu/settle_check.py); None: not checked
         self.settle_check = SettleCheck(settle_check, p.levels) if settle_check else None
         self._check_engine = self.settle_check.engine_for(self.pause_engine) if settle_check else None
@@ -111,7 +111,7 @@ class PhysicalCPU:
 
     # --- integration -----------------------------------------------------------------------
     def _stimulus(self, values: dict, clock: int):
-        key = (tuple(sorted(values.items())), clock)
+        key = (id(self.model), tuple(sorted(values.items())), clock)    # a Monte-Carlo sample swaps the model
         if key not in self._stimuli:
             self._stimuli[key] = network.stimulus(self.model, self.netlist, self.p, [(0, [values])], clock=[[clock]])
         return self._stimuli[key]

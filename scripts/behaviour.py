@@ -51,8 +51,15 @@ TOL = 1e-9
 
 
 def record(out: Path, only: list[str] | None) -> None:
-    stim = out.with_name(out.stem + ".counter.json")
+    stim = out.with_name(out.stem + ".counter.json")     # the counter's stimulus, for the runs' time only
     stim.write_text(json.dumps(COUNTER_STIMULUS))
+    try:
+        _record(out, only, stim)
+    finally:
+        stim.unlink()
+
+
+def _record(out: Path, only: list[str] | None, stim: Path) -> None:
     results = json.loads(out.read_text()) if out.exists() and only else {}
     for name, argv in RUNS.items():
         if only and name not in only:

@@ -12,6 +12,7 @@ import json
 import math
 import numbers
 import os
+import re
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -124,6 +125,33 @@ def read_json(path, what: str):
         raise Mech2SpiceError(f"{what} {path} is not valid JSON: {err.msg} (line {err.lineno})") from None
     except (ValueError, RecursionError) as err:     # NaN/Infinity, >4300-digit integers, deep nesting
         raise Mech2SpiceError(f"{what} {path} is not usable JSON: {str(err) or type(err).__name__}") from None
+
+
+def finite(o, default=None):
+    """`o` as strict JSON data: a non-finite number becomes None (the writer states why beside it, e.g. a
+    sample's 'reason'), numpy values Python's, tuples lists; anything else through `default` if given."""
+    if isinstance(o, dict):
+        return {k: finite(v, default) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [finite(v, default) for v in o]
+    if o is None or isinstance(o, (str, bool, int)):
+        return o
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if default is not None:
+        return finite(default(o), default)
+    return finite(o.tolist()) if hasattr(o, "tolist") else o      # numpy arrays and scalars
+
+
+def strict_json(data, default=None, **dumps) -> str:
+    """The one JSON writer of files and output: strict JSON (no NaN/Infinity, which `jq` and other strict
+    readers refuse; `finite` writes null), through `finite`; `dumps`: json.dumps's layout arguments."""
+    return json.dumps(finite(data, default), allow_nan=False, **dumps)
+
+
+def loads_strict(text):
+    """json.loads that refuses NaN/Infinity (ValueError), as a strict reader does."""
+    return json.loads(text, parse_constant=_no_constant)
 
 
 def _no_constant(name: str):
@@ -300,6 +328,40 @@ def check_output_file(path, inputs=(), what: str = "output file", *, kind=None, 
         if kind is not None and not force and p.stat().st_size and not kind[1](p):
             raise Mech2SpiceError(f"{what} {path} exists and is not {kind[0]}: refusing to overwrite it ({remedy})")
     return p
+
+
+def check_inside(path, folder, what: str) -> Path:
+    """`path` as written under `folder` (an --out folder): a name that leaves it (`..`, an absolute path, a link
+    out) is refused, so a stem option cannot write elsewhere."""
+    base, p = Path(folder).resolve(), (Path(folder) / path).resolve()
+    if p == base or base not in p.parents:
+        raise Mech2SpiceError(f"{what} {path} is not a file inside the output folder {folder}")
+    return Path(folder) / path
+
+
+INCLUDE = re.compile(r'^\s*`include\s+"([^"\n]+)"', re.M)
+MAX_INCLUDES = 256
+
+
+def design_inputs(design, label: str = "the design") -> list[tuple[str, Path]]:
+    """(label, path) of a Verilog design and of every file it `include`s, transitively, wherever Yosys or
+    Icarus may find it (beside the including file, beside the design, or as written): an output of a
+    command that reads the design is none of them."""
+    if not isinstance(design, (str, os.PathLike)) or not str(design):
+        return []
+    found, todo = [(label, Path(design))], [Path(design)]
+    while todo and len(found) < MAX_INCLUDES:
+        src = todo.pop()
+        try:
+            text = src.read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            continue
+        for name in INCLUDE.findall(text):
+            for cand in (src.parent / name, Path(design).parent / name, Path(name)):
+                if cand.is_file() and not any(_same_file(cand, f) for _, f in found):
+                    found.append((f"`include \"{name}\" of {src},", cand))
+                    todo.append(cand)
+    return found
 
 
 def force_arg(parser, option: str) -> None:

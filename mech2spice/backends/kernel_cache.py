@@ -14,7 +14,6 @@ the exercise).  scripts/kernel_cache_soak.py and tests/test_kernel_cache.py use 
 from __future__ import annotations
 
 import importlib
-import json
 import sys
 import time
 
@@ -107,7 +106,8 @@ def main(argv: list[str] | None = None) -> int:
         report = {"rc": rc, "wall_s": time.perf_counter() - t0, "kernels": stats(),
                   "function_arguments": function_arguments()}
         report["compiled"] = sum(k["compiled"] for k in report["kernels"].values())
-        json.dump(report, f)
+        from ..inputs import strict_json
+        f.write(strict_json(report))
     return rc
 
 

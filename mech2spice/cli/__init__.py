@@ -147,7 +147,7 @@ def _precheck(args) -> None:
     design_file, command = getattr(args, "design", None), args.command
     if command == "emit":
         from ..spice import NETLIST
-        read = {"the design": design_file, "the --params file": params_file(args.params)}
+        read = [*inputs.design_inputs(design_file), ("the --params file", params_file(args.params))]
         inputs.check_output_file(args.output, read, "netlist file", kind=NETLIST, force=args.force)
     elif command == "subckts":
         inputs.check_output_dir(args.output, "subckt directory")

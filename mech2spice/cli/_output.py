@@ -26,7 +26,7 @@ def jsonable(o):
 
 
 def print_json(data) -> None:
-    print(json.dumps(jsonable(data), indent=2))
+    print(json.dumps(jsonable(data), indent=2, allow_nan=False))
 
 
 def progress(args):

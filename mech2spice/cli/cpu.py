@@ -6,13 +6,12 @@ code and raise Mech2SpiceError for user errors (the main CLI prints those as one
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
 from ..inputs import (MAX_CPU_CYCLES, check_output_file, envelope_speed_args, force_arg, head, integer, number,
-                      write_bytes, write_text)
+                      strict_json, write_bytes, write_text)
 from ..backends import BACKENDS as ENGINES
 from ..cpu.physical import PHYSICAL, PROCESSOR_STEP, SETTLE_TOL
 from ..cpu.settle_check import PERIODS as SETTLE_CHECK_PERIODS
@@ -148,7 +147,7 @@ def cmd_emit(args) -> int:
     write_text(args.output, net.text, encoding="ascii")
     info = {"netlist": args.output, "cycles": args.cycles, "periods": net.schedule.stop,
             "schedule": vars(net.schedule), **net.stats, "bytes": len(net.text)}
-    print(json.dumps(info, indent=2) if args.json else
+    print(strict_json(info, indent=2) if args.json else
           f"wrote {args.output}: {net.stats['dofs']} DOFs, memory of 256 bytes, {args.cycles} cycles "
           f"({net.schedule.stop} drive periods); run it with: vacask {args.output}")
     return 0
@@ -247,7 +246,7 @@ def cmd_run(args) -> int:
                       checkpoint_every=args.checkpoint_every, trace=args.trace, force=args.force,
                       stability=args.stability, **physical)
     if args.json:
-        print(json.dumps(res, indent=2))
+        print(strict_json(res, indent=2))
     else:
         _print_run(res)
     agrees = res.get("iss_check", {}).get("mismatches", 0) == 0

@@ -141,7 +141,7 @@ def cmd_montecarlo(args) -> int:
     import tempfile
     from ._output import log as _log, print_json as _print_json, progress as _progress
     from ..experiments import mc_run, montecarlo as mc
-    check_out(args, {"the design": mc.design_path(args.design), "the --stimulus file": args.stimulus})
+    check_out(args, {**dict(inputs.design_inputs(mc.design_path(args.design))), "the --stimulus file": args.stimulus})
     job = job_of(args)
     log = _log(args)
     with tempfile.TemporaryDirectory() as tmp:

@@ -34,8 +34,21 @@ def add_parser(subparsers) -> None:
     s.add_argument("--params", default="default", help="gate parameters of a physical backend")
     s.add_argument("--no-equivalence", action="store_true", help="co-simulation only")
     s.add_argument("--junit", metavar="FILE", help="also write a JUnit XML report")
+    inputs.force_arg(s, "--junit")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_verify)
+
+
+JUNIT = ("a JUnit report", lambda p: inputs.head(p, 256).lstrip().startswith(b"<?xml")
+          and b"<testsuite " in inputs.head(p))
+
+
+def _check_junit(args) -> None:
+    """--junit, before any work: none of the files the run reads (the design, the files it includes, the
+    --params file), and an existing file only if it is a JUnit report (else --force)."""
+    from ..physics.params import params_file
+    read = [*inputs.design_inputs(args.design), ("the --params file", params_file(args.params))]
+    inputs.check_output_file(args.junit, read, "JUnit file", kind=JUNIT, force=args.force)
 
 
 def cmd_verify(args) -> int:
@@ -46,7 +59,7 @@ def cmd_verify(args) -> int:
     if args.vectors is not None and args.exhaustive:
         raise Mech2SpiceError("give --vectors N or --exhaustive, not both")
     if args.junit:
-        inputs.check_output_file(args.junit, {"the design": args.design}, "JUnit file")
+        _check_junit(args)
     if not Path(args.design).is_file():
         raise Mech2SpiceError(f"cannot read Verilog file {args.design}: no such file")
     nl = synthesize(args.design, top=args.top)

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import check_output_file, first_json_line, is_int, read_json
+from ..inputs import check_output_file, first_json_line, is_int, read_json, strict_json
 from .isa import MEM_SIZE
 from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS
 from .asm import Program, assemble_program
@@ -166,7 +166,7 @@ def write_checkpoint(path, state: dict) -> None:
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", encoding="utf-8") as f:
-        f.write(json.dumps(state))
+        f.write(strict_json(state))
         f.flush()
         os.fsync(f.fileno())             # the data is on disk before the rename makes it the checkpoint
     os.replace(tmp, path)
@@ -348,7 +348,7 @@ class TraceFile:
                        amps={k: round(float(v), 6) for k, v in amps.items()})
             if hasattr(cpu, "block_steps"):        # the oscillator-level engines (not the circuit)
                 row["block_steps"] = cpu.block_steps
-        self.file.write(json.dumps(row) + "\n")
+        self.file.write(strict_json(row) + "\n")
         self.file.flush()
 
     def close(self) -> None:

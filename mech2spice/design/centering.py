@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import Mech2SpiceError
+from ..inputs import head, is_number
 from ..physics import loaded, spread, steady_batch
 from ..physics.params import GateParams, Levels
 
@@ -292,10 +293,11 @@ class Analysis:
         n_res = self.sources.shape[1] - self.n_elements
         scale = np.concatenate([np.full(self.n_elements, s), np.full(n_res, self.spec.residual)])
         contrib = (self.sources[k] * scale) ** 2
-        top = np.argsort(-contrib)[:3]
+        top, total = np.argsort(-contrib)[:3], float(contrib.sum())
         return {"kind": str(self.cons.kind[k]), "inputs": self.levels[self.cons.point[k], 1:].tolist(),
                 "s": float(self.cons.s[k]), "value": float(self.cons.value[k]), "beta": float(beta[k]),
-                "elements": [{"name": self.elements[i], "share": float(contrib[i] / contrib.sum())} for i in top]}
+                "elements": [{"name": self.elements[i],      # no share where the spread underflows to nothing
+                              "share": float(contrib[i]) / total if total > 0 else None} for i in top]}
 
 
 def analyse(p: GateParams, spec: TrimmedSpread, per_band: int = 6, n_grid: int = 1000) -> Analysis:
@@ -579,11 +581,56 @@ FORMAT = "mech2spice-centering"
 RECORD, BEST = "centering.json", "best.json"
 
 
+def _is_record(path) -> bool:
+    data = head(path, 1 << 16)
+    return b'"format"' in data and FORMAT.encode() in data
+
+
+def _is_best(path) -> bool:
+    return b'"method": "design centering' in head(path, 1 << 20)
+
+
+RECORD_KIND = ("a centering record", _is_record)
+BEST_KIND = ("a block `center` wrote", _is_best)
+
+
+def _opt(check):
+    return lambda v: v is None or check(v)
+
+
+# A step of the record as run() reads it back (docs/architecture.md, "Files the tool reads back"): field ->
+# (test, what it must be); FIGURES are what the summary prints and best.json keeps.
+STEP = {"step": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, "a whole number >= 0"),
+        "trust_next": (lambda v: is_number(v) and v > 0, "a number > 0"),
+        "accepted": (lambda v: isinstance(v, bool), "true or false"),
+        "beta_target": (_opt(is_number), "a number or null"),
+        "nominal_margin": (_opt(is_number), "a number or null"),
+        "tolerance_linear": (is_number, "a number")}
+OPTIONAL = {"growth": (_opt(is_number), "a number or null"),
+            "limiting_target": (_opt(lambda v: isinstance(v, dict)), "an object or null")}
+FIGURES = ("nominal_margin", "tolerance_linear", "beta_target", "growth", "beta_stability_target")
+
+
+def _step_problem(st, n_vars: int) -> str | None:
+    """What is wrong with one step of a record (None: nothing)."""
+    if not isinstance(st, dict):
+        return "not an object"
+    x = st.get("x")
+    if not (isinstance(x, list) and len(x) == n_vars and all(map(is_number, x))):
+        return f"'x' is not a list of {n_vars} numbers"
+    for key, (ok, what) in STEP.items():
+        if key not in st or not ok(st[key]):
+            return f"'{key}' is not {what}"
+    for key, (ok, what) in OPTIONAL.items():
+        if key in st and not ok(st[key]):
+            return f"'{key}' is not {what}"
+    return None
+
+
 def read_record(path, settings: dict, n_vars: int) -> dict:
     """A run's record at `path`, checked field by field (it may come from someone else: docs/architecture.md),
     or None where it holds other settings."""
     import json
-    from ..inputs import is_number
     try:
         rec = json.loads(open(path, "rb").read())
     except OSError as e:
@@ -595,15 +642,32 @@ def read_record(path, settings: dict, n_vars: int) -> dict:
         raise Mech2SpiceError(f"{path} is not a centering record (format '{FORMAT}', settings, steps)")
     if rec["settings"] != settings:
         return None
+    if not rec["steps"]:
+        raise Mech2SpiceError(f"centering record {path} has no steps (not even the seed's): delete it to start again")
     for k, st in enumerate(rec["steps"]):
-        ok = (isinstance(st, dict) and isinstance(st.get("x"), list) and len(st["x"]) == n_vars
-              and all(map(is_number, st["x"])) and is_number(st.get("trust_next")) and st["trust_next"] > 0
-              and isinstance(st.get("accepted"), bool)
-              and (st.get("beta_target") is None or is_number(st.get("beta_target"))))
-        if not ok:
-            raise Mech2SpiceError(f"centering record {path}: step {k} is not a step (x of {n_vars} numbers, "
-                                  "trust_next > 0, accepted, beta_target)")
+        problem = _step_problem(st, n_vars)
+        if problem:
+            raise Mech2SpiceError(f"centering record {path}: step {k}: {problem}")
+    if _best(rec["steps"]) is None:
+        raise Mech2SpiceError(f"centering record {path} has no accepted step with a worst-case distance "
+                              "(beta_target): delete it to start again")
     return rec
+
+
+def _best(steps: list[dict]) -> dict | None:
+    """The accepted step of the largest worst-case distance (None: none has one)."""
+    return max((s for s in steps if s["accepted"] and s["beta_target"] is not None),
+               key=lambda s: s["beta_target"], default=None)
+
+
+def _check_finite(st: dict, k: int, settings: Settings) -> None:
+    """A step's figures are finite or the run stops before writing them (JSON has no Infinity)."""
+    for key in FIGURES:
+        v = st.get(key)
+        if isinstance(v, float) and not math.isfinite(v):
+            why = (f" (--spread {settings.spec.spread:g} is too small: the margins' spread underflows)"
+                   if key.startswith("beta") and v > 0 else "")
+            raise Mech2SpiceError(f"centering step {k}: {key} is {v}{why}; nothing written")
 
 
 def run(seed: GateParams, settings: Settings, out_dir, steps: int, log=lambda msg: None) -> dict:
@@ -620,9 +684,13 @@ def run(seed: GateParams, settings: Settings, out_dir, steps: int, log=lambda ms
     path = out / RECORD
     rec = read_record(path, settings.to_dict(), x0.size) if path.is_file() else None
     if rec is None:
+        first = {"step": 0, "x": x0.tolist(), "trust_next": 1.0, "accepted": True, **_figures(opt.analyse(x0))}
+        _check_finite(first, 0, settings)
+        if first["beta_target"] is None:
+            raise Mech2SpiceError(f"the seed block {settings.seed_name} does not work on the centering grid (no "
+                                  "worst-case distance): nothing to centre")
         rec = {"format": FORMAT, "version": 1, "settings": settings.to_dict(), "variables": design.names,
-               "steps": [{"step": 0, "x": x0.tolist(), "trust_next": 1.0, "accepted": True,
-                          **_figures(opt.analyse(x0))}]}
+               "steps": [first]}
         write_atomic(path, rec)
     t0, start = time.time(), len(rec["steps"])
     for k in range(start, steps + 1):
@@ -632,6 +700,7 @@ def run(seed: GateParams, settings: Settings, out_dir, steps: int, log=lambda ms
             break
         ts = time.time()
         st = opt.step(np.array(last["x"]), last["trust_next"])
+        _check_finite(st, k, settings)
         rec["steps"].append({"step": k, **st, "wall_s": time.time() - ts})
         write_atomic(path, rec)
         eta = (time.time() - t0) / (k - start + 1) * (steps - k)
@@ -639,8 +708,7 @@ def run(seed: GateParams, settings: Settings, out_dir, steps: int, log=lambda ms
         log(f"step {k}/{steps}: beta {st['beta_before']:.3f} -> {st['beta_after']:.3f} "
             f"({'accepted' if st['accepted'] else 'rejected'}), linear tolerance {st['tolerance_linear']:.3g}, "
             f"limiting {lim['kind']} at {lim['inputs']}: {lim['elements'][0]['name']}; ETA {eta:.0f} s")
-    best = max((s for s in rec["steps"] if s["accepted"] and s["beta_target"] is not None),
-               key=lambda s: s["beta_target"])
+    best = _best(rec["steps"])
     p, damping = _damped(design.params(best["x"]), log)
     block = {"name": p.name, "block": p.structure.to_dict(), "f_r": p.f_r, "u_r": p.u_r, "omega": p.omega,
              "levels": p.levels.to_dict(),

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import Mech2SpiceError
 from ..experiments import tolerance as tol
-from ..inputs import is_int, is_number
+from ..inputs import is_int, is_number, strict_json
 from . import grammar
 
 SEARCH_GRID = {"per_band": 6, "n_grid": 1000}     # coarse: 144 input points, 1000 s points
@@ -197,7 +197,7 @@ def write_atomic(path: Path, data) -> None:
     """Write JSON to path through a temporary file and os.replace (an interrupted write leaves the old file)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1) + "\n")
+    tmp.write_text(strict_json(data, indent=1) + "\n")
     os.replace(tmp, path)
 
 
@@ -364,7 +364,7 @@ def install_block(rec: dict, target: Path, name: str = "robust") -> None:
     data = {**rec["block_file"], "name": name, "note": f"best of `mech2spice design` ({rec['structure']})"}
     tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
     try:
-        tmp.write_text(json.dumps(data, indent=1) + "\n")
+        tmp.write_text(strict_json(data, indent=1) + "\n")
         margin = _nominal_margin(tmp, rec["structure"])
         if not margin > 0:
             raise Mech2SpiceError(f"--install-robust: the {rec['structure']} block fails its own check (nominal "

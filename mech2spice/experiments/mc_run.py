@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..backends import progress_bar
 from ..errors import Mech2SpiceError
-from ..inputs import first_json_line, is_int
+from ..inputs import first_json_line, is_int, strict_json
 from . import montecarlo as mc
 
 IN_FLIGHT = 2                  # tasks submitted per worker at a time
@@ -125,7 +125,7 @@ def _record(raw: bytes, n: int, path: Path) -> dict:
 
 
 def _append(fh, records: list[dict]) -> None:
-    fh.write("".join(json.dumps({"type": "sample", **r}, default=_num) + "\n" for r in records))
+    fh.write("".join(strict_json({"type": "sample", **r}, default=_num) + "\n" for r in records))
     fh.flush()
     os.fsync(fh.fileno())
 
@@ -161,7 +161,7 @@ def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: i
     out = Path(out)
     done = read_results(out, job)
     if not out.exists() or out.stat().st_size == 0:
-        out.write_text(json.dumps({"type": "header", "key": mc.job_key(job), "job": job}) + "\n", encoding="utf-8")
+        out.write_text(strict_json({"type": "header", "key": mc.job_key(job), "job": job}) + "\n", encoding="utf-8")
     todo = [i for i in range(samples) if i not in done]
     size = job.get("union") or design_for(job).union
     groups = tasks_of(todo, size)

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..compare import agreement
 from ..cpu import run as cpu_run
-from ..inputs import write_text
+from ..inputs import strict_json, write_text
 from ..cpu.machines import make_cpu
 
 
@@ -121,7 +121,7 @@ def _append_row(path, label, checkpoint, steps, row, probes, unit) -> None:
     line = {**row, "amp": [row["amp"].real.tolist(), row["amp"].imag.tolist()], "backend": label,
             "checkpoint": checkpoint, "steps": steps, "probes": probes, "unit": unit}
     with open(path, "a") as f:
-        f.write(json.dumps(line) + "\n")
+        f.write(strict_json(line) + "\n")
         f.flush()
 
 
@@ -254,7 +254,7 @@ def _latency_check(args, program: str, carrier: dict) -> dict:
 
 
 def _write(res: dict, out: str | None) -> int:
-    text = json.dumps(res, indent=2)
+    text = strict_json(res, indent=2)
     if out:
         write_text(out, text)
     print(text)

@@ -7,13 +7,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import sys
 import time
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import check_output_dir, check_output_file
+from ..inputs import check_inside, check_output_dir, check_output_file, strict_json
 from . import REPORTS, module
 
 # Options a report's write() takes, as command-line flags: (flag, dest, argparse keywords).  Defaults are
@@ -98,7 +97,7 @@ def cmd_report(args) -> int:
         if not args.json:
             print(f"{done[-1]['path']} ({done[-1]['wall_s']:.0f} s)", flush=True)
     if args.json:
-        print(json.dumps({"reports": done}, indent=2))
+        print(strict_json({"reports": done}, indent=2))
     return 0
 
 
@@ -134,7 +133,7 @@ def _write(name: str, directory: str, options: dict) -> dict:
 
 def _list(as_json: bool) -> int:
     if as_json:
-        print(json.dumps([{"name": n, "description": r.description, "cost": r.cost, "writes": list(r.writes),
+        print(strict_json([{"name": n, "description": r.description, "cost": r.cost, "writes": list(r.writes),
                            "options": [f for f, d, _ in OPTIONS if d in r.options]}
                           for n, r in REPORTS.items()], indent=2))
     else:

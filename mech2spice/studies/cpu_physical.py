@@ -8,7 +8,6 @@ ISS; the run stops at the first disagreement, and the rows measured up to it go 
 """
 from __future__ import annotations
 
-import json
 import platform
 import time
 from dataclasses import asdict, dataclass
@@ -20,6 +19,7 @@ from ..cpu import run as R
 from ..cpu.iss import ISS
 from ..cpu.physical import PROCESSOR_STEP as ENVELOPE_STEP, SETTLE_TOL as SETTLE
 from ..errors import Mech2SpiceError
+from ..inputs import strict_json
 from ._common import conditions, load_average, read_json
 from .cpu import moment_frames
 
@@ -120,7 +120,7 @@ def _run(a: Options, tracker: Tracker, out: Path) -> dict:
                              resume=a.resume, trace=tracker, **physical)
     except Mech2SpiceError as err:       # keep what was measured: the rows up to the failure
         (out / f"{a.name}_failed.md").write_text(f"# Physical run stopped\n\n{err}\n\n" + "\n".join(
-            json.dumps(r) for r in tracker.rows) + "\n")
+            strict_json(r) for r in tracker.rows) + "\n")
         raise Mech2SpiceError(f"{err} (rows in {out / (a.name + '_failed.md')})") from None
 
 

@@ -108,8 +108,18 @@ def _check_outputs(names: list[str], directory: str, options: dict) -> None:
     read = [(f"the {flag} file", options[dest]) for flag, dest, kw in OPTIONS
             if kw.get("metavar") == "FILE" and dest != "checkpoint" and options.get(dest)]
     for name in names:
-        for written in REPORTS[name].writes:
-            check_output_file(Path(directory) / written, read, f"report {name}'s file", parents=True)
+        for written in _files(name, options.get("name")):
+            path = check_inside(written, directory, f"report {name}'s file")
+            check_output_file(path, read, f"report {name}'s file", parents=True)
+
+
+def _files(name: str, stem: str | None) -> list[str]:
+    """The files report `name` writes in its folder; --name STEM renames them (STEM.md, STEM.json, ...)."""
+    if stem is None:
+        return list(REPORTS[name].writes)
+    if not stem or Path(stem).name != stem or stem in (".", ".."):
+        raise Mech2SpiceError(f"--name {stem!r}: a file stem, not a path (the report is written in --out)")
+    return [stem + w[len(name):] if w.startswith(name) else w for w in REPORTS[name].writes]
 
 
 def _names(given: list[str]) -> list[str]:
@@ -126,9 +136,27 @@ def _write(name: str, directory: str, options: dict) -> dict:
     """Run one report; its progress goes to stderr, so stdout carries only the result."""
     t0 = time.perf_counter()
     print(f"mech2spice report {name}: writing to {directory}", file=sys.stderr, flush=True)
-    with contextlib.redirect_stdout(sys.stderr):
+    with contextlib.redirect_stdout(sys.stderr), _stored_shape(name, directory, options.get("render")):
         path = module(name).write(directory, **options)
     return {"name": name, "path": str(path), "wall_s": round(time.perf_counter() - t0, 1)}
+
+
+# What a renderer raises on stored JSON of another shape (a list where a table was, a string where a count was)
+SHAPE_ERRORS = (KeyError, TypeError, IndexError, ValueError, AttributeError, ZeroDivisionError)
+
+
+@contextlib.contextmanager
+def _stored_shape(name: str, directory: str, render: bool):
+    """--render measures nothing: what fails on the stored JSON's shape is the file's fault, one line naming
+    it (stored() has checked it is an object; each renderer reads the fields it needs)."""
+    try:
+        yield
+    except SHAPE_ERRORS as err:
+        if not render or isinstance(err, Mech2SpiceError):
+            raise
+        raise Mech2SpiceError(f"report {name}: the stored JSON in {directory} is not what the report reads "
+                              f"({type(err).__name__}: {str(err)[:120]}): measure it again (without --render)") \
+            from None
 
 
 def _list(as_json: bool) -> int:

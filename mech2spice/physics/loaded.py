@@ -121,3 +121,54 @@ def point_margins(roots: Roots, expect: np.ndarray, u_r: float, levels: Levels =
     np.minimum.at(out, roots.point, m)
     out[np.isinf(out)] = -1.0
     return out
+
+
+# --- a block can drive itself --------------------------------------------------------------------------
+SELF_DRIVE_MARGIN = 0.05     # band widths: the least distance of a gate's output level to its band's edges
+SELF_DRIVE_GRID = 1000       # steady_batch's scan points
+_SELF_DRIVE: dict[str, float] = {}                 # digest of the block -> its margin (every command loads one)
+
+
+def digest(p: GateParams) -> str:
+    """A content key of a gate's parameters, structure and levels."""
+    import hashlib
+    import json
+    return hashlib.sha256(json.dumps(p.to_dict(), sort_keys=True, default=str).encode()).hexdigest()
+
+
+def self_drive_margin(p: GateParams) -> float:
+    """The smallest band margin (band widths) of the loaded gate's output levels, every stable steady state
+    with its inputs at its own nominal levels (00, 01, 10, 11): > 0 when each lies in the band of NOR of the
+    inputs, so that one such gate drives the next; -1 where an input has no stable state; NaN where the states
+    are not finite.  Memoised by `digest` (every command loads a block; ~0.02-0.3 s each)."""
+    key = digest(p)
+    if key not in _SELF_DRIVE:
+        from . import steady_batch
+        lg = build(p)
+        lv = p.levels
+        levels = np.array([[1.0, lv.nominal(a), lv.nominal(b)] for a in (0, 1) for b in (0, 1)])
+        st = steady_batch.stack([lg.model], lg.input_groups(), lg.gate.channel)
+        with np.errstate(all="ignore"):
+            r = steady_batch.roots(st, 0, levels, SELF_DRIVE_GRID)
+            m = point_margins(r, np.array([1, 0, 0, 0]), p.u_r, lv)
+        _SELF_DRIVE[key] = float(m.min()) if np.isfinite(m).all() else float("nan")
+    return _SELF_DRIVE[key]
+
+
+def check_self_drive(p: GateParams, where: str) -> None:
+    """Refuse a block whose output levels do not lie inside its own input bands with SELF_DRIVE_MARGIN (a
+    network of it would decode wrong bits as valid: docs/architecture.md)."""
+    from ..errors import Mech2SpiceError
+    try:
+        m = self_drive_margin(p)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:
+        raise Mech2SpiceError(f"{where}: the gate's steady states cannot be computed "
+                              f"({str(err).splitlines()[0][:100] or type(err).__name__}): not a usable block") from None
+    if not m >= SELF_DRIVE_MARGIN:
+        why = ("its steady states are not finite" if m != m else
+               "an input has no stable state" if m == -1.0 else
+               f"its worst output level lies {m:+.3f} band widths inside its band (negative: outside)")
+        raise Mech2SpiceError(f"{where}: the gate cannot drive itself: at its own nominal inputs "
+                              f"({p.levels.nominal0:g}, {p.levels.nominal1:g} u_R; bands {p.levels.band0[0]:g}-"
+                              f"{p.levels.band0[1]:g}, {p.levels.band1[0]:g}-{p.levels.band1[1]:g}), {why} "
+                              f"(at least {SELF_DRIVE_MARGIN} needed)")

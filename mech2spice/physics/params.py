@@ -302,7 +302,7 @@ def load_params(spec: str | None) -> GateParams:
         raise Mech2SpiceError(f"parameter file {spec} must hold a JSON object of fields "
                               f"(e.g. {{\"q_c\": 150}}), not {type_name(data)}")
     if "block" in data:
-        return block_params(data, spec)
+        return self_driving(block_params(data, spec), f"block file {spec}")
     known = {f.name for f in fields(GateParams)} - {"block"}
     unknown = set(data) - known
     if unknown:
@@ -319,6 +319,16 @@ def load_params(spec: str | None) -> GateParams:
             raise Mech2SpiceError(f"parameter file {spec}: {name} must be {want}, not {type_name(value)}")
     p = replace(DEFAULT, **{"name": Path(spec).stem, **data})
     p.validate()
+    return self_driving(p, f"parameter file {spec}") if "levels" in data else p
+
+
+def self_driving(p: GateParams, where: str) -> GateParams:
+    """`p` once its outputs lie in its own input bands (loaded.check_self_drive: a block is refused on load,
+    not after a run that decodes wrong bits as valid).  Checked for block files and files with their own
+    levels; a file of a few classic fields on the default bands is a variant to characterise (`gate`,
+    `--sens`), whose failures those commands report."""
+    from .loaded import check_self_drive
+    check_self_drive(p, where)
     return p
 
 

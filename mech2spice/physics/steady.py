@@ -180,9 +180,13 @@ def _distinct(states: list[SteadyState]) -> list[SteadyState]:
 
 
 def _scan_roots(env: Envelope, F: np.ndarray, n_grid: int) -> list[float]:
-    lim = s_reach(env, F)
-    s = np.linspace(-lim, lim, n_grid)
-    r = balance_grid(env, F[:, None], s)[0]
+    with np.errstate(all="ignore"):
+        lim = s_reach(env, F)
+        s = np.linspace(-lim, lim, n_grid)
+        r = balance_grid(env, F[:, None], s)[0]
+    if not (np.isfinite(lim) and np.isfinite(r).all()):      # brentq would stop at a NaN with a traceback
+        raise Mech2SpiceError("the steady-state scan is not finite: a gate parameter is too large or too small "
+                              "for double precision (a quality factor of 1e300?)")
     idx = np.flatnonzero(np.sign(r[:-1]) != np.sign(r[1:]))
     f = lambda x: balance_grid(env, F[:, None], np.array([x]))[0, 0]
     return [brentq(f, s[i], s[i + 1], xtol=1e-14, rtol=1e-13) for i in idx]

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from .. import inputs
 from ..backends import BACKENDS, engine_class
@@ -222,6 +223,24 @@ def cmd_simulate(args) -> int:
 
 
 # --- SPICE --------------------------------------------------------------------------
+LIBRARY_IGNORES = (("set", "--set"), ("top", "--top"), ("observe", "--observe"), ("periods", "--periods"),
+                   ("method", "--method"), ("max_step", "--max-step"))
+
+
+def _check_library_args(args) -> None:
+    """--format veriloga writes the device library, not a design's netlist: what only a design's netlist
+    reads is refused rather than ignored, and the design argument must still name a readable file."""
+    given = [flag for dest, flag in LIBRARY_IGNORES if getattr(args, dest, None) is not None]
+    if args.max_fanout != MAX_FANOUT:
+        given.append("--max-fanout")
+    if given:
+        raise Mech2SpiceError(f"{', '.join(given)}: a design's netlist option; --format veriloga writes the "
+                              "device library (no design is simulated)")
+    if not Path(args.design).is_file():
+        raise Mech2SpiceError(f"cannot read Verilog file {args.design}: no such file (--format veriloga reads "
+                              "no design, but the one named must exist)")
+
+
 def cmd_emit(args) -> int:
     """`mech2spice emit`: write the design as an ngspice or VACASK netlist, or the Verilog-A library."""
     from .. import simulation
@@ -230,6 +249,7 @@ def cmd_emit(args) -> int:
     from ..physics.params import load_params
     p = load_params(args.params)
     if args.format == "veriloga":                  # the device library, defaults from --params
+        _check_library_args(args)
         import re
         from ..spice import veriloga
         text = veriloga.combined(p)

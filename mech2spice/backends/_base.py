@@ -196,6 +196,9 @@ class _LineBar:
         now = time.monotonic()
         if now - self.last >= PROGRESS_EVERY_S:
             self.last = now
+            if self.total is None:               # an end nobody knows: what was done, and for how long
+                self.log(f"{self.n:,} {self.unit}s, {now - self.t0:.0f} s elapsed")
+                return
             rate = (self.n - self.n0) / max(now - self.t0, 1e-9)
             eta = f", at most {(self.total - self.n) / rate:.0f} s to go" if rate > 0 else ""
             self.log(f"{self.n:,}/{self.total:,} {self.unit}s ({self.n / max(self.total, 1):.0%}){eta}")
@@ -204,9 +207,10 @@ class _LineBar:
         """Nothing to clear (lines stay)."""
 
 
-def progress_bar(total: int, enabled, unit: str = "period", initial: int = 0):
+def progress_bar(total: int | None, enabled, unit: str = "period", initial: int = 0):
     """A tqdm bar with an ETA when `enabled` is True (callers enable it on a terminal only); a line every
-    PROGRESS_EVERY_S through `enabled` when it is a callable (the CLI's log, on a redirected stderr); else a no-op."""
+    PROGRESS_EVERY_S through `enabled` when it is a callable (the CLI's log, on a redirected stderr); else a
+    no-op.  `total` None: the end is not known, so no percentage and no ETA, only the count and the time."""
     if callable(enabled):
         return _LineBar(total, unit, enabled, initial)
     if not enabled:

@@ -114,21 +114,22 @@ def add_center_parser(subparsers) -> None:
     s.add_argument("--growth-floor", type=inputs.number(0), default=GROWTH_FLOOR,
                    help=f"slowest decay rate (1/time) of any stable state over the grid ({GROWTH_FLOOR})")
     s.add_argument("--out", required=True, metavar="DIR", help="record and best block folder")
-    inputs.force_arg(s, "--out's centering.json or best.json")
+    inputs.force_arg(s, "--out's best.json")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_center)
 
 
 def _check_center_out(args) -> None:
     """Before any analysis: DIR takes files; its record and best block are never the --from block, and an
-    existing one is this command's own (else --force)."""
+    existing best block is this command's own (else --force; an existing record is read, and refused unless
+    it is a centering record, before any step)."""
     from ..design import centering
     from ..physics.params import params_file
     inputs.check_output_dir(args.out, "centering folder", parents=True)
     seed = {"the --from block": params_file(args.seed)}
-    for name, kind, what in ((centering.RECORD, centering.RECORD_KIND, "centering record"),
-                             (centering.BEST, centering.BEST_KIND, "best block")):
-        inputs.check_output_file(Path(args.out) / name, seed, what, kind=kind, force=args.force, parents=True)
+    inputs.check_output_file(Path(args.out) / centering.RECORD, seed, "centering record", parents=True)
+    inputs.check_output_file(Path(args.out) / centering.BEST, seed, "best block", kind=centering.BEST_KIND,
+                             force=args.force, parents=True)
 
 
 def cmd_center(args) -> int:

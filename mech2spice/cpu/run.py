@@ -297,17 +297,34 @@ class _NoBar:
         """Do nothing (the progress bar is off)."""
 
 
-def _cycle_bar(enabled: bool, done: int, total: int, backend: str):
-    """A progress bar over cycles with rate and ETA (to --max-cycles: a halt comes sooner)."""
+def _cycle_bar(enabled: bool, done: int, total: int | None, backend: str):
+    """A progress bar over cycles: to the program's own end when `total` is known (program_length), else the
+    cycles and the time so far (the --max-cycles cap is no end: a percentage of it said nothing)."""
     if callable(enabled):                      # a redirected stderr: a line now and then (backends._base)
         from ..backends import progress_bar
         return progress_bar(total, enabled, "cycle", initial=done)
     if not enabled:
         return _NoBar()
     from tqdm import tqdm
-    return tqdm(total=total, initial=done, unit="cycle", desc=f"{backend} (to --max-cycles)", leave=False,
-                file=sys.stderr, dynamic_ncols=True)
+    return tqdm(total=total, initial=done, unit="cycle", desc=backend + ("" if total is None else " (to the halt)"),
+                leave=False, file=sys.stderr, dynamic_ncols=True)
 
+
+ISS_LOOKAHEAD_S = 2.0      # what the ISS may spend finding a program's length before a long run
+
+
+def program_length(cpu, max_cycles: int) -> int | None:
+    """The cycle the run will stop at, from the ISS run ahead from `cpu`'s state: its halt, or max_cycles if it
+    runs that far; None when the ISS has not found either within ISS_LOOKAHEAD_S (the bar then shows no end)."""
+    iss = ISS(copy.deepcopy(cpu.mem))
+    iss.set_registers(cpu.registers())
+    iss.cycle, iss.halted = cpu.cycle, cpu.halted
+    start, deadline = iss.cycle, time.perf_counter() + ISS_LOOKAHEAD_S
+    while not iss.halted and iss.cycle < max_cycles:
+        if (iss.cycle - start) % 4096 == 0 and time.perf_counter() > deadline:
+            return None
+        iss.step()
+    return iss.cycle
 
 
 def trace_lines(path) -> list[str]:
@@ -393,7 +410,8 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         _restore(cpu, state, checkpoint)
     if trace is not None and not callable(trace):
         trace = TraceFile(trace, cpu.cycle if resume else None)
-    bar = _cycle_bar(progress if backend != "iss" else False, cpu.cycle, max_cycles, backend)
+    shown = progress if backend != "iss" else False
+    bar = _cycle_bar(shown, cpu.cycle, program_length(cpu, max_cycles) if shown else None, backend)
     shadow = IssCheck(cpu) if backend != "iss" else None
     judged = [] if stability == "cycle" and backend in PHYSICAL else None
     while not cpu.halted and cpu.cycle < max_cycles:

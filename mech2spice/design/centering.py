@@ -581,16 +581,10 @@ FORMAT = "mech2spice-centering"
 RECORD, BEST = "centering.json", "best.json"
 
 
-def _is_record(path) -> bool:
-    data = head(path, 1 << 16)
-    return b'"format"' in data and FORMAT.encode() in data
-
-
 def _is_best(path) -> bool:
     return b'"method": "design centering' in head(path, 1 << 20)
 
 
-RECORD_KIND = ("a centering record", _is_record)
 BEST_KIND = ("a block `center` wrote", _is_best)
 
 

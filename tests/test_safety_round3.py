@@ -92,6 +92,12 @@ def test_center_never_replaces_a_users_best_json(capsys, tmp_path, no_centering)
     refused(capsys, keep(best), "center", "--out", d, needle="--force")
 
 
+def test_gate_report_never_writes_over_its_params(capsys, tmp_path):
+    params = tmp_path / "gate.json"
+    shutil.copy(data.path("blocks", "robust.json"), params)
+    refused(capsys, keep(params), "gate", "--params", params, "--report", tmp_path, needle="--params file")
+
+
 def test_report_name_stays_inside_out(capsys, tmp_path):
     sub = tmp_path / "sub"
     sub.mkdir()
@@ -112,6 +118,17 @@ def test_a_block_whose_outputs_miss_its_own_bands_is_refused_on_load(capsys, tmp
     block["levels"] = {"band0": [0, 0.995], "band1": [0.996, 1.1]}
     with pytest.raises(Mech2SpiceError, match="cannot drive itself"):
         load_params(str(write(tmp_path / "blk.json", json.dumps(block))))
+
+
+def test_the_check_is_in_place_whatever_was_imported_first(tmp_path):
+    """load_params imported alone (no model builder imported yet) still refuses: the physics package hands
+    the check to params.LOAD_CHECKS on its own import."""
+    import subprocess
+    import sys
+    bands = write(tmp_path / "bands.json", json.dumps({"levels": {"band0": [0, 0.995], "band1": [0.996, 1.1]}}))
+    code = f"from mech2spice.physics.params import load_params; load_params({str(bands)!r})"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode != 0 and "cannot drive itself" in r.stderr
 
 
 @pytest.mark.parametrize("name", ["default", *BLOCK_PRESETS])

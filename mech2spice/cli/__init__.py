@@ -10,6 +10,7 @@ import contextlib
 import os
 import signal
 import sys
+from pathlib import Path
 
 from .. import inputs
 from ..backends import engine_class
@@ -152,6 +153,10 @@ def _precheck(args) -> None:
     elif command == "subckts":
         inputs.check_output_dir(args.output, "subckt directory")
     elif command == "gate" and args.report:
+        from ..reports import REPORTS
         inputs.check_output_dir(args.report, "report directory")
+        for name in REPORTS["gate"].writes:                  # gate.json beside gate.md: never the --params file
+            inputs.check_output_file(Path(args.report) / name, {"the --params file": params_file(args.params)},
+                                     "gate report file")
     if getattr(args, "stimulus", None):
         inputs.stimulus_steps(args.stimulus, {}, engine_class(args.backend))

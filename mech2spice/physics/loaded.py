@@ -24,7 +24,7 @@ import numpy as np
 
 from . import nor
 from .model import MechModel
-from .params import DEFAULT_LEVELS, GateParams, Levels
+from .params import DEFAULT_LEVELS, LOAD_CHECKS, GateParams, Levels
 from .steady_batch import Roots
 
 GATE, INPUTS, LOAD = "gate", ("in1", "in2"), "load"
@@ -172,3 +172,7 @@ def check_self_drive(p: GateParams, where: str) -> None:
                               f"({p.levels.nominal0:g}, {p.levels.nominal1:g} u_R; bands {p.levels.band0[0]:g}-"
                               f"{p.levels.band0[1]:g}, {p.levels.band1[0]:g}-{p.levels.band1[1]:g}), {why} "
                               f"(at least {SELF_DRIVE_MARGIN} needed)")
+
+
+if check_self_drive not in LOAD_CHECKS:
+    LOAD_CHECKS.append(check_self_drive)

@@ -322,13 +322,19 @@ def load_params(spec: str | None) -> GateParams:
     return self_driving(p, f"parameter file {spec}") if "levels" in data else p
 
 
+# Checks every block file passes on load, (p, where) -> None or Mech2SpiceError.  physics/loaded.py adds its
+# check_self_drive when the physics package is imported (it builds the gate from this module, which therefore
+# cannot import it: the check is handed down instead).
+LOAD_CHECKS: list = []
+
+
 def self_driving(p: GateParams, where: str) -> GateParams:
-    """`p` once its outputs lie in its own input bands (loaded.check_self_drive: a block is refused on load,
-    not after a run that decodes wrong bits as valid).  Checked for block files and files with their own
-    levels; a file of a few classic fields on the default bands is a variant to characterise (`gate`,
-    `--sens`), whose failures those commands report."""
-    from .loaded import check_self_drive
-    check_self_drive(p, where)
+    """`p` once it passes LOAD_CHECKS (loaded.check_self_drive: its outputs lie in its own input bands; a block
+    is refused on load, not after a run that decodes wrong bits as valid).  Checked for block files and files
+    with their own levels; a file of a few classic fields on the default bands is a variant to characterise
+    (`gate`, `--sens`), whose failures those commands report."""
+    for check in LOAD_CHECKS:
+        check(p, where)
     return p
 
 

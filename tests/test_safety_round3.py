@@ -98,6 +98,13 @@ def test_gate_report_never_writes_over_its_params(capsys, tmp_path):
     refused(capsys, keep(params), "gate", "--params", params, "--report", tmp_path, needle="--params file")
 
 
+def test_subckts_never_writes_over_its_params(capsys, tmp_path):
+    params = tmp_path / "m2s_couple.subckt"                # a block file under the name of a library file
+    shutil.copy(data.path("blocks", "robust.json"), params)
+    refused(capsys, keep(params), "subckts", "-o", tmp_path, "--params", params, needle="--params file")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m2s_couple.subckt"]
+
+
 def test_report_name_stays_inside_out(capsys, tmp_path):
     sub = tmp_path / "sub"
     sub.mkdir()
@@ -257,3 +264,23 @@ def test_a_processor_runs_progress_without_a_known_end_has_no_percentage(monkeyp
     lines = _progress_lines(monkeypatch, -1.0)          # the ISS gets no time: the length is unknown
     assert lines and not any("%" in line or "to go" in line or "100,000" in line for line in lines), lines[:3]
     assert lines[-1].startswith("457 cycles,") and "s elapsed" in lines[-1]
+
+
+# ------------------------------------------------------------------ Monte-Carlo lines read back on resume
+
+@pytest.mark.parametrize("sample, ok", [
+    ({"margin": None, "reason": "simulation diverged"}, True),           # what the strict writer writes
+    ({"margin": "-Infinity"}, False), ({"failing_bits": ["s[0]"]}, False), ({"failing_gates": [3]}, False),
+    ({"reason": 5}, False),
+], ids=["null-margin", "margin-string", "bits-list", "gate-number", "reason-number"])
+def test_montecarlo_lines_are_checked_before_a_resume_counts_them(tmp_path, monkeypatch, sample, ok):
+    from mech2spice.experiments import mc_run
+    monkeypatch.setattr(mc_run.mc, "job_key", lambda job: "k")
+    out = tmp_path / "mc.jsonl"
+    out.write_text('{"type": "header", "key": "k"}\n' + json.dumps({"type": "sample", "i": 0, "pass": False,
+                                                                     **sample}) + "\n")
+    if ok:
+        assert mc_run.read_results(out, {})[0]["margin"] is None
+    else:
+        with pytest.raises(Mech2SpiceError, match="line 2: not a Monte-Carlo results record"):
+            mc_run.read_results(out, {})

@@ -151,7 +151,11 @@ def _precheck(args) -> None:
         read = [*inputs.design_inputs(design_file), ("the --params file", params_file(args.params))]
         inputs.check_output_file(args.output, read, "netlist file", kind=NETLIST, force=args.force)
     elif command == "subckts":
+        from ..spice.oscillator_netlist import subckt_library
         inputs.check_output_dir(args.output, "subckt directory")
+        for name in subckt_library(load_params(args.params)):       # the files it writes: never the --params file
+            inputs.check_output_file(Path(args.output) / name, {"the --params file": params_file(args.params)},
+                                     "subckt file", parents=True)
     elif command == "gate" and args.report:
         from ..reports import REPORTS
         inputs.check_output_dir(args.report, "report directory")

@@ -284,3 +284,12 @@ def test_montecarlo_lines_are_checked_before_a_resume_counts_them(tmp_path, monk
     else:
         with pytest.raises(Mech2SpiceError, match="line 2: not a Monte-Carlo results record"):
             mc_run.read_results(out, {})
+
+
+def test_install_robust_checks_the_block_as_params_will_load_it(tmp_path):
+    from mech2spice.design import search
+    block = json.loads(data.path("blocks", "robust.json").read_text())
+    path = write(tmp_path / "b.json", json.dumps({**block, "levels": {"band0": [0, 0.995], "band1": [0.996, 1.1]}}))
+    with pytest.raises(Mech2SpiceError, match="cannot drive itself"):
+        search._check_self_drive(path, "classic")
+    search._check_self_drive(write(tmp_path / "ok.json", json.dumps(block)), "classic")

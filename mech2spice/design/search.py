@@ -370,9 +370,19 @@ def install_block(rec: dict, target: Path, name: str = "robust") -> None:
             raise Mech2SpiceError(f"--install-robust: the {rec['structure']} block fails its own check (nominal "
                                   f"worst margin {margin:+.4f}): not installed")
         _check_stable(tmp, rec["structure"])
+        _check_self_drive(tmp, rec["structure"])
         os.replace(tmp, target)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def _check_self_drive(path: Path, structure: str) -> None:
+    """Refuse a block that --params would refuse on load (params.LOAD_CHECKS: its output levels inside its
+    own bands), so an installed --params robust always loads."""
+    from ..inputs import read_json
+    from ..physics.params import block_params, self_driving
+    self_driving(block_params(read_json(path, "block file"), f"of the {structure} entry"),
+                 f"--install-robust: the {structure} block (not installed)")
 
 
 def _check_stable(path: Path, structure: str) -> None:

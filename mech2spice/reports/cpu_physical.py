@@ -79,9 +79,10 @@ def write(directory="reports", cycles: int = 0, program: str = "programs/sieve.a
     return render_json(out, name)
 
 
-# The stored run's fields the report reads, and their types (_common.stored checks them before any figure).
+# The stored run's fields the report reads, and their types (_common.stored checks them before any figure;
+# primes: null for a program that is not the sieve).
 SCHEMA = {"cycles": COUNT, "periods": COUNT, "simulated_periods": COUNT, "wall_s": NUMBER, "cpu_s": NUMBER,
-          "s_per_cycle": NUMBER, "rows": list, "moments": list, "options": dict, "speedups": dict, "primes": list,
+          "s_per_cycle": NUMBER, "rows": list, "moments": list, "options": dict, "speedups": dict, "primes": (list, type(None)),
           "halted": bool, "sieve": bool, "agree_every_cycle": bool, "final_memory_equals_iss": bool,
           "command": str, "host": str, "load": str}
 

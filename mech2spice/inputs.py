@@ -149,11 +149,6 @@ def strict_json(data, default=None, **dumps) -> str:
     return json.dumps(finite(data, default), allow_nan=False, **dumps)
 
 
-def loads_strict(text):
-    """json.loads that refuses NaN/Infinity (ValueError), as a strict reader does."""
-    return json.loads(text, parse_constant=_no_constant)
-
-
 def _no_constant(name: str):
     raise ValueError(f"{name} is not a JSON number")
 
@@ -339,7 +334,7 @@ def check_inside(path, folder, what: str) -> Path:
     return Path(folder) / path
 
 
-INCLUDE = re.compile(r'^\s*`include\s+"([^"\n]+)"', re.M)
+INCLUDE = re.compile(r'`include\s+"([^"\n]+)"')       # anywhere (a commented one too: the check errs safe)
 MAX_INCLUDES = 256
 
 

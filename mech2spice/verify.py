@@ -115,7 +115,7 @@ def register_names(netlist: Netlist) -> list[tuple[str, str, str]]:
 
 def _read_source(path: Path, rel: str, top: str) -> list[str]:
     read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
-    return [f'{read} "{rel}"', f"hierarchy -check -top {top}", "proc", "flatten", "opt_clean",
+    return [f'{read} "{rel}"', f"hierarchy -check -top {top}", "proc", "flatten", "memory", "opt_clean",
             f"rename {top} {PREFIX}gold"]
 
 
@@ -269,19 +269,20 @@ def _testbench(netlist: Netlist, n: int, clocked: bool) -> str:
     if clocked:
         lines.append(f"  reg {netlist.clock} = 0;")
         conns.insert(0, f".{netlist.clock}({netlist.clock})")
+    k, mem = f"{PREFIX}k", f"{PREFIX}mem"          # the bench's own names: a port may be called k or mem
     lines += [f"  {netlist.top} dut({', '.join(conns)});",
-              f"  reg [{width - 1}:0] mem [0:{n - 1}];", "  integer k;"]
-    apply = f"{{{', '.join(ins)}}} = mem[%s];" if ins else ""
+              f"  reg [{width - 1}:0] {mem} [0:{n - 1}];", f"  integer {k};"]
+    apply = f"{{{', '.join(ins)}}} = {mem}[%s];" if ins else ""
     show = '$display("' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
-    lines += ["  initial begin", '    $readmemb("vectors.txt", mem);']
+    lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if clocked:
-        lines += [f"    {apply % '0'}", f"    for (k = 0; k < {n}; k = k + 1) begin",
+        lines += [f"    {apply % '0'}", f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
                   f"      #5 {netlist.clock} = 1;",
-                  f"      #1 {apply % f'(k + 1 < {n} ? k + 1 : k)'}",
+                  f"      #1 {apply % f'({k} + 1 < {n} ? {k} + 1 : {k})'}",
                   f"      #1 {show}", f"      #3 {netlist.clock} = 0;", "    end"]
     else:
-        lines += [f"    for (k = 0; k < {n}; k = k + 1) begin",
-                  f"      {apply % 'k'}", f"      #1 {show}", "    end"]
+        lines += [f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
+                  f"      {apply % k}", f"      #1 {show}", "    end"]
     return "\n".join(lines + ["    $finish;", "  end", "endmodule", ""])
 
 

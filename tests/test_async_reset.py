@@ -251,6 +251,18 @@ def test_the_carrier_agrees_on_the_smallest_design():
     assert all(t["valid"] and t["stable"] and t["settled"] for t in got)
 
 
+@pytest.mark.slow
+def test_the_carrier_starts_from_the_power_up_value(tmp_path):
+    """From rest, on the oscillator-level engine: z powers up at 1 (an inverted latch at rest), and r reads
+    it after the first edge."""
+    nl = synthesize(_write(tmp_path, "module pu2(input clk, input d, output reg r);\n  reg z = 1'b1;\n"
+                                     "  always @(posedge clk) begin r <= z; z <= d; end\nendmodule\n"))
+    ref, got = _physical_trace(nl, [{"d": 0}, {"d": 0}, {"d": 1}], "carrier")
+    assert [t["bits"] for t in ref] == [{"r[0]": 1}, {"r[0]": 0}, {"r[0]": 0}]
+    assert [t["bits"] for t in got] == [t["bits"] for t in ref]
+    assert all(t["valid"] and t["stable"] and t["settled"] for t in got)
+
+
 def test_logic_holds_a_forced_register_without_the_clock(tmp_path):
     nl = synthesize(_write(tmp_path, SMALL))
     sim = ClockedLogic(nl)

@@ -165,7 +165,8 @@ def equivalence(path, netlist: Netlist) -> dict:
         res = _prove(Path(path), netlist, [])
     n = len(res["regs"])
     matched = f", {n} matched register{'s' * (n != 1)}" if n else ""
-    method = (f"yosys miter + sat -tempinduct from the all-zero state (depth <= {INDUCTION_STEPS}{matched})"
+    start = "all-zero" if _initial_state(netlist) == "-set-init-zero" else "power-up"
+    method = (f"yosys miter + sat -tempinduct from the {start} state (depth <= {INDUCTION_STEPS}{matched})"
               if sequential else "yosys miter + sat (all input vectors; -tempinduct, closing at step 1)")
     if res["cex"] and "cycle" not in res["cex"][0]:
         _explain(path, netlist, res["cex"][0])

@@ -190,6 +190,30 @@ def test_each_polarity_and_value_is_proved_and_cosimulated(tmp_path, body):
     assert _against_icarus(src, nl, _stimulus(nl, 500, 7)) == []
 
 
+RESET_SYNCHRONISER = """module rs(input clk, input rst_n, input [2:0] d, output reg [2:0] q);
+  reg [1:0] sync;
+  always @(posedge clk or negedge rst_n)
+    if (!rst_n) sync <= 2'b00; else sync <= {sync[0], 1'b1};
+  wire rst_s_n = sync[1];                     // a latch output resets the others: F fed by a latch
+  always @(posedge clk or negedge rst_s_n)
+    if (!rst_s_n) q <= 3'd0; else q <= q ^ d;
+endmodule
+"""
+
+
+@needs_icarus
+@pytest.mark.parametrize("max_fanout", [None, 3])
+def test_a_reset_synchroniser_and_buffered_reset_nets(tmp_path, max_fanout):
+    """A register's output as another's asynchronous reset, and the reset net through fan-out buffers."""
+    src = _write(tmp_path, RESET_SYNCHRONISER)
+    nl = synthesize(src, max_fanout=max_fanout)
+    if max_fanout:
+        assert max(nl.fanout(n) for n in nl.graph if nl.graph.nodes[n]["kind"] in ("input", "nor", "latch")) <= 3
+    assert len(nl.forced()) == 5
+    assert verify.equivalence(src, nl)["status"] == "proved"
+    assert _against_icarus(src, nl, _stimulus(nl, 400, 11)) == []
+
+
 # --------------------------------------------------------------------------- the refusals that remain
 
 @pytest.mark.parametrize("body, needle", [

@@ -477,7 +477,8 @@ def _initial_values(module: dict) -> dict:
     initialisers and constant `initial` assignments); x bits and malformed entries are left out."""
     out = {}
     for info in module["netnames"].values():
-        init = info.get("attributes", {}).get("init")
+        attrs = info.get("attributes")          # a cached module is anyone's data: read only what is well formed
+        init = attrs.get("init") if isinstance(attrs, dict) else None
         if isinstance(init, int) and not isinstance(init, bool):
             init = format(init % (1 << len(info["bits"])), f"0{len(info['bits'])}b")
         if not isinstance(init, str) or len(init) != len(info["bits"]):

@@ -593,12 +593,18 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path |
         out_net = cell["connections"][out_pin][0]
         if out_net in driver:
             raise Mech2SpiceError(f"module {top}: net {out_net} has more than one driver")
-        line = path and refusals.src_line(cell.get("attributes", {}).get("src"), path)
-        g.add_node(node, kind=kind, **({"cell": (cell["type"], f"{path}, line {line}" if line else f"module {top}")}
-                                       if kind == "latch" else {}))
+        g.add_node(node, kind=kind, **({"cell": (cell["type"], _where(cell, top, path))} if kind == "latch" else {}))
         driver[out_net] = node
         cells[node] = ([cell["connections"][p][0] if p else "0" for p in pins], out_net)
     return cells
+
+
+def _where(cell: dict, top: str, path: Path | None) -> str:
+    """'FILE, line N' of a cell from its src attribute, else 'module TOP' (for a latch's messages)."""
+    attrs = cell.get("attributes")
+    src = attrs.get("src") if isinstance(attrs, dict) else None      # a cached module is anyone's data
+    line = path and isinstance(src, str) and refusals.src_line(src, path)
+    return f"{path}, line {line}" if line else f"module {top}"
 
 
 def _net_names(module: dict) -> dict:

@@ -64,18 +64,31 @@ def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] =
         + [f"output {_decl(w)}{p}" for p, w in netlist.outputs.items()] \
         + [f"output {name}" for name, _ in expose]
     lines = [f"module {module}({', '.join(ports)});"]
-    lines += [f"  reg {_ident(q)};" for q in netlist.latches()]
+    inverted = any(g.nodes[q].get("inverted") for q in netlist.latches())     # then every power-up is written
+    for q in netlist.latches():
+        lines.append(f"  reg {_ident(q)} = {g.nodes[q].get('inverted', 0)};" if inverted else f"  reg {_ident(q)};")
     for gate in netlist.gates():
         a, b = (_ident(u) for u, _, _ in sorted(g.in_edges(gate, data="pin"), key=lambda e: e[2]))
         lines.append(f"  wire {_ident(gate)} = ~({a} | {b});")
-    for q in netlist.latches():
-        (d,) = g.predecessors(q)
-        lines.append(f"  always @(posedge {netlist.clock}) {_ident(q)} <= {_ident(d)};")
+    lines += [_register(netlist, q) for q in netlist.latches()]
     for out in output_bits(netlist):
         (src,) = g.predecessors(out)
         lines.append(f"  assign {_port_bit(netlist.outputs, out)} = {_ident(src)};")
     lines += [f"  assign {name} = {_ident(q)};" for name, q in expose]
     return "\n".join(lines + ["endmodule", ""])
+
+
+def _register(netlist: Netlist, q: str) -> str:
+    """A latch as a posedge register: an inverted latch's D pin carries the complement; a forced one is reset
+    (or set, when inverted) asynchronously while F is high, as the mechanical latch is."""
+    from .synthesis.synth import latch_inputs
+    d, f = latch_inputs(netlist.graph, q)
+    inverted = netlist.graph.nodes[q].get("inverted", 0)
+    nxt = f"~{_ident(d)}" if inverted else _ident(d)
+    if f is None:
+        return f"  always @(posedge {netlist.clock}) {_ident(q)} <= {nxt};"
+    return (f"  always @(posedge {netlist.clock} or posedge {_ident(f)}) if ({_ident(f)}) {_ident(q)} <= "
+            f"1'b{inverted}; else {_ident(q)} <= {nxt};")
 
 
 def _port_bit(widths: dict, bit: str) -> str:
@@ -102,7 +115,7 @@ def register_names(netlist: Netlist) -> list[tuple[str, str, str]]:
 
 def _read_source(path: Path, rel: str, top: str) -> list[str]:
     read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
-    return [f'{read} "{rel}"', f"hierarchy -check -top {top}", "proc", "flatten", "opt_clean",
+    return [f'{read} "{rel}"', f"hierarchy -check -top {top}", "proc", "flatten", "memory", "opt_clean",
             f"rename {top} {PREFIX}gold"]
 
 
@@ -117,14 +130,26 @@ def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
     lines += ["read_verilog gate.v", "proc", "opt_clean",
               f"miter -equiv -flatten -make_assert -ignore_gold_x {PREFIX}gold {PREFIX}gate {PREFIX}miter",
               f"hierarchy -top {PREFIX}miter", "opt_clean"]
+    if netlist.forced():
+        # sat has no model of an asynchronous flip-flop; async2sync gives both sides the cycle view the logic
+        # backend and co-simulation read: the output forced while the reset is high, the next state too
+        lines.append("async2sync")
     # Induction even for a combinational network: the source may keep registers that synthesis folded
     # away (`q <= q` is a constant 0), which a plain SAT proof cannot model.  It closes at step 1 otherwise.
     # -enable_undef: without it sat reads the miter's `x` as 0, so -ignore_gold_x's `gold === x` becomes
     # `~gold` and each output check only "gold 1 => gate 1" (a stuck-at-1 output passed).  Inputs and the
     # start state are defined; the induction step's state may hold x (a source register assigned x).
     lines.append(f"sat -verify -prove-asserts -tempinduct -enable_undef -set-def-inputs "
-                 f"-set-init-zero -maxsteps {INDUCTION_STEPS} -show-inputs {PREFIX}miter")
+                 f"{_initial_state(netlist)} -maxsteps {INDUCTION_STEPS} -show-inputs {PREFIX}miter")
     return "\n".join(lines + [""])
+
+
+def _initial_state(netlist: Netlist) -> str:
+    """The proof's start: all-zero registers, as the latches power up; where some latch powers up at 1
+    (`inverted`), every network register carries its power-up value as an init attribute, and the source's
+    registers without an initial value start undefined (x: any power-up value refines it, as on Icarus)."""
+    g = netlist.graph
+    return "-set-init-undef" if any(g.nodes[q].get("inverted") for q in netlist.latches()) else "-set-init-zero"
 
 
 def equivalence(path, netlist: Netlist) -> dict:
@@ -140,7 +165,8 @@ def equivalence(path, netlist: Netlist) -> dict:
         res = _prove(Path(path), netlist, [])
     n = len(res["regs"])
     matched = f", {n} matched register{'s' * (n != 1)}" if n else ""
-    method = (f"yosys miter + sat -tempinduct from the all-zero state (depth <= {INDUCTION_STEPS}{matched})"
+    start = "all-zero" if _initial_state(netlist) == "-set-init-zero" else "power-up"
+    method = (f"yosys miter + sat -tempinduct from the {start} state (depth <= {INDUCTION_STEPS}{matched})"
               if sequential else "yosys miter + sat (all input vectors; -tempinduct, closing at step 1)")
     if res["cex"] and "cycle" not in res["cex"][0]:
         _explain(path, netlist, res["cex"][0])
@@ -244,20 +270,21 @@ def _testbench(netlist: Netlist, n: int, clocked: bool) -> str:
     if clocked:
         lines.append(f"  reg {netlist.clock} = 0;")
         conns.insert(0, f".{netlist.clock}({netlist.clock})")
+    k, mem = f"{PREFIX}k", f"{PREFIX}mem"          # the bench's own names: a port may be called k or mem
     lines += [f"  {netlist.top} dut({', '.join(conns)});",
-              f"  reg [{width - 1}:0] mem [0:{n - 1}];", "  integer k;"]
-    def apply(k: str) -> str:          # a design with no data inputs (none, or only its clock) applies nothing
-        return f"{{{', '.join(ins)}}} = mem[{k}];" if ins else ""
+              f"  reg [{width - 1}:0] {mem} [0:{n - 1}];", f"  integer {k};"]
+    def apply(index: str) -> str:      # a design with no data inputs (none, or only its clock) applies nothing
+        return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
     show = '$display("' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
-    lines += ["  initial begin", '    $readmemb("vectors.txt", mem);']
+    lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if clocked:
-        lines += [f"    {apply('0')}", f"    for (k = 0; k < {n}; k = k + 1) begin",
+        lines += [f"    {apply('0')}", f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
                   f"      #5 {netlist.clock} = 1;",
-                  f"      #1 {apply(f'(k + 1 < {n} ? k + 1 : k)')}",
+                  f"      #1 {apply(f'({k} + 1 < {n} ? {k} + 1 : {k})')}",
                   f"      #1 {show}", f"      #3 {netlist.clock} = 0;", "    end"]
     else:
-        lines += [f"    for (k = 0; k < {n}; k = k + 1) begin",
-                  f"      {apply('k')}", f"      #1 {show}", "    end"]
+        lines += [f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
+                  f"      {apply(k)}", f"      #1 {show}", "    end"]
     return "\n".join(lines + ["    $finish;", "  end", "endmodule", ""])
 
 

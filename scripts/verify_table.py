@@ -3,7 +3,7 @@ vector / cycle counts) on every design in verilog/ that synthesises, one Markdow
 
     python scripts/verify_table.py [DESIGN.v ...]
 
-Designs synthesis refuses (async_reset, bad_syntax, inferred_latch, loop) are listed on stderr and skipped.
+Designs synthesis refuses (bad_syntax, inferred_latch, loop) are listed on stderr and skipped.
 """
 from __future__ import annotations
 

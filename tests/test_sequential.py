@@ -84,7 +84,6 @@ def test_fsm_detects_sequence():
 
 
 @pytest.mark.parametrize("args,needle", [
-    (["simulate", str(REPO / "verilog" / "async_reset.v"), "--cycles", "1", "--backend", "logic"], "asynchronous"),
     (["simulate", str(REPO / "verilog" / "inferred_latch.v"), "--backend", "logic"], "level-sensitive latch"),
     (["simulate", str(REPO / "verilog" / "counter4.v"), "--backend", "logic"], "--cycles"),
     (["simulate", str(REPO / "verilog" / "adder2.v"), "--cycles", "2", "--backend", "logic"], "no flip-flops"),

@@ -284,8 +284,12 @@ def test_combinational_loop_names_a_net():
 
 
 @pytest.mark.parametrize("body,needle", [
-    ("module c(input clk, input rst, input d, output reg q);\n"
-     "  always @(posedge clk or posedge rst) if (rst) q <= 0; else q <= d; endmodule", "asynchronous"),
+    ("module c(input clk, input s, input r, input d, output reg q);\n  always @(posedge clk or posedge s or "
+     "posedge r) if (r) q <= 0; else if (s) q <= 1; else q <= d; endmodule", "both an asynchronous set and"),
+    ("module c(input c1, input c2, input d, output reg q, output reg p);\n  always @(posedge c1) q <= d;\n"
+     "  always @(posedge c2) p <= q; endmodule", r"clocked by several ports \(c1, c2\): the mechanical clock"),
+    ("module c(input clk, input l, input a, input d, output reg q);\n"
+     "  always @(posedge clk or posedge l) if (l) q <= a; else q <= d; endmodule", "asynchronous load"),
     ("module c(input en, input d, output reg q); always @* if (en) q = d; endmodule", "level-sensitive latch"),
     ("module c(input clk, input d, output reg q); always @(negedge clk) q <= d; endmodule", "negative-edge"),
     ("module c(input clk, input d, output reg q, output y); always @(posedge clk) q <= d; "
@@ -307,8 +311,16 @@ def test_flip_flops_become_latch_nodes(tmp_path):
     ("module t(input a, input en, output y); assign y = en ? a : 1'bz; endmodule",
      r"tri-state .* \(line 1\)"),
     ("module t(input a, inout b, output y); assign y = a & b; endmodule", "inout port 'b'"),
-    ("module t(input a, output y);\n reg r;\n initial r = 1;\n assign y = a & r;\nendmodule",
-     r"line 3: `initial` blocks are not supported"),
+    ("module t(input a, output y);\n reg r;\n initial #1 r = 1;\n assign y = a & r;\nendmodule",
+     r"line 3: a delay \(`#`\) in an `initial` block: a delay is an event after time zero"),
+    ("module t(input a, output y);\n assign y = a;\n initial begin\n  $display(\"hi\");\n end\nendmodule",
+     r"line 4: a system task in an `initial` block"),
+    ("module t(input clk, input a, output reg q);\n initial q = a;\n always @(posedge clk) q <= ~q;\nendmodule",
+     r"line 2: the power-up value of 'q' is given as 'a', not a constant"),
+    ("module t(input clk, input a, output reg q);\n initial forever q = 1;\n always @(posedge clk) q <= a;\n"
+     "endmodule", r"line 2: a loop or process over time"),
+    ("module t(input clk, input rst, input a, output reg q = 1);\n always @(posedge clk or posedge rst)\n"
+     "  if (rst) q <= 0; else q <= a;\nendmodule", r"line 2: register .q. powers up at 1 but is asynchronously reset to 0"),
     ("module t(input a, output y); assign y = ~a; always @* $display(\"%d\", a); endmodule",
      r"\$display/\$write is not supported"),
     ("module t(input a); wire w = ~a; endmodule", "no output ports"),

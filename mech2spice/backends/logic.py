@@ -11,10 +11,10 @@ import numpy as np
 from ..errors import Mech2SpiceError
 from ..inputs import MAX_CYCLES
 from ..synthesis.ports import input_bits, output_bits, pack_inputs, port_values
-from ..synthesis.synth import Netlist
+from ..synthesis.synth import Netlist, latch_inputs
 from ._base import Capabilities, FromFlags, NoOptions
 
-__all__ = ["evaluate", "evaluate_bits", "evaluate_batch", "ClockedLogic", "LogicEngine"]
+__all__ = ["evaluate", "evaluate_bits", "evaluate_batch", "power_up", "ClockedLogic", "LogicEngine"]
 
 
 def _input_bit_values(netlist: Netlist, values: dict) -> dict[str, int]:
@@ -29,19 +29,44 @@ def _input_bit_values(netlist: Netlist, values: dict) -> dict[str, int]:
     return bits
 
 
+def power_up(netlist: Netlist) -> dict[str, int]:
+    """Each register's value at power-up: the latch loop starts storing 0, so a register whose latch stores
+    its complement (`inverted`: an initial value of 1, or an asynchronous set) starts at 1."""
+    g = netlist.graph
+    return {q: int(g.nodes[q].get("inverted", 0)) for q in netlist.latches()}
+
+
 def evaluate_bits(netlist: Netlist, values: dict, state: dict[str, int] | None = None) -> dict[str, int]:
     """0/1 for every node (inputs, consts, latches, gates, outputs) given port ints or input bits;
-    latches hold `state` (0 where not given)."""
+    latches hold `state` (their power-up value where not given), a forced latch (F high) its forced value."""
     g = netlist.graph
     val = _input_bit_values(netlist, values)
     val.update({n: int(n == "const1") for n in g if g.nodes[n]["kind"] == "const"})
-    val.update({q: int((state or {}).get(q, 0)) for q in netlist.latches()})
-    for gate in netlist.gates():
-        val[gate] = int(not any(val[src] for src in g.predecessors(gate)))
+    latches = netlist.latches()
+    held = state if state is not None and len(state) == len(latches) else {**power_up(netlist), **(state or {})}
+    val.update({q: int(held[q]) for q in latches})
+    if netlist.forced():
+        _evaluate_forced(netlist, val)
+    else:
+        for gate in netlist.gates():
+            val[gate] = int(not any(val[src] for src in g.predecessors(gate)))
     for out in output_bits(netlist):
         (src,) = g.predecessors(out)
         val[out] = val[src]
     return val
+
+
+def _evaluate_forced(netlist: Netlist, val: dict) -> None:
+    """Gates and latches in schedule order: a latch whose F is high reads its forced value at once (an
+    asynchronous reset or set acts without the clock)."""
+    g = netlist.graph
+    for node in netlist.schedule():
+        if g.nodes[node]["kind"] == "latch":
+            f = latch_inputs(g, node)[1]
+            if f is not None and val[f]:
+                val[node] = int(g.nodes[node].get("inverted", 0))
+        else:
+            val[node] = int(not any(val[src] for src in g.predecessors(node)))
 
 
 def evaluate(netlist: Netlist, values: dict[str, int], state: dict[str, int] | None = None) -> dict[str, int]:
@@ -51,12 +76,13 @@ def evaluate(netlist: Netlist, values: dict[str, int], state: dict[str, int] | N
 
 
 class ClockedLogic:
-    """Cycle-level model of a clocked netlist: latches are registers that start at 0 and take their
-    D value at each clock edge (`tick`)."""
+    """Cycle-level model of a clocked netlist: latches are registers that start at their power-up value and
+    take their D value at each clock edge (`tick`), unless their forcing input holds them."""
 
     def __init__(self, netlist: Netlist):
         self.netlist = netlist
-        self.state = dict.fromkeys(netlist.latches(), 0)
+        self.state = power_up(netlist)
+        self._plain = not netlist.forced() and not any(self.state.values())   # D is the next state
 
     def evaluate_bits(self, values: dict) -> dict[str, int]:
         """Every node's value for these inputs and the current register state."""
@@ -70,7 +96,18 @@ class ClockedLogic:
         """One rising clock edge with inputs `values`."""
         bits = self.evaluate_bits(values)
         g = self.netlist.graph
-        self.state = {q: bits[next(iter(g.predecessors(q)))] for q in self.state}
+        if self._plain:
+            self.state = {q: bits[next(iter(g.predecessors(q)))] for q in self.state}
+            return
+        self.state = {q: _captured(g, q, bits) for q in self.state}
+
+
+def _captured(g, q: str, bits: dict) -> int:
+    """The register value a latch holds after a clock edge: forced while F is high, else its D pin (which
+    carries the complement for an inverted latch)."""
+    d, f = latch_inputs(g, q)
+    inverted = int(g.nodes[q].get("inverted", 0))
+    return inverted if f is not None and bits[f] else bits[d] ^ inverted
 
 
 def evaluate_batch(netlist: Netlist, vectors) -> np.ndarray:

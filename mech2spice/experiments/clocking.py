@@ -66,6 +66,7 @@ def clock_timing(netlist: Netlist, pulse: int | None = None, pause: int | None =
         raise Mech2SpiceError(f"a {pulse}-period clock pulse is shorter than the {min_pulse} periods "
                               "the latch was measured to need")
     depth = network.logic_depth(netlist)
-    need = int(math.ceil(s * (LATCH_OUTPUT_DELAY + GATE_DELAY_MAX * (depth + 1) + SETTLE_MARGIN))) - pulse
+    odd = any(netlist.graph.nodes[q].get("inverted") for q in netlist.latches())   # an odd delay line: one more gate
+    need = int(math.ceil(s * (LATCH_OUTPUT_DELAY + GATE_DELAY_MAX * (depth + odd + 1) + SETTLE_MARGIN))) - pulse
     return {"pulse": pulse, "pause": pause or need, "derived_pause": need, "logic_depth": depth,
             "block_slowdown": s}

@@ -16,7 +16,7 @@ from ..synthesis.ports import input_bits, output_bits, pack_inputs
 from .model import MechModel
 from .params import GateParams
 from .stimulus import Stimulus
-from ..synthesis.synth import Netlist
+from ..synthesis.synth import Netlist, latch_inputs
 
 
 # Largest fan-out measured to work (characterise.fanout_test, RK4 80 steps/period, 2000 periods): 12 loads all
@@ -38,10 +38,13 @@ def build(netlist: Netlist, p: GateParams, delay_pairs: int = LATCH_DELAY_PAIRS)
     outs: dict[str, nor.GateBlock] = dict(blocks)        # node -> block whose channel is its output
     clock_pairs = []
     for q in netlist.latches():
-        (d_src,) = g.predecessors(q)
-        first, last, clocked = _add_latch(m, p, q, delay_pairs)
+        d_src, f_src = latch_inputs(g, q)
+        first, last, clocked, force = _add_latch(m, p, q, delay_pairs, g.nodes[q].get("inverted", 0),
+                                                 forced=f_src is not None)
         outs[q] = last
         wiring.append((d_src, first.name, 0))
+        if f_src is not None:
+            wiring.append((f_src, force.name, 1))
         clock_pairs += clocked
     bit_drives: dict[str, list[int]] = {b: [] for b in input_bits(netlist)}
     every = {**blocks, **{b.name: b for b in m.design.latch_blocks}}
@@ -73,26 +76,30 @@ def build(netlist: Netlist, p: GateParams, delay_pairs: int = LATCH_DELAY_PAIRS)
     return m
 
 
-def _add_latch(m: MechModel, p: GateParams, q: str, delay_pairs: int):
+def _add_latch(m: MechModel, p: GateParams, q: str, delay_pairs: int, inverted: int = 0, forced: bool = False):
     """The paper's symmetric NOR latch (Fig. 5a) plus a delay line:
-        ne = NOR(EN, 0), a = NOR(D, ne) = !D.EN, b = NOR(m, EN) = !Q.!EN, m = NOR(a, b) = Q_next,
+        ne = NOR(EN, F), a = NOR(D, ne) = !D.EN, b = NOR(m, EN) = !Q.!EN, m = NOR(a, b) = Q_next,
     so the loop m -> b -> m holds the bit, and D and Q each reach m through one gate.  The output is m
-    after 2 * delay_pairs inverters, so it changes only after the enable pulse is over.  From rest
-    the loop settles with m at '0': registers power up at 0, as Yosys and the logic backend assume.
-    Returns (gate taking D on pin 0, gate whose channel is the output, the two clock pairs)."""
+    after 2 * delay_pairs inverters (one more for an `inverted` latch, which stores the register's
+    complement), so it changes only after the enable pulse is over.  From rest the loop settles with m at
+    '0': a register powers up at `inverted`.  F (pin 1 of ne, the constant '0' unless `forced`) is the
+    asynchronous reset: with F high ne is 0 whatever the clock, and the netlist keeps D low while F is high
+    (synth._connect_latch), so a = 1 forces m to 0 through one gate, and the b side is left as it is.
+    Returns (gate taking D on pin 0, gate whose channel is the output, the two clock pairs, the gate taking
+    F on pin 1)."""
     mk = {k: nor.add_nor(m, p, f"{q}.{k}") for k in ("ne", "a", "b", "m")}
     for src, sink, pin in (("ne", "a", 1), ("m", "b", 0), ("a", "m", 0), ("b", "m", 1)):
         nor.connect(m, p, mk[src].channel, mk[sink].inputs[pin])
     last = mk["m"]
-    for k in range(2 * delay_pairs):
+    for k in range(2 * delay_pairs + inverted):
         nxt = nor.add_nor(m, p, f"{q}.d{k}")
         nor.connect(m, p, last.channel, nxt.inputs[0])
         mk[f"d{k}"] = last = nxt
     for name, block in mk.items():                 # every free pin 1 is a constant '0'
-        if name == "ne" or name.startswith("d"):
+        if (name == "ne" and not forced) or name.startswith("d"):
             nor.drive_pair(m, p, block.inputs[1], p.levels.nominal0, f"zero.{block.name}")
     m.design.latch_blocks.extend(mk.values())
-    return mk["a"], last, [mk["ne"].inputs[0], mk["b"].inputs[1]]
+    return mk["a"], last, [mk["ne"].inputs[0], mk["b"].inputs[1]], mk["ne"]
 
 
 def drive_levels(model: MechModel, netlist: Netlist, p: GateParams, values: list[dict[str, int]]) \
@@ -122,11 +129,18 @@ def stimulus(model: MechModel, netlist: Netlist, p: GateParams,
     return Stimulus.from_levels(model, levels, batch=batch)
 
 
-def logic_depth(netlist: Netlist) -> int:
-    """Longest chain of NOR gates from any input or latch to any output or latch."""
+def logic_depth(netlist: Netlist, delay_pairs: int = LATCH_DELAY_PAIRS) -> int:
+    """Longest chain of NOR gates from any input or latch to any output or latch.  A forced latch's output
+    follows its forcing input F without the clock, through ne, a, m and the delay line: a path through it
+    counts those gates too."""
     from ..synthesis.synth import combinational_view
     g = combinational_view(netlist.graph)
     depth = {}
-    for node in netlist.gates():
+    for node in (netlist.schedule() if netlist.forced() else netlist.gates()):
+        if g.nodes[node]["kind"] == "latch":
+            f = latch_inputs(netlist.graph, node)[1]
+            if f is not None:
+                depth[node] = depth.get(f, 0) + 3 + 2 * delay_pairs + g.nodes[node].get("inverted", 0)
+            continue
         depth[node] = 1 + max((depth.get(s, 0) for s in g.predecessors(node)), default=0)
     return max(depth.values(), default=0)

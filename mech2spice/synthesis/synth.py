@@ -6,18 +6,22 @@ Graph conventions (nodes are strings, attribute ``kind``):
 * ``const``  -- exactly ``const0`` / ``const1``, present only while something uses them.
 * ``nor``    -- a 2-input NOR gate ``g<N>``; exactly two in-edges with edge attr ``pin`` 0 and 1.
   A NOT is ``NOR(x, const0)``.  Optional attr ``net``: the Yosys net it drives (for messages).
-* ``latch``  -- a positive-edge flip-flop bit ``q<N>`` (Yosys ``$_DFF_P_``); one in-edge with pin
-  ``"D"``; clocked by the port ``Netlist.clock`` (not an edge of the graph). Mechanically it is the
-  paper's NOR latch (network.py); logically a register that starts at 0.
+* ``latch``  -- a positive-edge flip-flop bit ``q<N>`` (Yosys ``$_DFF_P_``, or ``$_DFF_P[NP][01]_`` with an
+  asynchronous reset/set); in-edge pin ``"D"``, and pin ``"F"`` (the forcing input, active high) when it has
+  an asynchronous reset or set; attr ``inverted`` (1, absent = 0): the mechanical loop stores the complement of the
+  register, so the register powers up at ``inverted`` and ``F`` forces it to ``inverted``.  Clocked by the
+  port ``Netlist.clock`` (not an edge of the graph).  Mechanically it is the paper's NOR latch
+  (network.py); logically a register (backends/logic.py).  The D-side gates that make the forcing and the
+  inversion work (``D & !F``, ``!D & !F``) are ordinary NOR nodes of the graph; see docs/rtl.md.
 * ``output`` -- one per output port bit, named ``p[i]`` (attrs ``port``, ``bit``); one in-edge.
 
 Edges run driver -> sink.  Bit ``i`` of a port is bit ``i`` of its value (LSB = 0), i.e.
 Yosys's bit order; for an ascending range such as ``[0:3]`` that is HDL index ``3 - i``.
 
 Documented choices: Yosys's ``x`` constants become 0 (any value is a valid refinement of "don't
-care"), but a net that nothing drives and a declaration initialiser (``reg q = 1``, like
-``initial``) are refused; constant nodes are not
-subject to the fan-out limit (they are the mechanical ground/bias, not a driven signal).
+care"), but a net that nothing drives is refused; a register's power-up value comes from its declaration
+initialiser or a constant `initial` assignment (docs/rtl.md, "programming by initial conditions"); constant
+nodes are not subject to the fan-out limit (they are the mechanical ground/bias, not a driven signal).
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ import networkx as nx
 from ..errors import Mech2SpiceError
 from . import refusals, yosys
 
-__all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants",
+__all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
 
 
@@ -70,14 +74,40 @@ class Netlist:
             cache = self.__dict__["_order_cache"] = (self.graph, gates, latches)
         return cache[1], cache[2]
 
+    def forced(self) -> list[str]:
+        """Latches with an asynchronous forcing input (pin F), sorted by number.  Cached like gates()."""
+        cache = self.__dict__.get("_forced_cache")
+        if cache is None or cache[0] is not self.graph:
+            forced = [q for q in self.latches() if latch_inputs(self.graph, q)[1] is not None]
+            cache = self.__dict__["_forced_cache"] = (self.graph, forced)
+        return cache[1]
+
+    def schedule(self) -> list[str]:
+        """Gates and latches in an order where each follows everything it reads combinationally (a forced
+        latch after its F source): the evaluation order when some latch is forced.  Cached like gates()."""
+        cache = self.__dict__.get("_schedule_cache")
+        if cache is None or cache[0] is not self.graph:
+            g = combinational_view(self.graph)
+            order = [n for level in nx.topological_generations(g) for n in sorted(level, key=_gate_key)
+                     if g.nodes[n]["kind"] in ("nor", "latch")]
+            cache = self.__dict__["_schedule_cache"] = (self.graph, order)
+        return cache[1]
+
     def fanout(self, node) -> int:
         """How many sinks `node` drives (its out-edges: gates, latches, output bits)."""
         return self.graph.out_degree(node)
 
 
 def combinational_view(g: nx.DiGraph) -> nx.DiGraph:
-    """The graph without the edges into latches: what must be loop-free and is evaluated in order."""
-    return nx.subgraph_view(g, filter_edge=lambda u, v: g.nodes[v]["kind"] != "latch")
+    """The graph without the D edges into latches: what must be loop-free and is evaluated in order.  A
+    latch's forcing input F stays: it acts on the output at once, without the clock."""
+    return nx.subgraph_view(g, filter_edge=lambda u, v: g.nodes[v]["kind"] != "latch" or g.edges[u, v]["pin"] == "F")
+
+
+def latch_inputs(g: nx.DiGraph, q: str) -> tuple[str, str | None]:
+    """(the node on a latch's D pin, the node on its forcing pin F or None)."""
+    pins = {d["pin"]: u for u, _, d in g.in_edges(q, data=True)}
+    return pins["D"], pins.get("F")
 
 
 def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -> Netlist:
@@ -134,14 +164,77 @@ def _read_source(path: Path) -> str:
 _COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
 
 
+def _blanked(text: str) -> str:
+    """The source with comments and strings blanked out (lines kept), so keywords in them do not count."""
+    return _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
+
+
+# What an `initial` block may not hold: each is an event in simulated time, and a power-up value is the state
+# the network is prepared in before time starts (docs/rtl.md, "programming by initial conditions").
+_NOT_AN_INITIAL_VALUE = [
+    (re.compile(r"#"), "a delay (`#`)", "a delay is an event after time zero, not a power-up value"),
+    (re.compile(r"@|\bwait\b"), "an event control (`@`, `wait`)",
+     "waiting for an event is behaviour over time, not a power-up value"),
+    (re.compile(r"\$readmem[hb]\b"), "`$readmemh`/`$readmemb`",
+     "the values live in another file, outside the source synthesis reads (and its cache key); write them "
+     "as constant assignments"),
+    (re.compile(r"\$[A-Za-z_]\w*"), "a system task", "it acts while a simulation runs (printing, stopping, "
+     "reading time) and builds no hardware"),
+    (re.compile(r"\b(?:forever|while|repeat|fork|disable)\b|->"), "a loop or process over time",
+     "it runs as simulated time passes; only a `for` loop with constant bounds, unrolled into constant "
+     "assignments, is a power-up value"),
+]
+
+
 def _check_source(path: Path, text: str) -> None:
-    """Reject `initial` blocks: Yosys silently turns them into constants, a NOR net has no reset."""
-    blanked = _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
-    m = re.search(r"\binitial\b", blanked)
-    if m:
-        line = blanked.count("\n", 0, m.start()) + 1
-        raise Mech2SpiceError(f"{path}, line {line}: `initial` blocks are not supported "
-                              "(a NOR-gate network has no power-up values)")
+    """`initial` blocks may only give constant values (power-up values and ROM contents); anything that
+    happens in simulated time is refused with its line."""
+    blanked = _blanked(text)
+    for m in re.finditer(r"\binitial\b", blanked):
+        body_start, body_end = m.end(), _statement_end(blanked, m.end())
+        body = blanked[body_start:body_end]
+        for pattern, what, why in _NOT_AN_INITIAL_VALUE:
+            hit = pattern.search(body)
+            if hit:
+                line = blanked.count("\n", 0, body_start + hit.start()) + 1
+                raise Mech2SpiceError(f"{path}, line {line}: {what} in an `initial` block: {why}")
+
+
+def _statement_end(text: str, at: int) -> int:
+    """Where the statement starting at `at` ends: its `;` outside parentheses and begin/end, or the `end`
+    closing its block."""
+    parens = blocks = 0
+    for tok in re.finditer(r"\b(?:begin|end|fork|join)\b|[();]", text[at:]):
+        t = tok.group()
+        if t == "(":
+            parens += 1
+        elif t == ")":
+            parens -= 1
+        elif t in ("begin", "fork"):
+            blocks += 1
+        elif t in ("end", "join"):
+            blocks -= 1
+            if blocks <= 0:
+                return at + tok.end()
+        elif t == ";" and parens == 0 and blocks == 0:
+            return at + tok.end()
+    return len(text)
+
+
+_NON_CONSTANT_INIT = re.compile(r"Failed to get a constant init value for \\?(\S+?): \\?(\S+)")
+
+
+def _non_constant_init(msg: str, path: Path) -> str | None:
+    """Yosys's 'Failed to get a constant init value for \\q: \\a' as a message with the file and line."""
+    m = _NON_CONSTANT_INIT.search(msg)
+    if not m:
+        return None
+    text = _blanked(_read_source(path))
+    hit = re.search(rf"(?<![\w$]){re.escape(m[1])}\s*(?:\[[^\]]*\]\s*)*=(?!=)[^;]*(?<![\w$]){re.escape(m[2])}(?![\w$])",
+                    text)
+    where = f"{path}, line {text.count(chr(10), 0, hit.start()) + 1}" if hit else str(path)
+    return (f"{where}: the power-up value of '{m[1]}' is given as '{m[2]}', not a constant: a power-up value is "
+            "the state the network is prepared in before any input is applied, so it must be a constant")
 
 
 def _flow(source: str, top: str | None) -> str:
@@ -246,10 +339,12 @@ def _yosys_run(path: Path, top: str | None) -> tuple[str, dict]:
         result = yosys.run_script(_flow(rel, top), tmp)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))
+            if (init := _non_constant_init(msg, path)) is not None:
+                raise Mech2SpiceError(init)
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
                                   else f"yosys error: {path}: {msg}")
         refusals.check(Path(tmp), path, _read_source(path), top)
-        _check_init_and_drivers(Path(tmp), path)
+        _check_drivers(Path(tmp), path)
         tristate = (Path(tmp) / "tristate.txt").read_text().split()
         if tristate:
             raise Mech2SpiceError(f"{path}: tri-state ('z') drivers are not supported "
@@ -262,38 +357,17 @@ def _yosys_run(path: Path, top: str | None) -> tuple[str, dict]:
 
 
 _UNDRIVEN = re.compile(r"Wire (?P<mod>[^.\s]+)\.\\?(?P<net>.+?) is used but has no driver")
-_TYPES = re.compile(r"\b(?:reg|integer|logic|bit|byte|shortint|int|longint|time|real|realtime)\b")
-_NOT_A_DECLARATION = re.compile(r"\b(?:assign|always\w*|begin|for)\b")
 
 
-def _check_init_and_drivers(tmp: Path, path: Path) -> None:
-    """Refuse declaration initialisers (like `initial`) and nets nothing drives (Yosys reads them as x,
-    and synthesis would silently fold x into a constant)."""
-    inits = [(mod, name.lstrip("\\")) for mod, _, name in
-             (w.rpartition("/") for w in (tmp / "init.txt").read_text().split())]
-    if inits:
-        text = _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), _read_source(path))
-        line, mod, name = min((_declaration_line(text, name) or 1 << 30, mod, name) for mod, name in inits)
-        where = f"{path}, line {line}" if line < 1 << 30 else f"{path}, module {mod}"
-        raise Mech2SpiceError(f"{where}: '{name}' has an initial value in its declaration, which is not "
-                              "supported (a NOR-gate network powers up by its dynamics, not to a chosen value): "
-                              "reset it synchronously instead")
+def _check_drivers(tmp: Path, path: Path) -> None:
+    """Refuse nets nothing drives (Yosys reads them as x, and synthesis would silently fold x into a
+    constant).  Declaration initialisers are power-up values (build_netlist reads them)."""
     for line in (tmp / "check.txt").read_text().splitlines():
         m = _UNDRIVEN.search(line)
         if m:
             net = m["net"].replace(" ", "")
             raise Mech2SpiceError(f"{path}: in module {m['mod']}, '{net}' is used but nothing drives it "
                                   "(it would silently read as 0): assign it a value")
-
-
-def _declaration_line(text: str, name: str) -> int | None:
-    """The line of `TYPE ... name [..] = value` (a declaration with an initialiser), if one is found."""
-    pattern = re.compile(rf"(?<![\w$]){re.escape(name)}\s*(?:\[[^\]]*\]\s*)*=(?!=)")
-    for m in pattern.finditer(text):
-        before = text[text.rfind(";", 0, m.start()) + 1:m.start()]
-        if _TYPES.search(before) and not _NOT_A_DECLARATION.search(before):
-            return text.count("\n", 0, m.start()) + 1
-    return None
 
 
 def _src_of(cell: str, rel: str, path: Path) -> str:
@@ -318,13 +392,13 @@ def _pick_top(modules: dict, top: str | None, path: Path) -> tuple[str, dict]:
 # --------------------------------------------------------------------------- JSON -> graph
 
 # Cell type -> (node kind, input pins in pin order, output pin).  None = tied to const0.
-# A future latch is one more entry here, e.g. "$_DLATCH_P_": ("latch", ("D", "E"), "Q").
 _CELLS = {
     "$_NOR_": ("nor", ("A", "B"), "Y"),
     "$_NOT_": ("nor", ("A", None), "Y"),
     "$_DFF_P_": ("latch", ("D",), "Q"),
 }
-_ASYNC = re.compile(r"^\$_(?:DFF_[NP][NP][01]|DFFE_[NP][NP][01][NP]|DFFSRE?_\w+|ALDFFE?_\w+)_$")
+# Positive-edge flip-flops with an asynchronous reset (value 0) or set (value 1), active high (P) or low (N).
+_FORCED = re.compile(r"^\$_DFF_P(?P<polarity>[NP])(?P<value>[01])_$")
 _SEQUENTIAL = re.compile(r"^\$_?(?:\w*dff\w*|\w*dlatch\w*|sr|ff|mem\w*)(?:_|$)", re.I)
 _NAMED = {"$print": "$display/$write", "$check": "assert/assume/cover"}
 
@@ -333,14 +407,25 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
     """The graph node kind and pin layout for one Yosys cell type (None: skip); errors for the rest."""
     if cell_type in _CELLS:
         return _CELLS[cell_type]
+    if _FORCED.match(cell_type):
+        return "latch", ("D", "R"), "Q"
     if cell_type == "$scopeinfo":               # flatten's record of the hierarchy: no logic
         return None
-    if cell_type == "$_DFF_N_":
+    if re.match(r"^\$_(?:DFF_N|DFFE_N|DFF_N[NP][01]|DFFSRE?_N)\w*_$", cell_type):
         raise Mech2SpiceError(f"module {top}: negative-edge flip-flops are not supported "
                               "(use posedge; the mechanical latch captures on the clock pulse)")
-    if _ASYNC.match(cell_type):
-        raise Mech2SpiceError(f"module {top}: asynchronous set/reset ({cell_type}) cannot be honoured by "
-                              "the mechanical latch; use a synchronous reset")
+    if re.match(r"^\$_DFFSRE?_\w+_$", cell_type):
+        raise Mech2SpiceError(
+            f"module {top}: a flip-flop with both an asynchronous set and an asynchronous reset ({cell_type}) "
+            "has no one meaning: a simulator re-evaluates it only on their edges (releasing the reset while "
+            "the set is held leaves Q at 0 until the next clock), synthesis treats both as levels (Q goes to 1 "
+            "at once), so no network can agree with the source in every sequence; keep one of the two "
+            "asynchronous, make the other synchronous")
+    if re.match(r"^\$_ALDFFE?_\w+_$", cell_type):
+        raise Mech2SpiceError(
+            f"module {top}: an asynchronous load of a signal ({cell_type}) makes the register transparent to "
+            "a second data input whenever the load is asserted, a level-sensitive latch on a data path; "
+            "reset or set it to a constant instead")
     if "DLATCH" in cell_type.upper():
         raise Mech2SpiceError(f"module {top}: Yosys inferred a level-sensitive latch ({cell_type}); "
                               "assign every signal on every path of combinational always blocks")
@@ -361,11 +446,12 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
     cells = _add_cells(g, top, module, driver, path)
     names = _net_names(module)
     clock = _clock_port(g, top, module, driver)
+    power_up = _initial_values(module)
     for node, (pins, out_net) in cells.items():
         g.nodes[node]["net"] = names.get(out_net, f"${out_net}")
         sources = [_source(g, b, driver, top) for b in pins]
         if g.nodes[node]["kind"] == "latch":
-            g.add_edge(sources[0], node, pin="D")
+            _connect_latch(g, node, sources, power_up.get(out_net))
         else:
             _connect_gate(g, node, sources)
     for port, bits in _ports(module, "output"):
@@ -386,12 +472,81 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
     return Netlist(top, g, inputs, outputs, clock, signed)
 
 
+def _initial_values(module: dict) -> dict:
+    """Net id -> power-up value 0/1 from the `init` attributes Yosys keeps on register outputs (declaration
+    initialisers and constant `initial` assignments); x bits and malformed entries are left out."""
+    out = {}
+    for info in module["netnames"].values():
+        attrs = info.get("attributes")          # a cached module is anyone's data: read only what is well formed
+        init = attrs.get("init") if isinstance(attrs, dict) else None
+        if isinstance(init, int) and not isinstance(init, bool):
+            init = format(init % (1 << len(info["bits"])), f"0{len(info['bits'])}b")
+        if not isinstance(init, str) or len(init) != len(info["bits"]):
+            continue
+        for bit, v in zip(info["bits"], reversed(init)):      # the attribute is written MSB first
+            if v in "01" and not isinstance(bit, str):
+                out[bit] = int(v)
+    return out
+
+
+def _connect_latch(g: nx.DiGraph, q: str, sources: list[str], init: int | None) -> None:
+    """Wire a latch: D, and for an asynchronous reset/set the forcing input F (active high) with the D-side
+    gates that keep D low while F holds (docs/rtl.md).  The loop powers up storing 0 and F can only force it
+    to 0 (a NOR input forces its output low, never high), so a register that powers up at 1 or is set to 1
+    stores its complement (`inverted`), and one that powers up at 1 but resets to 0 has no latch."""
+    cell, where = g.nodes[q].pop("cell")
+    forced = _FORCED.match(cell)
+    inverted = int(forced["value"]) if forced else (init or 0)
+    net = g.nodes[q]["net"]
+    if forced and init is not None and init != inverted:
+        what = "set to 1" if inverted else "reset to 0"
+        raise Mech2SpiceError(
+            f"{where}: register '{net}' powers up at {init} but is asynchronously {what}: the mechanical latch "
+            "powers up with its loop storing 0 and its forcing input can only drive the loop to 0, so one latch "
+            f"holds either value {1 - inverted} at power-up or a forcing to {inverted}, never both; drop the "
+            "initial value or make the reset synchronous")
+    if inverted:
+        g.nodes[q]["inverted"] = 1
+    d = sources[0]
+    if not forced:
+        g.add_edge(_not(g, d) if inverted else d, q, pin="D")
+        return
+    f = sources[1] if forced["polarity"] == "P" else _not(g, sources[1])
+    g.add_edge(_nor(g, d if inverted else _not(g, d), f), q, pin="D")   # !D & !F  /  D & !F
+    g.add_edge(f, q, pin="F")
+
+
+def _nor(g: nx.DiGraph, a: str, b: str) -> str:
+    """A new NOR(a, b) gate; returns its name."""
+    gate = _new_gate(g)
+    g.add_node(gate, kind="nor")
+    _connect_gate(g, gate, [a, b])
+    return gate
+
+
+def _not(g: nx.DiGraph, a: str) -> str:
+    """NOR(a, 0), one per source node (an active-low reset is inverted once for all its latches)."""
+    made = g.graph.setdefault("inverters", {})
+    if a not in made:
+        made[a] = _nor(g, a, _const(g, 0))
+    return made[a]
+
+
 def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict) -> str | None:
     """The single 1-bit input port clocking every flip-flop (None for combinational designs)."""
-    clocks = {c["connections"]["C"][0] for c in module["cells"].values() if c["type"] == "$_DFF_P_"}
+    clocks = {c["connections"]["C"][0] for c in module["cells"].values()
+              if c["type"] == "$_DFF_P_" or _FORCED.match(c["type"])}
     if not clocks:
         return None
     srcs = {driver.get(c) for c in clocks}
+    ports = {g.nodes[s]["port"] for s in srcs if s is not None and g.nodes[s]["kind"] == "input"}
+    if len(ports) > 1 and len(ports) == len(srcs):
+        raise Mech2SpiceError(
+            f"module {top}: the flip-flops are clocked by several ports ({', '.join(sorted(ports))}): the "
+            "mechanical clock is one pulsed drive whose pulse and pause come from the latch and logic delays, "
+            "and the source does not say how the edges of different clocks relate; data crossing between "
+            "them is captured at whatever phase it has, which for a NOR latch means while it switches, the "
+            "marginal state the stability verdict rejects (docs/rtl.md, several clocks)")
     if len(srcs) != 1 or None in srcs or g.nodes[next(iter(srcs))]["kind"] != "input":
         raise Mech2SpiceError(f"module {top}: every flip-flop must be clocked directly by one input port "
                               "(no gated or derived clocks)")
@@ -438,10 +593,18 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path |
         out_net = cell["connections"][out_pin][0]
         if out_net in driver:
             raise Mech2SpiceError(f"module {top}: net {out_net} has more than one driver")
-        g.add_node(node, kind=kind)
+        g.add_node(node, kind=kind, **({"cell": (cell["type"], _where(cell, top, path))} if kind == "latch" else {}))
         driver[out_net] = node
         cells[node] = ([cell["connections"][p][0] if p else "0" for p in pins], out_net)
     return cells
+
+
+def _where(cell: dict, top: str, path: Path | None) -> str:
+    """'FILE, line N' of a cell from its src attribute, else 'module TOP' (for a latch's messages)."""
+    attrs = cell.get("attributes")
+    src = attrs.get("src") if isinstance(attrs, dict) else None      # a cached module is anyone's data
+    line = path and isinstance(src, str) and refusals.src_line(src, path)
+    return f"{path}, line {line}" if line else f"module {top}"
 
 
 def _net_names(module: dict) -> dict:

@@ -151,3 +151,27 @@ def test_cpu_run_vcd_follows_the_output_rule(tmp_path):
     assert rc == 2 and "is not a VCD file" in err and other.read_text() == "mine\n"
     rc, _, err = cli(*args, "--vcd", str(other), "--force")
     assert rc == 1 and "$enddefinitions" in other.read_text(), err
+
+
+def test_surfers_parser_reads_the_waveform(tmp_path):
+    """wellen (the parser of the Surfer viewer, as pywellen) reads what `simulate --vcd` wrote: the same
+    values as the JSON trace, vectors at their width, amplitudes as reals."""
+    pywellen = pytest.importorskip("pywellen")
+    stim = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, "cycles": 5}]
+    (tmp_path / "stim.json").write_text(json.dumps(stim))
+    vcd = tmp_path / "c.vcd"
+    rc, out, err = cli("simulate", str(COUNTER), "--backend", "logic", "--stimulus", str(tmp_path / "stim.json"),
+                       "--vcd", str(vcd), "--json")
+    assert rc == 0, err
+    w = pywellen.Waveform(str(vcd))
+    found = {v.full_name: v for v in w.all_vars()}
+    q = found["counter4.outputs.q"]
+    assert q.bitwidth == 4 and str(w.timescale) == "1ns"
+    assert [q.signal.value_at(e["cycle"]) for e in json.loads(out)["trace"]] == \
+           [e["outputs"]["q"] for e in json.loads(out)["trace"]]
+    from mech2spice.waveform import Waveform, write_vcd
+    wave = Waveform([0, 1, 2])
+    wave.add_real(["top", "amplitudes"], "q[0]", [0.5, 0.99, 0.52])
+    write_vcd(tmp_path / "r.vcd", wave)
+    (amp,) = list(pywellen.Waveform(str(tmp_path / "r.vcd")).all_vars())
+    assert amp.is_real and [amp.signal.value_at(t) for t in range(3)] == [0.5, 0.99, 0.52]

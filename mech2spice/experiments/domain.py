@@ -27,10 +27,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import Mech2SpiceError
-from ..physics import loaded, spread
+from ..physics import spread
 from ..physics.model import Drive, MechModel
 from ..physics.stimulus import Stimulus
-from .tolerance import wilson
+from .mc_clocked import CpuMC, sampled
+from .montecarlo import DesignMC, SpreadSpec, noise_seed, spec_of
+from .tolerance import Sampler, wilson
 
 AXES = {
     "freq": "drive frequency, relative change",
@@ -141,7 +143,6 @@ class GateDomain:
 
     def __init__(self, p, sigma: float = 0.0, samples: int = 0, seed: int = 0, trim: str = "none",
                  residual: float = 0.0):
-        from .tolerance import Sampler
         self.p, self.sigma = p, sigma
         self.sampler = Sampler(p, max(samples, 1), seed, trim=trim, residual=residual)
         self.samples = samples if sigma else 0
@@ -185,13 +186,12 @@ class DesignDomain:
 
     def __init__(self, netlist, p, vectors, backend: str = "envelope", sigma: float = 0.0, samples: int = 0,
                  seed: int = 0, trim: str = "none", residual: float = 0.0):
-        from .montecarlo import SpreadSpec, spec_of
         self.design, self.p, self.backend, self.sigma = netlist.top, p, backend, sigma
-        self.nominal = _ShiftedDesignMC(netlist, p, vectors, backend, SpreadSpec(), seed, union=1)
+        self.nominal = ShiftedDesignMC(netlist, p, vectors, backend, SpreadSpec(), seed, union=1)
         self.samples = samples if sigma else 0
         if self.samples:
             spec = replace(spec_of(sigma), trim=trim, trim_residual=residual)
-            self.spread = _ShiftedDesignMC(netlist, p, vectors, backend, spec, seed, union=min(self.samples, 8))
+            self.spread = ShiftedDesignMC(netlist, p, vectors, backend, spec, seed, union=min(self.samples, 8))
 
     def evaluate(self, point: Point) -> dict:
         self.nominal.point = point
@@ -207,23 +207,15 @@ class DesignDomain:
                 "vectors": len(self.nominal.vectors), "params": self.p.name}
 
 
-def _shifted_design_mc():
-    from .montecarlo import DesignMC
+class ShiftedDesignMC(DesignMC):
+    """DesignMC whose samples are moved to `point` (the nominal design's when its spec spreads nothing)."""
+    point = Point()
 
-    class ShiftedDesignMC(DesignMC):
-        """DesignMC whose samples are moved to `point` (the nominal design's when its spec spreads nothing)."""
-        point = Point()
-
-        def sample(self, i: int):
-            model, stim = super().sample(i)
-            supply = supply_drives(self.model)
-            return (shifted(model, self.point, supply),
-                    Stimulus(stim.times, stim.amps * _supply_factor(len(model.drives), supply, self.point)[None, :, None]))
-    return ShiftedDesignMC
-
-
-def _ShiftedDesignMC(*args, **kwargs):
-    return _shifted_design_mc()(*args, **kwargs)
+    def sample(self, i: int):
+        model, stim = super().sample(i)
+        supply = supply_drives(self.model)
+        factor = _supply_factor(len(model.drives), supply, self.point)
+        return shifted(model, self.point, supply), Stimulus(stim.times, stim.amps * factor[None, :, None])
 
 
 class CpuDomain:
@@ -233,13 +225,12 @@ class CpuDomain:
 
     def __init__(self, program: str, cycles: int, p, backend: str = "envelope", sigma: float = 0.0,
                  samples: int = 0, seed: int = 0, trim: str = "none", residual: float = 0.0):
-        from .montecarlo import SpreadSpec, spec_of
         self.program, self.cycles, self.p, self.backend, self.sigma = program, cycles, p, backend, sigma
-        self.nominal = _shifted_cpu_mc()(program, cycles, p, backend, SpreadSpec(), seed)
+        self.nominal = ShiftedCpuMC(program, cycles, p, backend, SpreadSpec(), seed)
         self.samples = samples if sigma else 0
         if self.samples:
             spec = replace(spec_of(sigma), trim=trim, trim_residual=residual)
-            self.spread = _shifted_cpu_mc()(program, cycles, p, backend, spec, seed)
+            self.spread = ShiftedCpuMC(program, cycles, p, backend, spec, seed)
 
     def evaluate(self, point: Point) -> dict:
         self.nominal.point = point
@@ -255,26 +246,20 @@ class CpuDomain:
                          f"({self.backend})", "params": self.p.name}
 
 
-def _shifted_cpu_mc():
-    from .mc_clocked import CpuMC
+class ShiftedCpuMC(CpuMC):
+    """CpuMC whose machines run at `point`."""
+    point = Point()
 
-    class ShiftedCpuMC(CpuMC):
-        """CpuMC whose machines run at `point`."""
-        point = Point()
-
-        def _machine(self, i: int):
-            """CpuMC's machine (sample i, powered up from rest) with its model moved to `point`."""
-            from ..cpu.physical import PhysicalCPU
-            from ..cpu.run import load_program, make_memory
-            from .mc_clocked import sampled
-            from .montecarlo import noise_seed
-            cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
-                              noise=(self.noise, noise_seed(self.seed, i)))
-            model, _ = sampled(cpu.model, spread.elements(cpu.model), self.spec, self.seed, i)
-            cpu.model = shifted(model, self.point, supply_drives(cpu.model))
-            cpu.amps = cpu._reset()
-            return cpu
-    return ShiftedCpuMC
+    def _machine(self, i: int):
+        """CpuMC's machine (sample i, powered up from rest) with its model moved to `point`."""
+        from ..cpu.physical import PhysicalCPU
+        from ..cpu.run import load_program, make_memory
+        cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
+                          noise=(self.noise, noise_seed(self.seed, i)))
+        model, _ = sampled(cpu.model, spread.elements(cpu.model), self.spec, self.seed, i)
+        cpu.model = shifted(model, self.point, supply_drives(cpu.model))
+        cpu.amps = cpu._reset()
+        return cpu
 
 
 # --------------------------------------------------------------------------- the map

@@ -27,6 +27,7 @@ def add_parser(sub) -> None:
   freq   the drive frequency (the structure, its coupling dashpots included, stays as built)
   amp    the supply drive F_C of every gate (inputs and clock stay at their logic levels)
   drift  every stiffness times (1 + drift): a common-mode temperature drift, as --drift
+exit 1 when the grid holds the nominal point (0, 0) and the nominal design fails there.
 example:
   mech2spice domain gate --params centered_fc2 --sweep freq=-1e-3:1e-3:7 --sweep amp=-0.1:0.1:7 -o gate.png""")
     d.add_argument("design", help="'gate', a combinational Verilog file, or a processor program (.asm)")

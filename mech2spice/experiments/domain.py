@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -242,7 +243,7 @@ class CpuDomain:
         return out
 
     def describe(self) -> dict:
-        return {"model": f"the processor running {self.program} for {self.cycles} cycles against the ISS "
+        return {"model": f"the processor running {Path(self.program).name} for {self.cycles} cycles against the ISS "
                          f"({self.backend})", "params": self.p.name}
 
 

@@ -393,3 +393,24 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
     if waveform:
         res["waveform"] = Waveform(amp, reads, outs)
     return res
+
+
+CLOCKED_VCD_COMMENT = ("mech2spice simulate: one time unit per clock cycle; at time k the inputs clocked in at "
+                       "edge k and the outputs read after it (x: a bit outside both bands), amplitudes in u_R")
+
+
+def clocked_waveform(netlist: Netlist, cycles: list[dict[str, int]], res: dict):
+    """A clocked run (run_clocked_logic / run_clocked_physical) as a waveform.Waveform: per cycle k the inputs
+    of cycle k, the output ports of trace entry k as vectors (an invalid bit x) and, on a physical engine,
+    each output bit's amplitude in u_R as a real; scopes TOP.inputs, TOP.outputs, TOP.amplitudes."""
+    from .waveform import Waveform
+    trace = res["trace"]
+    wave = Waveform([e["cycle"] for e in trace], comment=CLOCKED_VCD_COMMENT)
+    top = netlist.top
+    for port, width in netlist.inputs.items():
+        wave.add_wire([top, "inputs"], port, width, [cycles[e["cycle"]].get(port, 0) for e in trace])
+    for port, width in netlist.outputs.items():
+        wave.add_bits([top, "outputs"], port, [[e["bits"][f"{port}[{i}]"] for i in range(width)] for e in trace])
+    for bit in (trace[0].get("amplitudes") or {}) if trace else {}:
+        wave.add_real([top, "amplitudes"], bit, [e["amplitudes"][bit] for e in trace])
+    return wave

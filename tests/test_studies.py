@@ -85,7 +85,8 @@ def test_conditions_record_machine_load_and_versions():
     assert "cores" in c["machine"] and len(c["load_avg"]) == 3 and c["versions"]["numpy"]
 
 
-@pytest.mark.parametrize("name", ["gate", "spice", "cpu", "cpu_physical", "fidelity", "robustness", "design", "envelope"])
+@pytest.mark.parametrize("name", ["gate", "spice", "cpu", "cpu_physical", "fidelity", "robustness", "design", "envelope",
+                                  "domain"])
 def test_render_without_its_json_is_one_line(capsys, tmp_path, name):
     from cli_helpers import run
     rc, _, err = run(capsys, "report", name, "--render", "--out", str(tmp_path))
@@ -133,6 +134,7 @@ REPORTS_DIR = PACKAGE.parent / "reports"
     ("performance", ["performance.json", "cpu_physical.json", "carrier.json"], ["performance.md"], {}),
     ("carrier", ["carrier.json"], ["carrier.md"], {}),
     ("design", ["design.json"], ["design.md"], {"search": str(REPORTS_DIR / "design_search.json")}),
+    ("domain", ["domain.json"], ["domain.md"], {}),
 ])
 def test_render_rebuilds_the_checked_in_report_from_its_json(tmp_path, name, inputs, outputs, options):
     """`--render` from the stored JSON alone gives the checked-in markdown, byte for byte."""

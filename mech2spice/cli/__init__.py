@@ -15,7 +15,7 @@ from pathlib import Path
 from .. import inputs
 from ..backends import engine_class
 from ..errors import Mech2SpiceError
-from . import cpu, design, gate, montecarlo, simulate, verify
+from . import cpu, design, domain, gate, montecarlo, simulate, verify
 
 
 # --- parser --------------------------------------------------------------------
@@ -52,6 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     montecarlo.add_parser(sub)
     design.add_parser(sub)
     verify.add_parser(sub)
+    domain.add_parser(sub)
     simulate.add_subckts_parser(sub)
     return ap
 

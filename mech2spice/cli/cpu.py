@@ -88,6 +88,10 @@ def add_parser(subparsers) -> None:
                         "more than 1 turns the default latency off, the latency loop being serial)")
     r.add_argument("--trace", metavar="FILE", help="write one JSON line per cycle to FILE: the cycle's record, the "
                    "registers after it and (envelope, carrier, rk4) every probed amplitude in u_R")
+    r.add_argument("--vcd", metavar="FILE", help="write the run as a waveform (VCD, for GTKWave or Surfer) to FILE "
+                   "when it ends: one time unit per cycle; the cycle's bus (pc, phase, raddr, rdata, we, waddr, wdata, "
+                   "opcode), the registers after it and (envelope, carrier, rk4, vacask-envelope) every probed "
+                   "amplitude in u_R as a real")
     r.add_argument("--resume", action="store_true", help="continue from --checkpoint FILE")
     r.add_argument("--settle-check", type=integer(100, 10**6), nargs="?", const=SETTLE_CHECK_PERIODS, default=None,
                    metavar="PERIODS", help="envelope, carrier, rk4: judge every read against its own future: a copy "
@@ -99,7 +103,7 @@ def add_parser(subparsers) -> None:
                         "rk4; adds `stable` and `stability` to the JSON; 10-15 s on the processor); cycle: after "
                         "every cycle too, stopping at the first unstable one (adds `stability_cycles`; 10-15 s a "
                         "cycle; docs/stability.md)")
-    force_arg(r, "--checkpoint or --trace")
+    force_arg(r, "--checkpoint, --trace or --vcd")
     circuit_args(r)
     r.add_argument("--json", action="store_true", help="machine-readable output")
     r.set_defaults(func=cmd_run)
@@ -190,7 +194,8 @@ def _takes(backend: str, option: str) -> bool:
 
 def cmd_run(args) -> int:
     """`cpu run`: run a program on the chosen backend; returns 0 if it halted, 1 if it ran out of cycles."""
-    check_run_outputs(args.checkpoint, args.trace, args.program, args.resume, args.force, params_file(args.params))
+    check_run_outputs(args.checkpoint, args.trace, args.program, args.resume, args.force, params_file(args.params),
+                      vcd=args.vcd)
     for flag, value in (("--settle-check", args.settle_check), (f"--stability {args.stability}", args.stability != "off")):
         if value and args.backend not in PHYSICAL:
             raise Mech2SpiceError(f"{flag} judges an oscillator-level machine ({', '.join(PHYSICAL)}), "
@@ -244,7 +249,7 @@ def cmd_run(args) -> int:
     res = run_program(args.program, args.backend, args.max_cycles, checkpoint=args.checkpoint,
                       resume=args.resume, progress=_progress(args),
                       checkpoint_every=args.checkpoint_every, trace=args.trace, force=args.force,
-                      stability=args.stability, **physical)
+                      stability=args.stability, vcd=args.vcd, **physical)
     if args.json:
         print(strict_json(res, indent=2))
     else:

@@ -8,7 +8,7 @@ from .. import inputs
 from ..backends import BACKENDS, engine_class
 from ..errors import Mech2SpiceError
 from ..physics.network import MAX_FANOUT
-from ..physics.params import PRESETS
+from ..physics.params import PRESETS, params_file
 from ..spice import DEFAULT_TIMEOUT_S
 from ._output import jsonable as _jsonable, log as _log, print_json as _print_json, progress as _progress
 
@@ -78,6 +78,10 @@ def add_parsers(sub) -> None:
                    help="thermal noise on rk4, envelope, ngspice: k_B T in model energy units (docs/robustness.md)")
     s.add_argument("--noise-seed", type=inputs.integer(0, 2 ** 31 - 1), default=0, metavar="S",
                    help="the thermal noise's seed (default 0)")
+    s.add_argument("--vcd", metavar="FILE", help="clocked designs: write the trace as a waveform (VCD, for GTKWave "
+                   "or Surfer) to FILE: one time unit per cycle, the inputs and output ports as vectors (x: an "
+                   "invalid bit), each output bit's amplitude in u_R as a real")
+    inputs.force_arg(s, "--vcd")
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("emit", help="write a self-contained ngspice or VACASK netlist of a design, or the Verilog-A library",
@@ -171,6 +175,11 @@ def cmd_simulate_clocked(args, nl) -> int:
     from ..physics.params import load_params
     if args.clock and args.clock != nl.clock:
         raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by '{nl.clock}'")
+    if args.vcd is not None:
+        from ..waveform import is_vcd
+        inputs.check_output_file(args.vcd, {"the design": args.design, "the --stimulus file": args.stimulus,
+                                            "the --params file": params_file(args.params)},
+                                 "VCD file", kind=("a VCD file", is_vcd), force=args.force)
     cycles = simulation.expand_steps(_clocked_steps(args, nl))
     if not BACKENDS[args.backend].capabilities.physical:       # the logic oracle
         res = simulation.run_clocked_logic(nl, cycles)
@@ -182,6 +191,9 @@ def cmd_simulate_clocked(args, nl) -> int:
                                             progress=_progress(args),
                                             options=_engine_options(args), log=_log(args),
                                             noise=(args.noise, args.noise_seed))
+    if args.vcd is not None:
+        from ..waveform import write_vcd
+        write_vcd(args.vcd, simulation.clocked_waveform(nl, cycles, res))
     if args.json:
         _print_json(res)
     else:
@@ -204,8 +216,9 @@ def cmd_simulate(args) -> int:
     nl = _netlist(args)
     if nl.clock:
         return cmd_simulate_clocked(args, nl)
-    if args.cycles or args.stimulus or args.clock:
-        raise Mech2SpiceError(f"{nl.top} has no flip-flops: --clock/--cycles/--stimulus apply to clocked designs")
+    if args.cycles or args.stimulus or args.clock or args.vcd:
+        raise Mech2SpiceError(f"{nl.top} has no flip-flops: --clock/--cycles/--stimulus/--vcd apply to clocked "
+                              "designs")
     values = _parse_sets(args.set)
     res = simulation.run_physical(nl, load_params(args.params), [values], args.backend, periods=args.periods,
                                 progress=_progress(args), options=_engine_options(args),

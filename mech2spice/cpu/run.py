@@ -21,7 +21,8 @@ from pathlib import Path
 
 from ..errors import Mech2SpiceError
 from ..inputs import check_output_file, first_json_line, is_int, read_json, strict_json
-from .isa import MEM_SIZE
+from ..waveform import Waveform, is_vcd, write_vcd
+from .isa import MEM_SIZE, OPCODES
 from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS
 from .asm import Program, assemble_program
 from .machines import CIRCUIT, PHYSICAL, make_cpu
@@ -270,13 +271,17 @@ def is_trace(path) -> bool:
 
 
 CHECKPOINT_KIND, TRACE_KIND = ("a processor checkpoint", is_checkpoint), ("a cpu run trace", is_trace)
+VCD_KIND = ("a VCD file", is_vcd)
 
 
 def check_run_outputs(checkpoint, trace, program_source, resume: bool = False, force: bool = False,
-                      params=None) -> None:
-    """--checkpoint and --trace, before any work: neither the program, the --params file nor each other;
-    a file of another kind only with `force`; a resumed trace must be one, whole."""
+                      params=None, vcd=None) -> None:
+    """--checkpoint, --trace and --vcd, before any work: neither the program, the --params file nor each
+    other; a file of another kind only with `force`; a resumed trace must be one, whole."""
     read = {"the program": program_source, "the --params file": params}
+    if vcd is not None:
+        check_output_file(vcd, {**read, "the --checkpoint file": checkpoint, "the --trace file": trace}, "VCD file",
+                          kind=VCD_KIND, force=force)
     if checkpoint is not None:            # resuming, read_checkpoint says what else the file is
         check_output_file(checkpoint, {**read, "the --trace file": trace}, "checkpoint",
                           kind=None if resume else CHECKPOINT_KIND, force=force)
@@ -372,6 +377,55 @@ class TraceFile:
         self.file.close()
 
 
+PHASES = {FETCH: 0, LOAD: 1, LDNX: 2}      # the phase as a 2-bit wire in a VCD
+REGISTER_WIDTHS = {"pc": 8, "a": 8, "b": 8, "c": 8, "d": 8, "ov": 1}
+BUS_WIDTHS = {"pc": 8, "raddr": 8, "rdata": 8, "we": 1, "waddr": 8, "wdata": 8}
+
+
+class VcdTrace:
+    """`cpu run --vcd FILE`: the trace as a waveform, one timestep per clock cycle (time = the cycle's number):
+    scope `cycle` what the cycle did (its pc and phase at the start, the memory read and write, the opcode of a
+    fetch), scope `registers` the registers after it, scope `amplitudes` (envelope, carrier, rk4,
+    vacask-envelope) every probed amplitude in u_R after it, as reals named as in --trace's `amps`.  Kept
+    in memory and written at the end (a resumed run writes the cycles of this process)."""
+
+    COMMENT = ("mech2spice cpu run: one time unit per clock cycle; cycle.* is what cycle t did, registers.* and "
+               "amplitudes.* (u_R) are read after it; phase 0 fetch, 1 load, 2 ldnx")
+
+    def __init__(self, path):
+        self.path = path
+        self.rows: list[tuple] = []
+
+    def __call__(self, rec, cpu) -> None:
+        amps = getattr(cpu, "amps", None)
+        self.rows.append((rec, cpu.registers(), dict(amps) if isinstance(amps, dict) else {}))
+
+    def waveform(self) -> Waveform:
+        wave = Waveform([rec.cycle for rec, _, _ in self.rows], comment=self.COMMENT)
+        for name, width in BUS_WIDTHS.items():
+            wave.add_wire(["cpu", "cycle"], name, width, [getattr(rec, name) for rec, _, _ in self.rows])
+        wave.add_wire(["cpu", "cycle"], "phase", 2, [PHASES[rec.phase] for rec, _, _ in self.rows])
+        wave.add_wire(["cpu", "cycle"], "opcode", 4, [OPCODES.get(rec.instr) for rec, _, _ in self.rows])
+        for name, width in REGISTER_WIDTHS.items():
+            wave.add_wire(["cpu", "registers"], name, width, [regs[name] for _, regs, _ in self.rows])
+        wave.add_wire(["cpu", "registers"], "phase", 2, [PHASES[regs["phase"]] for _, regs, _ in self.rows])
+        probes = list(self.rows[0][2]) if self.rows else []
+        for probe in probes:                    # "latch.Q3" -> scope amplitudes.latch, real Q3
+            *scope, name = probe.split(".")
+            wave.add_real(["cpu", "amplitudes", *scope], name, [amps[probe] for _, _, amps in self.rows])
+        return wave
+
+    def close(self) -> None:
+        write_vcd(self.path, self.waveform())
+
+
+def _both(first, second):
+    """One per-cycle callback calling two (either may be None)."""
+    if first is None or second is None:
+        return first or second
+    return lambda rec, cpu: (first(rec, cpu), second(rec, cpu))
+
+
 def _judge_cycle(cpu) -> dict:
     """The stability verdict of the machine as it stands after a cycle, with its cost."""
     t = time.perf_counter()
@@ -381,13 +435,14 @@ def _judge_cycle(cpu) -> dict:
 
 def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpoint=None,
                 resume: bool = False, progress: bool = False, checkpoint_every: int | None = None,
-                trace=None, force: bool = False, stability: bool | str = False, **physical) -> dict:
+                trace=None, force: bool = False, stability: bool | str = False, vcd=None, **physical) -> dict:
     """Run until halted or ``max_cycles`` (total) and return the result dict.  Checkpoints are written
     every ``checkpoint_every`` cycles (default 1000, or 10 for the oscillator-level and circuit backends).  ``trace``:
     a callable(record, cpu) called after each cycle, or a path for a TraceFile.  Neither file may be the
     program; one of another kind is replaced only with ``force``.  ``stability``: "end" (or True) judges the
     oscillator-level machine at its halt, "cycle" after every cycle as well, stopping at the first unstable
-    one (docs/stability.md; ~10-15 s a cycle on the processor)."""
+    one (docs/stability.md; ~10-15 s a cycle on the processor).  ``vcd``: a path for the run's waveform
+    (VcdTrace), written when the run ends."""
     stability = {True: "end", False: "off", None: "off"}.get(stability, stability)
     if stability not in ("off", "end", "cycle"):
         raise Mech2SpiceError(f"stability {stability!r}: choose off, end or cycle")
@@ -396,7 +451,7 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         raise Mech2SpiceError("max_cycles must be >= 0 and checkpoint_every >= 1")
     if resume and checkpoint is None:
         raise Mech2SpiceError("resume needs a checkpoint file")
-    check_run_outputs(checkpoint, None if callable(trace) else trace, source, resume, force)
+    check_run_outputs(checkpoint, None if callable(trace) else trace, source, resume, force, vcd=vcd)
     program = load_program(source)
     state = read_checkpoint(checkpoint, program, backend) if resume else None
     t0 = time.perf_counter()                       # wall_s includes building the model and power-up
@@ -410,6 +465,8 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         _restore(cpu, state, checkpoint)
     if trace is not None and not callable(trace):
         trace = TraceFile(trace, cpu.cycle if resume else None)
+    waves = VcdTrace(vcd) if vcd is not None else None
+    record = _both(trace, waves)
     shown = progress if backend != "iss" else False
     bar = _cycle_bar(shown, cpu.cycle, program_length(cpu, max_cycles) if shown else None, backend)
     shadow = IssCheck(cpu) if backend != "iss" else None
@@ -421,8 +478,8 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
         if judged is not None:
             judged.append(_judge_cycle(cpu))
         bar.update(1)
-        if trace is not None:
-            trace(rec, cpu)
+        if record is not None:
+            record(rec, cpu)
         if checkpoint is not None and cpu.cycle % checkpoint_every == 0:
             save_checkpoint(cpu, checkpoint, program, backend, cost.totals())
         if judged and not judged[-1]["stable"]:       # the machine is not at a stable state: stop here
@@ -430,6 +487,8 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     bar.close()
     if isinstance(trace, TraceFile):
         trace.close()
+    if waves is not None:
+        waves.close()
     if checkpoint is not None:
         save_checkpoint(cpu, checkpoint, program, backend, cost.totals())
     result = {"backend": backend, "cycles": cpu.cycle, "halted": cpu.halted,

@@ -60,6 +60,10 @@ REPORTS: dict[str, Report] = {
                          "on Dask), per-gate failure rate, the processor extrapolated", "~30 min",
                          ("robustness.md", "robustness.json", "robustness_yield.png", "robustness_noise.png"),
                          ("quick", "render")),
+    "domain": Report("the operating domain of the gate, the adder and the processor (30 cycles): drive frequency "
+                     "x supply drive (and x stiffness drift for the gate), without and with 1 % trimmed spread",
+                     "~40 min", ("domain.md", "domain.json", "domain_gate.png", "domain_adder.png", "domain_cpu.png"),
+                     ("only", "quick", "render")),
     "design": Report("automated block design: the structures searched, tolerance/margin/delay/energy Pareto "
                      "front, what limits each, the best block on the adder, sqrt and the sieve (needs "
                      "`mech2spice design`)", "~20 min", ("design.md", "design.json", "design_pareto.png"),

@@ -1,0 +1,177 @@
+"""`--vcd FILE` on clocked `simulate` and on `cpu run`: the waveform, read back by an independent reader
+(vcdvcd), equals the JSON trace (`simulate --json`, `cpu run --trace`) cycle by cycle; the file obeys the
+output rule (never an input, another kind of file only with --force)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from mech2spice import simulation
+from mech2spice.cpu.isa import OPCODES
+from mech2spice.cpu.run import PHASES, run_program
+from mech2spice.synthesis import synth
+
+vcdvcd = pytest.importorskip("vcdvcd")
+
+REPO = Path(__file__).resolve().parent.parent
+COUNTER = REPO / "verilog" / "counter4.v"
+SIEVE = REPO / "programs" / "sieve.asm"
+
+
+def cli(*args):
+    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *args], capture_output=True, text=True)
+    return r.returncode, r.stdout, r.stderr
+
+
+def _wire(v, name: str, width: int, t: int) -> str:
+    """A wire's value at time t as `width` characters, MSB first (vcdvcd keeps what the file wrote)."""
+    ref = f"{name}[{width - 1}:0]" if width > 1 else name
+    return v[ref][t].rjust(width, "0")
+
+
+def _bits(bits: dict, port: str, width: int) -> str:
+    return "".join("x" if bits[f"{port}[{i}]"] is None else str(bits[f"{port}[{i}]"]) for i in reversed(range(width)))
+
+
+def _check_simulate_vcd(vcd: Path, res: dict, stimulus: list[dict], inputs: dict, outputs: dict, top: str):
+    v = vcdvcd.VCDVCD(str(vcd))
+    cycles = simulation.expand_steps(stimulus)
+    assert "$timescale" in vcd.read_text()
+    for e in res["trace"]:
+        t = e["cycle"]
+        for port, width in outputs.items():
+            assert _wire(v, f"{top}.outputs.{port}", width, t) == _bits(e["bits"], port, width), (port, t)
+        for port, width in inputs.items():
+            assert int(_wire(v, f"{top}.inputs.{port}", width, t), 2) == cycles[t].get(port, 0), (port, t)
+        for bit, amp in (e.get("amplitudes") or {}).items():
+            assert float(v[f"{top}.amplitudes.{bit}"][t]) == pytest.approx(amp, rel=1e-14), (bit, t)
+    return v
+
+
+def test_simulate_logic_vcd_equals_the_json_trace(tmp_path):
+    stim = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, "cycles": 18}, {"set": {"en": 0}, "cycles": 2}]
+    (tmp_path / "stim.json").write_text(json.dumps(stim))
+    vcd = tmp_path / "c.vcd"
+    rc, out, err = cli("simulate", str(COUNTER), "--backend", "logic", "--stimulus", str(tmp_path / "stim.json"),
+                       "--vcd", str(vcd), "--json")
+    assert rc == 0, err
+    res = json.loads(out)
+    assert [e["outputs"]["q"] for e in res["trace"]][:18] == [0, *range(1, 16), 0, 1]     # it counts and wraps
+    v = _check_simulate_vcd(vcd, res, stim, {"rst": 1, "en": 1}, {"q": 4}, "counter4")
+    assert not [s for s in v.signals if ".amplitudes." in s]                          # logic: no amplitudes
+
+
+def test_simulate_envelope_vcd_has_the_amplitudes_of_the_json_trace(tmp_path):
+    vcd = tmp_path / "c.vcd"
+    rc, out, err = cli("simulate", str(COUNTER), "--backend", "envelope", "--set", "en=1", "--cycles", "3",
+                       "--vcd", str(vcd), "--json")
+    assert rc == 0, err
+    res = json.loads(out)
+    v = _check_simulate_vcd(vcd, res, [{"set": {"en": 1}, "cycles": 3}], {"rst": 1, "en": 1}, {"q": 4}, "counter4")
+    assert {s for s in v.signals if ".amplitudes." in s} == {f"counter4.amplitudes.q[{i}]" for i in range(4)}
+
+
+def test_an_invalid_bit_is_x_in_the_waveform():
+    nl = synth.synthesize(str(COUNTER))
+    trace = [{"cycle": 0, "bits": {"q[0]": 1, "q[1]": None, "q[2]": 0, "q[3]": 1},
+              "amplitudes": {f"q[{i}]": 0.5 + i / 10 for i in range(4)}}]
+    wave = simulation.clocked_waveform(nl, [{"en": 1}], {"trace": trace})
+    assert wave.signal("counter4.outputs.q").values == ("10x1",)
+    assert wave.signal("counter4.amplitudes.q[2]").values == (0.7,)
+
+
+def test_simulate_vcd_follows_the_output_rule(tmp_path):
+    other = tmp_path / "notes.txt"
+    other.write_text("mine\n")
+    args = ["simulate", str(COUNTER), "--backend", "logic", "--cycles", "2"]
+    rc, _, err = cli(*args, "--vcd", str(COUNTER))
+    assert rc == 2 and "refusing to overwrite" in err and COUNTER.read_text().startswith("module") is not None
+    rc, _, err = cli(*args, "--vcd", str(other))
+    assert rc == 2 and "is not a VCD file" in err and other.read_text() == "mine\n"
+    rc, _, err = cli(*args, "--vcd", str(other), "--force")
+    assert rc == 0, err
+    assert "$enddefinitions" in other.read_text()
+    rc, _, err = cli(*args, "--vcd", str(other))              # a VCD file it wrote is replaced without --force
+    assert rc == 0, err
+    rc, _, err = cli("simulate", str(REPO / "verilog" / "adder2.v"), "--vcd", str(tmp_path / "a.vcd"))
+    assert rc == 2 and "clocked designs" in err and not (tmp_path / "a.vcd").exists()
+
+
+def _check_cpu_vcd(vcd: Path, trace: Path) -> list[dict]:
+    v = vcdvcd.VCDVCD(str(vcd))
+    rows = [json.loads(line) for line in trace.read_text().splitlines()]
+    for row in rows:
+        t = row["cycle"]
+        for name in ("pc", "raddr", "rdata", "waddr", "wdata"):
+            assert int(_wire(v, f"cpu.cycle.{name}", 8, t), 2) == row[name], (name, t)
+        assert int(v["cpu.cycle.we"][t]) == row["we"]
+        assert int(_wire(v, "cpu.cycle.phase", 2, t), 2) == PHASES[row["phase"]]
+        op = _wire(v, "cpu.cycle.opcode", 4, t)
+        assert op == "xxxx" if row["instr"] is None else int(op, 2) == OPCODES[row["instr"]]
+        regs = row["registers"]
+        for name in ("pc", "a", "b", "c", "d"):
+            assert int(_wire(v, f"cpu.registers.{name}", 8, t), 2) == regs[name], (name, t)
+        assert int(v["cpu.registers.ov"][t]) == regs["ov"]
+        assert int(_wire(v, "cpu.registers.phase", 2, t), 2) == PHASES[regs["phase"]]
+        for probe, amp in row.get("amps", {}).items():
+            assert float(v[f"cpu.amplitudes.{probe}"][t]) == pytest.approx(amp, abs=5e-7), (probe, t)
+    return rows
+
+
+def test_cpu_run_logic_vcd_equals_the_trace(tmp_path):
+    vcd, trace = tmp_path / "s.vcd", tmp_path / "s.jsonl"
+    rc, _, err = cli("cpu", "run", str(SIEVE), "--backend", "logic", "--max-cycles", "40", "--trace", str(trace),
+                     "--vcd", str(vcd))
+    assert rc == 1, err                                        # not halted after 40 cycles
+    rows = _check_cpu_vcd(vcd, trace)
+    assert len(rows) == 40 and any(r["we"] for r in rows) and any(r["instr"] is None for r in rows)
+
+
+def test_cpu_run_envelope_vcd_has_every_probed_amplitude(tmp_path):
+    vcd, trace = tmp_path / "s.vcd", tmp_path / "s.jsonl"
+    run_program(SIEVE, "envelope", 3, trace=trace, vcd=vcd)
+    rows = _check_cpu_vcd(vcd, trace)
+    v = vcdvcd.VCDVCD(str(vcd))
+    assert len(rows) == 3 and len([s for s in v.signals if ".amplitudes." in s]) == len(rows[0]["amps"]) > 50
+
+
+def test_cpu_run_vcd_follows_the_output_rule(tmp_path):
+    trace = tmp_path / "t.jsonl"
+    args = ["cpu", "run", str(SIEVE), "--backend", "logic", "--max-cycles", "3"]
+    for target, message in ((SIEVE, "is the program"), (trace, "is the --trace file")):
+        rc, _, err = cli(*args, "--trace", str(trace), "--vcd", str(target))
+        assert rc == 2 and message in err, err
+    other = tmp_path / "keep.txt"
+    other.write_text("mine\n")
+    rc, _, err = cli(*args, "--vcd", str(other))
+    assert rc == 2 and "is not a VCD file" in err and other.read_text() == "mine\n"
+    rc, _, err = cli(*args, "--vcd", str(other), "--force")
+    assert rc == 1 and "$enddefinitions" in other.read_text(), err
+
+
+def test_surfers_parser_reads_the_waveform(tmp_path):
+    """wellen (the parser of the Surfer viewer, as pywellen) reads what `simulate --vcd` wrote: the same
+    values as the JSON trace, vectors at their width, amplitudes as reals."""
+    pywellen = pytest.importorskip("pywellen")
+    stim = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, "cycles": 5}]
+    (tmp_path / "stim.json").write_text(json.dumps(stim))
+    vcd = tmp_path / "c.vcd"
+    rc, out, err = cli("simulate", str(COUNTER), "--backend", "logic", "--stimulus", str(tmp_path / "stim.json"),
+                       "--vcd", str(vcd), "--json")
+    assert rc == 0, err
+    w = pywellen.Waveform(str(vcd))
+    found = {v.full_name: v for v in w.all_vars()}
+    q = found["counter4.outputs.q"]
+    assert q.bitwidth == 4 and str(w.timescale) == "1ns"
+    assert [q.signal.value_at(e["cycle"]) for e in json.loads(out)["trace"]] == \
+           [e["outputs"]["q"] for e in json.loads(out)["trace"]]
+    from mech2spice.waveform import Waveform, write_vcd
+    wave = Waveform([0, 1, 2])
+    wave.add_real(["top", "amplitudes"], "q[0]", [0.5, 0.99, 0.52])
+    write_vcd(tmp_path / "r.vcd", wave)
+    (amp,) = list(pywellen.Waveform(str(tmp_path / "r.vcd")).all_vars())
+    assert amp.is_real and [amp.signal.value_at(t) for t in range(3)] == [0.5, 0.99, 0.52]

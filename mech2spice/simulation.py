@@ -148,7 +148,7 @@ def _run_until_settled(engine, model, stim, probes: list[str], budget: int, prog
     rows = list(range(len(probes))) if watch is None else list(watch)
     names = [probes[k] for k in rows]
     cap = budget if fixed else EXTENSION * budget
-    state, done, history, judged, next_check, target = None, 0, [], None, 0, budget
+    state, done, history, judged, next_check, target, last = None, 0, [], None, 0, budget, None
     bar = progress_bar(budget, progress)
     while done < target:
         n = min(CHUNK, target - done)
@@ -160,7 +160,8 @@ def _run_until_settled(engine, model, stim, probes: list[str], budget: int, prog
         judged = None
         due = done >= target or _settled(_rows(history[-2:], rows), model.levels)
         if not fixed and done >= next_check and due:
-            judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows), clock=clock)
+            judged = last = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows), clock=clock,
+                                   previous=last)
             wait = _periods_to_settle(judged, _rows(history[-3:], rows), names, budget, model.levels)
             if wait == 0:
                 break
@@ -169,7 +170,7 @@ def _run_until_settled(engine, model, stim, probes: list[str], budget: int, prog
                 target = min(cap, max(next_check, done + CHUNK))
     bar.close()
     if judged is None:
-        judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows), clock=clock)
+        judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows), clock=clock, previous=last)
     return history[-1][0], done, judged
 
 
@@ -196,8 +197,10 @@ class VerdictClock:
 
 
 def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int, history: list,
-           held: bool = False, clock: VerdictClock | None = None) -> list | None:
-    """(verdict, settled) of each batch member at the run's final state (None: the engine returns no state)."""
+           held: bool = False, clock: VerdictClock | None = None, previous: list | None = None) -> list | None:
+    """(verdict, settled) of each batch member at the run's final state (None: the engine returns no state).
+    `previous`: the same run's last judgement, whose eigenvectors start each member's sparse search (a nearby
+    state: ARPACK converges in far fewer products)."""
     ph = engine.phasors(model, run.state, run.t)
     if ph is None:
         return None
@@ -206,7 +209,8 @@ def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int,
     F = Envelope.of(model).forcing(stim.at((t_periods - 1e-6) * model.period))
     out = []
     for b in range(A.shape[1]):
-        v = verdict.judge(model, A[:, b], s[:, b], F[:, b], outs)
+        start = previous[b][0].start if previous and previous[b] else None
+        v = verdict.judge(model, A[:, b], s[:, b], F[:, b], outs, start=start)
         a, swing, step = _recent(history, outs, b)
         out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.rests_on_fixed_point(), held, model.levels)))
     if clock is not None:
@@ -299,12 +303,13 @@ def _run_cycles(engine, model: MechModel, stim, reads: list[int], outs: list[str
     full = _without_skipping(engine)
     bar = progress_bar(reads[-1], progress)
     for r in reads:
+        prev = next((q for q in reversed(judged) if q), None)
         part = engine.run(model, r - t, stim, state=state, start_period=t, probes=outs)
-        j = _judge_read(engine, model, part, stim, outs, r, clock)
+        j = _judge_read(engine, model, part, stim, outs, r, clock, prev)
         if j and j[0].stable and not j[1] and part.settled_periods and full is not None:
             # idle skipping held a state that had not settled: this cycle again, integrated throughout
             part = full.run(model, r - t, stim, state=state, start_period=t, probes=outs)
-            j = _judge_read(full, model, part, stim, outs, r, clock)
+            j = _judge_read(full, model, part, stim, outs, r, clock, j)
             part.extra["reintegrated"] = True
         bar.update(part.amp.shape[0])
         parts.append(part)
@@ -342,7 +347,7 @@ def _hold_until_settled(engine, model: MechModel, part, amps: np.ndarray, outs: 
             break
         part = engine.run(model, n, hold, state=part.state, start_period=0, probes=outs)
         part.extra["held"] = True
-        j = _judge_read(engine, model, part, hold, outs, n, clock)
+        j = _judge_read(engine, model, part, hold, outs, n, clock, j)
         holds.append(part)
         extra += n
     return holds, j
@@ -356,15 +361,16 @@ def _without_skipping(engine):
 
 
 def _judge_read(engine, model: MechModel, part, stim, outs: list[str], t_periods: int,
-                clock: VerdictClock | None = None):
-    """(verdict, settled) of a single-member run at a clock read: its summary over the last 2 CHUNKs."""
+                clock: VerdictClock | None = None, previous=None):
+    """(verdict, settled) of a single-member run at a clock read: its summary over the last 2 CHUNKs
+    (`previous`: the last read's, whose eigenvectors start the search)."""
     if part.amp.shape[0] < 2 * CHUNK:
         return None
     a = np.abs(part.amp[-2 * CHUNK:, [part.probe(n) for n in outs], :]) / model.amplitude_unit
     history = [(a[CHUNK - 1], a[:CHUNK].mean(axis=0), np.ptp(a[:CHUNK], axis=0)),
                (a[-1], a[CHUNK:].mean(axis=0), np.ptp(a[CHUNK:], axis=0))]
     judged = _judge(engine, model, part, stim, outs, t_periods, history, held=part.settled_periods > 0,
-                    clock=clock)
+                    clock=clock, previous=[previous] if previous else None)
     return judged[0] if judged else None
 
 

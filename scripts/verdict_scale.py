@@ -12,7 +12,8 @@ hdl-benchmarks iscas85/verilog/).  A design whose run exceeds --limit seconds is
 
 Usage:  OMP_NUM_THREADS=1 nice -n 5 python scripts/verdict_scale.py [--only adder,c432] [--limit 600] [--no-rk4]
                                                                       [--out reports/verdict_scale]
-Writes <out>.json and <out>.png (verdict and run seconds against the linearisation's unknowns).
+Writes <out>.json and <out>.png (verdict and run seconds against the linearisation's unknowns) and prints the
+table of docs/stability.md (--render: the table of an existing <out>.json, nothing measured).
 """
 from __future__ import annotations
 
@@ -131,6 +132,26 @@ def plot(rows: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
+def table(rows: list[dict]) -> str:
+    """The markdown table of docs/stability.md."""
+    lines = ["| design | oscillators | unknowns | periods | run s | verdict s | verdict / run | valid, stable, = logic |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        for path in ("fast", "reference", "rk4"):
+            m = r.get(path)
+            if m is None:
+                continue
+            name = r["design"] + ("" if path == "fast" else f" ({path})") + (" x16" if m.get("batch", 1) > 1 else "")
+            if m["timed_out"]:
+                lines.append(f"| {name} | {r['oscillators']} | {r['unknowns']} | | | | timed out after "
+                             f"{m['wall_s']:.0f} s | |")
+                continue
+            ok = ", ".join("yes" if m[k] else "no" for k in ("valid", "stable", "equal_to_logic"))
+            lines.append(f"| {name} | {r['oscillators']} | {r['unknowns']} | {m['periods']} | {m['run_s']:.2f} | "
+                         f"{m['verdict_s']:.2f} | {m['verdict_s'] / m['run_s']:.2f} | {ok} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="", help="comma-separated design names (default: every one present)")
@@ -138,7 +159,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--no-rk4", action="store_true", help="skip the adder's RK4 run")
     ap.add_argument("--out", default=str(REPO / "reports/verdict_scale"))
+    ap.add_argument("--render", action="store_true", help="print the table of <out>.json, measure nothing")
     args = ap.parse_args()
+    if args.render:
+        print(table(json.loads(Path(args.out + ".json").read_text())["designs"]))
+        return
     signal.signal(signal.SIGALRM, _alarm)
     only = set(filter(None, args.only.split(",")))
     warm = synthesize(str(REPO / "verilog/adder2.v"))      # compile the engines' kernels before any timing
@@ -156,6 +181,7 @@ def main() -> None:
                           "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}, "designs": rows}
     Path(args.out + ".json").write_text(json.dumps(out, indent=1) + "\n")
     plot(rows, Path(args.out + ".png"))
+    print(table(rows))
     print(f"wrote {args.out}.json and {args.out}.png")
 
 

@@ -86,7 +86,9 @@ def test_fast_dense_modes_equal_the_reference(q_i):
         assert f.growth == pytest.approx(r.growth, abs=1e-9)
         assert (f.period is None) == (r.period is None)
         assert f.period is None or f.period == pytest.approx(r.period, rel=1e-6)
-        assert f.dofs[:3] == r.dofs[:3]
+    for f, r in zip(fast, ref):             # DOFs are found for the leading mode and every growing one
+        if f is fast[0] or f.growth > 0:
+            assert f.dofs[:3] == r.dofs[:3]
     assert (fast[0].growth > 0) == (q_i == SELF_OSCILLATING_QI)
 
 

@@ -83,20 +83,30 @@ def _real_block(Z: sp.spmatrix) -> sp.csr_matrix:
     return sp.bmat([[Zr, -Zi], [Zi, Zr]], format="csr")
 
 
-def linearise(env: Envelope, A: np.ndarray, s: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """(E, J) with E y' = J y the envelope equations linearised at (A, s) with s' = 0, y = (a, b, ds, ds')."""
+def linearise(env: Envelope, A: np.ndarray, s: np.ndarray) -> tuple[sp.csc_matrix, sp.csr_matrix]:
+    """(E, J) with E y' = J y the envelope equations linearised at (A, s) with s' = 0, y = (a, b, ds, ds').
+    J's rows: the fast rows and d/dt ds = ds' and M_s ds'' = Ws (a, b, ds) - C_s ds' (Ws: the slow force
+    rows); assembled from the steady-state Jacobian's entries, E built once per model."""
     nf, ns = env.fast.size, env.slow.size
-    fast, Ws = _fast_rows(env, A, s), _slow_force_rows(env, A)
-    I_s = sp.identity(ns, format="csr")
-    J = sp.vstack([sp.hstack([fast, sp.csr_matrix((2 * nf, ns))]),
-                   sp.hstack([sp.csr_matrix((ns, 2 * nf + ns)), I_s]),
-                   sp.hstack([Ws, -env.Cs])], format="csr")
-    E = sp.block_diag([_real_block(env.Bop), I_s, sp.diags(env.ms)], format="csc")
+    n = 2 * nf + 2 * ns
+    Jss = _steady_jacobian(env, A, s).tocoo()
+    Cs = sp.coo_matrix(env.Cs)
+    slow = np.arange(ns)
+    rows = np.concatenate([np.where(Jss.row < 2 * nf, Jss.row, Jss.row + ns), 2 * nf + slow, 2 * nf + ns + Cs.row])
+    cols = np.concatenate([Jss.col, 2 * nf + ns + slow, 2 * nf + ns + Cs.col])
+    vals = np.concatenate([Jss.data, np.ones(ns), -Cs.data])
+    J = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+    E = env.model.derived.get("stability_e")
+    if E is None:
+        I_s = sp.identity(ns, format="csr")
+        E = env.model.derived["stability_e"] = sp.block_diag([_real_block(env.Bop), I_s, sp.diags(env.ms)],
+                                                             format="csc")
     return E, J
 
 
 def _fast_rows(env: Envelope, A, s) -> sp.csr_matrix:
-    """d(F - Z(s) A) / d(a, b, ds): the fast equations' rows.  -Re-block(Z0) is built once per model."""
+    """d(F - Z(s) A) / d(a, b, ds): the fast equations' rows, assembled block by block: the reference that
+    _steady_jacobian's pattern assembly is tested against.  -Re-block(Z0) is built once per model."""
     Z0 = env.model.derived.get("stability_z0")
     if Z0 is None:
         Z0 = env.model.derived["stability_z0"] = -_real_block(env.Z0)
@@ -221,9 +231,12 @@ def _dense_modes(env: Envelope, E, J, k: int) -> list[Mode]:
     T = env.model.period
     vectors = {}
     for i in order:             # a conjugate pair's vectors are conjugate: one inverse iteration for both
+        if i != order[0] and lam[i].real * T < STABLE_MARGIN:
+            continue            # whose DOFs nothing reports: only the leading mode's and growing modes' are read
         twin = next((j for j in vectors if lam[j] == np.conj(lam[i])), None)
         vectors[i] = np.conj(vectors[twin]) if twin is not None else _inverse_iteration(M, lam[i])
-    return [_mode(env, lam[i], vectors[i], T) for i in order]
+    return [_mode(env, lam[i], vectors[i], T) if i in vectors else Mode(float(lam[i].real * T), _period(lam[i], T))
+            for i in order]
 
 
 def _inverse_iteration(M: np.ndarray, lam: complex) -> np.ndarray:
@@ -274,8 +287,12 @@ def _mode(env: Envelope, lam: complex, v: np.ndarray, T: float) -> Mode:
         if w.size and w.max() > 0:
             share[idx] = w / w.max()
     top = np.lexsort((np.arange(share.size), -np.round(share, 9)))[:8]   # equal shares (symmetric DOFs) by index
-    period = 2 * np.pi / abs(lam.imag) / T if abs(lam.imag) * T > 1e-9 else None
-    return Mode(float(lam.real * T), period, [env.model.names[i] for i in top if share[i] > 0.1])
+    return Mode(float(lam.real * T), _period(lam, T), [env.model.names[i] for i in top if share[i] > 0.1])
+
+
+def _period(lam: complex, T: float) -> float | None:
+    """A mode's period in drive periods (None for a real eigenvalue)."""
+    return 2 * np.pi / abs(lam.imag) / T if abs(lam.imag) * T > 1e-9 else None
 
 
 # --- spectra already computed: the same fixed point has the same modes -------------------------

@@ -403,3 +403,20 @@ def test_c432_vector_is_valid_at_the_defaults(capsys):
     assert res["stability"]["fixed_point_found"] and res["stability"]["growth_rate"] < 0
     rc, logic, _ = _simulate(capsys, "simulate", design, "--top", "Circuit432", *sets, "--backend", "logic")
     assert res["outputs"] == logic["outputs"]
+
+
+def test_a_clocked_read_unsettled_is_held_until_settled():
+    """The stop rule in clocked runs: the dff latch with its pause cut to 35 % (586 periods, idle skipping
+    off) is read while still moving; each such read keeps its inputs until the verdict says settled, and every
+    read is then settled, valid and equal to logic, the schedule only later (`cycles_held`, longer `periods`)."""
+    from mech2spice import simulation
+    nl = synthesize(str(ROOT / "verilog/dff.v"))
+    cycles = simulation.expand_steps([{"set": {"d": 1}, "cycles": 2}, {"set": {"d": 0}, "cycles": 2}])
+    timing = clocking.clock_timing(nl)
+    timing = {**timing, "pause": int(timing["pause"] * 0.35)}
+    res = simulation.run_clocked_physical(nl, params.DEFAULT, cycles, "envelope", timing, settle_tol=None)
+    logic = simulation.run_clocked_logic(nl, cycles)
+    assert res["cycles_held"] > 0
+    assert res["periods"] > simulation.clocked_schedule(cycles, timing)[2]
+    assert [t["outputs"] for t in res["trace"]] == [t["outputs"] for t in logic["trace"]]
+    assert all(t["settled"] and t["valid"] and t["stable"] for t in res["trace"])

@@ -189,11 +189,9 @@ class VerdictClock:
     """The wall time a run spends in stability verdicts (`verdict_s`)."""
     def __init__(self):
         self.seconds = 0.0
-        self.count = 0
 
     def add(self, seconds: float) -> None:
         self.seconds += seconds
-        self.count += 1
 
 
 def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int, history: list,

@@ -30,6 +30,8 @@ from .synthesis.synth import Netlist
 SETTLED_CHANGE = 2e-3    # u_R: an output that moved less than this over SETTLE_WINDOW periods has settled
 SETTLE_WINDOW = 100      # periods
 CHUNK = 100              # periods per engine call in the settle loop
+EXTENSION = 4            # a run the verdict finds unsettled at its period budget goes on, up to this many budgets
+NO_FIXED_POINT_WAIT = 0.25   # of the budget: how long to go on before judging again a state with no fixed point near
 MAX_TRACE_BYTES = 2e9    # amplitudes a clocked run keeps in memory (one complex per period, probe, batch member)
 ESTIMATE_LOG_S = 10.0    # runs estimated to take longer than this say so before they start
 
@@ -105,16 +107,16 @@ def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], 
     budget = periods or period_budget(netlist)
     outs = _observed(netlist, model)
     _announce(engine, model, budget, len(values), log)
-    judged, source = None, "run"
+    judged, source, clock = None, "run", VerdictClock()
     if not outs:
         amps, used = np.zeros((0, len(values))), 0
     elif engine.capabilities.state:
         amps, used, judged = _run_until_settled(engine, model, stim, outs, budget, progress,
-                                                fixed=periods is not None)
+                                                fixed=periods is not None, clock=clock)
     else:
         run = engine.run(model, budget, stim, probes=outs, progress=progress)
         amps, used = run.final_amplitudes(outs, model.amplitude_unit), budget
-        judged, source = _reference_judged(model, stim, outs, budget), "envelope"
+        judged, source = _reference_judged(model, stim, outs, budget, clock), "envelope"
     wall = time.time() - t0
     results = []
     for b in range(len(values)):
@@ -122,44 +124,53 @@ def run_physical(netlist: Netlist, p: GateParams, values: list[dict[str, int]], 
         v, ok = judged[b] if judged else (None, False)
         res = verdict.apply(decode(netlist, a, model.design.const_outputs, model.levels), a, v, ok, source, model.levels)
         results.append({"backend": backend, **res, "amplitudes": a, "periods": used, "wall_s": wall,
-                        **_engine_fields(engine)})
+                        "verdict_s": clock.seconds, **_engine_fields(engine)})
     return results
 
 
-def _reference_judged(model: MechModel, stim, outs: list[str], budget: int) -> list:
+def _reference_judged(model: MechModel, stim, outs: list[str], budget: int, clock: "VerdictClock") -> list:
     """For engines that return no state (the circuit simulators): the verdict at the envelope's settled state
     under the same stimulus; the mechanical model, and so its fixed points and modes, are the same."""
-    return _run_until_settled(make_engine("envelope"), model, stim, outs, budget, False, fixed=False)[2]
+    return _run_until_settled(make_engine("envelope"), model, stim, outs, budget, False, fixed=False, clock=clock)[2]
 
 
 def _run_until_settled(engine, model, stim, probes: list[str], budget: int, progress: bool, fixed: bool,
-                       watch: list[int] | None = None):
+                       watch: list[int] | None = None, clock: "VerdictClock | None" = None):
     """CHUNK periods at a time, each continuing from the last state, until the watched probes (rows `watch`
     of `probes`, default all) settle: the cheap rule (_settled: nothing moved much over a window) first, then
     the verdict's (verdict.settled: stable, and less than verdict.SETTLED_BW band widths still to come).
     While an output is still moving, the next verdict waits for the slowest mode to close the gap.
+
+    One stop rule: the run stops where the verdict says settled (or unstable at a fixed point: no wait helps).
+    A run the verdict finds unsettled when the budget is spent (no fixed point near its state, or one still
+    to be reached) goes on, up to EXTENSION x the budget in all (`fixed`, a set period count: not extended).
     Returns (every probe's final amplitudes, periods, [(verdict, settled)] per batch member)."""
     rows = list(range(len(probes))) if watch is None else list(watch)
     names = [probes[k] for k in rows]
-    state, done, history, judged, next_check = None, 0, [], None, 0
+    cap = budget if fixed else EXTENSION * budget
+    state, done, history, judged, next_check, target, last = None, 0, [], None, 0, budget, None
     bar = progress_bar(budget, progress)
-    while done < budget:
-        n = min(CHUNK, budget - done)
+    while done < target:
+        n = min(CHUNK, target - done)
         run = engine.run(model, n, stim, state=state, start_period=done, probes=probes)
         state = run.state
         done += n
         history.append(_chunk_summary(run, probes, model.amplitude_unit))
         bar.update(n)
         judged = None
-        if not fixed and done >= next_check and _settled(_rows(history[-2:], rows), model.levels):
-            judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows))
-            wait = _periods_to_settle(judged, _rows(history[-3:], rows), names, model.levels)
+        due = done >= target or _settled(_rows(history[-2:], rows), model.levels)
+        if not fixed and done >= next_check and due:
+            judged = last = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows), clock=clock,
+                                   previous=last)
+            wait = _periods_to_settle(judged, _rows(history[-3:], rows), names, budget, model.levels)
             if wait == 0:
                 break
             next_check = done + wait
+            if done >= target:           # unsettled at the budget: go on until the verdict's wait, within the cap
+                target = min(cap, max(next_check, done + CHUNK))
     bar.close()
     if judged is None:
-        judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows))
+        judged = _judge(engine, model, run, stim, names, done, _rows(history[-3:], rows), clock=clock, previous=last)
     return history[-1][0], done, judged
 
 
@@ -174,19 +185,34 @@ def _chunk_summary(run, probes: list[str], unit: float) -> tuple[np.ndarray, np.
     return a[-1], a.mean(axis=0), a.max(axis=0) - a.min(axis=0)
 
 
+class VerdictClock:
+    """The wall time a run spends in stability verdicts (`verdict_s`)."""
+    def __init__(self):
+        self.seconds = 0.0
+
+    def add(self, seconds: float) -> None:
+        self.seconds += seconds
+
+
 def _judge(engine, model: MechModel, run, stim, outs: list[str], t_periods: int, history: list,
-           held: bool = False) -> list | None:
-    """(verdict, settled) of each batch member at the run's final state (None: the engine returns no state)."""
+           held: bool = False, clock: VerdictClock | None = None, previous: list | None = None) -> list | None:
+    """(verdict, settled) of each batch member at the run's final state (None: the engine returns no state).
+    `previous`: the same run's last judgement, whose eigenvectors start each member's sparse search (a nearby
+    state: ARPACK converges in far fewer products)."""
     ph = engine.phasors(model, run.state, run.t)
     if ph is None:
         return None
+    t0 = time.perf_counter()
     A, s = ph
     F = Envelope.of(model).forcing(stim.at((t_periods - 1e-6) * model.period))
     out = []
     for b in range(A.shape[1]):
-        v = verdict.judge(model, A[:, b], s[:, b], F[:, b], outs)
+        start = previous[b][0].start if previous and previous[b] else None
+        v = verdict.judge(model, A[:, b], s[:, b], F[:, b], outs, start=start)
         a, swing, step = _recent(history, outs, b)
         out.append((v, verdict.settled(v, a, swing, step, CHUNK, engine.rests_on_fixed_point(), held, model.levels)))
+    if clock is not None:
+        clock.add(time.perf_counter() - t0)
     return out
 
 
@@ -208,12 +234,16 @@ def _settled(history: list[np.ndarray], levels: Levels = DEFAULT_LEVELS) -> bool
     return bool(np.all(np.abs(now - before) < SETTLED_CHANGE) and np.all(inside))
 
 
-def _periods_to_settle(judged, history: list, probes: list[str], levels: Levels = DEFAULT_LEVELS) -> int:
-    """0 when every member is settled or unstable (no wait helps); else the periods for the slowest decaying
-    mode to bring what is still to come down to verdict.SETTLED_BW (at least one chunk)."""
+def _periods_to_settle(judged, history: list, probes: list[str], budget: int, levels: Levels = DEFAULT_LEVELS) -> int:
+    """0 when every member is settled or unstable at a fixed point (no wait helps); else the periods for the
+    slowest decaying mode to bring what is still to come down to verdict.SETTLED_BW (at least one chunk), or,
+    where no fixed point lies near a member's state (still on its way), NO_FIXED_POINT_WAIT of the budget."""
     wait = 0
     for b, (v, ok) in enumerate(judged or []):
-        if ok or not v.stable:
+        if ok or (v.converged and not v.stable):
+            continue
+        if not v.converged:
+            wait = max(wait, CHUNK, int(budget * NO_FIXED_POINT_WAIT) // CHUNK * CHUNK)
             continue
         a, swing, step = _recent(history, probes, b)
         left = max(verdict.still_to_come(v, a, swing, step, CHUNK, levels), verdict.drift(v, a, levels))
@@ -260,30 +290,65 @@ def _final(trace: list[dict]) -> dict:
     return out
 
 
-def _run_cycles(engine, model: MechModel, stim, reads: list[int], outs: list[str], progress: bool):
+def _run_cycles(engine, model: MechModel, stim, reads: list[int], outs: list[str], progress: bool,
+                pause: int = 0, clock: VerdictClock | None = None):
     """A clocked run read by read (each part continuing from the last one's state, so the whole equals one
-    run), judged at each read: (the whole run, [(verdict, settled) per cycle, or None])."""
-    state, t, parts, judged = None, 0, [], []
+    run), judged at each read: (the whole run, [(verdict, settled) per cycle, or None], the period of the
+    whole run at which each read was taken).  A read the verdict finds unsettled even integrated without
+    skipping is held (its inputs kept) up to (EXTENSION - 1) x `pause` more periods: the one stop rule of
+    _run_until_settled; the schedule after it is unchanged, only later."""
+    state, t, parts, judged, read_at, length = None, 0, [], [], [], 0
     full = _without_skipping(engine)
     bar = progress_bar(reads[-1], progress)
     for r in reads:
+        prev = next((q for q in reversed(judged) if q), None)
         part = engine.run(model, r - t, stim, state=state, start_period=t, probes=outs)
-        j = _judge_read(engine, model, part, stim, outs, r)
+        j = _judge_read(engine, model, part, stim, outs, r, clock, prev)
         if j and j[0].stable and not j[1] and part.settled_periods and full is not None:
             # idle skipping held a state that had not settled: this cycle again, integrated throughout
             part = full.run(model, r - t, stim, state=state, start_period=t, probes=outs)
-            j = _judge_read(full, model, part, stim, outs, r)
+            j = _judge_read(full, model, part, stim, outs, r, clock, j)
             part.extra["reintegrated"] = True
-        state, t = part.state, r
-        parts.append(part)
-        judged.append(j)
         bar.update(part.amp.shape[0])
+        parts.append(part)
+        holds, j = _hold_until_settled(full or engine, model, part, stim.at((r - 1e-6) * model.period), outs, j,
+                                       (EXTENSION - 1) * pause, clock)
+        parts += holds
+        state, t = parts[-1].state, r
+        length += sum(q.amp.shape[0] for q in [part, *holds])
+        read_at.append(length)
+        judged.append(j)
     bar.close()
     whole = replace(parts[-1], amp=np.concatenate([q.amp for q in parts]), mean=np.concatenate([q.mean for q in parts]),
                     t_end=np.concatenate([q.t_end for q in parts]),
                     settled_periods=sum(q.settled_periods for q in parts),
-                    extra={**parts[-1].extra, "reintegrated": sum(bool(q.extra.get("reintegrated")) for q in parts)})
-    return whole, judged
+                    extra={**parts[-1].extra, "reintegrated": sum(bool(q.extra.get("reintegrated")) for q in parts),
+                           "held": sum(bool(q.extra.get("held")) for q in parts)})
+    return whole, judged, read_at
+
+
+def _unsettled(j) -> bool:
+    """A read that more integration may settle: judged, not settled, and not unstable at a fixed point."""
+    return bool(j) and not j[1] and not (j[0].converged and not j[0].stable)
+
+
+def _hold_until_settled(engine, model: MechModel, part, amps: np.ndarray, outs: list[str], j, cap: int,
+                        clock: VerdictClock | None):
+    """Keep integrating a read's state under its inputs (`amps`, constant) while the verdict finds it
+    unsettled, up to `cap` periods: (the extra parts, the last judgement)."""
+    hold = Stimulus(np.zeros(1), amps[None])
+    holds, extra = [], 0
+    step = max(2 * CHUNK, int(cap * NO_FIXED_POINT_WAIT / (EXTENSION - 1)) // CHUNK * CHUNK)
+    while _unsettled(j) and extra < cap:
+        n = min(step, cap - extra)
+        if n < 2 * CHUNK:
+            break
+        part = engine.run(model, n, hold, state=part.state, start_period=0, probes=outs)
+        part.extra["held"] = True
+        j = _judge_read(engine, model, part, hold, outs, n, clock, j)
+        holds.append(part)
+        extra += n
+    return holds, j
 
 
 def _without_skipping(engine):
@@ -293,14 +358,17 @@ def _without_skipping(engine):
     return make_engine(engine.name, replace(engine.options, settle_tol=None))
 
 
-def _judge_read(engine, model: MechModel, part, stim, outs: list[str], t_periods: int):
-    """(verdict, settled) of a single-member run at a clock read: its summary over the last 2 CHUNKs."""
+def _judge_read(engine, model: MechModel, part, stim, outs: list[str], t_periods: int,
+                clock: VerdictClock | None = None, previous=None):
+    """(verdict, settled) of a single-member run at a clock read: its summary over the last 2 CHUNKs
+    (`previous`: the last read's, whose eigenvectors start the search)."""
     if part.amp.shape[0] < 2 * CHUNK:
         return None
     a = np.abs(part.amp[-2 * CHUNK:, [part.probe(n) for n in outs], :]) / model.amplitude_unit
     history = [(a[CHUNK - 1], a[:CHUNK].mean(axis=0), np.ptp(a[:CHUNK], axis=0)),
                (a[-1], a[CHUNK:].mean(axis=0), np.ptp(a[CHUNK:], axis=0))]
-    judged = _judge(engine, model, part, stim, outs, t_periods, history, held=part.settled_periods > 0)
+    judged = _judge(engine, model, part, stim, outs, t_periods, history, held=part.settled_periods > 0,
+                    clock=clock, previous=[previous] if previous else None)
     return judged[0] if judged else None
 
 
@@ -371,27 +439,29 @@ def run_clocked_physical(netlist: Netlist, p: GateParams, cycles: list[dict[str,
     stim = network.stimulus(nominal, netlist, p, [(t, [v]) for t, v, _ in segs], clock=[[c] for *_, c in segs])
     if sample is not None and sample[1] is not None:
         stim = Stimulus(stim.times, stim.amps * sample[1][None, :, None])
-    source = "run"
+    source, clock, read_at = "run", VerdictClock(), reads
     if engine.capabilities.state:
-        run, judged = _run_cycles(engine, model, stim, reads, outs, progress)
+        run, judged, read_at = _run_cycles(engine, model, stim, reads, outs, progress, timing["pause"], clock)
     else:
         run = engine.run(model, total, stim, probes=outs, progress=progress)
         reference = make_engine("envelope", make_engine("envelope").Options(settle_tol=CLOCKED_SETTLE_TOL))
-        judged, source = _run_cycles(reference, model, stim, reads, outs, False)[1], "envelope"
+        judged, source = _run_cycles(reference, model, stim, reads, outs, False, timing["pause"], clock)[1], "envelope"
     amp = np.abs(run.amp[:, [run.probe(n) for n in outs], 0]) / p.u_r
     trace = []
-    for k, t in enumerate(reads):
+    for k, t in enumerate(read_at):
         a = {n: float(amp[t - 10:t, j].mean()) for j, n in enumerate(outs)}
         v, ok = judged[k] if judged and judged[k] else (None, False)
         decoded = verdict.apply(decode(netlist, a, model.design.const_outputs, model.levels), a, v, ok, source, model.levels)
         trace.append({"cycle": k, **decoded, "amplitudes": a})
+    total = read_at[-1] + total - reads[-1]                  # with the periods held at unsettled reads
     extra = {"envelope_step": step, "settle": engine.options.settle_tol,
              "simulated_periods": total - run.settled_periods,
              "cycles_reintegrated": run.extra.get("reintegrated", 0)} if engine.capabilities.settle else {}
     res = {"backend": backend, **_final(trace), "amplitudes": trace[-1]["amplitudes"], "trace": trace,
-           "periods": total, "timing": timing, "wall_s": time.time() - t0, **extra, **_engine_fields(engine)}
+           "periods": total, "timing": timing, "wall_s": time.time() - t0, "verdict_s": clock.seconds,
+           "cycles_held": run.extra.get("held", 0), **extra, **_engine_fields(engine)}
     if waveform:
-        res["waveform"] = Waveform(amp, reads, outs)
+        res["waveform"] = Waveform(amp, list(read_at), outs)
     return res
 
 

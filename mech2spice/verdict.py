@@ -34,12 +34,13 @@ def band_width(x: float, levels: Levels = DEFAULT_LEVELS) -> float:
     return w0 if b == 0 else w1 if b == 1 else min(w0, w1)
 
 
-def judge(model, A: np.ndarray, s: np.ndarray, F: np.ndarray, outs: list[str]) -> stability.Verdict:
+def judge(model, A: np.ndarray, s: np.ndarray, F: np.ndarray, outs: list[str],
+          start: np.ndarray | None = None) -> stability.Verdict:
     """The stability verdict of one batch member's state (A (n_fast,), s, forcing F), watching `outs` and
-    every gate's channel."""
+    every gate's channel; `start`: the member's previous verdict's eigenvectors (stability.verdict)."""
     watch = {n: model.probes[n] for n in outs}
     watch.update({f"{g.name}.C": g.channel for g in model.design.gates})
-    return stability.verdict(model, A, s, F, watch)
+    return stability.verdict(model, A, s, F, watch, start=start)
 
 
 def drift(v: stability.Verdict, amplitudes: dict[str, float], levels: Levels = DEFAULT_LEVELS) -> float:

@@ -205,8 +205,15 @@ def cmd_simulate_clocked(args, nl) -> int:
             outs = ", ".join(f"{p}={'invalid' if v is None else v}" for p, v in e["outputs"].items())
             mg = "" if e["min_margin"] is None else f"  (margin {e['min_margin']:+.3f})"
             print(f"  cycle {e['cycle']:4d}: {outs}{mg}")
-        print(f"backend {res['backend']}, {res['periods']} periods, {res['wall_s']:.1f} s, valid: {res['valid']}")
+        print(f"backend {res['backend']}, {res['periods']} periods, {res['wall_s']:.1f} s{_verdict_share(res)}, "
+              f"valid: {res['valid']}")
     return 0 if res["valid"] else 1
+
+
+def _verdict_share(res: dict) -> str:
+    """' (verdict 0.3 s)': the stability verdicts' part of the wall time, where the run paid any."""
+    v = res.get("verdict_s")
+    return f" (verdict {v:.1f} s)" if v else ""
 
 
 def cmd_simulate(args) -> int:
@@ -231,7 +238,8 @@ def cmd_simulate(args) -> int:
             print(f"{port} = {'invalid' if v is None else v}")
         for bit, a in res["amplitudes"].items():
             print(f"  {bit}: {a:.4f} u_R -> {'invalid' if res['bits'][bit] is None else res['bits'][bit]}")
-        print(f"backend {res['backend']}, {res['periods']} periods, {res['wall_s']:.1f} s, valid: {res['valid']}")
+        print(f"backend {res['backend']}, {res['periods']} periods, {res['wall_s']:.1f} s{_verdict_share(res)}, "
+              f"valid: {res['valid']}")
     return 0 if res["valid"] else 1
 
 

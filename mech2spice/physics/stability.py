@@ -32,6 +32,10 @@ DENSE_LIMIT = 400         # real unknowns up to which the whole spectrum is comp
 # Beyond it, ARPACK on the Cayley transform: ~0.5-2 s on s344 (3744 unknowns), but 50-130 s on the processor
 # (12972), whose ~1000 lightly damped insulator modes cluster near |mu| = 1.  Restricting the search to the
 # least damped gates' neighbourhoods was tried and missed s344's mode, which is collective (docs/stability.md).
+METHOD = "fast"           # the verdict's default path: "fast" or "reference" (leading_modes, verdict)
+CAYLEY_NCV = 120          # Arnoldi subspace of the sparse search: 40 -> 120 halved its operator products on
+                          # c880 (6312 unknowns: 4845 -> 2271, 17.6 -> 8.2 s); 250 and 500 cost more in
+                          # orthogonalisation than they saved (docs/stability.md)
 MODES = 6                 # leading eigenvalues the sparse (Cayley) search returns
 NEWTON_TOL = 1e-10        # relative residual at which Newton's iterate is the fixed point
 NEWTON_MAX = 30
@@ -79,20 +83,30 @@ def _real_block(Z: sp.spmatrix) -> sp.csr_matrix:
     return sp.bmat([[Zr, -Zi], [Zi, Zr]], format="csr")
 
 
-def linearise(env: Envelope, A: np.ndarray, s: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """(E, J) with E y' = J y the envelope equations linearised at (A, s) with s' = 0, y = (a, b, ds, ds')."""
+def linearise(env: Envelope, A: np.ndarray, s: np.ndarray) -> tuple[sp.csc_matrix, sp.csr_matrix]:
+    """(E, J) with E y' = J y the envelope equations linearised at (A, s) with s' = 0, y = (a, b, ds, ds').
+    J's rows: the fast rows and d/dt ds = ds' and M_s ds'' = Ws (a, b, ds) - C_s ds' (Ws: the slow force
+    rows); assembled from the steady-state Jacobian's entries, E built once per model."""
     nf, ns = env.fast.size, env.slow.size
-    fast, Ws = _fast_rows(env, A, s), _slow_force_rows(env, A)
-    I_s = sp.identity(ns, format="csr")
-    J = sp.vstack([sp.hstack([fast, sp.csr_matrix((2 * nf, ns))]),
-                   sp.hstack([sp.csr_matrix((ns, 2 * nf + ns)), I_s]),
-                   sp.hstack([Ws, -env.Cs])], format="csr")
-    E = sp.block_diag([_real_block(env.Bop), I_s, sp.diags(env.ms)], format="csc")
+    n = 2 * nf + 2 * ns
+    Jss = _steady_jacobian(env, A, s).tocoo()
+    Cs = sp.coo_matrix(env.Cs)
+    slow = np.arange(ns)
+    rows = np.concatenate([np.where(Jss.row < 2 * nf, Jss.row, Jss.row + ns), 2 * nf + slow, 2 * nf + ns + Cs.row])
+    cols = np.concatenate([Jss.col, 2 * nf + ns + slow, 2 * nf + ns + Cs.col])
+    vals = np.concatenate([Jss.data, np.ones(ns), -Cs.data])
+    J = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+    E = env.model.derived.get("stability_e")
+    if E is None:
+        I_s = sp.identity(ns, format="csr")
+        E = env.model.derived["stability_e"] = sp.block_diag([_real_block(env.Bop), I_s, sp.diags(env.ms)],
+                                                             format="csc")
     return E, J
 
 
 def _fast_rows(env: Envelope, A, s) -> sp.csr_matrix:
-    """d(F - Z(s) A) / d(a, b, ds): the fast equations' rows.  -Re-block(Z0) is built once per model."""
+    """d(F - Z(s) A) / d(a, b, ds): the fast equations' rows, assembled block by block: the reference that
+    _steady_jacobian's pattern assembly is tested against.  -Re-block(Z0) is built once per model."""
     Z0 = env.model.derived.get("stability_z0")
     if Z0 is None:
         Z0 = env.model.derived["stability_z0"] = -_real_block(env.Z0)
@@ -114,6 +128,35 @@ def _residual(env: Envelope, A, s, F) -> np.ndarray:
     return np.concatenate([R.real, R.imag, -(env.H @ np.abs(A) ** 2) / 2 - env.Ks @ s])
 
 
+def _steady_pattern(env: Envelope):
+    """The index arrays of the steady-state Jacobian's entries (rows, cols) and its constant values, built once
+    per model: Newton's steps only fill in the values that depend on (A, s) (sparse assembly by blocks cost
+    more than the LU itself on small networks)."""
+    pat = env.model.derived.get("stability_pattern")
+    if pat is not None:
+        return pat
+    nf, ns = env.fast.size, env.slow.size
+    Z0 = sp.coo_matrix(-_real_block(env.Z0))
+    Ks = sp.coo_matrix(env.Ks)
+    G, H = sp.coo_matrix(env.G), sp.coo_matrix(env.H)
+    diag = np.arange(2 * nf)
+    rows = np.concatenate([Z0.row, diag, G.row, G.row + nf, 2 * nf + H.row, 2 * nf + H.row, 2 * nf + Ks.row])
+    cols = np.concatenate([Z0.col, diag, 2 * nf + G.col, 2 * nf + G.col, H.col, nf + H.col, 2 * nf + Ks.col])
+    pat = env.model.derived["stability_pattern"] = (rows, cols, Z0.data, -Ks.data, G, H)
+    return pat
+
+
+def _steady_jacobian(env: Envelope, A: np.ndarray, s: np.ndarray) -> sp.csc_matrix:
+    """d(F - Z(s) A, -H |A|^2 / 2 - K_s s) / d(a, b, ds): the fast rows and the slow force rows of linearise."""
+    rows, cols, z0, ks, G, H = _steady_pattern(env)
+    g = env.G @ s
+    PA = A[G.row] * G.data                              # entries of diag(A) G
+    vals = np.concatenate([z0, -np.concatenate([g, g]), -PA.real, -PA.imag,
+                           -H.data * A.real[H.col], -H.data * A.imag[H.col], ks])
+    n = 2 * env.fast.size + env.slow.size
+    return sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
+
+
 def operating_point(env: Envelope, A0: np.ndarray, s0: np.ndarray, F: np.ndarray):
     """Newton's method on the steady-state equations from (A0, s0): (A, s, converged).  Each step is one
     sparse LU of the steady-state Jacobian (the linearisation without the s' rows); steps are halved
@@ -125,7 +168,7 @@ def operating_point(env: Envelope, A0: np.ndarray, s0: np.ndarray, F: np.ndarray
     for _ in range(NEWTON_MAX):
         if np.abs(r).max() < NEWTON_TOL * scale:
             return A, s, True
-        Jss = sp.vstack([_fast_rows(env, A, s), _slow_force_rows(env, A)], format="csc")   # no s' terms
+        Jss = _steady_jacobian(env, A, s)                  # the linearisation without the s' terms
         try:
             dy = spla.splu(Jss).solve(-r)
         except RuntimeError:                              # singular: a fold exactly here
@@ -145,7 +188,7 @@ def operating_point(env: Envelope, A0: np.ndarray, s0: np.ndarray, F: np.ndarray
 # --- the leading eigenvalues -----------------------------------------------------------------
 
 def leading_modes(env: Envelope, A: np.ndarray, s: np.ndarray, k: int = MODES,
-                  start: np.ndarray | None = None) -> tuple[list[Mode], np.ndarray | None]:
+                  start: np.ndarray | None = None, method: str = "fast") -> tuple[list[Mode], np.ndarray | None]:
     """The k eigenvalues of the linearisation at (A, s) with the largest real parts, largest first, and
     (sparse search) their eigenvectors folded into one real vector to start the next search from.
 
@@ -154,27 +197,68 @@ def leading_modes(env: Envelope, A: np.ndarray, s: np.ndarray, k: int = MODES,
     rightmost ones of the network (|mu| > 1 exactly when Re lambda > 0), with sigma near the rates of the
     slow modes; one sparse LU.  `start`: such a vector from a nearby state (the processor's last cycle):
     ARPACK converges from it in ~15x fewer products than from a flat start (563 against 8141 on the sieve's
-    cycle-20 state when started from its own vectors)."""
+    cycle-20 state when started from its own vectors).
+
+    `method`: "fast" (small networks: the eigenvalues of E^-1 J alone, then the k leading ones' vectors by
+    inverse iteration; docs/stability.md, "Cost") or "reference" (the generalised problem with every vector:
+    the path the fast one is tested against)."""
     E, J = linearise(env, A, s)
     T = env.model.period
     folded = None
-    if J.shape[0] <= DENSE_LIMIT:
+    if J.shape[0] <= DENSE_LIMIT and method == "reference":
         lam, vec = sla.eig(J.toarray(), E.toarray())
         ok = np.isfinite(lam)
         lam, vec = lam[ok], vec[:, ok]
+    elif J.shape[0] <= DENSE_LIMIT:
+        return _dense_modes(env, E, J, k), None
     else:
-        lam, vec = _cayley(E, J, sigma=2 * np.pi / (50 * T), k=k, start=start)
+        lam, vec = _cayley(E, J, sigma=2 * np.pi / (50 * T), k=k, start=start,
+                           ncv=40 if method == "reference" else CAYLEY_NCV)
         folded = np.real(vec).sum(axis=1) + np.imag(vec).sum(axis=1)
     order = np.argsort(-lam.real)[:k]
     return [_mode(env, lam[i], vec[:, i], T) for i in order], folded
 
 
-def _cayley(E, J, sigma: float, k: int, start: np.ndarray | None = None):
+def _dense_modes(env: Envelope, E, J, k: int) -> list[Mode]:
+    """The k rightmost modes from the whole spectrum of M = E^-1 J (E is block diagonal and well
+    conditioned: the oscillators' 2 i omega m + c, the identity, the insulators' masses): eigenvalues alone
+    (Hessenberg QR, no vectors: ~5-10x cheaper than the generalised QZ with vectors), then each leading
+    eigenvalue's vector by two steps of inverse iteration on M - lambda I."""
+    M = spla.splu(E.tocsc()).solve(J.toarray())
+    lam = sla.eigvals(M, overwrite_a=False, check_finite=False)
+    lam = lam[np.isfinite(lam)]
+    order = np.argsort(-lam.real)[:k]
+    T = env.model.period
+    vectors = {}
+    for i in order:             # a conjugate pair's vectors are conjugate: one inverse iteration for both
+        if i != order[0] and lam[i].real * T < STABLE_MARGIN:
+            continue            # whose DOFs nothing reports: only the leading mode's and growing modes' are read
+        twin = next((j for j in vectors if lam[j] == np.conj(lam[i])), None)
+        vectors[i] = np.conj(vectors[twin]) if twin is not None else _inverse_iteration(M, lam[i])
+    return [_mode(env, lam[i], vectors[i], T) if i in vectors else Mode(float(lam[i].real * T), _period(lam[i], T))
+            for i in order]
+
+
+def _inverse_iteration(M: np.ndarray, lam: complex) -> np.ndarray:
+    """The eigenvector of M for its eigenvalue lam: (M - lam' I) x = b twice, lam' a hair off lam so the
+    shifted matrix stays invertible (the vector converges by the ratio of lam's distance to lam' and to the
+    next eigenvalue)."""
+    n = M.shape[0]
+    shift = lam + 1e-10 * max(abs(lam), 1.0)
+    lu = sla.lu_factor(M - shift * np.eye(n), check_finite=False)
+    x = np.ones(n, complex) / np.sqrt(n)
+    for _ in range(2):
+        x = sla.lu_solve(lu, x, check_finite=False)
+        x /= np.linalg.norm(x)
+    return x
+
+
+def _cayley(E, J, sigma: float, k: int, start: np.ndarray | None = None, ncv: int = 40):
     lu = spla.splu((J - sigma * E).tocsc())
     K = (J + sigma * E).tocsr()
     op = spla.LinearOperator(J.shape, matvec=lambda x: lu.solve(K @ x), dtype=float)
     n = J.shape[0]
-    ncv = min(n - 1, max(4 * k, 40))             # room for clustered, repeated modes
+    ncv = min(n - 1, max(4 * k, ncv))            # room for clustered, repeated modes
     for attempt in range(3):
         # ARPACK can stall on a start vector (error 3: no shifts could be applied): start elsewhere, with
         # a larger subspace; the starts are seeded, so a verdict is reproducible
@@ -203,20 +287,53 @@ def _mode(env: Envelope, lam: complex, v: np.ndarray, T: float) -> Mode:
         if w.size and w.max() > 0:
             share[idx] = w / w.max()
     top = np.lexsort((np.arange(share.size), -np.round(share, 9)))[:8]   # equal shares (symmetric DOFs) by index
-    period = 2 * np.pi / abs(lam.imag) / T if abs(lam.imag) * T > 1e-9 else None
-    return Mode(float(lam.real * T), period, [env.model.names[i] for i in top if share[i] > 0.1])
+    return Mode(float(lam.real * T), _period(lam, T), [env.model.names[i] for i in top if share[i] > 0.1])
+
+
+def _period(lam: complex, T: float) -> float | None:
+    """A mode's period in drive periods (None for a real eigenvalue)."""
+    return 2 * np.pi / abs(lam.imag) / T if abs(lam.imag) * T > 1e-9 else None
+
+
+# --- spectra already computed: the same fixed point has the same modes -------------------------
+
+# a fixed point's key: its amplitudes and positions in single precision; an equal key means the two fixed points
+# differ by < 6e-8 relative in every entry, so their growth rates by ~6e-8 x the rates' sensitivity
+CACHE_SIZE = 256
+
+
+def _cached_modes(env: Envelope, A: np.ndarray, s: np.ndarray, converged: bool, start, method: str):
+    """leading_modes at (A, s), reusing the spectrum of a fixed point seen before on this model (a batch's
+    later verdicts on members that had already settled, a processor cycle that returns to a state)."""
+    if method == "reference" or not converged:
+        return leading_modes(env, A, s, start=start, method=method)
+    cache = env.model.derived.setdefault("stability_spectra", {})
+    key = _fixed_point_key(A, s)
+    if key not in cache:
+        if len(cache) >= CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+        cache[key] = leading_modes(env, A, s, start=start, method=method)
+    return cache[key]
+
+
+def _fixed_point_key(A: np.ndarray, s: np.ndarray) -> bytes:
+    """Every entry in single precision: equal keys mean each entry equal to 2^-24 relative."""
+    return A.astype(np.complex64).tobytes() + s.astype(np.float32).tobytes()
 
 
 # --- the verdict -----------------------------------------------------------------------------
 
 def verdict(model, A: np.ndarray, s: np.ndarray, F: np.ndarray, watch: dict[str, int] | None = None,
-            start: np.ndarray | None = None) -> Verdict:
+            start: np.ndarray | None = None, method: str | None = None) -> Verdict:
     """The stability verdict at a run's state (A, s) under forcing F (n_fast,): the fixed point nearest it,
     the leading modes there, and how far the run's watched amplitudes (probe -> DOF) are from it.
-    `start`: a previous verdict's `start`, to begin the eigenvalue search from (leading_modes)."""
+    `start`: a previous verdict's `start`, to begin the eigenvalue search from (leading_modes).
+    `method`: "fast" or "reference" (leading_modes; default METHOD); "reference" also bypasses the cache of
+    spectra: the verdict as it was before issue #38, kept for the tests and scripts/verdict_scale.py."""
+    method = method or METHOD
     env = Envelope.of(model)
     Af, sf, ok = operating_point(env, A, s, F)
-    modes, folded = leading_modes(env, Af, sf, start=start)
+    modes, folded = _cached_modes(env, Af, sf, ok, start, method)
     lead = modes[0]
     stable = ok and lead.growth < STABLE_MARGIN
     decaying = [m for m in modes if m.growth < 0]

@@ -1,0 +1,193 @@
+"""Issue #38: the stability verdict's time against the run's own, from the 2-bit adder to ISCAS-85 c6288.
+
+For each design: synthesise it, pick one seeded random input vector (the adder: all 16 inputs in one batch), run
+`simulation.run_physical` on the envelope at the defaults (the verdict's `fast` path), and record the wall time,
+the verdicts' part of it (`verdict_s`), the periods, valid / stable / settled, the leading growth rate, and
+whether the outputs equal the logic backend's.  The adder is also run with the verdict's `reference` path
+(the dense generalised eigenproblem with every vector, no cache: the verdict before #38) and on RK4, in the same
+process, so the ratios are measured under the same load.  ISCAS-85 netlists are not in the repository: put them
+in $MECH2SPICE_BENCHMARKS/iscas85/ (c432_hansen.v: Mark C. Hansen's high-level model, from
+github.com/msabrishami/DFT data/netlist_behavioral/c432.v at ed00832d; c880.v, c1355.v, c6288.v: ispras/
+hdl-benchmarks iscas85/verilog/).  A design whose run exceeds --limit seconds is recorded as timed out.
+
+Usage:  OMP_NUM_THREADS=1 nice -n 5 python scripts/verdict_scale.py [--only adder,c432] [--limit 600] [--no-rk4]
+                                                                      [--out reports/verdict_scale]
+Writes <out>.json and <out>.png (verdict and run seconds against the linearisation's unknowns) and prints the
+table of docs/stability.md (--render: the table of an existing <out>.json, nothing measured).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import random
+import signal
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from mech2spice import simulation  # noqa: E402
+from mech2spice.experiments.scenes import ADDER_INPUTS  # noqa: E402
+from mech2spice.physics import network, params, stability  # noqa: E402
+from mech2spice.physics.envelope import Envelope  # noqa: E402
+from mech2spice.synthesis.synth import synthesize  # noqa: E402
+
+BENCH = Path(os.environ.get("MECH2SPICE_BENCHMARKS", REPO / "benchmarks")) / "iscas85"
+DESIGNS = [("adder", REPO / "verilog/adder2.v", None), ("c432", BENCH / "c432_hansen.v", "Circuit432"),
+           ("c880", BENCH / "c880.v", "c880"), ("c1355", BENCH / "c1355.v", "c1355"),
+           ("c6288", BENCH / "c6288.v", "c6288")]
+
+
+class TimedOut(Exception):
+    pass
+
+
+def _alarm(signum, frame):
+    raise TimedOut
+
+
+def _vectors(name: str, nl, seed: int) -> list[dict]:
+    if name == "adder":
+        return list(ADDER_INPUTS)
+    rng = random.Random(seed)
+    return [{p: rng.getrandbits(w) for p, w in nl.inputs.items()}]
+
+
+def _unknowns(nl) -> tuple[int, int]:
+    """(oscillators, real unknowns of the linearisation: 2 per oscillating DOF, 2 per insulator)."""
+    env = Envelope.of(network.build(nl, params.DEFAULT))
+    return env.model.n, 2 * env.fast.size + 2 * env.slow.size
+
+
+def _run(nl, vectors, backend: str, limit: int) -> dict:
+    """One run_physical call, summarised over its batch (None-valued fields when it timed out)."""
+    signal.alarm(limit)
+    t0 = time.perf_counter()
+    try:
+        res = simulation.run_physical(nl, params.DEFAULT, vectors, backend)
+    except TimedOut:
+        return {"backend": backend, "timed_out": True, "wall_s": time.perf_counter() - t0}
+    finally:
+        signal.alarm(0)
+    wall = time.perf_counter() - t0
+    logic = [simulation.run_logic(nl, v)["outputs"] for v in vectors]
+    growth = [r["stability"]["growth_rate"] for r in res if r.get("stability", {}).get("growth_rate") is not None]
+    return {"backend": backend, "timed_out": False, "wall_s": wall, "verdict_s": res[0]["verdict_s"],
+            "run_s": wall - res[0]["verdict_s"], "periods": res[0]["periods"], "batch": len(vectors),
+            "valid": all(r["valid"] for r in res), "stable": all(r.get("stable", True) for r in res),
+            "settled": all(r.get("settled", True) for r in res),
+            "equal_to_logic": all(r["outputs"] == want for r, want in zip(res, logic)),
+            "growth_rate_max": max(growth) if growth else None}
+
+
+def measure(name: str, path: Path, top: str | None, seed: int, limit: int, rk4: bool) -> dict:
+    nl = synthesize(str(path), top=top)
+    oscillators, unknowns = _unknowns(nl)
+    vectors = _vectors(name, nl, seed)
+    row = {"design": name, "source": str(path.relative_to(REPO) if path.is_relative_to(REPO) else path.name),
+           "top": top, "oscillators": oscillators, "unknowns": unknowns, "vector": vectors if len(vectors) == 1 else
+           "all 16 (a, b)", "fast": _run(nl, vectors, "envelope", limit)}
+    print(f"{name}: {unknowns} unknowns, fast: {json.dumps(row['fast'])}", flush=True)
+    if name == "adder":                 # fast and reference alternated, twice each; the faster of each kept
+        runs = {"fast": [row["fast"]], "reference": []}
+        for method in ("reference", "fast", "reference"):
+            stability.METHOD = method
+            try:
+                runs[method].append(_run(nl, vectors, "envelope", limit))
+            finally:
+                stability.METHOD = "fast"
+        row.update({m: min(rs, key=lambda r: r["wall_s"]) for m, rs in runs.items()})
+        row["walls_s"] = {m: [r["wall_s"] for r in rs] for m, rs in runs.items()}
+        print(f"{name}: reference: {json.dumps(row['reference'])}; walls {row['walls_s']}", flush=True)
+        if rk4:
+            row["rk4"] = _run(nl, vectors, "rk4", limit)
+            print(f"{name}: rk4: {json.dumps(row['rk4'])}", flush=True)
+    return row
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    done = [r for r in rows if not r["fast"]["timed_out"]]
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    x = [r["unknowns"] for r in done]
+    ax.loglog(x, [r["fast"]["run_s"] for r in done], "o-", label="run (integration, settle loop)")
+    ax.loglog(x, [r["fast"]["verdict_s"] for r in done], "s-", label="verdicts (fast path)")
+    for r in done:
+        ax.annotate(r["design"], (r["unknowns"], r["fast"]["verdict_s"]), textcoords="offset points", xytext=(4, 4))
+    ref = [r for r in done if "reference" in r and not r["reference"]["timed_out"]]
+    if ref:
+        ax.loglog([r["unknowns"] for r in ref], [r["reference"]["verdict_s"] for r in ref], "x", ms=9,
+                  label="verdicts (reference path)")
+    for r in rows:
+        if r["fast"]["timed_out"]:
+            ax.axvline(r["unknowns"], ls=":", c="grey")
+            ax.annotate(f"{r['design']}: > {r['fast']['wall_s']:.0f} s", (r["unknowns"], 1), rotation=90, fontsize=8)
+    ax.set_xlabel("real unknowns of the linearised envelope equations")
+    ax.set_ylabel("wall seconds (one process, envelope)")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def table(rows: list[dict]) -> str:
+    """The markdown table of docs/stability.md."""
+    lines = ["| design | oscillators | unknowns | periods | run s | verdict s | verdict / run | valid, stable, = logic |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        for path in ("fast", "reference", "rk4"):
+            m = r.get(path)
+            if m is None:
+                continue
+            name = r["design"] + ("" if path == "fast" else f" ({path})") + (" x16" if m.get("batch", 1) > 1 else "")
+            if m["timed_out"]:
+                lines.append(f"| {name} | {r['oscillators']} | {r['unknowns']} | | | | timed out after "
+                             f"{m['wall_s']:.0f} s | |")
+                continue
+            ok = ", ".join("yes" if m[k] else "no" for k in ("valid", "stable", "equal_to_logic"))
+            lines.append(f"| {name} | {r['oscillators']} | {r['unknowns']} | {m['periods']} | {m['run_s']:.2f} | "
+                         f"{m['verdict_s']:.2f} | {m['verdict_s'] / m['run_s']:.2f} | {ok} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", default="", help="comma-separated design names (default: every one present)")
+    ap.add_argument("--limit", type=int, default=600, help="seconds per run before it is recorded as timed out")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--no-rk4", action="store_true", help="skip the adder's RK4 run")
+    ap.add_argument("--out", default=str(REPO / "reports/verdict_scale"))
+    ap.add_argument("--render", action="store_true", help="print the table of <out>.json, measure nothing")
+    args = ap.parse_args()
+    if args.render:
+        print(table(json.loads(Path(args.out + ".json").read_text())["designs"]))
+        return
+    signal.signal(signal.SIGALRM, _alarm)
+    only = set(filter(None, args.only.split(",")))
+    warm = synthesize(str(REPO / "verilog/adder2.v"))      # compile the engines' kernels before any timing
+    simulation.run_physical(warm, params.DEFAULT, list(ADDER_INPUTS), "envelope", periods=200)
+    if not args.no_rk4:
+        simulation.run_physical(warm, params.DEFAULT, list(ADDER_INPUTS), "rk4", periods=10)
+    rows = []
+    for name, path, top in DESIGNS:
+        if (only and name not in only) or not path.is_file():
+            continue
+        rows.append(measure(name, path, top, args.seed, args.limit, not args.no_rk4))
+    out = {"conditions": {"machine": platform.node(), "python": platform.python_version(),
+                          "load_before": os.getloadavg(), "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
+                          "cayley_ncv": stability.CAYLEY_NCV, "dense_limit": stability.DENSE_LIMIT,
+                          "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}, "designs": rows}
+    Path(args.out + ".json").write_text(json.dumps(out, indent=1) + "\n")
+    plot(rows, Path(args.out + ".png"))
+    print(table(rows))
+    print(f"wrote {args.out}.json and {args.out}.png")
+
+
+if __name__ == "__main__":
+    main()

@@ -44,6 +44,7 @@ CLASSES = [
     ("several top modules", r"several top-level modules"),
     ("combinational loop", r"combinational loop"),
     ("$display/$write in the design", r"\$display"),
+    ("incomplete sensitivity list", r"sensitivity list"),
     ("Yosys could not read the source", r"yosys error"),
 ]
 
@@ -132,7 +133,7 @@ def _measure(design: dict, path: Path, args) -> dict:
     synth = _cli(["synth", "--json", *top, str(path)], args.timeout)
     row["synth_s"] = synth["wall_s"]
     if synth["status"] != "ok":
-        row.update(accepted=False, refusal=synth["line"], refusal_class=_classify(synth), crash=synth["status"])
+        row.update(accepted=False, refusal=synth["line"], status=synth["status"])
         return row
     out = synth["json"]
     row.update(accepted=True, gates=out["logic_gates"], nor_total=out["gates"], latches=out["latches"],
@@ -210,11 +211,13 @@ def _verify_class(verdict: dict) -> str:
     return "other"
 
 
-def _classify(res: dict) -> str:
-    if res["status"] in ("timeout", "crash"):
-        return res["status"]
+def _refusal_class(row: dict) -> str:
+    """The class of a refused row, from its refusal line (at render time: a new class needs no rerun)."""
+    status = row.get("status", row.get("crash"))
+    if status in ("timeout", "crash"):
+        return status
     for name, pattern in CLASSES:
-        if re.search(pattern, res["line"]):
+        if re.search(pattern, row["refusal"]):
             return name
     return "other"
 
@@ -223,7 +226,7 @@ def _classify(res: dict) -> str:
 
 def _line(row: dict) -> str:
     if not row["accepted"]:
-        return f"{row['name']:24s} REFUSED  {row['refusal_class']}: {row['refusal'][:150]}"
+        return f"{row['name']:24s} REFUSED  {_refusal_class(row)}: {row['refusal'][:150]}"
     v, e = row["verify"], row["envelope"]
     return (f"{row['name']:24s} accepted {row['gates']:6d} gates {row['latches']:4d} latches "
             f"{row['oscillators']:7d} osc  verify {v['verdict']}"
@@ -244,7 +247,7 @@ def _summary(rows: list[dict]) -> dict:
     classes: dict[str, list[str]] = {}
     for r in rows:
         if not r["accepted"]:
-            classes.setdefault(r["refusal_class"], []).append(r["name"])
+            classes.setdefault(_refusal_class(r), []).append(r["name"])
     failing: dict[str, list[str]] = {}
     for r in accepted:
         if r["verify"]["verdict"] != "pass":
@@ -279,7 +282,10 @@ def _write(rows: list[dict], tool: str, wall: float, args) -> None:
 
 
 def _cell(text) -> str:
-    return str(text).replace("|", "\\|").replace("\n", " ")
+    """A table cell: the benchmarks folder written as the variable naming it, the command's prefix dropped."""
+    rtl = str(_benchmarks())
+    text = str(text).replace("mech2spice: error: ", "").replace(rtl, "$MECH2SPICE_BENCHMARKS/rtl")
+    return text.replace("|", "\\|").replace("\n", " ")
 
 
 def _markdown(rows: list[dict], s: dict, meta: dict) -> str:

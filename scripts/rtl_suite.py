@@ -25,7 +25,6 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-CACHE = ROOT / "build" / "rtl_suite"
 FORMAT = 1     # bump when a row's fields change: cached rows of another format are measured again
 
 # Refusal classes, first match wins: (class, pattern on the refusal line).
@@ -74,7 +73,7 @@ def main(argv=None) -> int:
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         rows = list(pool.map(lambda d: _row(d, root, tool, args), designs))
     if args.only:      # a partial run updates its rows in the stored table
-        rows = _merge(rows)
+        rows = _merge(rows, args.out)
     _write(rows, tool, time.time() - started, args)
     return 0
 
@@ -88,6 +87,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="largest design (NOR gates) given an envelope sample (default 300)")
     p.add_argument("--envelope-cycles", type=int, default=4, help="clock cycles of the envelope sample")
     p.add_argument("--no-cache", action="store_true", help="measure every design again")
+    p.add_argument("--out", type=Path, default=ROOT / "docs", help="folder of rtl_suite.md/.json (default docs/)")
+    p.add_argument("--cache", type=Path, default=ROOT / "build" / "rtl_suite", help="the results cache folder")
     return p
 
 
@@ -114,13 +115,13 @@ def _row(design: dict, root: Path, tool: str, args) -> dict:
     key = hashlib.sha256(json.dumps([FORMAT, tool, hashlib.sha256(source).hexdigest(), design.get("top"),
                                      design.get("reset"), args.timeout, args.envelope_gates,
                                      args.envelope_cycles]).encode()).hexdigest()[:24]
-    cached = CACHE / f"{design['name']}-{key}.json"
+    cached = args.cache / f"{design['name']}-{key}.json"
     if cached.is_file() and not args.no_cache:
         row = json.loads(cached.read_text())
     else:
         row = _measure(design, path, args)
         row["tool"] = tool
-        CACHE.mkdir(parents=True, exist_ok=True)
+        args.cache.mkdir(parents=True, exist_ok=True)
         cached.write_text(json.dumps(row, indent=1))
     print(_line(row), flush=True)
     return row
@@ -233,8 +234,8 @@ def _line(row: dict) -> str:
             f"{'' if not v.get('equivalence') else ' (' + v['equivalence'] + ')'}  envelope {e['verdict']}")
 
 
-def _merge(rows: list[dict]) -> list[dict]:
-    stored = ROOT / "docs" / "rtl_suite.json"
+def _merge(rows: list[dict], out: Path) -> list[dict]:
+    stored = out / "rtl_suite.json"
     old = json.loads(stored.read_text())["rows"] if stored.is_file() else []
     new = {r["name"]: r for r in rows}
     merged = [new.pop(r["name"], r) for r in old]
@@ -269,7 +270,8 @@ def _write(rows: list[dict], tool: str, wall: float, args) -> None:
             "load_avg": [round(x, 2) for x in load], "cpus": os.cpu_count(), "wall_s": round(wall, 1),
             "timeout_s": args.timeout, "envelope_gates": args.envelope_gates,
             "envelope_cycles": args.envelope_cycles}
-    docs = ROOT / "docs"
+    docs = args.out
+    docs.mkdir(parents=True, exist_ok=True)
     (docs / "rtl_suite.json").write_text(json.dumps({"meta": meta, "summary": summary, "rows": rows}, indent=1) + "\n")
     (docs / "rtl_suite.md").write_text(_markdown(rows, summary, meta))
     s = summary

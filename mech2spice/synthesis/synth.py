@@ -160,7 +160,7 @@ def _flow(source: str, top: str | None) -> str:
         "tee -q -o check.txt check",                # undriven nets, before synth folds them to constants
         "flatten",
         "tribuf -formal",                           # tri-state buses -> multiplexers (docs/rtl.md) ...
-        "delete t:$assert",                         # ... less its no-two-drivers checks: Icarus co-simulates
+        "delete n:$tribuf_conflict*",               # ... less its no-two-drivers checks: Icarus co-simulates
         "synth -flatten" + (f" -top {top}" if top else ""),   # (memories: `memory` + `memory_map` in it)
         "dffunmap",                                 # enables/resets -> plain flip-flops + logic
         "abc -g NOR", "opt_clean",

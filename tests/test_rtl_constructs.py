@@ -181,3 +181,17 @@ def test_an_inout_inside_the_design_is_fine(tmp_path, capsys):
                             "  s u(en, d, w);\n  assign w = en ? 1'bz : e;\n  assign y = w;\nendmodule\n")
     rc, out, err = run(capsys, "synth", "--top", "t", src)
     assert rc == 0, err
+
+
+@needs_icarus
+@needs_suite
+def test_a_public_register_file_with_tri_state_read_buses_agrees_with_icarus(tmp_path, capsys):
+    """The ECE350 register file (32 x 32 bits, each read port a bus of 32 tri-state drivers): its flip-flop's
+    `initial` and asynchronous clear, another branch's constructs (`latch`), made a synchronous clear here."""
+    text = (SUITE / "regfile_tristate" / "regfile_tristate.v").read_text()
+    text = text.replace("   initial\n   begin\n       q = 1'b0;\n   end\n", "")
+    text = text.replace("always @(posedge clk or posedge clr)", "always @(posedge clk)")
+    res = _verify(capsys, verilog(tmp_path, text), "--no-equivalence", "--top", "regfile",
+                  "--reset", "ctrl_reset", "--cycles", 100)
+    assert res["latches"] == 32 * 31 and res["cosim"]["undefined_bits"] == 0
+    _agrees(res, compared_at_least=100 * 64)

@@ -116,15 +116,27 @@ def _row(design: dict, root: Path, tool: str, args) -> dict:
                                      design.get("reset"), args.timeout, args.envelope_gates,
                                      args.envelope_cycles]).encode()).hexdigest()[:24]
     cached = args.cache / f"{design['name']}-{key}.json"
-    if cached.is_file() and not args.no_cache:
-        row = json.loads(cached.read_text())
-    else:
+    row = None if args.no_cache else _cached_row(cached, design["name"])
+    if row is None:
         row = _measure(design, path, args)
         row["tool"] = tool
         args.cache.mkdir(parents=True, exist_ok=True)
         cached.write_text(json.dumps(row, indent=1))
     print(_line(row), flush=True)
     return row
+
+
+def _cached_row(cached: Path, name: str) -> dict | None:
+    """A cached row, or None (measured again) when there is none or it is not a row of this design: the cache
+    is rebuildable data, and what it holds only reaches the table's text."""
+    try:
+        row = json.loads(cached.read_text())
+    except (OSError, ValueError):
+        return None
+    ok = isinstance(row, dict) and row.get("name") == name and isinstance(row.get("accepted"), bool)
+    ok = ok and (isinstance(row.get("verify"), dict) and isinstance(row.get("envelope"), dict)
+                 if row["accepted"] else isinstance(row.get("refusal"), str))
+    return row if ok else None
 
 
 def _measure(design: dict, path: Path, args) -> dict:

@@ -68,3 +68,12 @@ def test_a_step_out_of_time_is_a_row_not_a_stop(bench):
     (row,) = [r for r in table["rows"] if r["name"] == "bus"]
     assert not row["accepted"] and row["refusal"].startswith("no result within")
     assert table["summary"]["refusal_classes"] == {"timeout": ["bus"]}
+
+
+def test_a_cache_entry_that_is_not_a_row_is_measured_again(bench):
+    suite = _suite()
+    _run(suite, bench, "--only", "pad")
+    (entry,) = (bench / "cache").glob("pad-*.json")
+    entry.write_text(json.dumps({"name": "pad", "accepted": True}))
+    (row,) = _run(suite, bench, "--only", "pad")["rows"]
+    assert not row["accepted"] and "inout port 'p'" in row["refusal"]

@@ -308,9 +308,9 @@ def test_flip_flops_become_latch_nodes(tmp_path):
 
 
 @pytest.mark.parametrize("body, match", [
-    ("module t(input a, input en, output y); assign y = en ? a : 1'bz; endmodule",
-     r"tri-state .* \(line 1\)"),
-    ("module t(input a, inout b, output y); assign y = a & b; endmodule", "inout port 'b'"),
+    ("module t(input a, output y, output w);\n assign y = 1'bz;\n assign w = a;\nendmodule",
+     r"line 1: output y\[0\] is tied to 'z'"),
+    ("module t(input a, inout b, output y); assign y = a & b; endmodule", r"line 1: inout port 'b'"),
     ("module t(input a, output y);\n reg r;\n initial #1 r = 1;\n assign y = a & r;\nendmodule",
      r"line 3: a delay \(`#`\) in an `initial` block: a delay is an event after time zero"),
     ("module t(input a, output y);\n assign y = a;\n initial begin\n  $display(\"hi\");\n end\nendmodule",

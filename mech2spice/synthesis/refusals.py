@@ -6,7 +6,8 @@ would do something else; every check reads a file the Yosys flow (synth._flow) w
 * ``read.il`` (RTLIL as read): several top-level modules and no --top (Yosys would pick one by itself).
 * ``drivers.il`` (after ``proc -noopt``, before anything merges or folds nets): a net with two drivers,
   e.g. two continuous assignments (a simulator reads x where they disagree; Yosys keeps one, and proc's
-  own opt_expr can even delete one of them).
+  own opt_expr can even delete one of them).  Not a tri-state bus: when every driver of a net can
+  release it (``en ? d : 'bz``), the flow resolves it to a multiplexer (``tribuf -merge -logic``).
 * ``ast.txt`` (``read_verilog -dump_ast1``): a non-edge ``always`` whose sensitivity list leaves out a
   signal it reads (Yosys builds it as ``@*``; a simulator runs it only when a listed signal changes, e.g.
   ``always @(clk) q <= d``), or an ``always`` with no event control at all (a simulator loops forever).
@@ -21,7 +22,7 @@ from pathlib import Path
 from ..errors import Mech2SpiceError
 
 #: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
-VERSION = 1
+VERSION = 2
 
 
 def check(tmp: Path, path: Path, source: str, top: str | None) -> None:
@@ -287,32 +288,80 @@ def _outputs(ctype: str, modules: dict) -> set[str]:
 
 
 def check_drivers(rtlil: str, path: Path, source: str) -> None:
-    """Refuse a net driven from two places: ports, cell outputs and constants each count as a driver."""
+    """Refuse a net driven from two places: ports, cell outputs and constants each count as a driver.
+    A net whose every driver can release it (a tri-state driver: `en ? d : 'bz`, or a submodule's output
+    that is one) is a tri-state bus, not a conflict: the flow resolves it to a multiplexer (`tribuf`)."""
     modules = read_rtlil(rtlil)
-    for name, mod in modules.items():
-        nets, drivers, written = _Nets(), [], defaultdict(int)
-        for wire, (width, _, _, direction, src) in mod.wires.items():
-            if direction == "input":
-                drivers += [((wire, i), ("input", wire, i), None) for i in range(width)]
-        for ctype, cname, conns, src in mod.cells:
-            outputs = _outputs(ctype, modules)
-            for port, bits in conns.items():
-                if port in outputs:
-                    drivers += [(b, (cname, port, k), src) for k, b in enumerate(bits) if b[0]]
-        for lhs, rhs in mod.connects:
-            for a, b in zip(lhs, rhs):
-                if a[0] and b[0]:
-                    nets.union(a, b)
-                    written[a] += 1
-                elif a[0] or b[0]:                      # a wire tied to a constant
-                    drivers.append((a if a[0] else b, ("const", (b if a[0] else a)[1]), None))
-        by_net = defaultdict(dict)
-        for bit, who, src in drivers:
-            written[bit] += 1
-            by_net[nets.find(bit)].setdefault(who, src)
-        for net, who in by_net.items():
-            if len(who) > 1:
-                _refuse_drivers(name, mod, nets, net, who, written, path, source)
+    released: dict[str, set] = {}
+    for name in _bottom_up(modules):
+        released[name] = _check_module_drivers(name, modules, released, path, source)
+
+
+def _bottom_up(modules: dict) -> list[str]:
+    """Module names, each after the modules it instantiates (what its tri-state outputs depend on)."""
+    order, seen = [], set()
+
+    def visit(name):
+        if name in seen:
+            return
+        seen.add(name)
+        for ctype, *_ in modules[name].cells:
+            if _name(ctype) in modules:
+                visit(_name(ctype))
+        order.append(name)
+    for name in modules:
+        visit(name)
+    return order
+
+
+def _check_module_drivers(name: str, modules: dict, released: dict, path: Path, source: str) -> set:
+    """Refuse a net of module `name` with two drivers unless all of them can release it; return the
+    module's port bits that a tri-state driver drives (what its instances' outputs may release)."""
+    mod = modules[name]
+    nets, drivers, written = _Nets(), [], defaultdict(int)
+    for wire, (width, _, _, direction, src) in mod.wires.items():
+        if direction == "input":
+            drivers += [((wire, i), ("input", wire, i), None, False) for i in range(width)]
+    for ctype, cname, conns, src in mod.cells:
+        outputs = _outputs(ctype, modules)
+        for port, bits in conns.items():
+            if port in outputs:
+                drivers += [(b, (cname, port, k), src, _releases(ctype, conns, port, k, released))
+                            for k, b in enumerate(bits) if b[0]]
+    for lhs, rhs in mod.connects:
+        for a, b in zip(lhs, rhs):
+            if a[0] and b[0]:
+                nets.union(a, b)
+                written[a] += 1
+            elif a[0] or b[0]:                      # a wire tied to a constant
+                value = (b if a[0] else a)[1]
+                drivers.append((a if a[0] else b, ("const", value), None, value == "z"))
+    by_net, tristate = defaultdict(dict), defaultdict(lambda: True)
+    for bit, who, src, releases in drivers:
+        written[bit] += 1
+        by_net[nets.find(bit)].setdefault(who, src)
+        tristate[nets.find(bit)] &= releases
+    for net, who in by_net.items():
+        if len(who) > 1 and not tristate[net]:
+            _refuse_drivers(name, mod, nets, net, who, written, path, source)
+    return {b for b in (*nets.parent, *(d[0] for d in drivers))
+            if mod.wires.get(b[0], (0, 0, 0, None))[3] == "output" and nets.find(b) in by_net
+            and tristate[nets.find(b)]}
+
+
+_TRISTATE_CELLS = {"$mux": ("\\A", "\\B"), "$pmux": ("\\A", "\\B"), "$_MUX_": ("\\A", "\\B")}
+
+
+def _releases(ctype: str, conns: dict, port: str, k: int, released: dict) -> bool:
+    """Whether output bit k of a cell can leave its net undriven ('z'): a $tribuf, a multiplexer with a 'z'
+    among the values it selects for that bit, or a submodule whose output bit is such a driver."""
+    if ctype in ("$tribuf", "$_TBUF_"):
+        return True
+    if ctype in _TRISTATE_CELLS:
+        width = len(conns.get("\\Y", [])) or 1
+        data = [b for p in _TRISTATE_CELLS[ctype] for i, b in enumerate(conns.get(p, [])) if i % width == k]
+        return ("", "z") in data
+    return (port, k) in released.get(_name(ctype), ())
 
 
 def _refuse_drivers(module: str, mod: _Module, nets: _Nets, net, who: dict, written: dict, path: Path,

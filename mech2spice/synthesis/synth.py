@@ -21,7 +21,9 @@ Yosys's bit order; for an ascending range such as ``[0:3]`` that is HDL index ``
 Documented choices: Yosys's ``x`` constants become 0 (any value is a valid refinement of "don't
 care"), but a net that nothing drives is refused; a register's power-up value comes from its declaration
 initialiser or a constant `initial` assignment (docs/rtl.md, "programming by initial conditions"); constant
-nodes are not subject to the fan-out limit (they are the mechanical ground/bias, not a driven signal).
+nodes are not subject to the fan-out limit (they are the mechanical ground/bias, not a driven signal).  Memories
+map to latches and multiplexers; a tri-state bus becomes a multiplexer, its released and contended states
+don't-cares; a top-level inout is refused (docs/rtl.md).
 """
 
 from __future__ import annotations
@@ -250,9 +252,9 @@ def _flow(source: str, top: str | None) -> str:
         "tee -q -o init.txt select -list a:init",   # declaration initialisers (`reg q = 1`)
         "tee -q -o check.txt check",                # undriven nets, before synth folds them to constants
         "flatten",
-        "tribuf",                                   # z-drivers -> $tribuf cells we can spot
-        "tee -q -o tristate.txt select -list t:$tribuf",
-        "synth -flatten" + (f" -top {top}" if top else ""),
+        "tribuf -formal",                           # tri-state buses -> multiplexers (docs/rtl.md) ...
+        "delete n:$tribuf_conflict*",               # ... less its no-two-drivers checks: Icarus co-simulates
+        "synth -flatten" + (f" -top {top}" if top else ""),   # (memories: `memory` + `memory_map` in it)
         "dffunmap",                                 # enables/resets -> plain flip-flops + logic
         "abc -g NOR", "opt_clean",
         "abc -g NOR", "opt_clean",                  # a 2nd pass trims e.g. comparator4 39 -> 36
@@ -345,10 +347,6 @@ def _yosys_run(path: Path, top: str | None) -> tuple[str, dict]:
                                   else f"yosys error: {path}: {msg}")
         refusals.check(Path(tmp), path, _read_source(path), top)
         _check_drivers(Path(tmp), path)
-        tristate = (Path(tmp) / "tristate.txt").read_text().split()
-        if tristate:
-            raise Mech2SpiceError(f"{path}: tri-state ('z') drivers are not supported "
-                                  f"({_src_of(tristate[0], rel, path)})")
         out = Path(tmp) / "netlist.json"
         if not out.exists():
             raise Mech2SpiceError(f"yosys wrote no netlist for {path} (its run stopped early)")
@@ -370,10 +368,6 @@ def _check_drivers(tmp: Path, path: Path) -> None:
                                   "(it would silently read as 0): assign it a value")
 
 
-def _src_of(cell: str, rel: str, path: Path) -> str:
-    """Turn Yosys's 'mod/$ternary$FILE:LINE$7' into 'line LINE', else the raw cell name."""
-    m = re.search(r":(\d+)\$\d+$", cell)
-    return f"line {m.group(1)}" if m else cell.replace(rel, str(path))
 
 
 def _pick_top(modules: dict, top: str | None, path: Path) -> tuple[str, dict]:
@@ -440,6 +434,7 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
 def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
     """Build the raw (pre-hygiene) graph from a Yosys JSON module (`path`: its Verilog, for messages)."""
     g = nx.DiGraph()
+    _refuse_inout(top, module, path)
     inputs, outputs, driver = _add_inputs(g, top, module)
     if not outputs:
         raise Mech2SpiceError(f"module {top} has no output ports: nothing to synthesize")
@@ -458,6 +453,10 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
         for i, bit in enumerate(bits):
             if not isinstance(bit, str) and bit not in driver:      # 'x' is a chosen don't-care: 0
                 raise Mech2SpiceError(f"module {top}: output {port}[{i}] is not driven by anything: assign it")
+            if bit == "z":
+                raise Mech2SpiceError(f"{_port_where(module, port, path, top)}: output {port}[{i}] is tied to "
+                                      "'z' (released, with no enable that ever drives it): a mechanical output "
+                                      "always carries an amplitude; assign it a value")
             node = f"{port}[{i}]"
             g.add_node(node, kind="output", port=port, bit=i)
             g.add_edge(_source(g, bit, driver, top), node)
@@ -562,11 +561,27 @@ def _ports(module: dict, direction: str):
             if info["direction"] == direction]
 
 
+def _refuse_inout(top: str, module: dict, path: Path | None) -> None:
+    """A top-level inout port, with its line: it would be an input and an output on one wire."""
+    bad = [p for p, info in module["ports"].items() if info["direction"] not in ("input", "output")]
+    if not bad:
+        return
+    port = bad[0]
+    raise Mech2SpiceError(f"{_port_where(module, port, path, top)}: inout port '{port}' of the top module {top}: a mechanical port is either "
+                          "driven from outside (an input's drive) or read from a gate (an output's amplitude), "
+                          f"never both on one wire; declare it as an input ({port}_in) and two outputs "
+                          f"(the value {port}_out and its enable {port}_oe)")
+
+
+def _port_where(module: dict, port: str, path: Path | None, top: str) -> str:
+    """'FILE, line N' of a port's declaration (from its netname's src attribute), else what is known."""
+    src = module.get("netnames", {}).get(port, {}).get("attributes", {}).get("src")
+    line = path and refusals.src_line(src, path)
+    return f"{path}, line {line}" if line else str(path or f"module {top}")
+
+
 def _add_inputs(g: nx.DiGraph, top: str, module: dict):
     """Input nodes; port widths in declaration order; net id -> driving node."""
-    bad = [p for p, info in module["ports"].items() if info["direction"] not in ("input", "output")]
-    if bad:
-        raise Mech2SpiceError(f"module {top}: inout port '{bad[0]}' is not supported")
     driver: dict[int, str] = {}
     for port, bits in _ports(module, "input"):
         for i, bit in enumerate(bits):
@@ -619,7 +634,8 @@ def _net_names(module: dict) -> dict:
 def _source(g: nx.DiGraph, bit, driver: dict, top: str) -> str:
     """The node driving a JSON bit: a net id or one of the constants '0', '1', 'x', 'z'."""
     if bit == "z":
-        raise Mech2SpiceError(f"module {top}: tri-state ('z') drivers are not supported")
+        raise Mech2SpiceError(f"module {top}: a net is tied to 'z' (released, with no enable that ever drives "
+                              "it): a mechanical net always carries an amplitude; assign it a value")
     if bit == "1":
         return _const(g, 1)
     return driver.get(bit) or _const(g, 0)     # '0', 'x' and undriven nets read as 0

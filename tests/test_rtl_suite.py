@@ -1,0 +1,79 @@
+"""scripts/rtl_suite.py on a small manifest of its own: a row per design (accepted and verified, refused
+with its class, a step out of time), the cache that makes a rerun free, the table it writes."""
+import importlib.util
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.skipif(not (shutil.which("iverilog") and shutil.which("vvp")),
+                                reason="Icarus Verilog (iverilog, vvp) is not installed")
+
+DESIGNS = {
+    "bus": "module bus(input s, input [1:0] a, input [1:0] b, output [1:0] y);\n  wire [1:0] w;\n"
+           "  assign w = s ? a : 2'bz;\n  assign w = s ? 2'bz : b;\n  assign y = w;\nendmodule\n",
+    "pad": "module pad(input a, input en,\n  inout p,\n  output y);\n  assign p = en ? a : 1'bz;\n"
+           "  assign y = p;\nendmodule\n",
+}
+
+
+def _suite():
+    spec = importlib.util.spec_from_file_location("rtl_suite", ROOT / "scripts" / "rtl_suite.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture
+def bench(tmp_path, monkeypatch):
+    rtl = tmp_path / "bench" / "rtl"
+    designs = []
+    for name, text in DESIGNS.items():
+        (rtl / name).mkdir(parents=True)
+        (rtl / name / f"{name}.v").write_text(text)
+        designs.append({"name": name, "file": f"{name}/{name}.v", "top": name, "repo": "test", "paths": []})
+    (rtl / "manifest.json").write_text(json.dumps({"designs": designs}))
+    monkeypatch.setenv("MECH2SPICE_BENCHMARKS", str(tmp_path / "bench"))
+    return tmp_path
+
+
+def _run(suite, tmp, *argv):
+    assert suite.main(["--out", str(tmp / "out"), "--cache", str(tmp / "cache"), "--envelope-gates", "0",
+                       *argv]) == 0
+    return json.loads((tmp / "out" / "rtl_suite.json").read_text())
+
+
+def test_one_row_per_design_with_its_verdict_or_refusal(bench, monkeypatch):
+    suite = _suite()
+    table = _run(suite, bench)
+    rows = {r["name"]: r for r in table["rows"]}
+    assert rows["bus"]["accepted"] and rows["bus"]["verify"]["verdict"] == "pass"
+    assert rows["bus"]["verify"]["equivalence"] == "proved" and rows["bus"]["envelope"]["verdict"] == "skipped"
+    assert not rows["pad"]["accepted"] and "line 2: inout port 'p'" in rows["pad"]["refusal"]
+    assert table["summary"]["refusal_classes"] == {"inout port": ["pad"]}
+    assert table["summary"]["verify_pass"] == 1
+    md = (bench / "out" / "rtl_suite.md").read_text()
+    assert "$MECH2SPICE_BENCHMARKS/rtl/pad/pad.v, line 2" in md and str(bench) not in md
+
+    def no_run(*_):
+        raise AssertionError("a cached design was measured again")
+    monkeypatch.setattr(suite, "_cli", no_run)
+    assert _run(suite, bench)["rows"] == table["rows"]
+
+
+def test_a_step_out_of_time_is_a_row_not_a_stop(bench):
+    table = _run(_suite(), bench, "--timeout", "0.01", "--only", "bus")
+    (row,) = [r for r in table["rows"] if r["name"] == "bus"]
+    assert not row["accepted"] and row["refusal"].startswith("no result within")
+    assert table["summary"]["refusal_classes"] == {"timeout": ["bus"]}
+
+
+def test_a_cache_entry_that_is_not_a_row_is_measured_again(bench):
+    suite = _suite()
+    _run(suite, bench, "--only", "pad")
+    (entry,) = (bench / "cache").glob("pad-*.json")
+    entry.write_text(json.dumps({"name": "pad", "accepted": True}))
+    (row,) = _run(suite, bench, "--only", "pad")["rows"]
+    assert not row["accepted"] and "inout port 'p'" in row["refusal"]

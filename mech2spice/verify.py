@@ -23,6 +23,7 @@ from xml.sax.saxutils import quoteattr, escape
 
 import numpy as np
 
+from . import identifiers as ids
 from .errors import Mech2SpiceError, ToolMissingError
 from .synthesis import yosys
 from .synthesis.ports import input_bits, output_bits
@@ -41,47 +42,64 @@ PREFIX = "m2s__"              # internal net names of the written-back network
 
 # --------------------------------------------------------------------------- the network as Verilog
 
-def _ident(node: str) -> str:
-    """A netlist node as a Verilog expression: port bits stay `p[i]`, gates/latches get a prefix."""
+def _expr(netlist: Netlist, node: str, rename: dict[str, str] | None = None) -> str:
+    """A netlist node as a Verilog expression: a port bit as the port's (escaped) name, gates and latches
+    prefixed (`m2s__g3`; no port may start with the prefix, `check_names`)."""
     if node == "const0":
         return "1'b0"
     if node == "const1":
         return "1'b1"
-    return node if "[" in node else PREFIX + node
+    attrs = netlist.graph.nodes[node]
+    if attrs["kind"] == "input":
+        port = attrs["port"]
+        return ids.verilog_bit((rename or {}).get(port, port), attrs["bit"], netlist.inputs[port])
+    return PREFIX + node
 
 
 def _decl(width: int) -> str:
     return f"[{width - 1}:0] " if width > 1 else ""
 
 
-def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] = ()) -> str:
+def check_names(netlist: Netlist) -> None:
+    """Refuse, before any work, a design whose names the generated Verilog cannot hold: a name that cannot
+    be written (ids.verilog), or a port whose name starts with the prefix of the generated ones."""
+    for name in [netlist.top, *netlist.inputs, *netlist.outputs, *([netlist.clock] if netlist.clock else [])]:
+        ids.verilog(name)
+        if name.startswith(PREFIX):
+            raise Mech2SpiceError(f"{netlist.top}: the name {name!r} starts with {PREFIX!r}, which verify "
+                                  "keeps for the names it generates: rename it")
+
+
+def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] = (),
+                  rename: dict[str, str] | None = None) -> str:
     """The netlist as structural Verilog: one `assign` per NOR, one posedge register per latch (starting
     wherever the simulator starts it; the proofs fix it at 0 like the logic backend).  `expose`: (port name,
-    latch) pairs made extra 1-bit outputs, for the register-correspondence proof."""
+    latch) pairs made extra 1-bit outputs, for the register-correspondence proof; `rename`: port -> the name
+    it gets (the proof's, `proof_ports`).  Every user name is written by ids.verilog (escaped where it is
+    not a plain identifier)."""
     g = netlist.graph
-    ports = ([f"input {netlist.clock}"] if netlist.clock else []) \
-        + [f"input {_decl(w)}{p}" for p, w in netlist.inputs.items()] \
-        + [f"output {_decl(w)}{p}" for p, w in netlist.outputs.items()] \
+    rename = rename or {}
+
+    def v(name: str) -> str:
+        return ids.verilog(rename.get(name, name))
+    ports = ([f"input {v(netlist.clock)}"] if netlist.clock else []) \
+        + [f"input {_decl(w)}{v(p)}" for p, w in netlist.inputs.items()] \
+        + [f"output {_decl(w)}{v(p)}" for p, w in netlist.outputs.items()] \
         + [f"output {name}" for name, _ in expose]
-    lines = [f"module {module}({', '.join(ports)});"]
-    lines += [f"  reg {_ident(q)};" for q in netlist.latches()]
+    lines = [f"module {ids.verilog(module)}({', '.join(ports)});"]
+    lines += [f"  reg {_expr(netlist, q, rename)};" for q in netlist.latches()]
     for gate in netlist.gates():
-        a, b = (_ident(u) for u, _, _ in sorted(g.in_edges(gate, data="pin"), key=lambda e: e[2]))
-        lines.append(f"  wire {_ident(gate)} = ~({a} | {b});")
+        a, b = (_expr(netlist, u, rename) for u, _, _ in sorted(g.in_edges(gate, data="pin"), key=lambda e: e[2]))
+        lines.append(f"  wire {_expr(netlist, gate, rename)} = ~({a} | {b});")
     for q in netlist.latches():
         (d,) = g.predecessors(q)
-        lines.append(f"  always @(posedge {netlist.clock}) {_ident(q)} <= {_ident(d)};")
+        lines.append(f"  always @(posedge {v(netlist.clock)}) {_expr(netlist, q, rename)} <= {_expr(netlist, d, rename)};")
     for out in output_bits(netlist):
         (src,) = g.predecessors(out)
-        lines.append(f"  assign {_port_bit(netlist.outputs, out)} = {_ident(src)};")
-    lines += [f"  assign {name} = {_ident(q)};" for name, q in expose]
+        port, bit = g.nodes[out]["port"], g.nodes[out]["bit"]
+        lines.append(f"  assign {ids.verilog_bit(rename.get(port, port), bit, netlist.outputs[port])} = {_expr(netlist, src, rename)};")
+    lines += [f"  assign {name} = {_expr(netlist, q, rename)};" for name, q in expose]
     return "\n".join(lines + ["endmodule", ""])
-
-
-def _port_bit(widths: dict, bit: str) -> str:
-    """`p[i]` for a multi-bit port, `p` for a 1-bit one (declared without a range)."""
-    port = bit[:bit.rindex("[")]
-    return bit if widths[port] > 1 else port
 
 
 _NET = re.compile(r"([A-Za-z_][A-Za-z0-9_$.]*)(?:\[(\d+)\])?")
@@ -100,21 +118,44 @@ def register_names(netlist: Netlist) -> list[tuple[str, str, str]]:
 
 # --------------------------------------------------------------------------- equivalence (Yosys)
 
+def proof_ports(netlist: Netlist) -> dict[str, str]:
+    """Port -> its name inside the proof (`m2s__i0`, `m2s__o0`, `m2s__clk`): Yosys's `sat` parses port names
+    as signal expressions, where a name such as `,` or `{a}` is not one; the source keeps its own names
+    behind a wrapper (`_wrapper`)."""
+    names = {netlist.clock: f"{PREFIX}clk"} if netlist.clock else {}
+    names.update({p: f"{PREFIX}i{k}" for k, p in enumerate(netlist.inputs)})
+    names.update({p: f"{PREFIX}o{k}" for k, p in enumerate(netlist.outputs)})
+    return names
+
+
+def _wrapper(netlist: Netlist, names: dict[str, str], nregs: int) -> str:
+    """Module m2s__gold: the source (renamed m2s__src) behind the proof's port names, its exposed registers
+    passed through."""
+    widths = {netlist.clock: 1, **netlist.inputs} if netlist.clock else dict(netlist.inputs)
+    ports = [f"input {_decl(w)}{names[p]}" for p, w in widths.items()] \
+        + [f"output {_decl(w)}{names[p]}" for p, w in netlist.outputs.items()] \
+        + [f"output {PREFIX}r{k}" for k in range(nregs)]
+    conns = [f".{ids.verilog(p)}({names[p]})" for p in [*widths, *netlist.outputs]] \
+        + [f".{PREFIX}r{k}({PREFIX}r{k})" for k in range(nregs)]
+    return "\n".join([f"module {PREFIX}gold({', '.join(ports)});",
+                      f"  {PREFIX}src {PREFIX}u({', '.join(conns)});", "endmodule", ""])
+
+
 def _read_source(path: Path, rel: str, top: str) -> list[str]:
     read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
-    return [f'{read} "{rel}"', f"hierarchy -check -top {top}", "proc", "flatten", "opt_clean",
-            f"rename {top} {PREFIX}gold"]
+    return [f'{read} {ids.yosys_path(rel, "Verilog file")}', f"hierarchy -check -top {ids.yosys(top)}", "proc",
+            "flatten", "opt_clean", f"rename {ids.yosys(top)} {PREFIX}src"]
 
 
 def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
     """Read source and network, expose the matched registers on both, build the miter and prove it."""
     lines = _read_source(path, rel, netlist.top)
     if regs:
-        lines.append(f"cd {PREFIX}gold")
+        lines.append(f"cd {PREFIX}src")
         for k, (_, wire, bit) in enumerate(regs):
-            lines += [f"add -output {PREFIX}r{k} 1", f"connect -set {PREFIX}r{k} {wire}[{bit}]"]
+            lines += [f"add -output {PREFIX}r{k} 1", f"connect -set {PREFIX}r{k} {ids.yosys(wire)}[{bit}]"]
         lines.append("cd ..")
-    lines += ["read_verilog gate.v", "proc", "opt_clean",
+    lines += ["read_verilog wrap.v", "read_verilog gate.v", "proc", "opt_clean",
               f"miter -equiv -flatten -make_assert -ignore_gold_x {PREFIX}gold {PREFIX}gate {PREFIX}miter",
               f"hierarchy -top {PREFIX}miter", "opt_clean"]
     # Induction even for a combinational network: the source may keep registers that synthesis folded
@@ -163,7 +204,9 @@ def _prove(path: Path, netlist: Netlist, regs: list) -> dict:
     with tempfile.TemporaryDirectory(prefix="mech2spice_verify_") as tmp:
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
         expose = [(f"{PREFIX}r{k}", q) for k, (q, _, _) in enumerate(regs)]
-        (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", expose))
+        names = proof_ports(netlist)
+        (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", expose, names))
+        (Path(tmp) / "wrap.v").write_text(_wrapper(netlist, names, len(regs)))
         result = yosys.run_script(_script(path, rel, netlist, regs), tmp)
     return {"regs": regs, **_verdict(result, netlist, bool(regs))}
 
@@ -201,13 +244,14 @@ def _counterexample(log: str, netlist: Netlist) -> list[dict] | None:
     """The failing inputs from sat's -show-inputs table (the log after the FAIL line): [{"cycle": k, "inputs":
     {port: int}}], cycle 0 the first from the zero state, the outputs differing in the last one (after its
     cycle's predecessors' clock edges, with its inputs applied); a combinational design: one entry."""
+    port_of = {v: p for p, v in proof_ports(netlist).items()}
     rows: dict[int, dict] = {}
     for line in log.splitlines():
         m = _ROW.match(line)
-        if m:
+        if m and m.group(2) in port_of:
             step = int(m.group(1) or 1)
             value = int(m.group(5).replace("x", "0").replace("z", "0"), 2)
-            rows.setdefault(step, {})[m.group(2)] = value
+            rows.setdefault(step, {})[port_of[m.group(2)]] = value
     if not rows:
         return None
     out = []
@@ -234,39 +278,46 @@ def _icarus_tools() -> tuple[str, str]:
 def _testbench(netlist: Netlist, n: int, clocked: bool) -> str:
     """Apply vectors.txt (one line of input bits per vector / cycle, ports in declaration order with the
     first port leftmost) and $display the outputs.  Clocked: the inputs of cycle k are on before edge k;
-    one time unit after it cycle k+1's are applied and the outputs read, as simulation.run_clocked_logic."""
-    ins, outs = list(netlist.inputs), list(netlist.outputs)
+    one time unit after it cycle k+1's are applied and the outputs read, as simulation.run_clocked_logic.
+    Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has."""
+    v = ids.verilog
+    ins, outs = [v(p) for p in netlist.inputs], [v(p) for p in netlist.outputs]
     width = max(1, sum(netlist.inputs.values()))
+    mem, k = f"{PREFIX}mem", f"{PREFIX}k"
     lines = ["`timescale 1ns/1ns", f"module {PREFIX}tb;"]
-    lines += [f"  reg {_decl(w)}{p};" for p, w in netlist.inputs.items()]
-    lines += [f"  wire {_decl(w)}{p};" for p, w in netlist.outputs.items()]
+    lines += [f"  reg {_decl(w)}{v(p)};" for p, w in netlist.inputs.items()]
+    lines += [f"  wire {_decl(w)}{v(p)};" for p, w in netlist.outputs.items()]
     conns = [f".{p}({p})" for p in ins + outs]
+    clock = v(netlist.clock) if clocked else None
     if clocked:
-        lines.append(f"  reg {netlist.clock} = 0;")
-        conns.insert(0, f".{netlist.clock}({netlist.clock})")
-    lines += [f"  {netlist.top} dut({', '.join(conns)});",
-              f"  reg [{width - 1}:0] mem [0:{n - 1}];", "  integer k;"]
-    apply = f"{{{', '.join(ins)}}} = mem[%s];" if ins else ""
+        lines.append(f"  reg {clock} = 0;")
+        conns.insert(0, f".{clock}({clock})")
+    lines += [f"  {v(netlist.top)} {PREFIX}dut({', '.join(conns)});",
+              f"  reg [{width - 1}:0] {mem} [0:{n - 1}];", f"  integer {k};"]
+    def apply(index: str) -> str:                  # a function, not `%`: a name may hold a `%`
+        return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
     show = '$display("' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
-    lines += ["  initial begin", '    $readmemb("vectors.txt", mem);']
+    lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if clocked:
-        lines += [f"    {apply % '0'}", f"    for (k = 0; k < {n}; k = k + 1) begin",
-                  f"      #5 {netlist.clock} = 1;",
-                  f"      #1 {apply % f'(k + 1 < {n} ? k + 1 : k)'}",
-                  f"      #1 {show}", f"      #3 {netlist.clock} = 0;", "    end"]
+        lines += [f"    {apply('0')}", f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
+                  f"      #5 {clock} = 1;",
+                  f"      #1 {apply(f'{k} + 1 < {n} ? {k} + 1 : {k}')}",
+                  f"      #1 {show}", f"      #3 {clock} = 0;", "    end"]
     else:
-        lines += [f"    for (k = 0; k < {n}; k = k + 1) begin",
-                  f"      {apply % 'k'}", f"      #1 {show}", "    end"]
+        lines += [f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
+                  f"      {apply(k)}", f"      #1 {show}", "    end"]
     return "\n".join(lines + ["    $finish;", "  end", "endmodule", ""])
 
 
 COERCED = re.compile(r"output port (\S+) is coerced to inout")   # iverilog: the source never drives it
 
 
-def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings: list | None = None) -> list[dict[str, str]]:
+def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings: list | None = None,
+           info: dict | None = None) -> list[dict[str, str]]:
     """Run the source on Icarus: per vector (or cycle), output bit -> '0', '1', 'x' or 'z'.  `warnings`, if
     given, receives iverilog's lines on output ports it coerced to inout: ports the source never drives
-    (an `assign internal = port` written backwards), which read z on Icarus while Yosys joins the two nets."""
+    (an `assign internal = port` written backwards), which read z on Icarus while Yosys joins the two nets;
+    `info`, if given, the generation iverilog compiled with (`generations`)."""
     iverilog, vvp = _icarus_tools()
     path = Path(path).resolve()
     order = input_bits(netlist)
@@ -274,10 +325,10 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
         tb = Path(tmp) / "tb.v"
         tb.write_text(_testbench(netlist, len(vectors), clocked))
         (Path(tmp) / "vectors.txt").write_text("".join(_vector_line(netlist, order, v) for v in vectors))
-        std = ["-g2012"] if path.suffix == ".sv" else ["-g2005"]
-        cmd = [iverilog, *std, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), str(path), "tb.v"]
-        built = _run_tool(cmd, tmp, "iverilog")
+        built, gen = _compile(iverilog, path, tmp)
         out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout
+    if info is not None:
+        info["icarus_generation"] = gen
     if warnings is not None:
         warnings += sorted({f"output port {m.group(1)} is coerced to inout (iverilog): the source never drives it"
                             for m in COERCED.finditer(built.stderr)})
@@ -286,6 +337,26 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
     if len(rows) != len(vectors):
         raise Mech2SpiceError(f"Icarus printed {len(rows)} result lines for {len(vectors)} vectors")
     return [_bits_of(netlist, r) for r in rows]
+
+
+def generations(path: Path) -> tuple[str, ...]:
+    """The language generations iverilog tries on a source, in order: SystemVerilog for `.sv`; Verilog-2005
+    for `.v` (where `logic` or `bit` may still be a name), then SystemVerilog (`.v` files written with SV
+    constructs, e.g. `[size]` dimensions or `always_ff`)."""
+    return ("-g2012",) if path.suffix == ".sv" else ("-g2005", "-g2012")
+
+
+def _compile(iverilog: str, path: Path, tmp: str) -> tuple[subprocess.CompletedProcess, str]:
+    """Compile source + tb.v into sim.vvp with the first generation that takes the source (the run, the
+    generation); a source no generation compiles is refused with the first one's error."""
+    first = None
+    for gen in generations(path):
+        cmd = [iverilog, gen, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), str(path), "tb.v"]
+        try:
+            return _run_tool(cmd, tmp, f"iverilog {gen}"), gen
+        except Mech2SpiceError as err:
+            first = first or err
+    raise first
 
 
 def _vector_line(netlist: Netlist, order: list[str], v) -> str:
@@ -436,14 +507,14 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
         if physical and not exhaustive and len(x) > n:
             x = x[np.random.default_rng(seed).permutation(len(x))[:n]]
             complete = False
-    warnings = []
-    ref = icarus(path, netlist, x, clocked, warnings)
+    warnings, info = [], {}
+    ref = icarus(path, netlist, x, clocked, warnings, info)
     got = run_backend(netlist, x, clocked, backend, params, progress)
     mismatches = compare(netlist, x, ref, got, clocked, None if params is None else params.levels)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
            "undefined_bits": sum(v in "xX" for r in ref for v in r.values()),
-           "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings}
+           "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings, **info}
     if clocked:
         out["reset"] = None if rst is None else {"port": rst[0], "level": rst[1]}
     if physical:
@@ -464,6 +535,7 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
     from .synthesis.synth import synthesize
     log = log or (lambda msg: None)
     nl = netlist if netlist is not None else synthesize(path, top=top)
+    check_names(nl)
     out = {"design": str(path), "top": nl.top, "clocked": nl.clock is not None,
            "gates": len(nl.gates()), "latches": len(nl.latches())}
     if equivalence_check:

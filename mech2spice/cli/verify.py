@@ -6,7 +6,7 @@ from pathlib import Path
 from .. import inputs
 from ..backends import BACKENDS
 from ..errors import Mech2SpiceError
-from ..verify import exit_code, junit_xml, reset_port, text, verify
+from ..verify import check_names, exit_code, junit_xml, reset_port, text, verify
 
 
 def add_parser(subparsers) -> None:
@@ -50,6 +50,7 @@ def cmd_verify(args) -> int:
     if not Path(args.design).is_file():
         raise Mech2SpiceError(f"cannot read Verilog file {args.design}: no such file")
     nl = synthesize(args.design, top=args.top)
+    check_names(nl)                                # every name the generated Verilog holds, before the work
     if nl.clock is None and args.cycles:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --cycles applies to clocked designs (use --vectors)")
     if nl.clock is not None and (args.vectors or args.exhaustive):

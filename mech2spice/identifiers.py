@@ -91,14 +91,16 @@ def yosys(name: str) -> str:
     """`name` as one argument of a Yosys script command naming a module, wire or cell: unchanged when plain,
     else `\\name` (Yosys's own escape, which its tokenizer reads as one word: a word starting with `\\`
     is never a comment `#`, a shell `!` or a quoted string).  Refused: blanks, non-printable characters
-    (they split or end the word) and a trailing `;` (it would end the command)."""
+    (they split or end the word), a trailing `;` (it would end the command) and a trailing backslash (it
+    would join the next line to this one)."""
     if _YOSYS_PLAIN.fullmatch(name or ""):
         return name
     name = _graphic(name, "Yosys name")
-    if name.endswith(";"):
-        raise Mech2SpiceError(f"Yosys name {_shown(name)} ends in ';', which ends a Yosys command: "
-                              "it cannot be written into a Yosys script")
-    return "\\" + name
+    internal = name.startswith("$")          # Yosys's own name (`$\mem$rdreg[0]$q`): no Verilog name starts so
+    if name.endswith((";", "\\")):
+        raise Mech2SpiceError(f"Yosys name {_shown(name)} ends in {name[-1]!r}, which ends a Yosys command or "
+                              "continues its line: it cannot be written into a Yosys script")
+    return name if internal else "\\" + name
 
 
 def yosys_path(path: str, what: str = "file") -> str:

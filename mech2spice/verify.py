@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from .synthesis.synth import Netlist
 
 INDUCTION_STEPS = 20          # sat -tempinduct -maxsteps: base case (BMC) and induction depth
+PROOF_BUDGET_S = 120          # default wall-clock budget of the whole proof (--proof-time)
 MAX_EXHAUSTIVE_BITS = 20      # --exhaustive refuses wider inputs (2^20 vectors)
 ICARUS_TIMEOUT_S = 600
 RESET_HIGH = ("rst", "reset")
@@ -102,18 +103,28 @@ def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] =
     return "\n".join(lines + ["endmodule", ""])
 
 
-_NET = re.compile(r"([A-Za-z_][A-Za-z0-9_$.]*)(?:\[(\d+)\])?")
+_NET = re.compile(r"(.+?)(?:\[(\d+)\])?")      # a wire (a user's, or Yosys's `$...` that both sides have), its bit
 
 
 def register_names(netlist: Netlist) -> list[tuple[str, str, str]]:
     """(latch, source wire, bit) for every latch whose Q net kept a user name: the source's register it
-    implements, to be exposed on both sides of the miter so that induction sees the hidden state."""
+    implements (a memory word too: `mem[7][0]` is bit 0 of the word `mem[7]` that the proof's `memory`
+    pass makes), to be exposed on both sides of the miter so that induction sees the hidden state.  A name
+    a Yosys script cannot hold (ids.yosys) is not matched."""
     out = []
     for q in netlist.latches():
         m = _NET.fullmatch(netlist.graph.nodes[q].get("net", "$"))
-        if m:
+        if m and _yosys_writable(m.group(1)):
             out.append((q, m.group(1), m.group(2) or "0"))
     return out
+
+
+def _yosys_writable(name: str) -> bool:
+    try:
+        ids.yosys(name)
+    except Mech2SpiceError:
+        return False
+    return True
 
 
 # --------------------------------------------------------------------------- equivalence (Yosys)
@@ -143,11 +154,23 @@ def _wrapper(netlist: Netlist, names: dict[str, str], nregs: int) -> str:
 
 def _read_source(path: Path, rel: str, top: str) -> list[str]:
     read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
-    return [f'{read} {ids.yosys_path(rel, "Verilog file")}', f"hierarchy -check -top {ids.yosys(top)}", "proc",
-            "flatten", "opt_clean", f"rename {ids.yosys(top)} {PREFIX}src"]
+    # `memory`: the source's memories as flip-flops and multiplexers, as synthesis maps them (sat has no
+    # model for $mem cells); its memory_dff folds a read register into the port only as synthesis does.
+    return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), "proc",
+            "flatten", "memory", "opt_clean", f"rename -top {PREFIX}src"]
 
 
-def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
+def _hierarchy(top: str) -> str:
+    """Yosys's `hierarchy` selecting the top module: by name, or, for a name a Yosys script cannot hold
+    (ids.yosys), by the rule synthesis found it with (-auto-top; a --top is always a plain name)."""
+    try:
+        return f"hierarchy -check -top {ids.yosys(top)}"
+    except Mech2SpiceError:
+        return "hierarchy -check -auto-top"
+
+
+def _script(path: Path, rel: str, netlist: Netlist, regs: list, resets=(), mode: str = "induct",
+            steps: int = INDUCTION_STEPS) -> str:
     """Read source and network, expose the matched registers on both, build the miter and prove it."""
     lines = _read_source(path, rel, netlist.top)
     if regs:
@@ -163,76 +186,172 @@ def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
     # -enable_undef: without it sat reads the miter's `x` as 0, so -ignore_gold_x's `gold === x` becomes
     # `~gold` and each output check only "gold 1 => gate 1" (a stuck-at-1 output passed).  Inputs and the
     # start state are defined; the induction step's state may hold x (a source register assigned x).
-    lines.append(f"sat -verify -prove-asserts -tempinduct -enable_undef -set-def-inputs "
-                 f"-set-init-zero -maxsteps {INDUCTION_STEPS} -show-inputs {PREFIX}miter")
+    # The base case applies the resets in its first cycle (-set-at 1, which sat leaves out of the induction
+    # step): both sides leave the all-zero start through the state the source's reset defines, whatever
+    # encoding synthesis chose for it.  -tempinduct-def: the induction step starts from defined registers
+    # (a source register holding x stands for one of its refinements, the one synthesis implements).
+    names = proof_ports(netlist)
+    at = "".join(f" -set-at 1 in_{names[r['port']]} {r['level']}" for r in resets)
+    # The base case is a bounded check (-seq): with -tempinduct-baseonly, sat 0.70 applied -set-at in every
+    # cycle, so a reset held forever hid a broken counter (tests/test_verify.py, the broken counter4).
+    half = (f"-tempinduct -tempinduct-inductonly -tempinduct-def -maxsteps {steps}" if mode == "induct" else
+            f"-seq {steps} -set-init-zero{at}")
+    lines.append(f"sat -prove-asserts {half} -enable_undef -set-def-inputs -show-inputs {PREFIX}miter")
     return "\n".join(lines + [""])
 
 
-def equivalence(path, netlist: Netlist) -> dict:
-    """Prove the network equal to the source: {status: proved | counterexample | unknown, method,
-    counterexample (input ports per cycle) or None, detail, wall_s}."""
+def equivalence(path, netlist: Netlist, budget_s: float = PROOF_BUDGET_S, resets: list[dict] = ()) -> dict:
+    """Prove the network equal to the source within `budget_s` seconds: {status: proved | counterexample |
+    unknown, method, counterexample (input ports per cycle) or None, detail, depth (cycles from the start
+    the base case covered), budget_s, wall_s}."""
     t0 = time.time()
     sequential = bool(netlist.latches())
     regs = register_names(netlist) if sequential else []
-    res = _prove(Path(path), netlist, regs)
-    if regs and res["status"] != "proved":
-        # The strengthened miter also compares the matched registers: a failure there may be a wrong
-        # match, not a wrong output; only the plain miter's verdict stands.
-        res = _prove(Path(path), netlist, [])
+    res = _prove(Path(path), netlist, regs, budget_s, resets)
+    if res["cex"]:
+        res = _replayed(path, netlist, res)
+    left = budget_s - (time.time() - t0)
+    if regs and res["status"] not in ("proved", "counterexample") and left > 1:
+        # The strengthened miter also compares the matched registers: a failure there may be a wrong match,
+        # not a wrong output.  A counterexample its replay confirms stands; otherwise the plain miter decides.
+        plain = _prove(Path(path), netlist, [], left, resets)
+        res = _replayed(path, netlist, plain) if plain["cex"] else plain
     n = len(res["regs"])
     matched = f", {n} matched register{'s' * (n != 1)}" if n else ""
-    method = (f"yosys miter + sat -tempinduct from the all-zero state (depth <= {INDUCTION_STEPS}{matched})"
-              if sequential else "yosys miter + sat (all input vectors; -tempinduct, closing at step 1)")
-    if res["cex"] and "cycle" not in res["cex"][0]:
-        _explain(path, netlist, res["cex"][0])
-    return {"status": res["status"], "method": method, "counterexample": res["cex"], "detail": res["detail"],
-            "wall_s": time.time() - t0}
+    reset = ", ".join(f"{r['port']}={r['level']}" for r in resets)
+    start = f"the all-zero state, reset {reset} in cycle 0" if resets else "the all-zero state"
+    method = (f"yosys miter: sat induction step (length <= {INDUCTION_STEPS}{matched}) + bounded check from "
+              f"{start} (sat -seq); budget {budget_s:.0f} s" if sequential else
+              f"yosys miter + sat (all input vectors: induction step and one-cycle check); budget {budget_s:.0f} s")
+    out = {"status": res["status"], "method": method, "counterexample": res["cex"], "detail": res["detail"],
+           "depth": res["depth"], "budget_s": budget_s, "wall_s": time.time() - t0}
+    if "replay" in res:
+        out["replay"] = res["replay"]
+    return out
 
 
-def _explain(path, netlist: Netlist, step: dict) -> None:
-    """Add what the source (on Icarus) and the network (logic) output on a combinational counterexample."""
-    from .backends.logic import evaluate
+def replay(path, netlist: Netlist, cex: list[dict]) -> dict:
+    """Run a counterexample's inputs on the network (logic backend, latches from 0) and on the source (Icarus,
+    registers from x, as a simulator starts them), cycle k before clock edge k: {reproduced, cycle (the first
+    where a bit the source defines differs, or None), bits (those bits), source, network (every output port
+    there, MSB first)}.  Where the source reads x on every differing bit the proof's all-zero start was
+    the difference, not the mapping."""
+    from .backends.logic import ClockedLogic, evaluate_bits
     from .synthesis.ports import pack_inputs
-    bits = pack_inputs(netlist, step["inputs"])
-    ref = icarus(path, netlist, np.array([[bits[b] for b in input_bits(netlist)]], bool), clocked=False)[0]
-    step["source"] = {p: "".join(ref[f"{p}[{i}]"] for i in reversed(range(w))) for p, w in netlist.outputs.items()}
-    step["network"] = {p: format(v % (1 << netlist.outputs[p]), f"0{netlist.outputs[p]}b")
-                       for p, v in evaluate(netlist, step["inputs"]).items()}
+    order = input_bits(netlist)
+    x = np.array([[pack_inputs(netlist, step["inputs"])[b] for b in order] for step in cex], bool)
+    clocked = netlist.clock is not None
+    ref = icarus(path, netlist, x, clocked, first_read=True)
+    net, sim = [], ClockedLogic(netlist) if clocked else None
+    for step in cex:
+        net.append(sim.evaluate_bits(step["inputs"]) if clocked else evaluate_bits(netlist, step["inputs"]))
+        if clocked:
+            sim.tick(step["inputs"])
+    first, bits = None, []
+    for k, (r, g) in enumerate(zip(ref, net)):
+        bits = [b for b in output_bits(netlist) if r[b] in "01" and int(r[b]) != g[b]]
+        if bits:
+            first = k
+            break
+    at = first if first is not None else len(cex) - 1
+    return {"reproduced": first is not None, "cycle": first, "bits": bits,
+            "source": {p: "".join(ref[at][f"{p}[{i}]"] for i in reversed(range(w))) for p, w in netlist.outputs.items()},
+            "network": {p: "".join(str(net[at][f"{p}[{i}]"]) for i in reversed(range(w)))
+                        for p, w in netlist.outputs.items()}}
 
 
-def _prove(path: Path, netlist: Netlist, regs: list) -> dict:
+def _replayed(path, netlist: Netlist, res: dict) -> dict:
+    """A counterexample stands only when its replay shows the source and the network differing: cut to the
+    first such cycle; otherwise the status is `unknown`, saying so."""
+    rep = replay(path, netlist, res["cex"])
+    if rep["reproduced"]:
+        cex = res["cex"][:rep["cycle"] + 1]
+        cex[-1].update(source=rep["source"], network=rep["network"])
+        edges = f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else ""
+        return {**res, "cex": cex, "replay": rep, "depth": len(cex),
+                "detail": f"the outputs differ on this input{edges}; replayed: Icarus and the network (logic "
+                          f"backend) differ on {', '.join(rep['bits'])}"}
+    return {**res, "status": "unknown", "replay": rep,
+            "detail": f"the proof found inputs on which the outputs differ from its all-zero start, but replayed "
+                      f"from power-up the source (Icarus) and the network (logic backend) do not differ on any "
+                      f"bit the source defines (source {rep['source']}, network {rep['network']}): the start "
+                      f"state, not the mapping, made the difference; give the reset with --reset PORT=LEVEL"}
+
+
+def _run_yosys(script: str, workdir: str, budget_s: float) -> tuple[yosys.YosysResult, bool]:
+    """Run the proof's script with a wall-clock budget: (the run, whether the budget ran out).  Cut short,
+    the run keeps the log it wrote so far, which says how deep the proof got."""
+    (Path(workdir) / "flow.ys").write_text(script)
+    try:
+        proc = subprocess.run([*yosys.yosys_command(), "-s", "flow.ys"], cwd=workdir, capture_output=True,
+                              text=True, timeout=max(1.0, budget_s))
+    except subprocess.TimeoutExpired as cut:
+        return yosys.YosysResult(-1, _text(cut.stdout), _text(cut.stderr)), True
+    return yosys.YosysResult(proc.returncode, proc.stdout, proc.stderr), False
+
+
+def _text(out) -> str:
+    return out.decode(errors="replace") if isinstance(out, bytes) else (out or "")
+
+
+def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUDGET_S, resets=()) -> dict:
+    """The two halves of the temporal induction as two sat runs: the induction step alone (no start state,
+    no reset: the length k at which it closes), then the base case from the start (all-zero, the resets
+    asserted in its first cycle) for k cycles, or for INDUCTION_STEPS when the step did not close (a bounded
+    search for a counterexample).  Split because sat applies -set-at to the induction step too, where a
+    reset would make every step trivially safe."""
+    t0 = time.time()
     with tempfile.TemporaryDirectory(prefix="mech2spice_verify_") as tmp:
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
         expose = [(f"{PREFIX}r{k}", q) for k, (q, _, _) in enumerate(regs)]
         names = proof_ports(netlist)
         (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", expose, names))
         (Path(tmp) / "wrap.v").write_text(_wrapper(netlist, names, len(regs)))
-        result = yosys.run_script(_script(path, rel, netlist, regs), tmp)
-    return {"regs": regs, **_verdict(result, netlist, bool(regs))}
+        step, cut = _run_yosys(_script(path, rel, netlist, regs, resets, "induct"), tmp, budget_s)
+        closed = not cut and _PROVED.search(step.stdout) is not None
+        tried = max(map(int, _TRYING.findall(step.stdout)), default=0)
+        if not cut and not closed and not _GAVE_UP.search(step.stdout):
+            return {"regs": regs, "depth": 0, **_failed_run(step, bool(regs))}
+        left = budget_s - (time.time() - t0)
+        steps = tried if closed else INDUCTION_STEPS
+        steps = max(steps, 1)
+        base, cut = _run_yosys(_script(path, rel, netlist, regs, resets, "base", steps), tmp, left) \
+            if left > 1 else (yosys.YosysResult(-1, "", ""), True)
+    depth = steps if _PROVED.search(base.stdout) else 0
+    if cut:
+        return {"regs": regs, "status": "unknown", "cex": None, "depth": depth, "budget_spent": True,
+                "detail": f"the proof's time budget ({budget_s:.0f} s) ran out: the bounded check of {steps} cycles from "
+                          f"the start was not finished, and the induction " +
+                          (f"closed at length {tried} but its base case was not finished" if closed else
+                           f"had not closed (tried up to length {tried})")}
+    failed = _FAILED.search(base.stdout)
+    if failed:
+        cex = _counterexample(base.stdout[failed.end():], netlist)
+        if cex is not None:
+            return {"regs": regs, "depth": depth, "status": "counterexample", "cex": cex,
+                    "detail": "the outputs differ on this input" +
+                              (f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else "")}
+    if not depth:
+        return {"regs": regs, "depth": depth, **_failed_run(base, bool(regs))}
+    if closed:
+        return {"regs": regs, "depth": depth, "status": "proved", "cex": None,
+                "detail": f"no input (sequence) makes an output differ (induction closed at length {tried})"}
+    return {"regs": regs, "depth": depth, "status": "unknown", "cex": None,
+            "detail": f"no counterexample within {depth} cycles of the start, but the induction did not close "
+                      f"within {INDUCTION_STEPS} steps"}
 
 
-# sat's final lines (Yosys 0.3x-0.70): a proof, a counterexample, the induction giving up.
+# sat's lines (Yosys 0.3x-0.70): the step proved, a counterexample, the step giving up, the base case.
 _PROVED = re.compile(r"^(?:SAT proof finished - no model found: SUCCESS|Induction step proven: SUCCESS)", re.M)
 _FAILED = re.compile(r"^SAT (?:temporal induction )?proof finished - model found(?: for base case)?: FAIL", re.M)
-_GAVE_UP = re.compile(r"^Reached maximum number of time steps", re.M)
+_GAVE_UP = re.compile(r"^Reached maximum number of time steps -> proof failed", re.M)
+_TRYING = re.compile(r"^\*\* Trying induction with length (\d+) \*\*", re.M)
 
 
-def _verdict(result, netlist: Netlist, strengthened: bool) -> dict:
-    """status / cex / detail from a sat run's log."""
-    log = result.stdout + "\n" + result.stderr
-    if result.returncode == 0 and _PROVED.search(log):
-        return {"status": "proved", "cex": None, "detail": "no input (sequence) makes an output differ"}
-    failed = _FAILED.search(log)
-    if failed:
-        cex = _counterexample(log[failed.end():], netlist)
-        if cex is not None:
-            return {"status": "counterexample", "cex": cex, "detail": "the outputs differ on this input" +
-                    (f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else "")}
-    if _GAVE_UP.search(log):
-        return {"status": "unknown", "cex": None,
-                "detail": f"no counterexample within {INDUCTION_STEPS} cycles from the all-zero state, but the "
-                          f"induction did not close within {INDUCTION_STEPS} steps"}
-    if strengthened:       # e.g. a register name the source does not have: the plain miter decides
+def _failed_run(result, strengthened: bool) -> dict:
+    """A sat run that ended without a verdict: `unknown` for the strengthened miter (e.g. a register name the
+    source does not have: the plain miter decides), else the one-line refusal."""
+    if strengthened:
         return {"status": "unknown", "cex": None, "detail": f"yosys: {yosys.error_line(result)}"}
     raise Mech2SpiceError(f"yosys equivalence check failed: {yosys.error_line(result)}")
 
@@ -275,10 +394,11 @@ def _icarus_tools() -> tuple[str, str]:
     return iverilog, vvp
 
 
-def _testbench(netlist: Netlist, n: int, clocked: bool) -> str:
+def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False) -> str:
     """Apply vectors.txt (one line of input bits per vector / cycle, ports in declaration order with the
     first port leftmost) and $display the outputs.  Clocked: the inputs of cycle k are on before edge k;
     one time unit after it cycle k+1's are applied and the outputs read, as simulation.run_clocked_logic.
+    `first_read`: also read once before the first edge (a counterexample's replay: its cycle 0).
     Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has."""
     v = ids.verilog
     ins, outs = [v(p) for p in netlist.inputs], [v(p) for p in netlist.outputs]
@@ -299,7 +419,8 @@ def _testbench(netlist: Netlist, n: int, clocked: bool) -> str:
     show = '$display("' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
     lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if clocked:
-        lines += [f"    {apply('0')}", f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
+        lines += [f"    {apply('0')}"] + ([f"    #1 {show}"] if first_read else []) + [
+                  f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
                   f"      #5 {clock} = 1;",
                   f"      #1 {apply(f'{k} + 1 < {n} ? {k} + 1 : {k}')}",
                   f"      #1 {show}", f"      #3 {clock} = 0;", "    end"]
@@ -313,7 +434,7 @@ COERCED = re.compile(r"output port (\S+) is coerced to inout")   # iverilog: the
 
 
 def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings: list | None = None,
-           info: dict | None = None) -> list[dict[str, str]]:
+           info: dict | None = None, first_read: bool = False) -> list[dict[str, str]]:
     """Run the source on Icarus: per vector (or cycle), output bit -> '0', '1', 'x' or 'z'.  `warnings`, if
     given, receives iverilog's lines on output ports it coerced to inout: ports the source never drives
     (an `assign internal = port` written backwards), which read z on Icarus while Yosys joins the two nets;
@@ -323,7 +444,7 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
     order = input_bits(netlist)
     with tempfile.TemporaryDirectory(prefix="mech2spice_icarus_") as tmp:
         tb = Path(tmp) / "tb.v"
-        tb.write_text(_testbench(netlist, len(vectors), clocked))
+        tb.write_text(_testbench(netlist, len(vectors), clocked, first_read))
         (Path(tmp) / "vectors.txt").write_text("".join(_vector_line(netlist, order, v) for v in vectors))
         built, gen = _compile(iverilog, path, tmp)
         out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout
@@ -334,7 +455,7 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
                             for m in COERCED.finditer(built.stderr)})
     rows = [ln.split() for ln in out.splitlines() if ln.strip() and not ln.startswith(("VCD", "WARNING"))]
     rows = [r for r in rows if len(r) == len(netlist.outputs) and all(re.fullmatch(r"[01xzXZ]+", s) for s in r)]
-    if len(rows) != len(vectors):
+    if len(rows) != len(vectors) + (first_read and clocked):
         raise Mech2SpiceError(f"Icarus printed {len(rows)} result lines for {len(vectors)} vectors")
     return [_bits_of(netlist, r) for r in rows]
 
@@ -387,20 +508,82 @@ def _run_tool(cmd: list[str], cwd: str, name: str) -> subprocess.CompletedProces
 
 # --------------------------------------------------------------------------- vectors
 
-def reset_port(netlist: Netlist, name: str | None = None) -> tuple[str, int] | None:
-    """(port, asserted level) of the design's synchronous reset: `name` (level 0 if it ends in _n/n), or an
-    input called rst/reset (1) or rst_n/rstn/reset_n/resetn (0); None when there is none."""
-    if name == "none":
-        return None
-    if name is not None:
-        if netlist.inputs.get(name) != 1:
-            raise Mech2SpiceError(f"--reset {name}: {netlist.top} has no 1-bit input '{name}' "
-                                  f"(inputs: {', '.join(netlist.inputs) or 'none'})")
-        return name, 0 if name.lower() in RESET_LOW else 1
+def reset_ports(netlist: Netlist, given=None, path=None) -> list[dict]:
+    """The resets verify asserts in cycle 0 (and now and then later): [{port, level, rule}], `rule` saying
+    what chose it.  `given` (--reset, repeatable): 'PORT' or 'PORT=LEVEL' each, or ['none'].  Else, in
+    order: the design's own flip-flops (Yosys's `$sdff*`/`$adff*` cells after `proc; opt_dff` name the
+    input and its polarity: rule "design"), then the port's name as a last resort (rst/reset active high,
+    rst_n/rstn/reset_n/resetn active low: rule "name")."""
+    if isinstance(given, str):
+        given = [given]
+    if given:
+        if list(given) == ["none"]:
+            return []
+        return [_given_reset(netlist, spec) for spec in given]
+    if path is not None:
+        found = design_resets(path, netlist)
+        if found:
+            return found
     for port, w in netlist.inputs.items():
         if w == 1 and port.lower() in RESET_HIGH + RESET_LOW:
-            return port, 0 if port.lower() in RESET_LOW else 1
-    return None
+            return [{"port": port, "level": 0 if port.lower() in RESET_LOW else 1, "rule": "name"}]
+    return []
+
+
+def reset_port(netlist: Netlist, name: str | None = None) -> tuple[str, int] | None:
+    """(port, level) of the first reset `reset_ports` picks without reading the design (kept for callers)."""
+    found = reset_ports(netlist, name)
+    return (found[0]["port"], found[0]["level"]) if found else None
+
+
+def _given_reset(netlist: Netlist, spec: str) -> dict:
+    name, _, level = spec.partition("=")
+    if netlist.inputs.get(name) != 1 or name == netlist.clock:
+        raise Mech2SpiceError(f"--reset {spec}: {netlist.top} has no 1-bit input '{name}' "
+                              f"(inputs: {', '.join(netlist.inputs) or 'none'})")
+    if level not in ("", "0", "1"):
+        raise Mech2SpiceError(f"--reset {spec}: the level is 0 or 1 (PORT=0: active low)")
+    if level == "":
+        return {"port": name, "level": 0 if name.lower() in RESET_LOW else 1, "rule": "given (level from the name)"}
+    return {"port": name, "level": int(level), "rule": "given"}
+
+
+_RESET_CELL = re.compile(r"\$(?:_?)(s|a)dff")       # $sdff, $sdffe, $sdffce, $adff, $adffe (word-level cells)
+
+
+def design_resets(path, netlist: Netlist) -> list[dict]:
+    """The inputs the source's flip-flops reset on, with the level that resets them, from Yosys's cells after
+    `proc; opt_dff` (`$sdff*`: SRST and SRST_POLARITY; `$adff*`: ARST and ARST_POLARITY); [] when none is
+    an input port of the top or the run fails (the name rule then decides)."""
+    import json as _json
+    path = Path(path)
+    with tempfile.TemporaryDirectory(prefix="mech2spice_resets_") as tmp:
+        rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
+        read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
+        script = "\n".join([f'{read} {ids.yosys_path(rel, "Verilog file")}',
+                            _hierarchy(netlist.top), "proc", "flatten", "opt_dff", f"rename -top {PREFIX}src",
+                            "write_json resets.json", ""])
+        result, cut = _run_yosys(script, tmp, 60)
+        if cut or result.returncode != 0:
+            return []
+        module = _json.loads((Path(tmp) / "resets.json").read_text())["modules"].get(f"{PREFIX}src")
+    if module is None:
+        return []
+    port_of = {p["bits"][0]: name for name, p in module["ports"].items()
+               if p["direction"] == "input" and len(p["bits"]) == 1}
+    found = {}
+    for cell in module["cells"].values():
+        m = _RESET_CELL.match(cell["type"])
+        if not m:
+            continue
+        pin = "SRST" if m.group(1) == "s" else "ARST"
+        port = port_of.get((cell["connections"].get(pin) or [None])[0])
+        if port is not None and port != netlist.clock:
+            polarity = int(str(cell["parameters"].get(f"{pin}_POLARITY", "1")), 2) & 1
+            found.setdefault(port, {"port": port, "level": polarity,
+                                    "rule": f"design ({'synchronous' if pin == 'SRST' else 'asynchronous'} "
+                                            f"reset of the source's flip-flops)"})
+    return [found[p] for p in netlist.inputs if p in found]
 
 
 def make_vectors(netlist: Netlist, n: int | None, exhaustive: bool, seed: int) -> tuple[np.ndarray, bool]:
@@ -415,14 +598,17 @@ def make_vectors(netlist: Netlist, n: int | None, exhaustive: bool, seed: int) -
     return np.random.default_rng(seed).integers(0, 2, (n, nbits)).astype(bool), False
 
 
-def make_cycles(netlist: Netlist, n: int, seed: int, reset: tuple[str, int] | None) -> np.ndarray:
-    """(n, input bits) bool: random inputs per cycle; the reset asserted in cycle 0, and now and then later."""
+def make_cycles(netlist: Netlist, n: int, seed: int, resets) -> np.ndarray:
+    """(n, input bits) bool: random inputs per cycle; the resets (`reset_ports`' dicts, or one (port, level)
+    pair) asserted together in cycle 0, and now and then later."""
     order = input_bits(netlist)
     rng = np.random.default_rng(seed)
     x = rng.integers(0, 2, (n, len(order))).astype(bool)
-    if reset is not None:
-        j, level = order.index(f"{reset[0]}[0]"), reset[1]
-        again = rng.random(n) < RESET_AGAIN
+    if isinstance(resets, tuple):
+        resets = [{"port": resets[0], "level": resets[1]}]
+    again = rng.random(n) < RESET_AGAIN
+    for r in resets or []:
+        j, level = order.index(f"{r['port']}[0]"), r["level"]
         x[:, j] = np.where(again, level, 1 - level).astype(bool)
         x[0, j] = bool(level)
     return x
@@ -490,13 +676,13 @@ def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], c
 
 
 def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool, seed: int, params=None,
-          progress=False, reset: str | None = None) -> dict:
+          progress=False, reset=None, resets: list[dict] | None = None) -> dict:
     """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches."""
     t0 = time.time()
     clocked = netlist.clock is not None
     physical = _physical(backend)
     n = n or (16 if physical and not clocked else 8 if physical else 2000 if not clocked else 1000)
-    rst = reset_port(netlist, reset) if clocked else None
+    rst = reset_ports(netlist, reset, path) if clocked and resets is None else (resets or [])
     if clocked:
         if exhaustive:
             raise Mech2SpiceError(f"--exhaustive applies to combinational designs; {netlist.top} is clocked: "
@@ -516,7 +702,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
            "undefined_bits": sum(v in "xX" for r in ref for v in r.values()),
            "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings, **info}
     if clocked:
-        out["reset"] = None if rst is None else {"port": rst[0], "level": rst[1]}
+        out["reset"] = {k: rst[0][k] for k in ("port", "level")} if rst else None
+        out["resets"] = rst
     if physical:
         margins = [g["min_margin"] for g in got if g.get("min_margin") is not None]
         out.update(valid=all(g["valid"] for g in got), stable=all(g.get("stable", True) for g in got),
@@ -529,7 +716,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
 
 def verify(path, top: str | None = None, backend: str = "logic", vectors: int | None = None,
            exhaustive: bool = False, seed: int = 0, params=None, progress=False, log=None,
-           netlist: Netlist | None = None, reset: str | None = None, equivalence_check: bool = True) -> dict:
+           netlist: Netlist | None = None, reset=None, equivalence_check: bool = True,
+           proof_time: float = PROOF_BUDGET_S) -> dict:
     """Equivalence and co-simulation of one design; `netlist` replaces the synthesised one (tests)."""
     t0 = time.time()
     from .synthesis.synth import synthesize
@@ -538,12 +726,14 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
     check_names(nl)
     out = {"design": str(path), "top": nl.top, "clocked": nl.clock is not None,
            "gates": len(nl.gates()), "latches": len(nl.latches())}
+    resets = reset_ports(nl, reset, path) if nl.clock is not None else []
     if equivalence_check:
-        log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source (yosys)")
-        out["equivalence"] = equivalence(path, nl)
+        log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source (yosys, at most "
+            f"{proof_time:.0f} s)")
+        out["equivalence"] = equivalence(path, nl, proof_time, resets)
         log(f"equivalence: {out['equivalence']['status']} ({out['equivalence']['wall_s']:.1f} s)")
     log(f"co-simulation against Icarus on {backend}")
-    out["cosim"] = cosim(path, nl, backend, vectors, exhaustive, seed, params, progress, reset)
+    out["cosim"] = cosim(path, nl, backend, vectors, exhaustive, seed, params, progress, reset, resets)
     eq = out.get("equivalence", {}).get("status", "proved")
     out["verdict"] = "pass" if eq == "proved" and out["cosim"]["agree"] else \
         "fail" if eq == "counterexample" or not out["cosim"]["agree"] else "unknown"

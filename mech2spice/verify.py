@@ -675,6 +675,15 @@ def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], c
     return mismatches
 
 
+def undefined_by_port(netlist: Netlist, ref: list[dict]) -> dict:
+    """Per output port, of the bits compared: how many the source left x and z (Icarus), and how many in all."""
+    out = {}
+    for port, w in netlist.outputs.items():
+        vals = [r[f"{port}[{i}]"] for r in ref for i in range(w)]
+        out[port] = {"x": sum(v in "xX" for v in vals), "z": sum(v in "zZ" for v in vals), "compared": len(vals)}
+    return out
+
+
 def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool, seed: int, params=None,
           progress=False, reset=None, resets: list[dict] | None = None) -> dict:
     """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches."""
@@ -700,7 +709,10 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
            "undefined_bits": sum(v in "xX" for r in ref for v in r.values()),
-           "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings, **info}
+           "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings, **info,
+           "undefined_by_port": undefined_by_port(netlist, ref)}
+    compared = sum(len(r) for r in ref)
+    out["mostly_undefined"] = compared > 0 and (out["undefined_bits"] + out["undriven_bits"]) * 2 > compared
     if clocked:
         out["reset"] = {k: rst[0][k] for k in ("port", "level")} if rst else None
         out["resets"] = rst
@@ -778,6 +790,18 @@ def _mismatch_text(m: dict) -> str:
     return f"{where} {m['inputs']}: {m['bit']} Icarus {m['icarus']}, network {got}{amp}"
 
 
+def _undefined_text(co: dict) -> str:
+    """The verdict line's note on bits the source left undefined: per port, and a warning when most were."""
+    ports = [f"{p} {n['x'] + n['z']}/{n['compared']}" for p, n in co.get("undefined_by_port", {}).items()
+             if n["x"] + n["z"]]
+    if not ports:
+        return ""
+    note = "; x/z in the source (per port, of the bits compared): " + ", ".join(ports)
+    if co.get("mostly_undefined"):
+        note += " -- MOST compared bits were undefined in the source: agreement there says little"
+    return note
+
+
 def text(result: dict) -> str:
     """The human-readable report."""
     lines = [f"{result['top']}: {result['gates']} NOR gates, {result['latches']} latches"]
@@ -786,6 +810,11 @@ def text(result: dict) -> str:
         lines.append(f"equivalence: {eq['status']} ({eq['method']}, {eq['wall_s']:.1f} s)")
         if eq["status"] != "proved":
             lines.append(f"  {eq['detail']}")
+        if eq.get("replay"):
+            rep = eq["replay"]
+            lines.append("  replay (Icarus vs the network on the logic backend): " +
+                         (f"reproduced in cycle {rep['cycle']} on {', '.join(rep['bits'])}" if rep["reproduced"]
+                          else "not reproduced: no bit the source defines differs"))
         for step in eq["counterexample"] or []:
             lines.append(f"  counterexample{' cycle ' + str(step['cycle']) if 'cycle' in step else ''}: "
                          f"{step['inputs']}" + (f" -> source {step['source']}, network {step['network']}"
@@ -806,5 +835,5 @@ def text(result: dict) -> str:
     lines += ["  " + _mismatch_text(m) for m in co["mismatches"][:20]]
     if len(co["mismatches"]) > 20:
         lines.append(f"  ... {len(co['mismatches']) - 20} more (--json lists all)")
-    lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)")
+    lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)" + _undefined_text(co))
     return "\n".join(lines)

@@ -452,3 +452,18 @@ def test_a_counterexample_the_replay_does_not_confirm_is_unknown():
     assert res["status"] == "unknown" and not res["replay"]["reproduced"]
     assert res["replay"]["source"] == res["replay"]["network"] == {"q": "0010"}   # reset at edge 0, counted at edges 1 and 2
     assert "do not differ" in res["detail"]
+
+
+def test_agreement_on_mostly_undefined_outputs_says_so(tmp_path, capsys):
+    """A register nothing defines (rotated, never reset, never loaded): every q bit is x on Icarus, so any network
+    agrees.  The verdict line and the JSON count the x bits per port and say that most were undefined."""
+    src = tmp_path / "rot.v"
+    src.write_text("module rot(input clk, input d, output reg [3:0] q, output e);\n"
+                   "  assign e = d;\n  always @(posedge clk) q <= {q[2:0], q[3]};\nendmodule\n")
+    code, out, err = _run(capsys, src, "--cycles", 50, "--json", "--no-equivalence")
+    co = json.loads(out)["cosim"]
+    assert co["undefined_by_port"] == {"q": {"x": 200, "z": 0, "compared": 200}, "e": {"x": 0, "z": 0, "compared": 50}}
+    assert co["mostly_undefined"] and co["agree"]
+    code, out, err = _run(capsys, src, "--cycles", 50, "--no-equivalence")
+    verdict = out.strip().splitlines()[-1]
+    assert "q 200/200" in verdict and "MOST compared bits were undefined" in verdict

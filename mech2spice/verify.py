@@ -530,12 +530,6 @@ def reset_ports(netlist: Netlist, given=None, path=None) -> list[dict]:
     return []
 
 
-def reset_port(netlist: Netlist, name: str | None = None) -> tuple[str, int] | None:
-    """(port, level) of the first reset `reset_ports` picks without reading the design (kept for callers)."""
-    found = reset_ports(netlist, name)
-    return (found[0]["port"], found[0]["level"]) if found else None
-
-
 def _given_reset(netlist: Netlist, spec: str) -> dict:
     name, _, level = spec.partition("=")
     if netlist.inputs.get(name) != 1 or name == netlist.clock:

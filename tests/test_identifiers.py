@@ -5,12 +5,10 @@ from __future__ import annotations
 
 import re
 import shutil
-import string
 import subprocess
 from pathlib import Path
 
 import networkx as nx
-import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 

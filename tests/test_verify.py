@@ -467,3 +467,16 @@ def test_agreement_on_mostly_undefined_outputs_says_so(tmp_path, capsys):
     code, out, err = _run(capsys, src, "--cycles", 50, "--no-equivalence")
     verdict = out.strip().splitlines()[-1]
     assert "q 200/200" in verdict and "MOST compared bits were undefined" in verdict
+
+
+@pytest.mark.parametrize("body", ["module noin(output y);\n  assign y = 1;\nendmodule\n",
+                                  "module onlyclk(input clk, output reg [1:0] q);\n"
+                                  "  always @(posedge clk) q <= q + 1;\nendmodule\n"])
+def test_a_design_without_data_inputs_is_verified(tmp_path, capsys, body):
+    """No data input, or only the clock: the testbench has nothing to apply (it raised a TypeError)."""
+    src = tmp_path / "d.v"
+    src.write_text(body)
+    code, out, err = _run(capsys, src, "--json", *(["--cycles", 20] if "clk" in body else []))
+    res = json.loads(out)
+    assert code == 0, out + err
+    assert res["equivalence"]["status"] == "proved" and res["cosim"]["agree"]

@@ -14,7 +14,8 @@ def add_parser(subparsers) -> None:
     s = subparsers.add_parser(
         "verify", help="prove the NOR network equal to the Verilog and co-simulate it against Icarus",
         description="1. Formal equivalence of the mapped NOR network (written back as Verilog) and the source, "
-                    "with Yosys (miter + SAT; temporal induction from the all-zero state for clocked designs). "
+                    "with Yosys (miter + SAT: an induction step and a bounded check from the all-zero state, the resets "
+                    "asserted in cycle 0; a counterexample replayed on Icarus and the logic backend). "
                     "2. Co-simulation of the source on Icarus Verilog against a backend on the same vectors "
                     "(clocked: a reset cycle, then random inputs per cycle). Exit 0 when proved and every bit "
                     "agrees, 1 on a counterexample, a mismatch, an invalid output or an unproved equivalence.")

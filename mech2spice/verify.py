@@ -3,8 +3,10 @@
 Two independent checks of one synthesised design:
 
 * equivalence -- the NOR netlist is written back as structural Verilog and proved equal to the source by
-  Yosys (a miter, SAT with x modelled; temporal induction from the all-zero register state for clocked
-  designs, the state the mapping's latches start in).  See docs/verify.md for what is and is not proved.
+  Yosys (a miter, SAT with x modelled, memories mapped: an induction step, and a bounded check from the
+  all-zero state with the design's resets asserted in the first cycle), within a time budget; a
+  counterexample is replayed on Icarus and the logic backend before it is reported.  See docs/verify.md
+  for what is and is not proved.
 * co-simulation -- the source runs on Icarus Verilog (an independent simulator), the network on a
   backend, on the same vectors (clocked: a reset cycle, then random inputs per cycle); every
   differing output bit is listed.
@@ -23,6 +25,7 @@ from xml.sax.saxutils import quoteattr, escape
 
 import numpy as np
 
+from . import identifiers as ids
 from .errors import Mech2SpiceError, ToolMissingError
 from .synthesis import yosys
 from .synthesis.ports import input_bits, output_bits
@@ -31,6 +34,7 @@ if TYPE_CHECKING:
     from .synthesis.synth import Netlist
 
 INDUCTION_STEPS = 20          # sat -tempinduct -maxsteps: base case (BMC) and induction depth
+PROOF_BUDGET_S = 120          # default wall-clock budget of the whole proof (--proof-time)
 MAX_EXHAUSTIVE_BITS = 20      # --exhaustive refuses wider inputs (2^20 vectors)
 ICARUS_TIMEOUT_S = 600
 RESET_HIGH = ("rst", "reset")
@@ -41,93 +45,158 @@ PREFIX = "m2s__"              # internal net names of the written-back network
 
 # --------------------------------------------------------------------------- the network as Verilog
 
-def _ident(node: str) -> str:
-    """A netlist node as a Verilog expression: port bits stay `p[i]`, gates/latches get a prefix."""
+def _expr(netlist: Netlist, node: str, rename: dict[str, str] | None = None) -> str:
+    """A netlist node as a Verilog expression: a port bit as the port's (escaped) name, gates and latches
+    prefixed (`m2s__g3`; no port may start with the prefix, `check_names`)."""
     if node == "const0":
         return "1'b0"
     if node == "const1":
         return "1'b1"
-    return node if "[" in node else PREFIX + node
+    attrs = netlist.graph.nodes[node]
+    if attrs["kind"] == "input":
+        port = attrs["port"]
+        return ids.verilog_bit((rename or {}).get(port, port), attrs["bit"], netlist.inputs[port])
+    return PREFIX + node
 
 
 def _decl(width: int) -> str:
     return f"[{width - 1}:0] " if width > 1 else ""
 
 
-def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] = ()) -> str:
+def check_names(netlist: Netlist) -> None:
+    """Refuse, before any work, a design whose names the generated Verilog cannot hold: a name that cannot
+    be written (ids.verilog), or a port whose name starts with the prefix of the generated ones."""
+    for name in [netlist.top, *netlist.inputs, *netlist.outputs, *([netlist.clock] if netlist.clock else [])]:
+        ids.verilog(name)
+        if name.startswith(PREFIX):
+            raise Mech2SpiceError(f"{netlist.top}: the name {name!r} starts with {PREFIX!r}, which verify "
+                                  "keeps for the names it generates: rename it")
+
+
+def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] = (),
+                  rename: dict[str, str] | None = None) -> str:
     """The netlist as structural Verilog: one `assign` per NOR, one posedge register per latch (starting
     wherever the simulator starts it; the proofs fix it at 0 like the logic backend).  `expose`: (port name,
-    latch) pairs made extra 1-bit outputs, for the register-correspondence proof."""
+    latch) pairs made extra 1-bit outputs, for the register-correspondence proof; `rename`: port -> the name
+    it gets (the proof's, `proof_ports`).  Every user name is written by ids.verilog (escaped where it is
+    not a plain identifier)."""
     g = netlist.graph
-    ports = ([f"input {netlist.clock}"] if netlist.clock else []) \
-        + [f"input {_decl(w)}{p}" for p, w in netlist.inputs.items()] \
-        + [f"output {_decl(w)}{p}" for p, w in netlist.outputs.items()] \
+    rename = rename or {}
+
+    def v(name: str) -> str:
+        return ids.verilog(rename.get(name, name))
+    ports = ([f"input {v(netlist.clock)}"] if netlist.clock else []) \
+        + [f"input {_decl(w)}{v(p)}" for p, w in netlist.inputs.items()] \
+        + [f"output {_decl(w)}{v(p)}" for p, w in netlist.outputs.items()] \
         + [f"output {name}" for name, _ in expose]
-    lines = [f"module {module}({', '.join(ports)});"]
+    lines = [f"module {ids.verilog(module)}({', '.join(ports)});"]
     inverted = any(g.nodes[q].get("inverted") for q in netlist.latches())     # then every power-up is written
     for q in netlist.latches():
-        lines.append(f"  reg {_ident(q)} = {g.nodes[q].get('inverted', 0)};" if inverted else f"  reg {_ident(q)};")
+        lines.append(f"  reg {_expr(netlist, q, rename)} = {g.nodes[q].get('inverted', 0)};" if inverted
+                     else f"  reg {_expr(netlist, q, rename)};")
     for gate in netlist.gates():
-        a, b = (_ident(u) for u, _, _ in sorted(g.in_edges(gate, data="pin"), key=lambda e: e[2]))
-        lines.append(f"  wire {_ident(gate)} = ~({a} | {b});")
-    lines += [_register(netlist, q) for q in netlist.latches()]
+        a, b = (_expr(netlist, u, rename) for u, _, _ in sorted(g.in_edges(gate, data="pin"), key=lambda e: e[2]))
+        lines.append(f"  wire {_expr(netlist, gate, rename)} = ~({a} | {b});")
+    lines += [_register(netlist, q, rename) for q in netlist.latches()]
     for out in output_bits(netlist):
         (src,) = g.predecessors(out)
-        lines.append(f"  assign {_port_bit(netlist.outputs, out)} = {_ident(src)};")
-    lines += [f"  assign {name} = {_ident(q)};" for name, q in expose]
+        port, bit = g.nodes[out]["port"], g.nodes[out]["bit"]
+        lines.append(f"  assign {ids.verilog_bit(rename.get(port, port), bit, netlist.outputs[port])} = {_expr(netlist, src, rename)};")
+    lines += [f"  assign {name} = {_expr(netlist, q, rename)};" for name, q in expose]
     return "\n".join(lines + ["endmodule", ""])
 
 
-def _register(netlist: Netlist, q: str) -> str:
+def _register(netlist: Netlist, q: str, rename: dict[str, str] | None = None) -> str:
     """A latch as a posedge register: an inverted latch's D pin carries the complement; a forced one is reset
     (or set, when inverted) asynchronously while F is high, as the mechanical latch is."""
     from .synthesis.synth import latch_inputs
     d, f = latch_inputs(netlist.graph, q)
     inverted = netlist.graph.nodes[q].get("inverted", 0)
-    nxt = f"~{_ident(d)}" if inverted else _ident(d)
+    reg, clock = _expr(netlist, q, rename), ids.verilog((rename or {}).get(netlist.clock, netlist.clock))
+    nxt = f"~{_expr(netlist, d, rename)}" if inverted else _expr(netlist, d, rename)
     if f is None:
-        return f"  always @(posedge {netlist.clock}) {_ident(q)} <= {nxt};"
-    return (f"  always @(posedge {netlist.clock} or posedge {_ident(f)}) if ({_ident(f)}) {_ident(q)} <= "
-            f"1'b{inverted}; else {_ident(q)} <= {nxt};")
+        return f"  always @(posedge {clock}) {reg} <= {nxt};"
+    force = _expr(netlist, f, rename)
+    return (f"  always @(posedge {clock} or posedge {force}) if ({force}) {reg} <= "
+            f"1'b{inverted}; else {reg} <= {nxt};")
 
 
-def _port_bit(widths: dict, bit: str) -> str:
-    """`p[i]` for a multi-bit port, `p` for a 1-bit one (declared without a range)."""
-    port = bit[:bit.rindex("[")]
-    return bit if widths[port] > 1 else port
-
-
-_NET = re.compile(r"([A-Za-z_][A-Za-z0-9_$.]*)(?:\[(\d+)\])?")
+_NET = re.compile(r"(.+?)(?:\[(\d+)\])?")      # a wire (a user's, or Yosys's `$...` that both sides have), its bit
 
 
 def register_names(netlist: Netlist) -> list[tuple[str, str, str]]:
     """(latch, source wire, bit) for every latch whose Q net kept a user name: the source's register it
-    implements, to be exposed on both sides of the miter so that induction sees the hidden state."""
+    implements (a memory word too: `mem[7][0]` is bit 0 of the word `mem[7]` that the proof's `memory`
+    pass makes), to be exposed on both sides of the miter so that induction sees the hidden state.  A name
+    a Yosys script cannot hold (ids.yosys) is not matched."""
     out = []
     for q in netlist.latches():
         m = _NET.fullmatch(netlist.graph.nodes[q].get("net", "$"))
-        if m:
+        if m and _yosys_writable(m.group(1)):
             out.append((q, m.group(1), m.group(2) or "0"))
     return out
 
 
+def _yosys_writable(name: str) -> bool:
+    try:
+        ids.yosys(name)
+    except Mech2SpiceError:
+        return False
+    return True
+
+
 # --------------------------------------------------------------------------- equivalence (Yosys)
+
+def proof_ports(netlist: Netlist) -> dict[str, str]:
+    """Port -> its name inside the proof (`m2s__i0`, `m2s__o0`, `m2s__clk`): Yosys's `sat` parses port names
+    as signal expressions, where a name such as `,` or `{a}` is not one; the source keeps its own names
+    behind a wrapper (`_wrapper`)."""
+    names = {netlist.clock: f"{PREFIX}clk"} if netlist.clock else {}
+    names.update({p: f"{PREFIX}i{k}" for k, p in enumerate(netlist.inputs)})
+    names.update({p: f"{PREFIX}o{k}" for k, p in enumerate(netlist.outputs)})
+    return names
+
+
+def _wrapper(netlist: Netlist, names: dict[str, str], nregs: int) -> str:
+    """Module m2s__gold: the source (renamed m2s__src) behind the proof's port names, its exposed registers
+    passed through."""
+    widths = {netlist.clock: 1, **netlist.inputs} if netlist.clock else dict(netlist.inputs)
+    ports = [f"input {_decl(w)}{names[p]}" for p, w in widths.items()] \
+        + [f"output {_decl(w)}{names[p]}" for p, w in netlist.outputs.items()] \
+        + [f"output {PREFIX}r{k}" for k in range(nregs)]
+    conns = [f".{ids.verilog(p)}({names[p]})" for p in [*widths, *netlist.outputs]] \
+        + [f".{PREFIX}r{k}({PREFIX}r{k})" for k in range(nregs)]
+    return "\n".join([f"module {PREFIX}gold({', '.join(ports)});",
+                      f"  {PREFIX}src {PREFIX}u({', '.join(conns)});", "endmodule", ""])
+
 
 def _read_source(path: Path, rel: str, top: str) -> list[str]:
     read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
-    return [f'{read} "{rel}"', f"hierarchy -check -top {top}", "proc", "flatten", "memory", "opt_clean",
-            f"rename {top} {PREFIX}gold"]
+    # `memory`: the source's memories as flip-flops and multiplexers, as synthesis maps them (sat has no
+    # model for $mem cells); its memory_dff folds a read register into the port only as synthesis does.
+    return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), "proc",
+            "flatten", "memory", "opt_clean", f"rename -top {PREFIX}src"]
 
 
-def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
+def _hierarchy(top: str) -> str:
+    """Yosys's `hierarchy` selecting the top module: by name, or, for a name a Yosys script cannot hold
+    (ids.yosys), by the rule synthesis found it with (-auto-top; a --top is always a plain name)."""
+    try:
+        return f"hierarchy -check -top {ids.yosys(top)}"
+    except Mech2SpiceError:
+        return "hierarchy -check -auto-top"
+
+
+def _script(path: Path, rel: str, netlist: Netlist, regs: list, resets=(), mode: str = "induct",
+            steps: int = INDUCTION_STEPS) -> str:
     """Read source and network, expose the matched registers on both, build the miter and prove it."""
     lines = _read_source(path, rel, netlist.top)
     if regs:
-        lines.append(f"cd {PREFIX}gold")
+        lines.append(f"cd {PREFIX}src")
         for k, (_, wire, bit) in enumerate(regs):
-            lines += [f"add -output {PREFIX}r{k} 1", f"connect -set {PREFIX}r{k} {wire}[{bit}]"]
+            lines += [f"add -output {PREFIX}r{k} 1", f"connect -set {PREFIX}r{k} {ids.yosys(wire)}[{bit}]"]
         lines.append("cd ..")
-    lines += ["read_verilog gate.v", "proc", "opt_clean",
+    lines += ["read_verilog wrap.v", "read_verilog gate.v", "proc", "opt_clean",
               f"miter -equiv -flatten -make_assert -ignore_gold_x {PREFIX}gold {PREFIX}gate {PREFIX}miter",
               f"hierarchy -top {PREFIX}miter", "opt_clean"]
     if netlist.forced():
@@ -139,83 +208,181 @@ def _script(path: Path, rel: str, netlist: Netlist, regs: list) -> str:
     # -enable_undef: without it sat reads the miter's `x` as 0, so -ignore_gold_x's `gold === x` becomes
     # `~gold` and each output check only "gold 1 => gate 1" (a stuck-at-1 output passed).  Inputs and the
     # start state are defined; the induction step's state may hold x (a source register assigned x).
-    lines.append(f"sat -verify -prove-asserts -tempinduct -enable_undef -set-def-inputs "
-                 f"{_initial_state(netlist)} -maxsteps {INDUCTION_STEPS} -show-inputs {PREFIX}miter")
+    # The base case applies the resets in its first cycle (-set-at 1, which sat leaves out of the induction
+    # step): both sides leave the all-zero start through the state the source's reset defines, whatever
+    # encoding synthesis chose for it.  -tempinduct-def: the induction step starts from defined registers
+    # (a source register holding x stands for one of its refinements, the one synthesis implements).
+    names = proof_ports(netlist)
+    at = "".join(f" -set-at 1 in_{names[r['port']]} {r['level']}" for r in resets)
+    # The base case is a bounded check (-seq): with -tempinduct-baseonly, sat 0.70 applied -set-at in every
+    # cycle, so a reset held forever hid a broken counter (tests/test_verify.py, the broken counter4).
+    half = (f"-tempinduct -tempinduct-inductonly -tempinduct-def -maxsteps {steps}" if mode == "induct" else
+            f"-seq {steps} {_initial_state(netlist)}{at}")
+    lines.append(f"sat -prove-asserts {half} -enable_undef -set-def-inputs -show-inputs {PREFIX}miter")
     return "\n".join(lines + [""])
 
 
 def _initial_state(netlist: Netlist) -> str:
-    """The proof's start: all-zero registers, as the latches power up; where some latch powers up at 1
+    """The bounded check's start: all-zero registers, as the latches power up; where some latch powers up at 1
     (`inverted`), every network register carries its power-up value as an init attribute, and the source's
     registers without an initial value start undefined (x: any power-up value refines it, as on Icarus)."""
     g = netlist.graph
     return "-set-init-undef" if any(g.nodes[q].get("inverted") for q in netlist.latches()) else "-set-init-zero"
 
 
-def equivalence(path, netlist: Netlist) -> dict:
-    """Prove the network equal to the source: {status: proved | counterexample | unknown, method,
-    counterexample (input ports per cycle) or None, detail, wall_s}."""
+def equivalence(path, netlist: Netlist, budget_s: float = PROOF_BUDGET_S, resets: list[dict] = ()) -> dict:
+    """Prove the network equal to the source within `budget_s` seconds: {status: proved | counterexample |
+    unknown, method, counterexample (input ports per cycle) or None, detail, depth (cycles from the start
+    the base case covered), budget_s, wall_s}."""
     t0 = time.time()
     sequential = bool(netlist.latches())
     regs = register_names(netlist) if sequential else []
-    res = _prove(Path(path), netlist, regs)
-    if regs and res["status"] != "proved":
-        # The strengthened miter also compares the matched registers: a failure there may be a wrong
-        # match, not a wrong output; only the plain miter's verdict stands.
-        res = _prove(Path(path), netlist, [])
+    res = _prove(Path(path), netlist, regs, budget_s, resets)
+    if res["cex"]:
+        res = _replayed(path, netlist, res)
+    left = budget_s - (time.time() - t0)
+    if regs and res["status"] not in ("proved", "counterexample") and left > 1:
+        # The strengthened miter also compares the matched registers: a failure there may be a wrong match,
+        # not a wrong output.  A counterexample its replay confirms stands; otherwise the plain miter decides.
+        plain = _prove(Path(path), netlist, [], left, resets)
+        res = _replayed(path, netlist, plain) if plain["cex"] else plain
     n = len(res["regs"])
     matched = f", {n} matched register{'s' * (n != 1)}" if n else ""
-    start = "all-zero" if _initial_state(netlist) == "-set-init-zero" else "power-up"
-    method = (f"yosys miter + sat -tempinduct from the {start} state (depth <= {INDUCTION_STEPS}{matched})"
-              if sequential else "yosys miter + sat (all input vectors; -tempinduct, closing at step 1)")
-    if res["cex"] and "cycle" not in res["cex"][0]:
-        _explain(path, netlist, res["cex"][0])
-    return {"status": res["status"], "method": method, "counterexample": res["cex"], "detail": res["detail"],
-            "wall_s": time.time() - t0}
+    reset = ", ".join(f"{r['port']}={r['level']}" for r in resets)
+    state = "the all-zero state" if _initial_state(netlist) == "-set-init-zero" else "the power-up state"
+    start = f"{state}, reset {reset} in cycle 0" if resets else state
+    method = (f"yosys miter: sat induction step (length <= {INDUCTION_STEPS}{matched}) + bounded check from "
+              f"{start} (sat -seq); budget {budget_s:.0f} s" if sequential else
+              f"yosys miter + sat (all input vectors: induction step and one-cycle check); budget {budget_s:.0f} s")
+    out = {"status": res["status"], "method": method, "counterexample": res["cex"], "detail": res["detail"],
+           "depth": res["depth"], "budget_s": budget_s, "wall_s": time.time() - t0}
+    if "replay" in res:
+        out["replay"] = res["replay"]
+    return out
 
 
-def _explain(path, netlist: Netlist, step: dict) -> None:
-    """Add what the source (on Icarus) and the network (logic) output on a combinational counterexample."""
-    from .backends.logic import evaluate
+def replay(path, netlist: Netlist, cex: list[dict]) -> dict:
+    """Run a counterexample's inputs on the network (logic backend, latches from 0) and on the source (Icarus,
+    registers from x, as a simulator starts them), cycle k before clock edge k: {reproduced, cycle (the first
+    where a bit the source defines differs, or None), bits (those bits), source, network (every output port
+    there, MSB first)}.  Where the source reads x on every differing bit the proof's all-zero start was
+    the difference, not the mapping."""
+    from .backends.logic import ClockedLogic, evaluate_bits
     from .synthesis.ports import pack_inputs
-    bits = pack_inputs(netlist, step["inputs"])
-    ref = icarus(path, netlist, np.array([[bits[b] for b in input_bits(netlist)]], bool), clocked=False)[0]
-    step["source"] = {p: "".join(ref[f"{p}[{i}]"] for i in reversed(range(w))) for p, w in netlist.outputs.items()}
-    step["network"] = {p: format(v % (1 << netlist.outputs[p]), f"0{netlist.outputs[p]}b")
-                       for p, v in evaluate(netlist, step["inputs"]).items()}
+    order = input_bits(netlist)
+    x = np.array([[pack_inputs(netlist, step["inputs"])[b] for b in order] for step in cex], bool)
+    clocked = netlist.clock is not None
+    ref = icarus(path, netlist, x, clocked, first_read=True)
+    net, sim = [], ClockedLogic(netlist) if clocked else None
+    for step in cex:
+        net.append(sim.evaluate_bits(step["inputs"]) if clocked else evaluate_bits(netlist, step["inputs"]))
+        if clocked:
+            sim.tick(step["inputs"])
+    first, bits = None, []
+    for k, (r, g) in enumerate(zip(ref, net)):
+        bits = [b for b in output_bits(netlist) if r[b] in "01" and int(r[b]) != g[b]]
+        if bits:
+            first = k
+            break
+    at = first if first is not None else len(cex) - 1
+    return {"reproduced": first is not None, "cycle": first, "bits": bits,
+            "source": {p: "".join(ref[at][f"{p}[{i}]"] for i in reversed(range(w))) for p, w in netlist.outputs.items()},
+            "network": {p: "".join(str(net[at][f"{p}[{i}]"]) for i in reversed(range(w)))
+                        for p, w in netlist.outputs.items()}}
 
 
-def _prove(path: Path, netlist: Netlist, regs: list) -> dict:
+def _replayed(path, netlist: Netlist, res: dict) -> dict:
+    """A counterexample stands only when its replay shows the source and the network differing: cut to the
+    first such cycle; otherwise the status is `unknown`, saying so."""
+    rep = replay(path, netlist, res["cex"])
+    if rep["reproduced"]:
+        cex = res["cex"][:rep["cycle"] + 1]
+        cex[-1].update(source=rep["source"], network=rep["network"])
+        edges = f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else ""
+        return {**res, "cex": cex, "replay": rep, "depth": len(cex),
+                "detail": f"the outputs differ on this input{edges}; replayed: Icarus and the network (logic "
+                          f"backend) differ on {', '.join(rep['bits'])}"}
+    return {**res, "status": "unknown", "replay": rep,
+            "detail": f"the proof found inputs on which the outputs differ from its all-zero start, but replayed "
+                      f"from power-up the source (Icarus) and the network (logic backend) do not differ on any "
+                      f"bit the source defines (source {rep['source']}, network {rep['network']}): the start "
+                      f"state, not the mapping, made the difference; give the reset with --reset PORT=LEVEL"}
+
+
+def _run_yosys(script: str, workdir: str, budget_s: float) -> tuple[yosys.YosysResult, bool]:
+    """Run the proof's script with a wall-clock budget: (the run, whether the budget ran out).  Cut short,
+    the run keeps the log it wrote so far, which says how deep the proof got."""
+    (Path(workdir) / "flow.ys").write_text(script)
+    try:
+        proc = subprocess.run([*yosys.yosys_command(), "-s", "flow.ys"], cwd=workdir, capture_output=True,
+                              text=True, timeout=max(1.0, budget_s))
+    except subprocess.TimeoutExpired as cut:
+        return yosys.YosysResult(-1, _text(cut.stdout), _text(cut.stderr)), True
+    return yosys.YosysResult(proc.returncode, proc.stdout, proc.stderr), False
+
+
+def _text(out) -> str:
+    return out.decode(errors="replace") if isinstance(out, bytes) else (out or "")
+
+
+def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUDGET_S, resets=()) -> dict:
+    """The two halves of the temporal induction as two sat runs: the induction step alone (no start state,
+    no reset: the length k at which it closes), then the base case from the start (all-zero, the resets
+    asserted in its first cycle) for k cycles, or for INDUCTION_STEPS when the step did not close (a bounded
+    search for a counterexample).  Split because sat applies -set-at to the induction step too, where a
+    reset would make every step trivially safe."""
+    t0 = time.time()
     with tempfile.TemporaryDirectory(prefix="mech2spice_verify_") as tmp:
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
         expose = [(f"{PREFIX}r{k}", q) for k, (q, _, _) in enumerate(regs)]
-        (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", expose))
-        result = yosys.run_script(_script(path, rel, netlist, regs), tmp)
-    return {"regs": regs, **_verdict(result, netlist, bool(regs))}
+        names = proof_ports(netlist)
+        (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", expose, names))
+        (Path(tmp) / "wrap.v").write_text(_wrapper(netlist, names, len(regs)))
+        step, cut = _run_yosys(_script(path, rel, netlist, regs, resets, "induct"), tmp, budget_s)
+        closed = not cut and _PROVED.search(step.stdout) is not None
+        tried = max(map(int, _TRYING.findall(step.stdout)), default=0)
+        if not cut and not closed and not _GAVE_UP.search(step.stdout):
+            return {"regs": regs, "depth": 0, **_failed_run(step, bool(regs))}
+        left = budget_s - (time.time() - t0)
+        steps = tried if closed else INDUCTION_STEPS
+        steps = max(steps, 1)
+        base, cut = _run_yosys(_script(path, rel, netlist, regs, resets, "base", steps), tmp, left) \
+            if left > 1 else (yosys.YosysResult(-1, "", ""), True)
+    depth = steps if _PROVED.search(base.stdout) else 0
+    if cut:
+        return {"regs": regs, "status": "unknown", "cex": None, "depth": depth, "budget_spent": True,
+                "detail": f"the proof's time budget ({budget_s:.0f} s) ran out: the bounded check of {steps} cycles from "
+                          f"the start was not finished, and the induction " +
+                          (f"closed at length {tried} but its base case was not finished" if closed else
+                           f"had not closed (tried up to length {tried})")}
+    failed = _FAILED.search(base.stdout)
+    if failed:
+        cex = _counterexample(base.stdout[failed.end():], netlist)
+        if cex is not None:
+            return {"regs": regs, "depth": depth, "status": "counterexample", "cex": cex,
+                    "detail": "the outputs differ on this input" +
+                              (f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else "")}
+    if not depth:
+        return {"regs": regs, "depth": depth, **_failed_run(base, bool(regs))}
+    if closed:
+        return {"regs": regs, "depth": depth, "status": "proved", "cex": None,
+                "detail": f"no input (sequence) makes an output differ (induction closed at length {tried})"}
+    return {"regs": regs, "depth": depth, "status": "unknown", "cex": None,
+            "detail": f"no counterexample within {depth} cycles of the start, but the induction did not close "
+                      f"within {INDUCTION_STEPS} steps"}
 
 
-# sat's final lines (Yosys 0.3x-0.70): a proof, a counterexample, the induction giving up.
+# sat's lines (Yosys 0.3x-0.70): the step proved, a counterexample, the step giving up, the base case.
 _PROVED = re.compile(r"^(?:SAT proof finished - no model found: SUCCESS|Induction step proven: SUCCESS)", re.M)
 _FAILED = re.compile(r"^SAT (?:temporal induction )?proof finished - model found(?: for base case)?: FAIL", re.M)
-_GAVE_UP = re.compile(r"^Reached maximum number of time steps", re.M)
+_GAVE_UP = re.compile(r"^Reached maximum number of time steps -> proof failed", re.M)
+_TRYING = re.compile(r"^\*\* Trying induction with length (\d+) \*\*", re.M)
 
 
-def _verdict(result, netlist: Netlist, strengthened: bool) -> dict:
-    """status / cex / detail from a sat run's log."""
-    log = result.stdout + "\n" + result.stderr
-    if result.returncode == 0 and _PROVED.search(log):
-        return {"status": "proved", "cex": None, "detail": "no input (sequence) makes an output differ"}
-    failed = _FAILED.search(log)
-    if failed:
-        cex = _counterexample(log[failed.end():], netlist)
-        if cex is not None:
-            return {"status": "counterexample", "cex": cex, "detail": "the outputs differ on this input" +
-                    (f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else "")}
-    if _GAVE_UP.search(log):
-        return {"status": "unknown", "cex": None,
-                "detail": f"no counterexample within {INDUCTION_STEPS} cycles from the all-zero state, but the "
-                          f"induction did not close within {INDUCTION_STEPS} steps"}
-    if strengthened:       # e.g. a register name the source does not have: the plain miter decides
+def _failed_run(result, strengthened: bool) -> dict:
+    """A sat run that ended without a verdict: `unknown` for the strengthened miter (e.g. a register name the
+    source does not have: the plain miter decides), else the one-line refusal."""
+    if strengthened:
         return {"status": "unknown", "cex": None, "detail": f"yosys: {yosys.error_line(result)}"}
     raise Mech2SpiceError(f"yosys equivalence check failed: {yosys.error_line(result)}")
 
@@ -227,13 +394,14 @@ def _counterexample(log: str, netlist: Netlist) -> list[dict] | None:
     """The failing inputs from sat's -show-inputs table (the log after the FAIL line): [{"cycle": k, "inputs":
     {port: int}}], cycle 0 the first from the zero state, the outputs differing in the last one (after its
     cycle's predecessors' clock edges, with its inputs applied); a combinational design: one entry."""
+    port_of = {v: p for p, v in proof_ports(netlist).items()}
     rows: dict[int, dict] = {}
     for line in log.splitlines():
         m = _ROW.match(line)
-        if m:
+        if m and m.group(2) in port_of:
             step = int(m.group(1) or 1)
             value = int(m.group(5).replace("x", "0").replace("z", "0"), 2)
-            rows.setdefault(step, {})[m.group(2)] = value
+            rows.setdefault(step, {})[port_of[m.group(2)]] = value
     if not rows:
         return None
     out = []
@@ -257,31 +425,36 @@ def _icarus_tools() -> tuple[str, str]:
     return iverilog, vvp
 
 
-def _testbench(netlist: Netlist, n: int, clocked: bool) -> str:
+def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False) -> str:
     """Apply vectors.txt (one line of input bits per vector / cycle, ports in declaration order with the
     first port leftmost) and $display the outputs.  Clocked: the inputs of cycle k are on before edge k;
-    one time unit after it cycle k+1's are applied and the outputs read, as simulation.run_clocked_logic."""
-    ins, outs = list(netlist.inputs), list(netlist.outputs)
+    one time unit after it cycle k+1's are applied and the outputs read, as simulation.run_clocked_logic.
+    `first_read`: also read once before the first edge (a counterexample's replay: its cycle 0).
+    Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has."""
+    v = ids.verilog
+    ins, outs = [v(p) for p in netlist.inputs], [v(p) for p in netlist.outputs]
     width = max(1, sum(netlist.inputs.values()))
+    mem, k = f"{PREFIX}mem", f"{PREFIX}k"
     lines = ["`timescale 1ns/1ns", f"module {PREFIX}tb;"]
-    lines += [f"  reg {_decl(w)}{p};" for p, w in netlist.inputs.items()]
-    lines += [f"  wire {_decl(w)}{p};" for p, w in netlist.outputs.items()]
+    lines += [f"  reg {_decl(w)}{v(p)};" for p, w in netlist.inputs.items()]
+    lines += [f"  wire {_decl(w)}{v(p)};" for p, w in netlist.outputs.items()]
     conns = [f".{p}({p})" for p in ins + outs]
+    clock = v(netlist.clock) if clocked else None
     if clocked:
-        lines.append(f"  reg {netlist.clock} = 0;")
-        conns.insert(0, f".{netlist.clock}({netlist.clock})")
-    k, mem = f"{PREFIX}k", f"{PREFIX}mem"          # the bench's own names: a port may be called k or mem
-    lines += [f"  {netlist.top} dut({', '.join(conns)});",
+        lines.append(f"  reg {clock} = 0;")
+        conns.insert(0, f".{clock}({clock})")
+    lines += [f"  {v(netlist.top)} {PREFIX}dut({', '.join(conns)});",
               f"  reg [{width - 1}:0] {mem} [0:{n - 1}];", f"  integer {k};"]
-    def apply(index: str) -> str:      # a design with no data inputs (none, or only its clock) applies nothing
+    def apply(index: str) -> str:                  # a function, not `%`: a name may hold a `%`
         return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
     show = '$display("' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
     lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if clocked:
-        lines += [f"    {apply('0')}", f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
-                  f"      #5 {netlist.clock} = 1;",
-                  f"      #1 {apply(f'({k} + 1 < {n} ? {k} + 1 : {k})')}",
-                  f"      #1 {show}", f"      #3 {netlist.clock} = 0;", "    end"]
+        lines += [f"    {apply('0')}"] + ([f"    #1 {show}"] if first_read else []) + [
+                  f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
+                  f"      #5 {clock} = 1;",
+                  f"      #1 {apply(f'{k} + 1 < {n} ? {k} + 1 : {k}')}",
+                  f"      #1 {show}", f"      #3 {clock} = 0;", "    end"]
     else:
         lines += [f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
                   f"      {apply(k)}", f"      #1 {show}", "    end"]
@@ -291,29 +464,51 @@ def _testbench(netlist: Netlist, n: int, clocked: bool) -> str:
 COERCED = re.compile(r"output port (\S+) is coerced to inout")   # iverilog: the source never drives it
 
 
-def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings: list | None = None) -> list[dict[str, str]]:
+def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings: list | None = None,
+           info: dict | None = None, first_read: bool = False) -> list[dict[str, str]]:
     """Run the source on Icarus: per vector (or cycle), output bit -> '0', '1', 'x' or 'z'.  `warnings`, if
     given, receives iverilog's lines on output ports it coerced to inout: ports the source never drives
-    (an `assign internal = port` written backwards), which read z on Icarus while Yosys joins the two nets."""
+    (an `assign internal = port` written backwards), which read z on Icarus while Yosys joins the two nets;
+    `info`, if given, the generation iverilog compiled with (`generations`)."""
     iverilog, vvp = _icarus_tools()
     path = Path(path).resolve()
     order = input_bits(netlist)
     with tempfile.TemporaryDirectory(prefix="mech2spice_icarus_") as tmp:
         tb = Path(tmp) / "tb.v"
-        tb.write_text(_testbench(netlist, len(vectors), clocked))
+        tb.write_text(_testbench(netlist, len(vectors), clocked, first_read))
         (Path(tmp) / "vectors.txt").write_text("".join(_vector_line(netlist, order, v) for v in vectors))
-        std = ["-g2012"] if path.suffix == ".sv" else ["-g2005"]
-        cmd = [iverilog, *std, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), str(path), "tb.v"]
-        built = _run_tool(cmd, tmp, "iverilog")
+        built, gen = _compile(iverilog, path, tmp)
         out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout
+    if info is not None:
+        info["icarus_generation"] = gen
     if warnings is not None:
         warnings += sorted({f"output port {m.group(1)} is coerced to inout (iverilog): the source never drives it"
                             for m in COERCED.finditer(built.stderr)})
     rows = [ln.split() for ln in out.splitlines() if ln.strip() and not ln.startswith(("VCD", "WARNING"))]
     rows = [r for r in rows if len(r) == len(netlist.outputs) and all(re.fullmatch(r"[01xzXZ]+", s) for s in r)]
-    if len(rows) != len(vectors):
+    if len(rows) != len(vectors) + (first_read and clocked):
         raise Mech2SpiceError(f"Icarus printed {len(rows)} result lines for {len(vectors)} vectors")
     return [_bits_of(netlist, r) for r in rows]
+
+
+def generations(path: Path) -> tuple[str, ...]:
+    """The language generations iverilog tries on a source, in order: SystemVerilog for `.sv`; Verilog-2005
+    for `.v` (where `logic` or `bit` may still be a name), then SystemVerilog (`.v` files written with SV
+    constructs, e.g. `[size]` dimensions or `always_ff`)."""
+    return ("-g2012",) if path.suffix == ".sv" else ("-g2005", "-g2012")
+
+
+def _compile(iverilog: str, path: Path, tmp: str) -> tuple[subprocess.CompletedProcess, str]:
+    """Compile source + tb.v into sim.vvp with the first generation that takes the source (the run, the
+    generation); a source no generation compiles is refused with the first one's error."""
+    first = None
+    for gen in generations(path):
+        cmd = [iverilog, gen, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), str(path), "tb.v"]
+        try:
+            return _run_tool(cmd, tmp, f"iverilog {gen}"), gen
+        except Mech2SpiceError as err:
+            first = first or err
+    raise first
 
 
 def _vector_line(netlist: Netlist, order: list[str], v) -> str:
@@ -344,20 +539,76 @@ def _run_tool(cmd: list[str], cwd: str, name: str) -> subprocess.CompletedProces
 
 # --------------------------------------------------------------------------- vectors
 
-def reset_port(netlist: Netlist, name: str | None = None) -> tuple[str, int] | None:
-    """(port, asserted level) of the design's synchronous reset: `name` (level 0 if it ends in _n/n), or an
-    input called rst/reset (1) or rst_n/rstn/reset_n/resetn (0); None when there is none."""
-    if name == "none":
-        return None
-    if name is not None:
-        if netlist.inputs.get(name) != 1:
-            raise Mech2SpiceError(f"--reset {name}: {netlist.top} has no 1-bit input '{name}' "
-                                  f"(inputs: {', '.join(netlist.inputs) or 'none'})")
-        return name, 0 if name.lower() in RESET_LOW else 1
+def reset_ports(netlist: Netlist, given=None, path=None) -> list[dict]:
+    """The resets verify asserts in cycle 0 (and now and then later): [{port, level, rule}], `rule` saying
+    what chose it.  `given` (--reset, repeatable): 'PORT' or 'PORT=LEVEL' each, or ['none'].  Else, in
+    order: the design's own flip-flops (Yosys's `$sdff*`/`$adff*` cells after `proc; opt_dff` name the
+    input and its polarity: rule "design"), then the port's name as a last resort (rst/reset active high,
+    rst_n/rstn/reset_n/resetn active low: rule "name")."""
+    if isinstance(given, str):
+        given = [given]
+    if given:
+        if list(given) == ["none"]:
+            return []
+        return [_given_reset(netlist, spec) for spec in given]
+    if path is not None:
+        found = design_resets(path, netlist)
+        if found:
+            return found
     for port, w in netlist.inputs.items():
         if w == 1 and port.lower() in RESET_HIGH + RESET_LOW:
-            return port, 0 if port.lower() in RESET_LOW else 1
-    return None
+            return [{"port": port, "level": 0 if port.lower() in RESET_LOW else 1, "rule": "name"}]
+    return []
+
+
+def _given_reset(netlist: Netlist, spec: str) -> dict:
+    name, _, level = spec.partition("=")
+    if netlist.inputs.get(name) != 1 or name == netlist.clock:
+        raise Mech2SpiceError(f"--reset {spec}: {netlist.top} has no 1-bit input '{name}' "
+                              f"(inputs: {', '.join(netlist.inputs) or 'none'})")
+    if level not in ("", "0", "1"):
+        raise Mech2SpiceError(f"--reset {spec}: the level is 0 or 1 (PORT=0: active low)")
+    if level == "":
+        return {"port": name, "level": 0 if name.lower() in RESET_LOW else 1, "rule": "given (level from the name)"}
+    return {"port": name, "level": int(level), "rule": "given"}
+
+
+_RESET_CELL = re.compile(r"\$(?:_?)(s|a)dff")       # $sdff, $sdffe, $sdffce, $adff, $adffe (word-level cells)
+
+
+def design_resets(path, netlist: Netlist) -> list[dict]:
+    """The inputs the source's flip-flops reset on, with the level that resets them, from Yosys's cells after
+    `proc; opt_dff` (`$sdff*`: SRST and SRST_POLARITY; `$adff*`: ARST and ARST_POLARITY); [] when none is
+    an input port of the top or the run fails (the name rule then decides)."""
+    import json as _json
+    path = Path(path)
+    with tempfile.TemporaryDirectory(prefix="mech2spice_resets_") as tmp:
+        rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
+        read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
+        script = "\n".join([f'{read} {ids.yosys_path(rel, "Verilog file")}',
+                            _hierarchy(netlist.top), "proc", "flatten", "opt_dff", f"rename -top {PREFIX}src",
+                            "write_json resets.json", ""])
+        result, cut = _run_yosys(script, tmp, 60)
+        if cut or result.returncode != 0:
+            return []
+        module = _json.loads((Path(tmp) / "resets.json").read_text())["modules"].get(f"{PREFIX}src")
+    if module is None:
+        return []
+    port_of = {p["bits"][0]: name for name, p in module["ports"].items()
+               if p["direction"] == "input" and len(p["bits"]) == 1}
+    found = {}
+    for cell in module["cells"].values():
+        m = _RESET_CELL.match(cell["type"])
+        if not m:
+            continue
+        pin = "SRST" if m.group(1) == "s" else "ARST"
+        port = port_of.get((cell["connections"].get(pin) or [None])[0])
+        if port is not None and port != netlist.clock:
+            polarity = int(str(cell["parameters"].get(f"{pin}_POLARITY", "1")), 2) & 1
+            found.setdefault(port, {"port": port, "level": polarity,
+                                    "rule": f"design ({'synchronous' if pin == 'SRST' else 'asynchronous'} "
+                                            f"reset of the source's flip-flops)"})
+    return [found[p] for p in netlist.inputs if p in found]
 
 
 def make_vectors(netlist: Netlist, n: int | None, exhaustive: bool, seed: int) -> tuple[np.ndarray, bool]:
@@ -372,14 +623,17 @@ def make_vectors(netlist: Netlist, n: int | None, exhaustive: bool, seed: int) -
     return np.random.default_rng(seed).integers(0, 2, (n, nbits)).astype(bool), False
 
 
-def make_cycles(netlist: Netlist, n: int, seed: int, reset: tuple[str, int] | None) -> np.ndarray:
-    """(n, input bits) bool: random inputs per cycle; the reset asserted in cycle 0, and now and then later."""
+def make_cycles(netlist: Netlist, n: int, seed: int, resets) -> np.ndarray:
+    """(n, input bits) bool: random inputs per cycle; the resets (`reset_ports`' dicts, or one (port, level)
+    pair) asserted together in cycle 0, and now and then later."""
     order = input_bits(netlist)
     rng = np.random.default_rng(seed)
     x = rng.integers(0, 2, (n, len(order))).astype(bool)
-    if reset is not None:
-        j, level = order.index(f"{reset[0]}[0]"), reset[1]
-        again = rng.random(n) < RESET_AGAIN
+    if isinstance(resets, tuple):
+        resets = [{"port": resets[0], "level": resets[1]}]
+    again = rng.random(n) < RESET_AGAIN
+    for r in resets or []:
+        j, level = order.index(f"{r['port']}[0]"), r["level"]
         x[:, j] = np.where(again, level, 1 - level).astype(bool)
         x[0, j] = bool(level)
     return x
@@ -446,14 +700,23 @@ def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], c
     return mismatches
 
 
+def undefined_by_port(netlist: Netlist, ref: list[dict]) -> dict:
+    """Per output port, of the bits compared: how many the source left x and z (Icarus), and how many in all."""
+    out = {}
+    for port, w in netlist.outputs.items():
+        vals = [r[f"{port}[{i}]"] for r in ref for i in range(w)]
+        out[port] = {"x": sum(v in "xX" for v in vals), "z": sum(v in "zZ" for v in vals), "compared": len(vals)}
+    return out
+
+
 def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool, seed: int, params=None,
-          progress=False, reset: str | None = None) -> dict:
+          progress=False, reset=None, resets: list[dict] | None = None) -> dict:
     """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches."""
     t0 = time.time()
     clocked = netlist.clock is not None
     physical = _physical(backend)
     n = n or (16 if physical and not clocked else 8 if physical else 2000 if not clocked else 1000)
-    rst = reset_port(netlist, reset) if clocked else None
+    rst = reset_ports(netlist, reset, path) if clocked and resets is None else (resets or [])
     if clocked:
         if exhaustive:
             raise Mech2SpiceError(f"--exhaustive applies to combinational designs; {netlist.top} is clocked: "
@@ -464,16 +727,20 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
         if physical and not exhaustive and len(x) > n:
             x = x[np.random.default_rng(seed).permutation(len(x))[:n]]
             complete = False
-    warnings = []
-    ref = icarus(path, netlist, x, clocked, warnings)
+    warnings, info = [], {}
+    ref = icarus(path, netlist, x, clocked, warnings, info)
     got = run_backend(netlist, x, clocked, backend, params, progress)
     mismatches = compare(netlist, x, ref, got, clocked, None if params is None else params.levels)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
            "undefined_bits": sum(v in "xX" for r in ref for v in r.values()),
-           "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings}
+           "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings, **info,
+           "undefined_by_port": undefined_by_port(netlist, ref)}
+    compared = sum(len(r) for r in ref)
+    out["mostly_undefined"] = compared > 0 and (out["undefined_bits"] + out["undriven_bits"]) * 2 > compared
     if clocked:
-        out["reset"] = None if rst is None else {"port": rst[0], "level": rst[1]}
+        out["reset"] = {k: rst[0][k] for k in ("port", "level")} if rst else None
+        out["resets"] = rst
     if physical:
         margins = [g["min_margin"] for g in got if g.get("min_margin") is not None]
         out.update(valid=all(g["valid"] for g in got), stable=all(g.get("stable", True) for g in got),
@@ -486,20 +753,24 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
 
 def verify(path, top: str | None = None, backend: str = "logic", vectors: int | None = None,
            exhaustive: bool = False, seed: int = 0, params=None, progress=False, log=None,
-           netlist: Netlist | None = None, reset: str | None = None, equivalence_check: bool = True) -> dict:
+           netlist: Netlist | None = None, reset=None, equivalence_check: bool = True,
+           proof_time: float = PROOF_BUDGET_S) -> dict:
     """Equivalence and co-simulation of one design; `netlist` replaces the synthesised one (tests)."""
     t0 = time.time()
     from .synthesis.synth import synthesize
     log = log or (lambda msg: None)
     nl = netlist if netlist is not None else synthesize(path, top=top)
+    check_names(nl)
     out = {"design": str(path), "top": nl.top, "clocked": nl.clock is not None,
            "gates": len(nl.gates()), "latches": len(nl.latches())}
+    resets = reset_ports(nl, reset, path) if nl.clock is not None else []
     if equivalence_check:
-        log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source (yosys)")
-        out["equivalence"] = equivalence(path, nl)
+        log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source (yosys, at most "
+            f"{proof_time:.0f} s)")
+        out["equivalence"] = equivalence(path, nl, proof_time, resets)
         log(f"equivalence: {out['equivalence']['status']} ({out['equivalence']['wall_s']:.1f} s)")
     log(f"co-simulation against Icarus on {backend}")
-    out["cosim"] = cosim(path, nl, backend, vectors, exhaustive, seed, params, progress, reset)
+    out["cosim"] = cosim(path, nl, backend, vectors, exhaustive, seed, params, progress, reset, resets)
     eq = out.get("equivalence", {}).get("status", "proved")
     out["verdict"] = "pass" if eq == "proved" and out["cosim"]["agree"] else \
         "fail" if eq == "counterexample" or not out["cosim"]["agree"] else "unknown"
@@ -544,6 +815,18 @@ def _mismatch_text(m: dict) -> str:
     return f"{where} {m['inputs']}: {m['bit']} Icarus {m['icarus']}, network {got}{amp}"
 
 
+def _undefined_text(co: dict) -> str:
+    """The verdict line's note on bits the source left undefined: per port, and a warning when most were."""
+    ports = [f"{p} {n['x'] + n['z']}/{n['compared']}" for p, n in co.get("undefined_by_port", {}).items()
+             if n["x"] + n["z"]]
+    if not ports:
+        return ""
+    note = "; x/z in the source (per port, of the bits compared): " + ", ".join(ports)
+    if co.get("mostly_undefined"):
+        note += " -- MOST compared bits were undefined in the source: agreement there says little"
+    return note
+
+
 def text(result: dict) -> str:
     """The human-readable report."""
     lines = [f"{result['top']}: {result['gates']} NOR gates, {result['latches']} latches"]
@@ -552,6 +835,11 @@ def text(result: dict) -> str:
         lines.append(f"equivalence: {eq['status']} ({eq['method']}, {eq['wall_s']:.1f} s)")
         if eq["status"] != "proved":
             lines.append(f"  {eq['detail']}")
+        if eq.get("replay"):
+            rep = eq["replay"]
+            lines.append("  replay (Icarus vs the network on the logic backend): " +
+                         (f"reproduced in cycle {rep['cycle']} on {', '.join(rep['bits'])}" if rep["reproduced"]
+                          else "not reproduced: no bit the source defines differs"))
         for step in eq["counterexample"] or []:
             lines.append(f"  counterexample{' cycle ' + str(step['cycle']) if 'cycle' in step else ''}: "
                          f"{step['inputs']}" + (f" -> source {step['source']}, network {step['network']}"
@@ -572,5 +860,5 @@ def text(result: dict) -> str:
     lines += ["  " + _mismatch_text(m) for m in co["mismatches"][:20]]
     if len(co["mismatches"]) > 20:
         lines.append(f"  ... {len(co['mismatches']) - 20} more (--json lists all)")
-    lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)")
+    lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)" + _undefined_text(co))
     return "\n".join(lines)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -84,6 +85,9 @@ def test_broken_clocked_mapping_gives_a_counterexample_sequence():
     assert eq["status"] == "counterexample"
     assert [s["cycle"] for s in eq["counterexample"]] == list(range(len(eq["counterexample"])))
     assert not res["cosim"]["agree"] and res["verdict"] == "fail"
+    rep = eq["replay"]                       # replayed before it is reported: the last cycle differs there
+    assert rep["reproduced"] and rep["cycle"] == len(eq["counterexample"]) - 1 and rep["bits"]
+    assert eq["counterexample"][-1]["source"] != eq["counterexample"][-1]["network"]
 
 
 def _stuck_at_one(nl, out: str):
@@ -299,3 +303,180 @@ def test_an_output_the_source_never_drives_is_named(tmp_path, capsys):
     assert co["source_warnings"] == ["output port q is coerced to inout (iverilog): the source never drives it"]
     code, out, err = _run(capsys, src)
     assert code == 1 and "source: output port q is coerced to inout" in out and "2 bits the source does not drive" in out
+
+
+ESCAPED = r"""module \top.level$1 (input \clk , input \opcode[0] , input \opcode[1] , input [1:0] \logic ,
+                      output \y[0] , output reg [2:0] \q.r );
+  wire \n,1 = \opcode[0] & ~\opcode[1] ;
+  assign \y[0] = \n,1 ^ \logic [1];
+  always @(posedge \clk ) \q.r <= {\q.r [1:0], \n,1 | \logic [0]};
+endmodule
+"""
+
+
+def test_escaped_identifiers_proved_and_agree(tmp_path, capsys):
+    """Escaped module, port, wire and register names as EPFL netlists write them (`\\opcode[0]`), a keyword
+    (`\\logic`) and a comma: the network written back as Verilog, the testbench and the proof all read them."""
+    src = tmp_path / "escaped.v"
+    src.write_text(ESCAPED)
+    code, out, err = _run(capsys, src, "--cycles", 200, "--json")
+    res = json.loads(out)
+    assert code == 0, out + err
+    assert res["top"] == "top.level$1" and res["latches"] == 3
+    assert res["equivalence"]["status"] == "proved" and res["cosim"]["agree"] and res["cosim"]["cycles"] == 200
+
+
+EPFL = ["ctrl", "router", "int2float", "cavlc"]
+
+
+@pytest.mark.skipif(not BENCH, reason="set MECH2SPICE_BENCHMARKS to a folder with epfl/ctrl.v ... "
+                                      "(docs/verify.md says where they come from)")
+@pytest.mark.parametrize("name", EPFL)
+def test_epfl_benchmark_with_escaped_names_proved_and_agrees(name, capsys):
+    """EPFL random-control benchmarks (lsils/benchmarks, random_control/NAME.v): every port an escaped name."""
+    path = Path(BENCH) / "epfl" / f"{name}.v"
+    if not path.exists():
+        pytest.skip(f"{path} not there")
+    code, out, err = _run(capsys, path, "--vectors", 500, "--json")
+    res = json.loads(out)
+    assert code == 0, out + err
+    assert res["equivalence"]["status"] == "proved" and res["cosim"]["agree"] and res["cosim"]["mismatches"] == []
+
+
+FIFO = """// A synchronous FIFO, 8 entries of 8 bits (written for these tests).
+module fifo8(input clk, input rst, input push, input pop, input [7:0] din,
+             output [7:0] dout, output empty, output full);
+  reg [7:0] mem [0:7];
+  reg [2:0] wp, rp;
+  reg [3:0] count;
+  assign empty = count == 0;
+  assign full = count == 8;
+  assign dout = mem[rp];
+  wire do_push = push && !full;
+  wire do_pop = pop && !empty;
+  always @(posedge clk) begin
+    if (rst) begin
+      wp <= 0; rp <= 0; count <= 0;
+    end else begin
+      if (do_push) begin mem[wp] <= din; wp <= wp + 1; end
+      if (do_pop) rp <= rp + 1;
+      count <= count + do_push - do_pop;
+    end
+  end
+endmodule
+"""
+
+
+def test_a_fifo_with_a_memory_is_proved(tmp_path, capsys):
+    """The proof maps the source's memory to flip-flops as synthesis does (sat has no model of $mem cells):
+    the 64 memory bits are matched registers and the induction closes."""
+    src = tmp_path / "fifo8.v"
+    src.write_text(FIFO)
+    code, out, err = _run(capsys, src, "--cycles", 300, "--json")
+    res = json.loads(out)
+    assert code == 0, out + err
+    eq = res["equivalence"]
+    assert eq["status"] == "proved" and "77 matched registers" in eq["method"]
+    assert res["cosim"]["agree"] and res["cosim"]["undefined_bits"] > 0     # dout reads unwritten words: x
+
+
+GCD = """// GCD by subtraction; its reset port is named rst_n but is active high (written for these tests).
+module gcd(input clk, input rst_n, input start, input [3:0] a, input [3:0] b,
+           output reg [3:0] y, output reg done);
+  reg [3:0] x, z;
+  reg busy;
+  always @(posedge clk) begin
+    if (rst_n) begin
+      x <= 0; z <= 0; y <= 0; busy <= 0; done <= 0;
+    end else if (!busy) begin
+      done <= 0;
+      if (start) begin x <= a; z <= b; busy <= 1; end
+    end else if (x == z || x == 0 || z == 0) begin
+      y <= x == 0 ? z : x; done <= 1; busy <= 0;
+    end else if (x > z) x <= x - z;
+    else z <= z - x;
+  end
+endmodule
+"""
+
+
+def test_the_reset_level_is_read_from_the_design_not_the_name(tmp_path, capsys):
+    """`rst_n` active high: its polarity comes from Yosys's $sdff cell (rule "design"), so the reset is applied
+    and no output is x; stating it the other way (--reset rst_n=0) leaves the registers undefined."""
+    src = tmp_path / "gcd.v"
+    src.write_text(GCD)
+    code, out, err = _run(capsys, src, "--cycles", 300, "--json")
+    res = json.loads(out)
+    assert code == 0, out + err
+    (rst,) = res["cosim"]["resets"]
+    assert rst["port"] == "rst_n" and rst["level"] == 1 and rst["rule"].startswith("design")
+    assert res["cosim"]["undefined_bits"] == 0 and res["equivalence"]["status"] == "proved"
+    code, out, err = _run(capsys, src, "--cycles", 300, "--json", "--reset", "rst_n=0", "--no-equivalence")
+    res = json.loads(out)
+    assert res["cosim"]["resets"] == [{"port": "rst_n", "level": 0, "rule": "given"}]
+    assert res["cosim"]["undefined_bits"] > 0                      # the reset was never really applied
+
+
+def test_several_resets_one_asynchronous(tmp_path):
+    """Two resets, a synchronous active-low one and an asynchronous active-high one: both read from the design."""
+    src = tmp_path / "two.v"
+    src.write_text("module two(input clk, input clr_n, input arst, input d, output reg p, output reg q);\n"
+                   "  always @(posedge clk) if (!clr_n) p <= 0; else p <= d;\n"
+                   "  always @(posedge clk or posedge arst) if (arst) q <= 0; else q <= p;\nendmodule\n")
+    nl = synthesize(VERILOG / "counter4.v")      # any netlist with the same ports will do for the port list
+    nl.top, nl.inputs = "two", {"clr_n": 1, "arst": 1, "d": 1}
+    found = V.reset_ports(nl, None, src)
+    assert found[0]["port"] == "clr_n" and found[0]["level"] == 0 and "synchronous" in found[0]["rule"]
+    assert found[1]["port"] == "arst" and found[1]["level"] == 1 and "asynchronous" in found[1]["rule"]
+    assert V.reset_ports(nl, ["clr_n=0", "arst"]) == [
+        {"port": "clr_n", "level": 0, "rule": "given"}, {"port": "arst", "level": 1, "rule": "given (level from the name)"}]
+    with pytest.raises(V.Mech2SpiceError, match="level is 0 or 1"):
+        V.reset_ports(nl, ["arst=2"])
+
+
+def test_a_proof_out_of_time_is_unknown_and_says_so():
+    """The budget bounds the proof: cut short, the status is `unknown`, never a hang or a pass."""
+    nl = _swap_outputs(synthesize(VERILOG / "cpu.v"), "waddr[0]", "waddr[1]")
+    t0 = time.time()
+    eq = V.equivalence(VERILOG / "cpu.v", nl, budget_s=2)
+    assert eq["status"] == "unknown" and "time budget (2 s) ran out" in eq["detail"]
+    assert eq["budget_s"] == 2 and time.time() - t0 < 30
+
+
+def test_a_counterexample_the_replay_does_not_confirm_is_unknown():
+    """Inputs on which source and network agree, offered as a counterexample: the replay (Icarus and the logic
+    backend) finds no differing bit, so the status is `unknown` and the text says why."""
+    nl = synthesize(VERILOG / "counter4.v")
+    cex = [{"cycle": k, "inputs": {"rst": int(k == 0), "en": 1}} for k in range(4)]
+    res = V._replayed(VERILOG / "counter4.v", nl, {"status": "counterexample", "cex": cex, "depth": 4, "detail": ""})
+    assert res["status"] == "unknown" and not res["replay"]["reproduced"]
+    assert res["replay"]["source"] == res["replay"]["network"] == {"q": "0010"}   # reset at edge 0, counted at edges 1 and 2
+    assert "do not differ" in res["detail"]
+
+
+def test_agreement_on_mostly_undefined_outputs_says_so(tmp_path, capsys):
+    """A register nothing defines (rotated, never reset, never loaded): every q bit is x on Icarus, so any network
+    agrees.  The verdict line and the JSON count the x bits per port and say that most were undefined."""
+    src = tmp_path / "rot.v"
+    src.write_text("module rot(input clk, input d, output reg [3:0] q, output e);\n"
+                   "  assign e = d;\n  always @(posedge clk) q <= {q[2:0], q[3]};\nendmodule\n")
+    code, out, err = _run(capsys, src, "--cycles", 50, "--json", "--no-equivalence")
+    co = json.loads(out)["cosim"]
+    assert co["undefined_by_port"] == {"q": {"x": 200, "z": 0, "compared": 200}, "e": {"x": 0, "z": 0, "compared": 50}}
+    assert co["mostly_undefined"] and co["agree"]
+    code, out, err = _run(capsys, src, "--cycles", 50, "--no-equivalence")
+    verdict = out.strip().splitlines()[-1]
+    assert "q 200/200" in verdict and "MOST compared bits were undefined" in verdict
+
+
+@pytest.mark.parametrize("body", ["module noin(output y);\n  assign y = 1;\nendmodule\n",
+                                  "module onlyclk(input clk, output reg [1:0] q);\n"
+                                  "  always @(posedge clk) q <= q + 1;\nendmodule\n"])
+def test_a_design_without_data_inputs_is_verified(tmp_path, capsys, body):
+    """No data input, or only the clock: the testbench has nothing to apply (it raised a TypeError)."""
+    src = tmp_path / "d.v"
+    src.write_text(body)
+    code, out, err = _run(capsys, src, "--json", *(["--cycles", 20] if "clk" in body else []))
+    res = json.loads(out)
+    assert code == 0, out + err
+    assert res["equivalence"]["status"] == "proved" and res["cosim"]["agree"]

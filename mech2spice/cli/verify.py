@@ -6,7 +6,7 @@ from pathlib import Path
 from .. import inputs
 from ..backends import BACKENDS
 from ..errors import Mech2SpiceError
-from ..verify import exit_code, junit_xml, reset_port, text, verify
+from ..verify import PROOF_BUDGET_S, check_names, exit_code, junit_xml, reset_ports, text, verify
 
 
 def add_parser(subparsers) -> None:
@@ -14,7 +14,8 @@ def add_parser(subparsers) -> None:
     s = subparsers.add_parser(
         "verify", help="prove the NOR network equal to the Verilog and co-simulate it against Icarus",
         description="1. Formal equivalence of the mapped NOR network (written back as Verilog) and the source, "
-                    "with Yosys (miter + SAT; temporal induction from the all-zero state for clocked designs). "
+                    "with Yosys (miter + SAT: an induction step and a bounded check from the all-zero state, the resets "
+                    "asserted in cycle 0; a counterexample replayed on Icarus and the logic backend). "
                     "2. Co-simulation of the source on Icarus Verilog against a backend on the same vectors "
                     "(clocked: a reset cycle, then random inputs per cycle). Exit 0 when proved and every bit "
                     "agrees, 1 on a counterexample, a mismatch, an invalid output or an unproved equivalence.")
@@ -28,8 +29,14 @@ def add_parser(subparsers) -> None:
     s.add_argument("--exhaustive", action="store_true", help="every input vector (combinational designs)")
     s.add_argument("--cycles", type=inputs.integer(1, inputs.MAX_CYCLES), metavar="N",
                    help="clock cycles after the reset cycle's start (default 1000 on logic, 8 on a physical backend)")
-    s.add_argument("--reset", metavar="PORT", help="the synchronous reset asserted in cycle 0 (default: an input "
-                   "named rst/reset, or rst_n/rstn/reset_n/resetn active low; 'none': no reset)")
+    s.add_argument("--reset", metavar="PORT[=LEVEL]", action="append",
+                   help="a reset asserted in cycle 0 (and now and then later) of the co-simulation and the proof, "
+                        "at LEVEL (1: active high, 0: active low); repeat for several; 'none': no reset. Default: "
+                        "the inputs the source's flip-flops reset on, with their polarity (Yosys's $sdff/$adff "
+                        "cells), else an input named rst/reset (high) or rst_n/rstn/reset_n/resetn (low)")
+    s.add_argument("--proof-time", type=inputs.number(1, 86400), metavar="S", default=PROOF_BUDGET_S,
+                   help=f"wall-clock budget of the proof in seconds (default {PROOF_BUDGET_S}); when it runs out the "
+                        "equivalence is 'unknown' with the depth reached")
     s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, help="random seed (default 0)")
     s.add_argument("--params", default="default", help="gate parameters of a physical backend")
     s.add_argument("--no-equivalence", action="store_true", help="co-simulation only")
@@ -63,18 +70,21 @@ def cmd_verify(args) -> int:
     if not Path(args.design).is_file():
         raise Mech2SpiceError(f"cannot read Verilog file {args.design}: no such file")
     nl = synthesize(args.design, top=args.top)
+    check_names(nl)                                # every name the generated Verilog holds, before the work
     if nl.clock is None and args.cycles:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --cycles applies to clocked designs (use --vectors)")
     if nl.clock is not None and (args.vectors or args.exhaustive):
         raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N, not --vectors/--exhaustive")
     if nl.clock is None and args.reset:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --reset applies to clocked designs")
-    if nl.clock is not None:
-        reset_port(nl, args.reset)                 # checked before the work starts
+    if nl.clock is not None and args.reset:
+        if "none" in args.reset and len(args.reset) > 1:
+            raise Mech2SpiceError("--reset none: give it alone (no reset), not beside other --reset ports")
+        reset_ports(nl, args.reset)                # checked before the work starts
     params = load_params(args.params) if BACKENDS[args.backend].capabilities.physical else None
     res = verify(args.design, backend=args.backend, vectors=args.cycles or args.vectors, exhaustive=args.exhaustive,
                  seed=args.seed, params=params, progress=_progress(args), log=_log(args), netlist=nl,
-                 reset=args.reset, equivalence_check=not args.no_equivalence)
+                 reset=args.reset, equivalence_check=not args.no_equivalence, proof_time=args.proof_time)
     if args.junit:
         inputs.write_text(args.junit, junit_xml(res))
     if args.json:

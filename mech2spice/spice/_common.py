@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DivergenceError, Mech2SpiceError
+from ..identifiers import SpiceNamer, comment
 from ..inputs import check_fields
 from ..physics.model import MechModel
 from ..run_result import blowup_bound
@@ -44,31 +45,9 @@ def drive_schedule(model: MechModel, stimulus, b: int, d: int, t_end: float) -> 
     return tuple(pts)
 
 
-# --- names -------------------------------------------------------------------
-_UNSAFE = re.compile(r"[^a-z0-9_]+")
-
-
-class Namer:
-    """Maps user names to SPICE-safe stems: [a-z0-9_] only (ngspice lowercases), unique, letter first."""
-
-    def __init__(self):
-        self.used: set[str] = set()
-
-    def __call__(self, name: str) -> str:
-        stem = _UNSAFE.sub("_", str(name).lower()).strip("_")[:40] or "n"
-        if not stem[0].isalpha():
-            stem = "n" + stem
-        out, k = stem, 1
-        while out in self.used:
-            k += 1
-            out = f"{stem}_{k}"
-        self.used.add(out)
-        return out
-
-
-def comment_text(text: str) -> str:
-    """Free text made safe for a comment line: printable ASCII, no newline, no card."""
-    return re.sub(r"[^A-Za-z0-9_ .,:;=+\-()'\[\]/]", "?", ascii(str(text))[1:-1])[:120]
+# --- names: written by mech2spice/identifiers.py (one writer of names for every generated text) ----------
+Namer = SpiceNamer
+comment_text = comment
 
 
 def num(x: float) -> str:

@@ -9,10 +9,10 @@ See docs/spice.md, section "Netlists that read their own result".
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 from ..physics.model import MechModel
+from ..identifiers import ngspice_echo, ngspice_echo_text
 from ._common import comment_text, num
 
 MAX_VALUE_BITS = 53        # a port's integer is printed from doubles: exact up to 2^53
@@ -81,17 +81,8 @@ def header(model: MechModel, nodes: list[str], what: str, about_line: str, print
 
 
 # --- the ngspice .control block ------------------------------------------------------------------------
-_ECHO_UNSAFE = re.compile(r"[^A-Za-z0-9_\[\]]")
-
-
-def _label(name: str) -> str:
-    """A name safe inside an ngspice echo string (no quote, $, ; or redirection)."""
-    return _ECHO_UNSAFE.sub("?", name)
-
-
-def _label_text(text: str) -> str:
-    """Free text safe inside an ngspice echo string."""
-    return re.sub(r"[^A-Za-z0-9_ .,:=/()\[\]|+-]", "?", text)
+_label = ngspice_echo            # names and free text in echo strings: mech2spice/identifiers.py
+_label_text = ngspice_echo_text
 
 
 def period_mask(t0: float, t1: float) -> list[str]:

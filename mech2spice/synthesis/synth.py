@@ -38,6 +38,7 @@ from pathlib import Path
 
 import networkx as nx
 
+from .. import identifiers
 from ..errors import Mech2SpiceError
 from . import refusals, yosys
 
@@ -115,9 +116,7 @@ def latch_inputs(g: nx.DiGraph, q: str) -> tuple[str, str | None]:
 def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -> Netlist:
     """Synthesize the Verilog file ``path`` into a clean Netlist of 2-input NOR gates (and latches)."""
     path = Path(path)
-    if '"' in str(path.resolve()) or not str(path.resolve()).isprintable():    # quoted in the Yosys script
-        raise Mech2SpiceError(f"Verilog file {ascii(str(path))}: its path has a quote or a control character, "
-                              "which the Yosys script cannot quote: rename it")
+    identifiers.yosys_path(path.resolve(), "Verilog file")      # quoted in the Yosys script: checked first
     source = _read_source(path)
     _check_source(path, source)
     if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
@@ -243,9 +242,9 @@ def _flow(source: str, top: str | None) -> str:
     """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python)."""
     read = "read_verilog -sv" if source.endswith(".sv") else "read_verilog"
     return "\n".join([                             # ast.txt, *.il: for refusals.py
-        f'tee -o ast.txt {read} -dump_ast1 "{source}"',   # not -q: its errors must reach the log
+        f'tee -o ast.txt {read} -dump_ast1 {identifiers.yosys_path(source)}',   # not -q: its errors must reach the log
         "write_rtlil read.il",                      # before hierarchy drops the modules the top leaves unused
-        f"hierarchy -check -top {top}" if top else "hierarchy -check -auto-top",
+        f"hierarchy -check -top {identifiers.yosys(top)}" if top else "hierarchy -check -auto-top",
         "proc -noopt",                              # `proc` less its opt_expr, which can fold away one of
         "write_rtlil drivers.il",                   # two conflicting drivers: the nets as written
         "opt_expr -keepdc",                         # the rest of `proc`
@@ -254,7 +253,7 @@ def _flow(source: str, top: str | None) -> str:
         "flatten",
         "tribuf -formal",                           # tri-state buses -> multiplexers (docs/rtl.md) ...
         "delete n:$tribuf_conflict*",               # ... less its no-two-drivers checks: Icarus co-simulates
-        "synth -flatten" + (f" -top {top}" if top else ""),   # (memories: `memory` + `memory_map` in it)
+        "synth -flatten" + (f" -top {identifiers.yosys(top)}" if top else ""),   # (memories: `memory` + `memory_map` in it)
         "dffunmap",                                 # enables/resets -> plain flip-flops + logic
         "abc -g NOR", "opt_clean",
         "abc -g NOR", "opt_clean",                  # a 2nd pass trims e.g. comparator4 39 -> 36

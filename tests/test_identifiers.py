@@ -1,0 +1,209 @@
+"""One writer of names into generated text (mech2spice/identifiers.py): every generator, run on names holding
+every printable ASCII character, writes text its target reads back as the same names or refuses the name in
+one Mech2SpiceError; a design whose module name is a testbench statement creates no file (issues #35, #37)."""
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import networkx as nx
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from mech2spice import api, cli, identifiers as ids, verify as V
+from mech2spice.errors import Mech2SpiceError
+from mech2spice.physics import network
+from mech2spice.physics.params import load_params
+from mech2spice.spice import vacask
+from mech2spice.synthesis.synth import Netlist, synthesize
+
+ROOT = Path(__file__).resolve().parents[1]
+VERILOG = ROOT / "verilog"
+PRINTABLE = "".join(chr(c) for c in range(32, 127))          # every printable ASCII character, blank included
+GRAPHIC = PRINTABLE[1:]
+ICARUS = shutil.which("iverilog") and shutil.which("vvp")
+needs_icarus = pytest.mark.skipif(not ICARUS, reason="Icarus Verilog (iverilog, vvp) not installed")
+
+names = st.text(alphabet=PRINTABLE, min_size=1, max_size=24)
+VERILOG_GRAPHIC = GRAPHIC.replace("`", "")                  # a backquote is refused (a macro call), tested above
+graphic_names = st.text(alphabet=VERILOG_GRAPHIC, min_size=1, max_size=24).filter(lambda s: not s.startswith(V.PREFIX))
+
+
+def renamed(nl: Netlist, top: str, new: dict[str, str]) -> Netlist:
+    """`nl` with its top module and ports renamed (`new`: old port -> new port); port bit nodes follow."""
+    g = nl.graph.copy()
+    relabel = {}
+    for node, attrs in g.nodes(data=True):
+        if attrs["kind"] in ("input", "output"):
+            attrs["port"] = new[attrs["port"]]
+            relabel[node] = f"{attrs['port']}[{attrs['bit']}]"
+    g = nx.relabel_nodes(g, relabel)
+    return Netlist(top, g, {new[p]: w for p, w in nl.inputs.items()}, {new[p]: w for p, w in nl.outputs.items()},
+                   new.get(nl.clock, nl.clock), frozenset(new[p] for p in nl.signed))
+
+
+ADDER = synthesize(VERILOG / "adder2.v")          # a[2], b[2] -> s[3]
+COUNTER = synthesize(VERILOG / "counter4.v")      # clocked
+
+
+def _hostile(nl: Netlist, words: list[str]) -> Netlist:
+    ports = [*([nl.clock] if nl.clock else []), *nl.inputs, *nl.outputs]
+    return renamed(nl, words[0], dict(zip(ports, words[1:])))
+
+
+# --------------------------------------------------------------------------- the writers alone
+
+def test_plain_names_are_written_unchanged_and_keywords_escaped():
+    assert ids.verilog("a_1$") == "a_1$" and ids.yosys("mp.y") == "mp.y"
+    assert ids.verilog("logic") == "\\logic " and ids.verilog("module") == "\\module "
+    assert ids.verilog("opcode[0]") == "\\opcode[0] " and ids.verilog_bit("opcode[0]", 0, 1) == "\\opcode[0] "
+    assert ids.verilog_bit("q", 3, 4) == "q[3]"
+    assert ids.yosys("opcode[0]") == "\\opcode[0]"
+
+
+@given(names)
+def test_every_printable_name_is_escaped_or_refused_by_name(name):
+    for writer in (ids.verilog, ids.yosys):
+        try:
+            text = writer(name)
+        except Mech2SpiceError as err:
+            assert " " in name or (writer is ids.yosys and name.endswith((";", "\\"))) or \
+                (writer is ids.verilog and "`" in name), name
+            assert ascii(name)[1:-1][:20] in str(err)
+            continue
+        if text.startswith("\\"):             # one word to the target: no blank inside, nothing after it
+            assert text.rstrip(" ")[1:] == name and not re.search(r"\s", text.rstrip(" "))
+        else:                                  # plain, or Yosys's own `$` name (no Verilog name starts so)
+            assert text == name and (re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$.]*", name) or
+                                     writer is ids.yosys and name.startswith("$") and not re.search(r"\s", name))
+    for text in (ids.comment(name), ids.ngspice_echo(name), ids.ngspice_echo_text(name)):
+        assert text.isprintable() and not set(text) & set("\"'{}$;*\\`") - set("';")
+    assert re.fullmatch(r"[a-z][a-z0-9_]*", ids.SpiceNamer()(name))
+
+
+# --------------------------------------------------------------------------- Verilog and Yosys, end to end
+
+def _icarus_equals_logic(nl: Netlist, tmp: Path) -> None:
+    """gate.v written with these names, run under the generated testbench on Icarus, equals the network on
+    the logic backend; Yosys reads the same gate.v through the generated script and proves it equal to the
+    network (the script names the top module)."""
+    src = tmp / "gate.v"
+    src.write_text(V.write_verilog(nl, nl.top))
+    clocked = nl.clock is not None
+    x = V.make_cycles(nl, 12, 1, None) if clocked else V.make_vectors(nl, 16, True, 0)[0]
+    ref = V.icarus(src, nl, x, clocked)
+    got = V.run_backend(nl, x, clocked, "logic", None, False)
+    assert V.compare(nl, x, ref, got, clocked) == []
+    assert V.equivalence(src, nl)["status"] == "proved"
+
+
+@needs_icarus
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(graphic_names, min_size=4, max_size=4, unique=True))
+def test_hostile_names_in_gate_v_testbench_and_yosys_script(tmp_path, words):
+    _icarus_equals_logic(_hostile(ADDER, words), tmp_path)
+
+
+@needs_icarus
+def test_every_printable_character_at_once(tmp_path):
+    """One name of every graphic character for each port of a combinational and a clocked design."""
+    words = [f"{VERILOG_GRAPHIC}{k}" for k in range(5)]
+    _icarus_equals_logic(_hostile(ADDER, words), tmp_path)
+    words = [w + VERILOG_GRAPHIC for w in ("top", "clk", "rst", "en", "q")]
+    nl = COUNTER
+    assert [nl.clock, *nl.inputs, *nl.outputs] == ["clk", "rst", "en", "q"], "counter4's ports changed"
+    _icarus_equals_logic(_hostile(nl, words), tmp_path)
+
+
+def test_a_name_with_a_blank_or_a_backquote_is_refused_naming_it():
+    with pytest.raises(Mech2SpiceError, match="'a b'"):
+        V.check_names(_hostile(ADDER, ["top", "a b", "b", "s"]))
+    with pytest.raises(Mech2SpiceError, match="'a`define'.*backquote"):
+        V.check_names(_hostile(ADDER, ["top", "a`define", "b", "s"]))
+    with pytest.raises(Mech2SpiceError, match="m2s__mem"):
+        V.check_names(_hostile(ADDER, ["top", "m2s__mem", "b", "s"]))
+
+
+# --------------------------------------------------------------------------- ngspice and VACASK: inert
+
+CARD = re.compile(r"^(\*.*|\.\w+.*|\+ .*|[A-Za-z]\w*( [\w.()={}*+/\-]+| I = .*)*)$")
+
+
+def _ngspice_lines_inert(text: str) -> None:
+    """Every card of the netlist is a comment, a dot card, a continuation or an element of plain words;
+    inside .control, every echo is one double-quoted string holding no quote, `$` or `;`."""
+    body, control = text.split(".control", 1)
+    bad = [ln for ln in body.splitlines() if ln and not CARD.match(ln)]
+    assert not bad, bad[:3]
+    for ln in control.splitlines():
+        if ln.startswith("echo "):
+            assert re.fullmatch(r'echo( "[^"$;`\\]*")?', ln), ln
+        assert not ln.lower().startswith(("shell", "write", "wrdata", "source", "load", "cd ")), ln
+    assert text.count(".control") == 1 and text.count(".endc") == 1 and text.rstrip().endswith(".end")
+
+
+def _netlists(words: list[str]) -> tuple[str, str]:
+    """The ngspice and VACASK netlists of adder2 with its module and ports named `words`, a + b = 1 + 1."""
+    nl = _hostile(ADDER, words)
+    values = {q: 1 for q in nl.inputs}
+    p = load_params("default")
+    model = network.build(nl, p)
+    stim = network.stimulus(model, nl, p, [(0, [values])])
+    title = "mech2spice: " + " ".join(words)
+    return (api.emit(nl, values, periods=20),
+            vacask.emit(model, 20, stim, title=title, standalone=True, about=title).text)
+
+
+PLAIN = _netlists(["top", "a", "b", "s"])
+QUOTED = re.compile(r'"[^"\n]*"')
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.lists(names, min_size=4, max_size=4, unique=True))
+def test_hostile_names_leave_spice_netlists_inert(words):
+    """Names only rename nodes and fill comments: the same cards, the same quoted strings, one line each."""
+    for text, plain in zip(_netlists(words), PLAIN):
+        assert text.isascii() and len(text.splitlines()) == len(plain.splitlines())
+        assert sorted(QUOTED.findall(text.split(".control")[0])) == sorted(QUOTED.findall(plain.split(".control")[0]))
+    ngspice_text, vacask_text = _netlists(words)
+    _ngspice_lines_inert(ngspice_text)
+    body = [ln for ln in vacask_text.split("\nembed ")[0].splitlines()[1:] if not ln.lstrip().startswith("//")]
+    plain_body = [ln for ln in PLAIN[1].split("\nembed ")[0].splitlines()[1:] if not ln.lstrip().startswith("//")]
+    shape = re.compile(r"[a-z0-9_]+")          # instance and node names are the namer's stems
+    assert [shape.sub("N", ln) for ln in body] == [shape.sub("N", ln) for ln in plain_body]
+
+
+@pytest.mark.skipif(not shutil.which("ngspice"), reason="ngspice not installed")
+def test_an_all_printable_netlist_runs_and_writes_nothing_else(tmp_path):
+    words = [PRINTABLE + str(k) for k in range(4)]
+    nl = _hostile(ADDER, words)
+    (tmp_path / "a.cir").write_text(api.emit(nl, {words[1]: 1, words[2]: 2}, periods=40))
+    proc = subprocess.run(["ngspice", "-b", "a.cir"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-500:]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.cir"]
+    assert re.search(r"= \d+ \((in)?valid\)", proc.stdout)    # the .control block's reading of the port ran
+
+
+# --------------------------------------------------------------------------- the injection (issue #37)
+
+EVIL_MODULE = '\\inv/**/d0();always/**/#1/**/$fclose($fopen("{0}","w"));inv '
+EVIL_PORT = '\\a);always/**/#1/**/$fclose($fopen("{0}","w"));//'
+
+
+@needs_icarus
+@pytest.mark.parametrize("where", ["module", "port"])
+def test_a_name_that_is_a_testbench_statement_creates_no_file(tmp_path, capsys, where):
+    target = tmp_path / "PWNED"
+    inner = "module inv(input a, output y); assign y = ~a; endmodule\n"
+    if where == "module":
+        src = inner + f"module {EVIL_MODULE.format(target)}(input a, output y);\n  inv u(.a(a), .y(y));\nendmodule\n"
+    else:
+        port = EVIL_PORT.format(target)
+        src = f"module top(input {port} , output y);\n  assign y = ~{port} ;\nendmodule\n"
+    (tmp_path / "evil.v").write_text(src)
+    code = cli.main(["verify", str(tmp_path / "evil.v"), "--json"])
+    out, err = capsys.readouterr()
+    assert not target.exists()
+    assert code == 0 and '"verdict": "pass"' in out, err   # written safely: proved and agreeing

@@ -10,10 +10,16 @@ for every live copy at once.
 
 What differs from K separate runs: a pause ends when every copy has settled (a lone copy would end at its
 own settle), and a copy whose rdata did not change still integrates through a pause another copy needs
-(a lone run skips it).  Both only continue a settled state a little further, within the settle tolerance;
-tests/test_cpu_batch.py checks that the decoded cycles of each copy equal its lone run's.  A copy that
-fails (an invalid bit) stops being compared: its inputs are held and its blocks frozen, so it costs no more
+(a lone run skips it).  Both only continue a settled state further, within the settle tolerance (0.1 u_R);
+tests/test_cpu_batch.py checks that the decoded cycles of each copy equal its lone run's, and shows the
+exception: a marginal copy (a latch drifting at 0.54 u_R) that the lone run reads invalid one cycle earlier.
+A copy that fails stops being compared: its inputs are held and its blocks frozen, so it costs no more
 integration.
+
+It buys no speed (scripts/cpu_mc_batch_speed.py, docs/design.md "The processor under spread, round 2"): the
+compiled latency loop's cost is its active blocks' arithmetic, per copy; even K identical columns of one
+model (the envelope's own batch) cost K times one.  Hence no command-line flag; CpuMC(batch=K) keeps it
+for a kernel that shares work across members.
 """
 from __future__ import annotations
 

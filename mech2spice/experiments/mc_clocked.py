@@ -9,7 +9,7 @@
   memory's data forces and the clock/reset drives are external and stay nominal.
 
 Neither checks gate channels one by one (a clocked run keeps only its outputs), so no per-gate failure
-rate is measured: `gates` is empty and the summary's rate is None.  Samples run one per engine run.
+rate is measured: `gates` is empty and the summary's rate is None.  Samples run one per engine run (CpuMC with batch=K: K processors as one union model, cpu/batch.py).
 """
 from __future__ import annotations
 

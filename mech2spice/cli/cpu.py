@@ -86,6 +86,8 @@ def add_parser(subparsers) -> None:
     r.add_argument("--threads", type=integer(1, 64), default=None, metavar="N",
                    help="carrier: split each step over N threads (default 1; 2 uses both cores of an idle machine; "
                         "more than 1 turns the default latency off, the latency loop being serial)")
+    from .montecarlo import max_fanout_arg
+    max_fanout_arg(r)
     r.add_argument("--trace", metavar="FILE", help="write one JSON line per cycle to FILE: the cycle's record, the "
                    "registers after it and (envelope, carrier, rk4) every probed amplitude in u_R")
     r.add_argument("--vcd", metavar="FILE", help="write the run as a waveform (VCD, for GTKWave or Surfer) to FILE "
@@ -225,6 +227,10 @@ def cmd_run(args) -> int:
         raise Mech2SpiceError("--step, --settle, --latency, --exponential and --parallel apply to the envelope "
                               "backend only (--settle also to carrier and rk4, --latency also to carrier)")
     physical.update(carrier)
+    if args.max_fanout is not None:
+        if args.backend not in PHYSICAL:
+            raise Mech2SpiceError(f"--max-fanout applies to the {', '.join(PHYSICAL)} backends only")
+        physical["max_fanout"] = args.max_fanout
     if args.params is not None:
         if args.backend not in PHYSICAL:
             raise Mech2SpiceError("--params applies to the envelope, carrier and rk4 backends only")

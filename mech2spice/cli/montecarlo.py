@@ -194,8 +194,17 @@ def add_cpu_parser(sub) -> None:
     c.add_argument("program", help="assembly source (.asm) or binary image")
     c.add_argument("--cycles", type=inputs.integer(1, 100_000), default=30, help="clock cycles per sample (default 30)")
     c.add_argument("--backend", default="envelope", choices=names(continuing, first="envelope"))
+    max_fanout_arg(c)
     add_sweep_arguments(c)
     c.set_defaults(func=cmd_cpu_montecarlo)
+
+
+def max_fanout_arg(parser) -> None:
+    """--max-fanout: the processor's buffer trees (synthesis.synth.limit_fanout), a physical run's lever."""
+    from ..physics.network import MAX_FANOUT
+    parser.add_argument("--max-fanout", type=inputs.integer(2, 64), default=None, metavar="N",
+                        help=f"envelope, carrier, rk4: give every gate driving more than N loads a tree of buffer "
+                             f"pairs (default {MAX_FANOUT}; fewer loads per gate, more gates: docs/design.md)")
 
 
 def cpu_job_of(args) -> dict:
@@ -207,7 +216,14 @@ def cpu_job_of(args) -> dict:
     return {"program": str(path.resolve()), "program_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
             "cycles": args.cycles, "params": args.params, "backend": args.backend,
             "spread": spread_spec(args).describe(), "seed": args.seed, "union": 1,
-            **({"noise": args.noise} if args.noise else {})}      # noiseless files keep their keys
+            **({"noise": args.noise} if args.noise else {}),      # noiseless files keep their keys
+            **_fanout_key(args.max_fanout)}
+
+
+def _fanout_key(max_fanout: int | None) -> dict:
+    """The job's max_fanout, only when it is not the network's own limit (results files keep their keys)."""
+    from ..physics.network import MAX_FANOUT
+    return {"max_fanout": max_fanout} if max_fanout and max_fanout != MAX_FANOUT else {}
 
 
 def cmd_cpu_montecarlo(args) -> int:
@@ -215,6 +231,7 @@ def cmd_cpu_montecarlo(args) -> int:
     import tempfile
     from ._output import log as _log, print_json as _print_json, progress as _progress
     from ..experiments import mc_run
+    from ..physics import network
     check_out(args, {"the program": args.program})
     job = cpu_job_of(args)
     with tempfile.TemporaryDirectory() as tmp:
@@ -222,6 +239,7 @@ def cmd_cpu_montecarlo(args) -> int:
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=_progress(args), log=_log(args))
     res.update({"program": job["program"], "cycles": job["cycles"], "backend": job["backend"],
+                "max_fanout": job.get("max_fanout", network.MAX_FANOUT),
                 "spread": job["spread"], "seed": job["seed"], "noise": job.get("noise", 0.0), **trim_json(job["spread"])})
     if not args.out:
         res.pop("out")

@@ -66,12 +66,13 @@ class PhysicalCPU:
                  settle: float | None = SETTLE_TOL, latency: float | None | str = OWN_LATENCY,
                  exponential: bool = EXPONENTIAL, parallel: bool = False, power_up: bool = True,
                  noise: tuple[float, int] | None = None, steps_per_period: int | None = None, threads: int = 1,
-                 settle_check: int | None = None):
+                 settle_check: int | None = None, max_fanout: int | None = None):
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
         if settle_check and noise and noise[0]:
             raise Mech2SpiceError("a settle check needs a deterministic machine: not with thermal noise")
-        self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=network.MAX_FANOUT)
+        # max_fanout: buffer trees above this many loads (synthesis.synth.limit_fanout); None: the network's limit
+        self.netlist = cpu_netlist(str(CPU_VERILOG), max_fanout=max_fanout or network.MAX_FANOUT)
         self.model = network.build(self.netlist, p)
         self.regmap = register_map(self.netlist)
         for q, block in self.model.design.latch_outputs.items():

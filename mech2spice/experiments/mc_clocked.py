@@ -9,7 +9,7 @@
   memory's data forces and the clock/reset drives are external and stay nominal.
 
 Neither checks gate channels one by one (a clocked run keeps only its outputs), so no per-gate failure
-rate is measured: `gates` is empty and the summary's rate is None.  Samples run one per engine run.
+rate is measured: `gates` is empty and the summary's rate is None.  Samples run one per engine run (CpuMC with batch=K: K processors as one union model, cpu/batch.py).
 """
 from __future__ import annotations
 
@@ -91,12 +91,16 @@ class ClockedMC:
 class CpuMC:
     """The processor running a program for `cycles` cycles; evaluates samples against the ISS cycle by cycle."""
 
-    def __init__(self, program: str, cycles: int, p, backend: str, spec: SpreadSpec, seed: int, noise: float = 0.0):
+    def __init__(self, program: str, cycles: int, p, backend: str, spec: SpreadSpec, seed: int, noise: float = 0.0,
+                 batch: int = 1, max_fanout: int | None = None):
         from ..cpu.physical import PHYSICAL
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"cpu montecarlo runs on {', '.join(PHYSICAL)}, not '{backend}'")
         self.program, self.cycles, self.p, self.backend = program, cycles, p, backend
         self.noise = check_temperature(noise)
+        self.max_fanout = max_fanout or network.MAX_FANOUT
+        # samples per union model (cpu/batch.py); with noise one per run, as DesignMC does
+        self.batch = 1 if self.noise else batch
         self.spec, self.seed = spec, seed
         self.want = self._iss()
         self.gates, self.union, self.outs = [], 1, ["pc", "phase", "raddr", "rdata", "we", "waddr", "wdata"]
@@ -116,20 +120,61 @@ class CpuMC:
         return out
 
     def evaluate(self, indices: list[int]) -> list[dict]:
-        """One record per sample index."""
-        return [self._one(i) for i in indices]
+        """One record per sample index, `self.batch` samples per union model."""
+        if self.batch <= 1:
+            return [self._one(i) for i in indices]
+        out = []
+        for k in range(0, len(indices), self.batch):
+            group = list(indices[k:k + self.batch])
+            out += self._batch(group) if len(group) > 1 else [self._one(group[0])]
+        return out
 
-    def _machine(self, i: int):
-        """The processor on sample i's model, powered up."""
+    def _machine(self, i: int, power_up: bool = True):
+        """The processor on sample i's model, powered up (or not: cpu/batch.py powers copies up together)."""
         from ..cpu.physical import PhysicalCPU
         from ..cpu.run import load_program, make_memory
         cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
-                          noise=(self.noise, noise_seed(self.seed, i)))
+                          noise=(self.noise, noise_seed(self.seed, i)), max_fanout=self.max_fanout)
         nominal = cpu.model
         model, _ = sampled(nominal, spread.elements(nominal), self.spec, self.seed, i)
         cpu.model = model               # the probes (latch outputs) are copied with the model
-        cpu.amps = cpu._reset()
+        if power_up:
+            cpu.amps = cpu._reset()
         return cpu
+
+    def _batch(self, idx: list[int]) -> list[dict]:
+        """Samples idx as one union model (cpu/batch.BatchCPU), compared cycle by cycle as _one does; if the
+        union run stops (a divergence or an engine refusal), each sample runs alone instead."""
+        from ..cpu.batch import BatchCPU
+        recs = {i: {"wrong": {}, "first": None, "n": 0} for i in idx}
+        try:
+            bc = BatchCPU([self._machine(i, power_up=False) for i in idx])
+            for want in self.want:
+                if not any(bc.alive):
+                    break
+                got = bc.step()
+                for k, i in enumerate(idx):
+                    if got[k] is None:
+                        continue
+                    r = recs[i]
+                    r["n"] += 1
+                    bad = [f for f in self.compared(want) if getattr(got[k], f) != getattr(want, f)]
+                    for f in bad:
+                        r["wrong"][f] = r["wrong"].get(f, 0) + 1
+                    if bad:
+                        r["first"] = got[k].cycle
+                        bc.retire(k)          # the programs diverge: later cycles compare nothing
+        except (DivergenceError, Mech2SpiceError):
+            return [self._one(i) for i in idx]
+        out = []
+        for k, i in enumerate(idx):
+            r, err = recs[i], bc.errors.get(k)
+            if err is not None:
+                out.append({**_failed(i, err), "cycles_run": r["n"]})
+            else:
+                out.append({"i": i, "pass": not r["wrong"], "margin": None, "failing_bits": r["wrong"],
+                            "failing_gates": [], "first_bad_cycle": r["first"], "cycles_run": r["n"]})
+        return out
 
     def _one(self, i: int) -> dict:
         wrong, first, n = {}, None, 0

@@ -42,7 +42,8 @@ def design_for(job: dict) -> mc.DesignMC:
         spec, p, noise = mc.spec_of(job["spread"]), load_params(job["params"]), job.get("noise", 0.0)
         if "program" in job:             # the processor (cpu montecarlo)
             from .mc_clocked import CpuMC
-            _DESIGNS[key] = CpuMC(job["program"], job["cycles"], p, job["backend"], spec, job["seed"], noise)
+            _DESIGNS[key] = CpuMC(job["program"], job["cycles"], p, job["backend"], spec, job["seed"], noise,
+                                  batch=job.get("union", 1), max_fanout=job.get("max_fanout"))
             return _DESIGNS[key]
         nl = synthesize(job["design"], max_fanout=network.MAX_FANOUT)
         if "steps" in job:               # a clocked design under a stimulus of cycles

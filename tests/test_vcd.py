@@ -243,7 +243,8 @@ def _check_verify_vcd(vcd: Path, res: dict, inputs: dict, outputs: dict) -> vcdv
             assert _value(v, f"{top}.counterexample.source", ids.vcd(port), w, first + k) == rep["source"][port]
             assert _value(v, f"{top}.counterexample.network", ids.vcd(port), w, first + k) == rep["network"][port]
     for port, w in outputs.items():                           # the last cycle: the differing bits the replay named
-        assert _value(v, f"{top}.counterexample.source", ids.vcd(port), w, last) == cex[-1]["source"][port]
+        assert _value(v, f"{top}.counterexample.source", ids.vcd(port), w, last) == \
+               res["equivalence"]["replay"]["source"][port]
         flags = _value(v, f"{top}.counterexample.mismatch", ids.vcd(port), w, last)
         assert {f"{port}[{w - 1 - j}]" for j in range(w) if flags[j] == "1"} == \
                {b for b in res["equivalence"]["replay"]["bits"] if b.rpartition("[")[0] == port}
@@ -331,3 +332,26 @@ def test_simulate_vcd_of_escaped_names(tmp_path):
         assert _wire(v, f"{top}.outputs.{ids.vcd('q.r')}", 3, e["cycle"]) == _bits(e["bits"], "q.r", 3)
         assert _wire(v, f"{top}.outputs.{ids.vcd('y[0]')}", 1, e["cycle"]) == _bits(e["bits"], "y[0]", 1)
         assert _wire(v, f"{top}.inputs.{ids.vcd('opcode[0]')}", 1, e["cycle"]) == "1"
+
+
+@needs_icarus
+def test_verify_vcd_of_a_counterexample_the_replay_does_not_confirm(tmp_path):
+    """An `unknown` status from an unconfirmed counterexample: its cycles are in the file all the same, the
+    replay's values side by side and no mismatch bit set; the comment names the status."""
+    from mech2spice import verify as V
+    from mech2spice.verify_vcd import verify_waveform
+    from mech2spice.waveform import write_vcd
+    nl = synth.synthesize(str(COUNTER))
+    res = V.verify(COUNTER, netlist=nl, vectors=10, equivalence_check=False, keep_trace=True)
+    cex = [{"cycle": k, "inputs": {"rst": int(k == 0), "en": 1}} for k in range(4)]
+    eq = V._replayed(COUNTER, nl, {"status": "counterexample", "cex": cex, "depth": 4, "detail": ""})
+    res["equivalence"] = {"status": eq["status"], "counterexample": eq["cex"], "replay": eq["replay"]}
+    wave, res["vcd"] = verify_waveform(nl, res)
+    write_vcd(tmp_path / "u.vcd", wave)
+    v = _check_verify_vcd(tmp_path / "u.vcd", res, {"rst": 1, "en": 1}, {"q": 4})
+    assert res["vcd"]["counterexample"] == [11, 14]
+    assert _value(v, "counter4.counterexample.source", "q", 4, 14) == \
+           _value(v, "counter4.counterexample.network", "q", 4, 14) == "0010"      # reset at edge 0, counted twice
+    assert {_value(v, "counter4.counterexample.mismatch", "q", 4, t) for t in range(11, 15)} == {"0000"}
+    assert _value(v, "counter4.counterexample.source", "q", 4, 10) == "xxxx"        # the gap
+    assert "scope counterexample: the proof's counterexample (unknown) replayed" in (tmp_path / "u.vcd").read_text()

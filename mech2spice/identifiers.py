@@ -151,3 +151,21 @@ def ngspice_echo(name: str) -> str:
 def ngspice_echo_text(text: str) -> str:
     """Free text inside a double-quoted `echo` of an ngspice `.control` block (see `ngspice_echo`)."""
     return _ECHO_TEXT_UNSAFE.sub("?", str(text))
+
+
+# --------------------------------------------------------------------------- VCD waveforms
+
+_VCD_KEPT = re.compile(r"[A-Za-z0-9_]")
+
+
+def vcd(name: str) -> str:
+    """`name` as a VCD scope or variable name that every reader takes for the same single name: a plain
+    Verilog identifier unchanged; any other name (an escaped identifier may hold dots, which readers take for
+    scope separators, and brackets, which they take for a bit select) as `\\` and the name with each character
+    other than a letter, digit or `_` written `$HH` (its code in hex; `$uHHHH` beyond one byte).  One-to-one:
+    no plain name starts with `\\`, and `$` is escaped too.  Never refuses: `opcode[0]` -> `\\opcode$5B0$5D`."""
+    name = str(name)
+    if _VERILOG_PLAIN.fullmatch(name):
+        return name
+    return "\\" + "".join(c if _VCD_KEPT.fullmatch(c) else f"${ord(c):02X}" if ord(c) < 256 else f"$u{ord(c):04X}"
+                          if ord(c) < 0x10000 else f"$U{ord(c):08X}" for c in name)

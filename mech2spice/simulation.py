@@ -472,15 +472,18 @@ CLOCKED_VCD_COMMENT = ("mech2spice simulate: one time unit per clock cycle; at t
 def clocked_waveform(netlist: Netlist, cycles: list[dict[str, int]], res: dict):
     """A clocked run (run_clocked_logic / run_clocked_physical) as a waveform.Waveform: per cycle k the inputs
     of cycle k, the output ports of trace entry k as vectors (an invalid bit x) and, on a physical engine,
-    each output bit's amplitude in u_R as a real; scopes TOP.inputs, TOP.outputs, TOP.amplitudes."""
+    each output bit's amplitude in u_R as a real; scopes TOP.inputs, TOP.outputs, TOP.amplitudes.  Names as
+    identifiers.vcd writes them (an escaped Verilog name's dots and brackets escaped)."""
+    from .identifiers import vcd
     from .waveform import Waveform
     trace = res["trace"]
     wave = Waveform([e["cycle"] for e in trace], comment=CLOCKED_VCD_COMMENT)
-    top = netlist.top
+    top = vcd(netlist.top)
     for port, width in netlist.inputs.items():
-        wave.add_wire([top, "inputs"], port, width, [cycles[e["cycle"]].get(port, 0) for e in trace])
+        wave.add_wire([top, "inputs"], vcd(port), width, [cycles[e["cycle"]].get(port, 0) for e in trace])
     for port, width in netlist.outputs.items():
-        wave.add_bits([top, "outputs"], port, [[e["bits"][f"{port}[{i}]"] for i in range(width)] for e in trace])
+        wave.add_bits([top, "outputs"], vcd(port), [[e["bits"][f"{port}[{i}]"] for i in range(width)] for e in trace])
     for bit in (trace[0].get("amplitudes") or {}) if trace else {}:
-        wave.add_real([top, "amplitudes"], bit, [e["amplitudes"][bit] for e in trace])
+        port, _, index = bit.rpartition("[")
+        wave.add_real([top, "amplitudes"], f"{vcd(port)}[{index}", [e["amplitudes"][bit] for e in trace])
     return wave

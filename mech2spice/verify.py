@@ -285,10 +285,14 @@ def replay(path, netlist: Netlist, cex: list[dict]) -> dict:
             first = k
             break
     at = first if first is not None else len(cex) - 1
-    return {"reproduced": first is not None, "cycle": first, "bits": bits,
-            "source": {p: "".join(ref[at][f"{p}[{i}]"] for i in reversed(range(w))) for p, w in netlist.outputs.items()},
-            "network": {p: "".join(str(net[at][f"{p}[{i}]"]) for i in reversed(range(w)))
-                        for p, w in netlist.outputs.items()}}
+    trace = [{"source": _port_values(netlist, r), "network": _port_values(netlist, g)} for r, g in zip(ref, net)]
+    return {"reproduced": first is not None, "cycle": first, "bits": bits, **trace[at], "trace": trace}
+
+
+def _port_values(netlist: Netlist, bits: dict) -> dict[str, str]:
+    """Output bits (bit name -> '0'/'1'/'x'/'z' or 0/1, None: invalid) as a string per port, MSB first."""
+    return {p: "".join("x" if bits.get(f"{p}[{i}]") is None else str(bits[f"{p}[{i}]"]).lower()
+                       for i in reversed(range(w))) for p, w in netlist.outputs.items()}
 
 
 def _replayed(path, netlist: Netlist, res: dict) -> dict:
@@ -298,6 +302,7 @@ def _replayed(path, netlist: Netlist, res: dict) -> dict:
     if rep["reproduced"]:
         cex = res["cex"][:rep["cycle"] + 1]
         cex[-1].update(source=rep["source"], network=rep["network"])
+        rep["trace"] = rep["trace"][:len(cex)]
         edges = f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else ""
         return {**res, "cex": cex, "replay": rep, "depth": len(cex),
                 "detail": f"the outputs differ on this input{edges}; replayed: Icarus and the network (logic "
@@ -700,6 +705,21 @@ def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], c
     return mismatches
 
 
+def cosim_trace(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], clocked: bool) -> list[dict]:
+    """Every compared value, per vector / cycle k: {cycle or vector: k, inputs (port -> int), source (Icarus,
+    port -> "01xz" MSB first), network (the backend, port -> "01x", x an invalid bit), amplitudes (physical
+    backends: output bit -> u_R)}; what `verify --vcd` writes."""
+    out = []
+    for k, (r, g) in enumerate(zip(ref, got)):
+        step = {("cycle" if clocked else "vector"): k, "inputs": _as_ports(netlist, x[k]),
+                "source": _port_values(netlist, r),
+                "network": _port_values(netlist, {b: g["bits"].get(b) for b in output_bits(netlist)})}
+        if g.get("amplitudes"):
+            step["amplitudes"] = {b: float(a) for b, a in g["amplitudes"].items()}
+        out.append(step)
+    return out
+
+
 def undefined_by_port(netlist: Netlist, ref: list[dict]) -> dict:
     """Per output port, of the bits compared: how many the source left x and z (Icarus), and how many in all."""
     out = {}
@@ -710,8 +730,9 @@ def undefined_by_port(netlist: Netlist, ref: list[dict]) -> dict:
 
 
 def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool, seed: int, params=None,
-          progress=False, reset=None, resets: list[dict] | None = None) -> dict:
-    """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches."""
+          progress=False, reset=None, resets: list[dict] | None = None, keep_trace: bool = False) -> dict:
+    """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches;
+    `keep_trace`: also every compared value ("trace", `cosim_trace`)."""
     t0 = time.time()
     clocked = netlist.clock is not None
     physical = _physical(backend)
@@ -731,6 +752,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     ref = icarus(path, netlist, x, clocked, warnings, info)
     got = run_backend(netlist, x, clocked, backend, params, progress)
     mismatches = compare(netlist, x, ref, got, clocked, None if params is None else params.levels)
+    if keep_trace:
+        info["trace"] = cosim_trace(netlist, x, ref, got, clocked)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
            "undefined_bits": sum(v in "xX" for r in ref for v in r.values()),
@@ -754,8 +777,9 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
 def verify(path, top: str | None = None, backend: str = "logic", vectors: int | None = None,
            exhaustive: bool = False, seed: int = 0, params=None, progress=False, log=None,
            netlist: Netlist | None = None, reset=None, equivalence_check: bool = True,
-           proof_time: float = PROOF_BUDGET_S) -> dict:
-    """Equivalence and co-simulation of one design; `netlist` replaces the synthesised one (tests)."""
+           proof_time: float = PROOF_BUDGET_S, keep_trace: bool = False) -> dict:
+    """Equivalence and co-simulation of one design; `netlist` replaces the synthesised one (tests);
+    `keep_trace`: the co-simulation's compared values too (cosim.trace, for --vcd)."""
     t0 = time.time()
     from .synthesis.synth import synthesize
     log = log or (lambda msg: None)
@@ -770,7 +794,7 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
         out["equivalence"] = equivalence(path, nl, proof_time, resets)
         log(f"equivalence: {out['equivalence']['status']} ({out['equivalence']['wall_s']:.1f} s)")
     log(f"co-simulation against Icarus on {backend}")
-    out["cosim"] = cosim(path, nl, backend, vectors, exhaustive, seed, params, progress, reset, resets)
+    out["cosim"] = cosim(path, nl, backend, vectors, exhaustive, seed, params, progress, reset, resets, keep_trace)
     eq = out.get("equivalence", {}).get("status", "proved")
     out["verdict"] = "pass" if eq == "proved" and out["cosim"]["agree"] else \
         "fail" if eq == "counterexample" or not out["cosim"]["agree"] else "unknown"
@@ -860,5 +884,10 @@ def text(result: dict) -> str:
     lines += ["  " + _mismatch_text(m) for m in co["mismatches"][:20]]
     if len(co["mismatches"]) > 20:
         lines.append(f"  ... {len(co['mismatches']) - 20} more (--json lists all)")
+    if result.get("vcd"):
+        w = result["vcd"]
+        cex = w["counterexample"]
+        lines.append(f"waveform: {w['file']} (co-simulation at times {w['cosim'][0]}-{w['cosim'][1]}"
+                     + (f", counterexample at times {cex[0]}-{cex[1]})" if cex else ")"))
     lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)" + _undefined_text(co))
     return "\n".join(lines)

@@ -15,13 +15,13 @@ from .errors import Mech2SpiceError
 from .inputs import write_text
 
 TIMESCALE = "1 ns"          # one time unit per timestep: the unit is nominal, the comment says what a step is
-WIRE_CHARS = frozenset("01x")
+WIRE_CHARS = frozenset("01xz")          # z: a bit a simulator reads undriven (verify's Icarus side)
 
 
 @dataclass(frozen=True)
 class Signal:
     """One variable: a wire of `width` bits (values: an int, None for all bits invalid, or a string over
-    "01x" of `width` characters, most significant first) or, with width None, a real (values: floats)."""
+    "01xz" of `width` characters, most significant first) or, with width None, a real (values: floats)."""
     scope: tuple[str, ...]          # module path, outermost first, e.g. ("counter4", "outputs")
     name: str
     width: int | None
@@ -45,7 +45,7 @@ class Waveform:
     comment: str = ""
 
     def add_wire(self, scope, name: str, width: int, values) -> None:
-        """A wire of `width` bits; each value an int, None (all x) or a "01x" string (MSB first)."""
+        """A wire of `width` bits; each value an int, None (all x) or a "01xz" string (MSB first)."""
         self.signals.append(Signal(tuple(scope), name, int(width), tuple(wire_value(v, width) for v in values)))
 
     def add_bits(self, scope, name: str, per_step: list[list[int | None]]) -> None:
@@ -74,14 +74,14 @@ def bits_string(bits: list[int | None]) -> str:
 
 
 def wire_value(value, width: int) -> str:
-    """A wire's value as `width` characters over "01x" (MSB first): an int (two's complement if negative),
+    """A wire's value as `width` characters over "01xz" (MSB first): an int (two's complement if negative),
     None (all x) or such a string."""
     if value is None:
         return "x" * width
     if isinstance(value, str):
         v = value.lower()
         if len(v) != width or not set(v) <= WIRE_CHARS:
-            raise Mech2SpiceError(f"waveform value {value!r}: expected {width} characters of 0, 1 or x")
+            raise Mech2SpiceError(f"waveform value {value!r}: expected {width} characters of 0, 1, x or z")
         return v
     return format(int(value) & ((1 << width) - 1), f"0{width}b")
 

@@ -207,3 +207,32 @@ def test_a_name_that_is_a_testbench_statement_creates_no_file(tmp_path, capsys, 
     out, err = capsys.readouterr()
     assert not target.exists()
     assert code == 0 and '"verdict": "pass"' in out, err   # written safely: proved and agreeing
+
+
+# --------------------------------------------------------------------------- VCD names
+
+def _vcd_unescaped(text: str) -> str:
+    """The inverse of ids.vcd, written here from its rule, to show that the map is one-to-one."""
+    if not text.startswith("\\"):
+        return text
+    return re.sub(r"\$(?:u([0-9A-F]{4})|U([0-9A-F]{8})|([0-9A-F]{2}))",
+                  lambda m: chr(int(next(g for g in m.groups() if g), 16)), text[1:])
+
+
+def test_vcd_names_plain_unchanged_others_escaped():
+    assert ids.vcd("q") == "q" and ids.vcd("a_1$") == "a_1$" and ids.vcd("logic") == "logic"
+    assert ids.vcd("opcode[0]") == "\\opcode$5B0$5D" and ids.vcd("top.level$1") == "\\top$2Elevel$241"
+    assert ids.vcd("é") == "\\$E9" and ids.vcd("\u2192") == "\\$u2192"
+
+
+@given(st.text(min_size=1, max_size=24))
+def test_every_name_has_one_writable_vcd_name(name):
+    """Any string (control characters and non-ASCII too) maps to a name the VCD writer takes (printable, no
+    blank, no dot, no bracket), and back to itself: two names never share one."""
+    from mech2spice.waveform import Waveform, vcd_text
+    text = ids.vcd(name)
+    assert text.isprintable() and not any(c.isspace() or c in ".[]" for c in text) and text.isascii()
+    assert _vcd_unescaped(text) == name
+    wave = Waveform([0])
+    wave.add_wire([ids.vcd(name)], text, 1, [1])
+    assert f" {text} $end" in vcd_text(wave)

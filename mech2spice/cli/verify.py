@@ -41,7 +41,11 @@ def add_parser(subparsers) -> None:
     s.add_argument("--params", default="default", help="gate parameters of a physical backend")
     s.add_argument("--no-equivalence", action="store_true", help="co-simulation only")
     s.add_argument("--junit", metavar="FILE", help="also write a JUnit XML report")
-    inputs.force_arg(s, "--junit")
+    s.add_argument("--vcd", metavar="FILE",
+                   help="also write the co-simulation as a waveform (VCD, for GTKWave or Surfer): inputs, source "
+                        "(Icarus) and network per output port, the differing bits, amplitudes in u_R; the proof's "
+                        "counterexample replayed in a later time range (docs/waveforms.md)")
+    inputs.force_arg(s, "--junit or --vcd")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_verify)
 
@@ -58,6 +62,17 @@ def _check_junit(args) -> None:
     inputs.check_output_file(args.junit, read, "JUnit file", kind=JUNIT, force=args.force)
 
 
+def _check_vcd(args) -> None:
+    """--vcd, before any work, as --junit: none of the files the run reads nor the --junit file, an existing
+    file only if it is a VCD file (else --force)."""
+    from ..physics.params import params_file
+    from ..waveform import is_vcd
+    other = [*inputs.design_inputs(args.design), ("the --params file", params_file(args.params))]
+    if args.junit:
+        other.append(("the --junit file", args.junit))
+    inputs.check_output_file(args.vcd, other, "VCD file", kind=("a VCD file", is_vcd), force=args.force)
+
+
 def cmd_verify(args) -> int:
     """`mech2spice verify`: print the report (text or JSON), write --junit; 0 pass, 1 otherwise."""
     from ._output import log as _log, print_json as _print_json, progress as _progress
@@ -67,6 +82,8 @@ def cmd_verify(args) -> int:
         raise Mech2SpiceError("give --vectors N or --exhaustive, not both")
     if args.junit:
         _check_junit(args)
+    if args.vcd is not None:
+        _check_vcd(args)
     if not Path(args.design).is_file():
         raise Mech2SpiceError(f"cannot read Verilog file {args.design}: no such file")
     nl = synthesize(args.design, top=args.top)
@@ -84,9 +101,16 @@ def cmd_verify(args) -> int:
     params = load_params(args.params) if BACKENDS[args.backend].capabilities.physical else None
     res = verify(args.design, backend=args.backend, vectors=args.cycles or args.vectors, exhaustive=args.exhaustive,
                  seed=args.seed, params=params, progress=_progress(args), log=_log(args), netlist=nl,
-                 reset=args.reset, equivalence_check=not args.no_equivalence, proof_time=args.proof_time)
+                 reset=args.reset, equivalence_check=not args.no_equivalence, proof_time=args.proof_time,
+                 keep_trace=args.vcd is not None)
     if args.junit:
         inputs.write_text(args.junit, junit_xml(res))
+    if args.vcd is not None:
+        from ..verify_vcd import verify_waveform
+        from ..waveform import write_vcd
+        wave, sections = verify_waveform(nl, res)
+        write_vcd(args.vcd, wave)
+        res["vcd"] = {"file": args.vcd, **sections}
     if args.json:
         _print_json(res)
     else:

@@ -108,3 +108,75 @@ def test_emit_output(capsys, tmp_path):
 @pytest.mark.skipif(not (shutil.which("iverilog") and shutil.which("vvp")), reason="Icarus Verilog not installed")
 def test_verify_output(capsys):
     strict(ok(capsys, "verify", ADDER, "--json", "--no-equivalence", "--vectors", "4"))
+
+
+# --------------------------------------------------------------------------- the reports' measured JSON
+REPORTS = ROOT / "reports"
+
+
+def test_every_checked_in_report_json_is_strict():
+    """reports/*.json and the records kept under it (the studies' JSON and saved command output)."""
+    paths = sorted(REPORTS.rglob("*.json"))
+    assert len(paths) > 20
+    for path in paths:
+        try:
+            strict(path.read_text())
+        except ValueError as err:
+            pytest.fail(f"{path.relative_to(ROOT)}: {err}")
+
+
+def test_the_studies_writer_is_strict_and_keeps_its_layout(tmp_path):
+    import numpy as np
+    from mech2spice.studies import write_json
+    data = {"time_err": math.inf, "margin_quantiles": {"50%": np.float64("nan")}, "output_delays": [1316.0, math.nan],
+            "x": np.float32(0.5), "a": np.arange(2), "t": (1, -math.inf)}
+    write_json(tmp_path / "r.json", data)
+    assert strict((tmp_path / "r.json").read_text()) == {
+        "time_err": None, "margin_quantiles": {"50%": None}, "output_delays": [1316.0, None], "x": 0.5,
+        "a": [0, 1], "t": [1, None]}
+    same = {"step": 0.5, "n": 3, "s": "é", "rows": [[1.25, None, True]]}    # finite data: the layout it always had
+    write_json(tmp_path / "f.json", same)
+    assert (tmp_path / "f.json").read_text() == json.dumps(same, indent=1)
+
+
+def _envelope_figures(d):
+    scene = d["scenes"][2]
+    return [(v[run], "time_err") for v in scene["variants"].values() for run in ("vs80", "vs160")] + \
+        [(d["scenes"][0]["env"]["4"]["vs160"], "traj_err"), (d["sweep"]["sweep"][0]["vs80"], "time_err")]
+
+
+def _robustness_figures(d):
+    return [(d["curves"]["adder"][0]["margin_quantiles"], q) for q in ("1%", "50%")] + \
+        [(d["noise"]["gate"][0]["margin_quantiles"], "50%"), (d["clocked"]["processor"][2]["margin_quantiles"], "1%")]
+
+
+def _sequential_figures(d):
+    return [(d["latch"]["output_delays"], 1), (d["latch_envelope"]["output_delays"], 0),
+            (d["short_pulse"]["output_delays"], 1)]
+
+
+@pytest.mark.parametrize("name, figures, value", [
+    ("envelope", _envelope_figures, math.inf),
+    ("robustness", _robustness_figures, math.nan),
+    ("sequential", _sequential_figures, math.nan),
+])
+def test_a_renderer_reads_null_as_the_number_it_stood_for(tmp_path, name, figures, value):
+    """`report NAME --render` writes the same markdown and figures, byte for byte, from the strict JSON (null)
+    as from the JSON with NaN/Infinity the study wrote before; the figures set are ones the report prints."""
+    from mech2spice import reports
+    data = json.loads((REPORTS / f"{name}.json").read_text())
+    places = figures(data)
+    for nulled in (False, True):
+        for container, key in places:
+            container[key] = None if nulled else value
+        folder = tmp_path / ("null" if nulled else "non_finite")
+        folder.mkdir()
+        text = json.dumps(data, indent=1)
+        (strict if nulled else json.loads)(text)
+        (folder / f"{name}.json").write_text(text)
+        reports.module(name).write(folder, render=True)
+    old, new = tmp_path / "non_finite", tmp_path / "null"
+    written = sorted(f.name for f in old.iterdir() if f.suffix in (".md", ".png"))
+    assert written and written == sorted(f.name for f in new.iterdir() if f.suffix in (".md", ".png"))
+    for f in written:
+        assert (new / f).read_bytes() == (old / f).read_bytes(), f

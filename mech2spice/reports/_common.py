@@ -87,5 +87,26 @@ def stored(path: Path, report: str, schema: dict | None = None) -> dict:
     return data
 
 
+def non_finite(data, fields: tuple[str, ...], value: float):
+    """`data` with each null in a figure named in `fields` (the field itself, or an entry of its list or
+    object) read as `value` (math.inf or math.nan): the study's strict JSON writes a non-finite figure as null
+    (studies/_common.write_json), and the renderer reads it as the number it stood for.  Other nulls (a field
+    that was never measured) are left alone."""
+    if isinstance(data, dict):
+        for key, item in data.items():
+            data[key] = _as_value(item, value) if key in fields else non_finite(item, fields, value)
+    elif isinstance(data, list):
+        data[:] = [non_finite(item, fields, value) for item in data]
+    return data
+
+
+def _as_value(figure, value: float):
+    if isinstance(figure, list):
+        return [value if x is None else x for x in figure]
+    if isinstance(figure, dict):
+        return {k: value if x is None else x for k, x in figure.items()}
+    return value if figure is None else figure
+
+
 def _tuple(kinds) -> tuple:
     return kinds if isinstance(kinds, tuple) else (kinds,)

@@ -7,11 +7,12 @@ Run: mech2spice report design [--skip-slow] [--render]
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 from ..studies.design import (ADDER_BACKENDS, CHECKED, CHECKS, SIGMA, TOL_SAMPLES, block_names, same_block,
                               search_record)
-from ._common import md_table, out_dir, pyplot, save_figure, stored
+from ._common import md_table, non_finite, out_dir, pyplot, save_figure, stored
 
 
 def plot_pareto(figs: dict, path: Path, machine: str) -> None:
@@ -50,7 +51,9 @@ def write(directory="reports", skip_slow: bool = False, render: bool = False, se
     if not render:
         from ..studies import design as study          # measuring loads the engines; rendering does not
         study.measure_into(d / "design.json", search, skip_slow)
-    rec, cache = search_record(search), stored(d / "design.json", "design")
+    rec = search_record(search)
+    # a quantile over margins one of which was not a number is NaN, null in the JSON
+    cache = non_finite(stored(d / "design.json", "design"), ("margin_quantiles",), math.nan)
     figs = {n: f for n, f in cache["blocks"].items()
             if n in block_names(rec) and same_block(f, rec["structures"].get(n), n)}
     plot_pareto(figs, d / "design_pareto.png", cache["machine"])

@@ -12,10 +12,13 @@ import numpy as np
 
 from ..errors import Mech2SpiceError
 from ..physics.params import DEFAULT
-from ._common import measured_on, out_dir, pyplot, save_figure, shade_bands, stored, write_json
+from ._common import measured_on, non_finite, out_dir, pyplot, save_figure, shade_bands, stored, write_json
 
 plt = pyplot()
 P = DEFAULT
+# validate.compare's errors: +inf where they are undefined (a run crossed the threshold where the other did not,
+# so crossing_count_mismatch > 0; or it diverged), null in the JSON
+ERRORS = ("amp_err", "time_err", "traj_err", "first_rel", "last_rel", "max_abs_diff")
 
 
 def write(directory="reports", quick: bool = False, cache=None, render: bool = False) -> Path:
@@ -47,7 +50,8 @@ def render_report(d: dict, out: Path) -> Path:
 
 def loaded(d: dict) -> dict:
     """The JSON with what JSON cannot key or hold put back: envelope steps (float) and periods (int) as keys,
-    traces as arrays, the worst state's eigenvalues as complex numbers."""
+    traces as arrays, the worst state's eigenvalues as complex numbers, an undefined error (null) as inf."""
+    non_finite(d, ERRORS, math.inf)
     for r in d["scenes"]:
         r["env"] = {float(k): v for k, v in r["env"].items()}
     sw = d["sweep"]

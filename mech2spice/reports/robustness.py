@@ -6,11 +6,12 @@ Run: mech2spice report robustness [--quick] [--render]
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
-from ._common import SANDBOX, out_dir, pyplot, save_figure, stored, write_json
+from ._common import SANDBOX, non_finite, out_dir, pyplot, save_figure, stored, write_json
 
 
 def write(directory="reports", quick: bool = False, render: bool = False) -> Path:
@@ -19,7 +20,8 @@ def write(directory="reports", quick: bool = False, render: bool = False) -> Pat
     if not render:
         from ..studies import robustness as study      # measuring loads the engines; rendering does not
         write_json(d / "robustness.json", study.measure(quick=quick), default=float)
-    data = stored(d / "robustness.json", "robustness")
+    # a quantile over margins one of which was not a number is NaN, null in the JSON
+    data = non_finite(stored(d / "robustness.json", "robustness"), ("margin_quantiles",), math.nan)
     figure({**data["curves"], **data["clocked"]}, data, d / "robustness_yield.png")
     noise_figure(data["noise"], data, d / "robustness_noise.png")
     md = d / "robustness.md"

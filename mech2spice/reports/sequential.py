@@ -6,11 +6,12 @@ Run: mech2spice report sequential [--sqrt-rk4] [--render]
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
-from ._common import md_table, measured_on, out_dir, pyplot, save_figure, shade_bands, stored, write_json
+from ._common import md_table, measured_on, non_finite, out_dir, pyplot, save_figure, shade_bands, stored, write_json
 
 plt = pyplot()
 
@@ -76,7 +77,8 @@ def write(directory="reports", sqrt_rk4: bool = False, render: bool = False) -> 
     if not render:
         from ..studies import sequential as study      # measuring loads the engines; rendering does not
         write_json(d / "sequential.json", study.measure(sqrt_rk4=sqrt_rk4))
-    res = stored(d / "sequential.json", "sequential")
+    # a latch output that never crossed the mid threshold has a NaN delay, null in the JSON
+    res = non_finite(stored(d / "sequential.json", "sequential"), ("output_delays",), math.nan)
     latch, ctr, fsm, sq = res["latch"], res["counter"], res["fsm"], res["sqrt"]
     plot_latch(latch, d / "latch.png")
     plot_trace(fsm["rk4"], d / "fsm.png", "FSM (1101 detector), RK4: output amplitudes; dotted = read points")

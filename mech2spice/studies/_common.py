@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import Mech2SpiceError
+from ..inputs import strict_json
 SANDBOX = "2-core Debian 12 sandbox"               # where the long reports' checked-in numbers were measured
 
 
@@ -63,8 +64,10 @@ def json_default(o):
 
 
 def write_json(path: Path, data, default=json_default) -> None:
-    """Write `data` as indented JSON (the reports' data files all use indent 1)."""
-    Path(path).write_text(json.dumps(data, indent=1, default=default))
+    """Write `data` as indented strict JSON (the reports' data files all use indent 1): a non-finite figure is
+    null, read back by its renderer as what it stood for (`reports/_common.non_finite`, the meaning of each
+    such null in docs/architecture.md)."""
+    Path(path).write_text(strict_json(data, default, indent=1))
 
 
 def read_json(path: Path, missing=None):

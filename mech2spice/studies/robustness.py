@@ -19,7 +19,7 @@ import numpy as np
 
 from ..experiments import mc_run
 from ..experiments import montecarlo as mc
-from ._common import conditions, load_average
+from ._common import conditions, load_average, write_json
 
 SECTIONS = ("all",)
 
@@ -172,7 +172,7 @@ def noise_agreement() -> dict:
         row["wall_s"] = time.time() - t0
         out[name] = row
     CACHE.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=1))
+    write_json(path, out)
     return out
 
 
@@ -204,7 +204,7 @@ def stored_amortised_scaling() -> list[dict] | None:
 def measure_amortised_scaling() -> list[dict]:
     """Measure and store scaling(**AMORTISED) (run by hand: it wants the machine as quiet as it gets)."""
     rows = scaling(**AMORTISED)
-    (CACHE / "scaling_amortised.json").write_text(json.dumps(rows, indent=1))
+    write_json(CACHE / "scaling_amortised.json", rows)
     return rows
 
 
@@ -237,7 +237,7 @@ def stored_scaling() -> list[dict]:
     """The 1-vs-2-worker measurement, kept in CACHE (measured once: it needs an otherwise idle machine)."""
     path = CACHE / "scaling.json"
     if not path.exists():
-        path.write_text(json.dumps(scaling(), indent=1))
+        write_json(path, scaling())
     return json.loads(path.read_text())
 
 

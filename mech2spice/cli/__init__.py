@@ -157,7 +157,8 @@ def _precheck(args) -> None:
         for name in subckt_library(load_params(args.params)):       # the files it writes: never the --params file
             inputs.check_output_file(Path(args.output) / name, {"the --params file": params_file(args.params)},
                                      "subckt file", parents=True)
-    elif command == "gate" and args.report:
+    elif command == "gate" and args.report and not (args.sens or args.spread is not None):
+        # (with --sens/--spread, --report is refused as a flag combination, before any path is read)
         from ..reports import REPORTS
         inputs.check_output_dir(args.report, "report directory")
         for name in REPORTS["gate"].writes:                  # gate.json beside gate.md: never the --params file

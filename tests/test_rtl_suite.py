@@ -77,3 +77,21 @@ def test_a_cache_entry_that_is_not_a_row_is_measured_again(bench):
     entry.write_text(json.dumps({"name": "pad", "accepted": True}))
     (row,) = _run(suite, bench, "--only", "pad")["rows"]
     assert not row["accepted"] and "inout port 'p'" in row["refusal"]
+
+
+def test_the_reset_and_its_level_come_from_the_design_not_the_manifest_name(tmp_path, monkeypatch):
+    """A counter whose `rst_n` is active high (as the public GCD's is): the suite once passed the manifest's
+    bare name, and `--reset rst_n` asserted it at 0, so the counter was never reset in the run."""
+    rtl = tmp_path / "bench" / "rtl"
+    (rtl / "cnt").mkdir(parents=True)
+    (rtl / "cnt" / "cnt.v").write_text(
+        "module cnt(input clk, input rst_n, output reg [1:0] q);\n"
+        "  always @(posedge clk) if (rst_n) q <= 2'd0; else q <= q + 2'd1;\nendmodule\n")
+    design = {"name": "cnt", "file": "cnt/cnt.v", "top": "cnt", "clock": "clk", "reset": "rst_n",
+              "repo": "test", "paths": []}
+    (rtl / "manifest.json").write_text(json.dumps({"designs": [design]}))
+    monkeypatch.setenv("MECH2SPICE_BENCHMARKS", str(tmp_path / "bench"))
+    (row,) = _run(_suite(), tmp_path)["rows"]
+    assert row["verify"]["verdict"] == "pass"
+    (reset,) = row["verify"]["resets"]
+    assert reset.startswith("rst_n=1 (design (synchronous")

@@ -188,8 +188,9 @@ def _hierarchy(top: str) -> str:
 
 
 def _script(path: Path, rel: str, netlist: Netlist, regs: list, resets=(), mode: str = "induct",
-            steps: int = INDUCTION_STEPS) -> str:
+            steps: int | None = None) -> str:
     """Read source and network, expose the matched registers on both, build the miter and prove it."""
+    steps = steps or INDUCTION_STEPS
     lines = _read_source(path, rel, netlist.top)
     if regs:
         lines.append(f"cd {PREFIX}src")
@@ -369,7 +370,8 @@ def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUD
                 "detail": f"no input (sequence) makes an output differ (induction closed at length {tried})"}
     return {"regs": regs, "depth": depth, "status": "unknown", "cex": None,
             "detail": f"no counterexample within {depth} cycles of the start, but the induction did not close "
-                      f"within {INDUCTION_STEPS} steps"}
+                      f"within {INDUCTION_STEPS} steps ({time.time() - t0:.0f} s of the proof's "
+                      f"{budget_s:.0f} s budget used)"}
 
 
 # sat's lines (Yosys 0.3x-0.70): the step proved, a counterexample, the step giving up, the base case.

@@ -3,6 +3,7 @@ mapping caught, the JUnit/JSON output and the exit-code contract."""
 from __future__ import annotations
 
 import json
+import re
 import os
 import shutil
 import time
@@ -480,3 +481,19 @@ def test_a_design_without_data_inputs_is_verified(tmp_path, capsys, body):
     res = json.loads(out)
     assert code == 0, out + err
     assert res["equivalence"]["status"] == "proved" and res["cosim"]["agree"]
+
+
+def test_an_induction_that_does_not_close_states_its_depth_and_budget(tmp_path, monkeypatch):
+    """A recoded FSM whose induction closes only at length 4, given 3 steps: `unknown`, and the detail says
+    how deep the bounded check went and how much of which budget the proof used (the suite's rows)."""
+    src = tmp_path / "fsm3.v"
+    src.write_text("module fsm3(input clk, input rst, input go, output y);\n  reg [1:0] state;\n"
+                   "  always @(posedge clk)\n    if (rst) state <= 2'd0;\n    else case (state)\n"
+                   "      2'd0: if (go) state <= 2'd1;\n      2'd1: state <= 2'd2;\n      2'd2: state <= 2'd0;\n"
+                   "      default: state <= 2'd0;\n    endcase\n  assign y = state == 2'd2;\nendmodule\n")
+    nl = synthesize(src)
+    monkeypatch.setattr(V, "INDUCTION_STEPS", 3)
+    res = V.equivalence(src, nl, budget_s=100, resets=[{"port": "rst", "level": 1}])
+    assert res["status"] == "unknown" and res["depth"] == 3
+    assert re.search(r"no counterexample within 3 cycles of the start, but the induction did not close within "
+                     r"3 steps \(\d+ s of the proof's \d+ s budget used\)", res["detail"])

@@ -52,7 +52,11 @@ CLASSES = [
 VERIFY_CLASSES = [
     ("escaped identifiers in the written-back network", r"gate\.v, line \d+: syntax error"),
     ("memory in the equivalence proof", r"\$memrd|\$memwr|\$mem\b|No SAT model available for cell .*mem"),
+    # an unreproduced counterexample: its detail also says "outputs differ", so it is matched first
+    ("start state: a counterexample the replay from power-up does not reproduce", r"the start state, not the mapping"),
     ("equivalence counterexample", r"outputs differ"),
+    ("proof budget ran out", r"time budget \(\d+ s\) ran out"),
+    ("induction did not close (bounded check found no difference)", r"induction did not close"),
     ("equivalence not proved", r"not proved|unproved|induction"),
     ("co-simulation mismatch", r"co-simulation mismatches"),
     ("Icarus could not run the source", r"iverilog failed"),

@@ -95,3 +95,19 @@ def test_the_reset_and_its_level_come_from_the_design_not_the_manifest_name(tmp_
     assert row["verify"]["verdict"] == "pass"
     (reset,) = row["verify"]["resets"]
     assert reset.startswith("rst_n=1 (design (synchronous")
+
+
+@pytest.mark.parametrize("detail, cause", [
+    ("the proof found inputs on which the outputs differ from its all-zero start, but replayed from power-up the "
+     "source (Icarus) and the network (logic backend) do not differ on any bit the source defines (...): the start "
+     "state, not the mapping, made the difference; give the reset with --reset PORT=LEVEL",
+     "start state: a counterexample the replay from power-up does not reproduce"),
+    ("the outputs differ on this input (sequence), read after 3 clock edges; replayed: Icarus and the network "
+     "(logic backend) differ on done[0]", "equivalence counterexample"),
+    ("the proof's time budget (120 s) ran out: the bounded check of 20 cycles from the start was not finished, "
+     "and the induction had not closed (tried up to length 1)", "proof budget ran out"),
+    ("no counterexample within 20 cycles of the start, but the induction did not close within 20 steps (29 s of "
+     "the proof's 120 s budget used)", "induction did not close (bounded check found no difference)"),
+])
+def test_a_verify_unknown_is_classed_by_its_cause_not_by_a_phrase_it_shares(detail, cause):
+    assert _suite()._verify_class({"verdict": "unknown", "detail": detail}) == cause

@@ -497,3 +497,16 @@ def test_an_induction_that_does_not_close_states_its_depth_and_budget(tmp_path, 
     assert res["status"] == "unknown" and res["depth"] == 3
     assert re.search(r"no counterexample within 3 cycles of the start, but the induction did not close within "
                      r"3 steps \(\d+ s of the proof's \d+ s budget used\)", res["detail"])
+
+
+def test_a_start_state_difference_without_a_reset_says_what_would_define_the_start(tmp_path):
+    """A ROM read into registers never initialised, `done` only ever loaded with 1 (as the public rom_dds):
+    synthesis makes `done` the constant 1, the proof's all-zero start has 0, the replay from power-up finds
+    no defined bit differing.  `unknown`, and with no input to reset it with, the detail does not ask for one."""
+    src = tmp_path / "rom.v"
+    src.write_text("module rom(input clk, input [1:0] a, output reg [1:0] d, output reg done);\n"
+                   "  reg [1:0] m [0:3];\n  initial begin m[0] = 1; m[1] = 2; m[2] = 3; m[3] = 0; end\n"
+                   "  always @(posedge clk) begin d <= m[a]; done <= 1; end\nendmodule\n")
+    res = V.equivalence(src, synthesize(src), budget_s=100)
+    assert res["status"] == "unknown" and "the start state, not the mapping" in res["detail"]
+    assert "--reset" not in res["detail"] and "give them power-up values" in res["detail"]

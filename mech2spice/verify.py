@@ -188,8 +188,9 @@ def _hierarchy(top: str) -> str:
 
 
 def _script(path: Path, rel: str, netlist: Netlist, regs: list, resets=(), mode: str = "induct",
-            steps: int = INDUCTION_STEPS) -> str:
+            steps: int | None = None) -> str:
     """Read source and network, expose the matched registers on both, build the miter and prove it."""
+    steps = steps or INDUCTION_STEPS
     lines = _read_source(path, rel, netlist.top)
     if regs:
         lines.append(f"cd {PREFIX}src")
@@ -239,13 +240,13 @@ def equivalence(path, netlist: Netlist, budget_s: float = PROOF_BUDGET_S, resets
     regs = register_names(netlist) if sequential else []
     res = _prove(Path(path), netlist, regs, budget_s, resets)
     if res["cex"]:
-        res = _replayed(path, netlist, res)
+        res = _replayed(path, netlist, res, resets)
     left = budget_s - (time.time() - t0)
     if regs and res["status"] not in ("proved", "counterexample") and left > 1:
         # The strengthened miter also compares the matched registers: a failure there may be a wrong match,
         # not a wrong output.  A counterexample its replay confirms stands; otherwise the plain miter decides.
         plain = _prove(Path(path), netlist, [], left, resets)
-        res = _replayed(path, netlist, plain) if plain["cex"] else plain
+        res = _replayed(path, netlist, plain, resets) if plain["cex"] else plain
     n = len(res["regs"])
     matched = f", {n} matched register{'s' * (n != 1)}" if n else ""
     reset = ", ".join(f"{r['port']}={r['level']}" for r in resets)
@@ -295,7 +296,7 @@ def _port_values(netlist: Netlist, bits: dict) -> dict[str, str]:
                        for i in reversed(range(w))) for p, w in netlist.outputs.items()}
 
 
-def _replayed(path, netlist: Netlist, res: dict) -> dict:
+def _replayed(path, netlist: Netlist, res: dict, resets=()) -> dict:
     """A counterexample stands only when its replay shows the source and the network differing: cut to the
     first such cycle; otherwise the status is `unknown`, saying so."""
     rep = replay(path, netlist, res["cex"])
@@ -311,7 +312,17 @@ def _replayed(path, netlist: Netlist, res: dict) -> dict:
             "detail": f"the proof found inputs on which the outputs differ from its all-zero start, but replayed "
                       f"from power-up the source (Icarus) and the network (logic backend) do not differ on any "
                       f"bit the source defines (source {rep['source']}, network {rep['network']}): the start "
-                      f"state, not the mapping, made the difference; give the reset with --reset PORT=LEVEL"}
+                      f"state, not the mapping, made the difference; " + _start_hint(netlist, resets)}
+
+
+def _start_hint(netlist: Netlist, resets) -> str:
+    """What would fix the start: a reset verify did not find, or, with none to give, the source's own
+    power-up values (a register it never initialises is x, and synthesis may pick any value for it)."""
+    if resets or any(w == 1 for w in netlist.inputs.values()):
+        return "give the reset with --reset PORT=LEVEL"
+    return ("the source has no 1-bit input to reset it with: its registers that are never initialised power up "
+            "x, and synthesis may choose their value (a register only ever loaded with a constant becomes that "
+            "constant); give them power-up values (`reg q = 0;`) to make the start defined")
 
 
 def _run_yosys(script: str, workdir: str, budget_s: float) -> tuple[yosys.YosysResult, bool]:
@@ -374,7 +385,8 @@ def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUD
                 "detail": f"no input (sequence) makes an output differ (induction closed at length {tried})"}
     return {"regs": regs, "depth": depth, "status": "unknown", "cex": None,
             "detail": f"no counterexample within {depth} cycles of the start, but the induction did not close "
-                      f"within {INDUCTION_STEPS} steps"}
+                      f"within {INDUCTION_STEPS} steps ({time.time() - t0:.0f} s of the proof's "
+                      f"{budget_s:.0f} s budget used)"}
 
 
 # sat's lines (Yosys 0.3x-0.70): the step proved, a counterexample, the step giving up, the base case.

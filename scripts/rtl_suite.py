@@ -25,7 +25,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-FORMAT = 1     # bump when a row's fields change: cached rows of another format are measured again
+FORMAT = 2     # bump when a row's fields change: cached rows of another format are measured again
 
 # Refusal classes, first match wins: (class, pattern on the refusal line).
 CLASSES = [
@@ -35,7 +35,7 @@ CLASSES = [
     ("tri-state driver", r"tri-state"),
     ("inout port", r"\binout\b"),
     ("negative-edge flip-flop", r"negative-edge"),
-    ("several or derived clocks", r"clocked directly by one input port|clock .* also used as data"),
+    ("several or derived clocks", r"clocked by several ports|clocked directly by one input port|clock .* also used as data"),
     ("level-sensitive latch", r"level-sensitive latch"),
     ("memory", r"\$mem|memory"),
     ("other sequential cell", r"sequential cell"),
@@ -52,7 +52,11 @@ CLASSES = [
 VERIFY_CLASSES = [
     ("escaped identifiers in the written-back network", r"gate\.v, line \d+: syntax error"),
     ("memory in the equivalence proof", r"\$memrd|\$memwr|\$mem\b|No SAT model available for cell .*mem"),
+    # an unreproduced counterexample: its detail also says "outputs differ", so it is matched first
+    ("start state: a counterexample the replay from power-up does not reproduce", r"the start state, not the mapping"),
     ("equivalence counterexample", r"outputs differ"),
+    ("proof budget ran out", r"time budget \(\d+ s\) ran out"),
+    ("induction did not close (bounded check found no difference)", r"induction did not close"),
     ("equivalence not proved", r"not proved|unproved|induction"),
     ("co-simulation mismatch", r"co-simulation mismatches"),
     ("Icarus could not run the source", r"iverilog failed"),
@@ -170,9 +174,11 @@ def _source(design: dict) -> str:
 
 
 def _reset_flag(design: dict) -> list[str]:
-    """The manifest's reset port when it is one port (verify asserts it in cycle 0); else verify's own choice."""
-    reset = design.get("reset")
-    return ["--reset", reset] if reset and re.fullmatch(r"\w+", reset) else []
+    """No flag: verify reads each reset port and its level from the design (docs/verify.md, Resets).  The
+    manifest's bare port name used to be passed here, and `--reset NAME` takes its level from the name: the
+    GCD's active-high `rst_n` was asserted at 0 and the FIFO's active-low `reset` at 1, so neither was reset.
+    The row records the resets verify chose (`resets`), to be read against the manifest's `reset_level`."""
+    return []
 
 
 def _cli(argv: list[str], timeout: float) -> dict:
@@ -210,7 +216,9 @@ def _verdict(res: dict) -> dict:
     detail = eq.get("detail", "") if eq.get("status") not in (None, "proved") else ""
     if cosim and not cosim.get("agree", True):
         detail = (detail + "; " if detail else "") + f"{len(cosim.get('mismatches', []))} co-simulation mismatches"
+    resets = [f"{r['port']}={r['level']} ({r.get('rule', '?')})" for r in cosim.get("resets") or []]
     return {"verdict": out.get("verdict"), "equivalence": eq.get("status"), "cosim_agree": cosim.get("agree"),
+            "resets": resets,
             "stable": cosim.get("stable"), "min_margin": cosim.get("min_margin"), "detail": detail,
             "wall_s": res["wall_s"]}
 
@@ -335,7 +343,8 @@ def _markdown(rows: list[dict], s: dict, meta: dict) -> str:
             continue
         v, e = r["verify"], r["envelope"]
         ver = v["verdict"] + (f" ({v['equivalence']})" if v.get("equivalence") else "")
-        detail = "; ".join(x for x in (v.get("detail"), e.get("detail")) if x)
+        resets = f"reset {', '.join(v['resets'])}" if v.get("resets") else ""
+        detail = "; ".join(x for x in (v.get("detail"), e.get("detail"), resets) if x)
         out.append(f"| {r['name']} | {_cell(r['kind'])} | accepted | {r['gates']} | {r['latches']} | "
                    f"{r['oscillators']} | {_cell(ver)} | {_cell(e['verdict'])} | {_cell(detail)} |")
     out += ["", "## Sources", "", "| design | repository @ commit: paths | licence |", "|---|---|---|"]

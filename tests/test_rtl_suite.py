@@ -77,3 +77,37 @@ def test_a_cache_entry_that_is_not_a_row_is_measured_again(bench):
     entry.write_text(json.dumps({"name": "pad", "accepted": True}))
     (row,) = _run(suite, bench, "--only", "pad")["rows"]
     assert not row["accepted"] and "inout port 'p'" in row["refusal"]
+
+
+def test_the_reset_and_its_level_come_from_the_design_not_the_manifest_name(tmp_path, monkeypatch):
+    """A counter whose `rst_n` is active high (as the public GCD's is): the suite once passed the manifest's
+    bare name, and `--reset rst_n` asserted it at 0, so the counter was never reset in the run."""
+    rtl = tmp_path / "bench" / "rtl"
+    (rtl / "cnt").mkdir(parents=True)
+    (rtl / "cnt" / "cnt.v").write_text(
+        "module cnt(input clk, input rst_n, output reg [1:0] q);\n"
+        "  always @(posedge clk) if (rst_n) q <= 2'd0; else q <= q + 2'd1;\nendmodule\n")
+    design = {"name": "cnt", "file": "cnt/cnt.v", "top": "cnt", "clock": "clk", "reset": "rst_n",
+              "repo": "test", "paths": []}
+    (rtl / "manifest.json").write_text(json.dumps({"designs": [design]}))
+    monkeypatch.setenv("MECH2SPICE_BENCHMARKS", str(tmp_path / "bench"))
+    (row,) = _run(_suite(), tmp_path)["rows"]
+    assert row["verify"]["verdict"] == "pass"
+    (reset,) = row["verify"]["resets"]
+    assert reset.startswith("rst_n=1 (design (synchronous")
+
+
+@pytest.mark.parametrize("detail, cause", [
+    ("the proof found inputs on which the outputs differ from its all-zero start, but replayed from power-up the "
+     "source (Icarus) and the network (logic backend) do not differ on any bit the source defines (...): the start "
+     "state, not the mapping, made the difference; give the reset with --reset PORT=LEVEL",
+     "start state: a counterexample the replay from power-up does not reproduce"),
+    ("the outputs differ on this input (sequence), read after 3 clock edges; replayed: Icarus and the network "
+     "(logic backend) differ on done[0]", "equivalence counterexample"),
+    ("the proof's time budget (120 s) ran out: the bounded check of 20 cycles from the start was not finished, "
+     "and the induction had not closed (tried up to length 1)", "proof budget ran out"),
+    ("no counterexample within 20 cycles of the start, but the induction did not close within 20 steps (29 s of "
+     "the proof's 120 s budget used)", "induction did not close (bounded check found no difference)"),
+])
+def test_a_verify_unknown_is_classed_by_its_cause_not_by_a_phrase_it_shares(detail, cause):
+    assert _suite()._verify_class({"verdict": "unknown", "detail": detail}) == cause

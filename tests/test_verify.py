@@ -3,6 +3,7 @@ mapping caught, the JUnit/JSON output and the exit-code contract."""
 from __future__ import annotations
 
 import json
+import re
 import os
 import shutil
 import time
@@ -480,3 +481,32 @@ def test_a_design_without_data_inputs_is_verified(tmp_path, capsys, body):
     res = json.loads(out)
     assert code == 0, out + err
     assert res["equivalence"]["status"] == "proved" and res["cosim"]["agree"]
+
+
+def test_an_induction_that_does_not_close_states_its_depth_and_budget(tmp_path, monkeypatch):
+    """A recoded FSM whose induction closes only at length 4, given 3 steps: `unknown`, and the detail says
+    how deep the bounded check went and how much of which budget the proof used (the suite's rows)."""
+    src = tmp_path / "fsm3.v"
+    src.write_text("module fsm3(input clk, input rst, input go, output y);\n  reg [1:0] state;\n"
+                   "  always @(posedge clk)\n    if (rst) state <= 2'd0;\n    else case (state)\n"
+                   "      2'd0: if (go) state <= 2'd1;\n      2'd1: state <= 2'd2;\n      2'd2: state <= 2'd0;\n"
+                   "      default: state <= 2'd0;\n    endcase\n  assign y = state == 2'd2;\nendmodule\n")
+    nl = synthesize(src)
+    monkeypatch.setattr(V, "INDUCTION_STEPS", 3)
+    res = V.equivalence(src, nl, budget_s=100, resets=[{"port": "rst", "level": 1}])
+    assert res["status"] == "unknown" and res["depth"] == 3
+    assert re.search(r"no counterexample within 3 cycles of the start, but the induction did not close within "
+                     r"3 steps \(\d+ s of the proof's \d+ s budget used\)", res["detail"])
+
+
+def test_a_start_state_difference_without_a_reset_says_what_would_define_the_start(tmp_path):
+    """A ROM read into registers never initialised, `done` only ever loaded with 1 (as the public rom_dds):
+    synthesis makes `done` the constant 1, the proof's all-zero start has 0, the replay from power-up finds
+    no defined bit differing.  `unknown`, and with no input to reset it with, the detail does not ask for one."""
+    src = tmp_path / "rom.v"
+    src.write_text("module rom(input clk, input [1:0] a, output reg [1:0] d, output reg done);\n"
+                   "  reg [1:0] m [0:3];\n  initial begin m[0] = 1; m[1] = 2; m[2] = 3; m[3] = 0; end\n"
+                   "  always @(posedge clk) begin d <= m[a]; done <= 1; end\nendmodule\n")
+    res = V.equivalence(src, synthesize(src), budget_s=100)
+    assert res["status"] == "unknown" and "the start state, not the mapping" in res["detail"]
+    assert "--reset" not in res["detail"] and "give them power-up values" in res["detail"]

@@ -394,6 +394,13 @@ _CELLS = {
 _FORCED = re.compile(r"^\$_DFF_P(?P<polarity>[NP])(?P<value>[01])_$")
 _SEQUENTIAL = re.compile(r"^\$_?(?:\w*dff\w*|\w*dlatch\w*|sr|ff|mem\w*)(?:_|$)", re.I)
 _NAMED = {"$print": "$display/$write", "$check": "assert/assume/cover"}
+# Why each is refused rather than dropped: dropping would silently change what the source says it does.
+_NOT_LOGIC = {
+    "$print": "prints text while a simulator runs: it computes no output, and a network of oscillators has "
+              "no console to print on, so the source's observable behaviour cannot be kept; remove it or "
+              "guard it with `ifndef SYNTHESIS`",
+    "$check": "states a property for a simulator or a formal tool to check, not a value to compute: a NOR "
+              "network cannot stop or flag a run when it fails; remove it or guard it with `ifndef SYNTHESIS`"}
 
 
 def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
@@ -405,8 +412,10 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
     if cell_type == "$scopeinfo":               # flatten's record of the hierarchy: no logic
         return None
     if re.match(r"^\$_(?:DFF_N|DFFE_N|DFF_N[NP][01]|DFFSRE?_N)\w*_$", cell_type):
-        raise Mech2SpiceError(f"module {top}: negative-edge flip-flops are not supported "
-                              "(use posedge; the mechanical latch captures on the clock pulse)")
+        raise Mech2SpiceError(f"module {top}: a negative-edge flip-flop ({cell_type}): the mechanical clock is "
+                              "one pulse per cycle and every latch captures during it; a falling-edge capture "
+                              "is a second event per cycle that the drive does not have, and a design mixing "
+                              "both edges hands data between them within a cycle; clock it on posedge")
     if re.match(r"^\$_DFFSRE?_\w+_$", cell_type):
         raise Mech2SpiceError(
             f"module {top}: a flip-flop with both an asynchronous set and an asynchronous reset ({cell_type}) "
@@ -423,11 +432,13 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
         raise Mech2SpiceError(f"module {top}: Yosys inferred a level-sensitive latch ({cell_type}); "
                               "assign every signal on every path of combinational always blocks")
     if _SEQUENTIAL.match(cell_type):
-        raise Mech2SpiceError(f"module {top}: sequential cell {cell_type} is not supported "
-                              "(only posedge flip-flops on one clock)")
-    what = _NAMED.get(cell_type, f"cell type {cell_type}")
-    raise Mech2SpiceError(f"module {top}: {what} is not supported (only logic that maps "
-                          "to NOR gates)")
+        raise Mech2SpiceError(f"module {top}: sequential cell {cell_type} has no mechanical counterpart: the "
+                              "latch is a flip-flop capturing on the one clock pulse, optionally forced by one "
+                              "asynchronous set or reset")
+    if cell_type in _NAMED:
+        raise Mech2SpiceError(f"module {top}: {_NAMED[cell_type]} {_NOT_LOGIC[cell_type]}")
+    raise Mech2SpiceError(f"module {top}: Yosys cell type {cell_type} has no NOR-gate mapping in this flow "
+                          "(only logic, posedge flip-flops and their resets reach the mechanical network)")
 
 
 def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
@@ -439,7 +450,7 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
         raise Mech2SpiceError(f"module {top} has no output ports: nothing to synthesize")
     cells = _add_cells(g, top, module, driver, path)
     names = _net_names(module)
-    clock = _clock_port(g, top, module, driver)
+    clock = _clock_port(g, top, module, driver, path)
     power_up = _initial_values(module)
     for node, (pins, out_net) in cells.items():
         g.nodes[node]["net"] = names.get(out_net, f"${out_net}")
@@ -530,17 +541,24 @@ def _not(g: nx.DiGraph, a: str) -> str:
     return made[a]
 
 
-def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict) -> str | None:
+def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path | None = None) -> str | None:
     """The single 1-bit input port clocking every flip-flop (None for combinational designs)."""
-    clocks = {c["connections"]["C"][0] for c in module["cells"].values()
-              if c["type"] == "$_DFF_P_" or _FORCED.match(c["type"])}
+    flops = [c for c in module["cells"].values() if c["type"] == "$_DFF_P_" or _FORCED.match(c["type"])]
+    clocks = {c["connections"]["C"][0] for c in flops}
     if not clocks:
         return None
     srcs = {driver.get(c) for c in clocks}
     ports = {g.nodes[s]["port"] for s in srcs if s is not None and g.nodes[s]["kind"] == "input"}
     if len(ports) > 1 and len(ports) == len(srcs):
+        first = {}                              # port -> where its first flip-flop is written
+        for c in flops:
+            node = driver.get(c["connections"]["C"][0])
+            first.setdefault(g.nodes[node]["port"], _where(c, top, path))
+        at = {p: w.rsplit(", ", 1)[-1] for p, w in first.items() if ", line " in w}
+        lines = ", ".join(f"{p} at {at[p]}" if p in at else p for p in sorted(ports))
+        lead = next((first[p] + ": " for p in sorted(ports, reverse=True) if p in at), "")
         raise Mech2SpiceError(
-            f"module {top}: the flip-flops are clocked by several ports ({', '.join(sorted(ports))}): the "
+            f"{lead}module {top}: the flip-flops are clocked by several ports ({lines}): the "
             "mechanical clock is one pulsed drive whose pulse and pause come from the latch and logic delays, "
             "and the source does not say how the edges of different clocks relate; data crossing between "
             "them is captured at whatever phase it has, which for a NOR latch means while it switches, the "

@@ -26,8 +26,9 @@ def _wave() -> Waveform:
 def test_bits_and_values_are_written_msb_first_with_x_for_invalid():
     assert bits_string([1, 0, None, 1]) == "1x01"
     assert wire_value(5, 4) == "0101" and wire_value(-1, 3) == "111" and wire_value(None, 2) == "xx"
+    assert wire_value("01z", 3) == "01z"             # Icarus's undriven bits (verify --vcd's source side)
     with pytest.raises(Mech2SpiceError):
-        wire_value("01z", 3)
+        wire_value("01q", 3)
 
 
 def test_round_trip_through_its_own_reader(tmp_path):

@@ -9,7 +9,8 @@ tool's git commit (plus a digest of uncommitted changes to mech2spice/), so a re
 changed.  Writes docs/rtl_suite.md and docs/rtl_suite.json.
 
 The manifest (outside git, like the ISCAS files): {"designs": [{name, file, top, clock, reset,
-reset_level, repo, paths, commit, licence, kind, ...}]}.  Sources are named per design in the table.
+reset_level, repo, paths, commit, licence, kind, ...}]}, written with the design files by
+scripts/rtl_suite_stage.py from mirrors of the source repositories.  Sources are named per design in the table.
 """
 from __future__ import annotations
 

@@ -195,7 +195,8 @@ def test_a_damaged_centering_record_is_one_line(capsys, tmp_path, steps, needle)
 
 
 @pytest.mark.parametrize("content, needle", [
-    ("[]", "not a list"), ("{}", "not an empty object"), ('"x"', "not a string"), ("cycles", "'cycles' is a string"),
+    ("[]", "$: a list, not an object"), ("{}", "$: an empty object"), ('"x"', "$: a string, not an object"),
+    ("cycles", "$.cycles: a string, not a whole number >= 0"),
 ], ids=["list", "empty", "string", "count-string"])
 def test_stored_report_json_of_another_shape_is_one_line(capsys, tmp_path, content, needle):
     if content == "cycles":
@@ -210,7 +211,7 @@ def test_a_renderer_failing_on_the_stored_shape_is_one_line(capsys, tmp_path):
     stored = json.loads((ROOT / "reports/gate.json").read_text())
     first = next(k for k, v in stored.items() if isinstance(v, dict))
     write(tmp_path / "gate.json", json.dumps({**stored, first: "x"}))
-    report_refused(capsys, "report", "gate", "--render", "--out", tmp_path, needle="not what the report reads")
+    report_refused(capsys, "report", "gate", "--render", "--out", tmp_path, needle=f"$.{first}: a string, not an object")
 
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog (iverilog, vvp) not installed")

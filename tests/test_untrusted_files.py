@@ -222,7 +222,7 @@ def test_a_json_that_is_not_the_reports_is_refused_in_one_line(tmp_path, capsys)
     out = tmp_path / "out"
     out.mkdir()
     (out / "envelope.json").write_text('{"scenes": [{"scene": "x"}]}')
-    _render(capsys, out, needle="lacks what `report envelope` renders")
+    _render(capsys, out, needle="envelope.json: $.scenes[0].")
 
 
 def test_the_measurement_cache_refuses_foreign_entries_and_never_reads_pickles(tmp_path):

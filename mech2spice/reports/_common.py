@@ -63,13 +63,9 @@ def out_dir(directory) -> Path:
     return d
 
 
-NUMBER, COUNT = (int, float), int
-
-
-def stored(path: Path, report: str, schema: dict | None = None) -> dict:
-    """The JSON a study wrote at `path`; without it one Mech2SpiceError line says how to measure it.  `schema`:
-    {field: type or types} of the fields the report reads (an int is no bool here); a field absent from it
-    is the renderer's to default."""
+def stored(path: Path, report: str) -> dict:
+    """The JSON a study wrote at `path`; without it one Mech2SpiceError line says how to measure it.  Its
+    fields are reports/schemas.py's to check (`--render` checks them before any report is drawn)."""
     from ..errors import Mech2SpiceError
     data = read_json(path)
     if data is None:
@@ -78,12 +74,6 @@ def stored(path: Path, report: str, schema: dict | None = None) -> dict:
         from ..inputs import type_name
         raise Mech2SpiceError(f"{path} is not the JSON `mech2spice report {report}` writes (an object of its results, "
                               f"not {'an empty object' if data == {} else type_name(data)}): measure it again")
-    for key, kinds in (schema or {}).items():
-        value = data.get(key)
-        if key in data and (isinstance(value, bool) and bool not in _tuple(kinds) or not isinstance(value, kinds)):
-            from ..inputs import type_name
-            raise Mech2SpiceError(f"{path}: '{key}' is {type_name(value)}, not what `mech2spice report {report}` "
-                                  "writes there: measure it again")
     return data
 
 
@@ -106,7 +96,3 @@ def _as_value(figure, value: float):
     if isinstance(figure, dict):
         return {k: value if x is None else x for k, x in figure.items()}
     return value if figure is None else figure
-
-
-def _tuple(kinds) -> tuple:
-    return kinds if isinstance(kinds, tuple) else (kinds,)

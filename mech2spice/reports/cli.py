@@ -91,6 +91,10 @@ def cmd_report(args) -> int:
             flags = ", ".join(f for f, d, _ in OPTIONS if d in unused)
             raise Mech2SpiceError(f"report {name} takes no {flags}")
     _check_outputs(names, args.out, options)
+    if options.get("render"):
+        from .schemas import check_stored        # every report's files before any is drawn: nothing written
+        for name in names:
+            check_stored(name, args.out, options.get("name"))
     done = []
     for name in names:
         done.append(_write(name, args.out, options))
@@ -148,7 +152,7 @@ SHAPE_ERRORS = (KeyError, TypeError, IndexError, ValueError, AttributeError, Zer
 @contextlib.contextmanager
 def _stored_shape(name: str, directory: str, render: bool):
     """--render measures nothing: what fails on the stored JSON's shape is the file's fault, one line naming
-    it (stored() has checked it is an object; each renderer reads the fields it needs)."""
+    it (reports/schemas.py has checked every file it reads, field by field; this is the net under it)."""
     try:
         yield
     except SHAPE_ERRORS as err:

@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ._common import COUNT, NUMBER, out_dir, pyplot, read_json, save_figure, stored, write_json
+from ._common import out_dir, pyplot, read_json, save_figure, stored, write_json
 from .cpu import fig_sieve, plot_traffic
 
 plt = pyplot()
@@ -81,15 +81,11 @@ def write(directory="reports", cycles: int = 0, program: str = "programs/sieve.a
 
 # The stored run's fields the report reads, and their types (_common.stored checks them before any figure;
 # primes: null for a program that is not the sieve).
-SCHEMA = {"cycles": COUNT, "periods": COUNT, "simulated_periods": COUNT, "wall_s": NUMBER, "cpu_s": NUMBER,
-          "s_per_cycle": NUMBER, "rows": list, "moments": list, "options": dict, "speedups": dict, "primes": (list, type(None)),
-          "halted": bool, "sieve": bool, "agree_every_cycle": bool, "final_memory_equals_iss": bool,
-          "command": str, "host": str, "load": str}
 
 
 def render_json(out: Path, name: str) -> Path:
     """NAME.md and the figures from NAME.json (a JSON written before the study kept its rows: one error line)."""
-    res = stored(out / f"{name}.json", "cpu_physical", SCHEMA)
+    res = stored(out / f"{name}.json", "cpu_physical")
     if "rows" not in res:
         raise Mech2SpiceError(f"{out / (name + '.json')} has no per-cycle rows (written before the report kept "
                               f"them): measure it again with `{res.get('command', 'mech2spice report cpu_physical')}`")

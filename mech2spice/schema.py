@@ -92,6 +92,8 @@ def kind_of(value) -> str:
     """How a message names a value: its JSON type, or the number itself where it is not finite."""
     if isinstance(value, float) and not math.isfinite(value):
         return str(value)
+    if isinstance(value, int) and not isinstance(value, bool) and not _finite(value):
+        return "a whole number beyond the float range"
     return {dict: "an object", list: "a list", str: "a string", bool: "true/false", int: "a whole number",
             float: "a number", type(None): "null"}.get(type(value), type(value).__name__)
 
@@ -109,8 +111,9 @@ def child(path: str, key) -> str:
 
 
 def _quoted(key: str) -> str:
-    text = key[:40].encode("ascii", "backslashreplace").decode("ascii").replace('"', '\\"')
-    return f'"{text}{"..." if len(key) > 40 else ""}"'
+    """A key as a JSON string, cut to 40 characters: a newline or a quote in it stays on the message's line."""
+    import json
+    return json.dumps(key[:40] + ("..." if len(key) > 40 else ""))
 
 
 def check(value, spec, path: str = "$") -> None:

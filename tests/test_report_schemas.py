@@ -136,13 +136,14 @@ def _mutated(data, keys: tuple, how: str):
     return data
 
 
-def _refused_naming(capsys, tmp_path, report: str, file: str, data, where: str):
+def _refused_naming(capsys, tmp_path, report: str, file: str, data, where: str, writer: str = ""):
     out = _copy(report, tmp_path / "r")
     (out / file).write_text(json.dumps(data))             # Python writes NaN as NaN: the lenient form
     before = _state(out)
     rc, stdout, err = run(capsys, "report", report, "--render", "--out", out)
     assert rc == 2 and "Traceback" not in err and err.count("\n") == 1, err[-2000:]
     assert f"{out / file}: {where}:" in err, (where, err)
+    assert f"`{writer or 'mech2spice report ' + report}` writes" in err, err
     assert _state(out) == before and not stdout
 
 
@@ -193,7 +194,9 @@ def test_a_damaged_file_read_beside_the_reports_own_is_refused(capsys, tmp_path,
         pytest.skip(f"no committed {file}.json")
     data, spec = _load(report, f"{file}.json")
     keys = next(keys for keys, k in _places(data, spec) if k == "number" and keys)
-    _refused_naming(capsys, tmp_path, report, f"{file}.json", _mutated(data, keys, "nan"), _path(keys))
+    writer = {"envelope_spice": "mech2spice report speed_accuracy", "vacask": "python -m mech2spice.studies.vacask",
+              "cpu_physical_tm_increment": "mech2spice report cpu_physical"}.get(file, f"mech2spice report {file}")
+    _refused_naming(capsys, tmp_path, report, f"{file}.json", _mutated(data, keys, "nan"), _path(keys), writer)
 
 
 @pytest.mark.parametrize("content, where", [("[]", "$: a list, not an object"), ("{}", "$: an empty object"),

@@ -272,8 +272,10 @@ def test_a_processor_runs_progress_without_a_known_end_has_no_percentage(monkeyp
 @pytest.mark.parametrize("sample, ok", [
     ({"margin": None, "reason": "simulation diverged"}, True),           # what the strict writer writes
     ({"margin": "-Infinity"}, False), ({"failing_bits": ["s[0]"]}, False), ({"failing_gates": [3]}, False),
-    ({"reason": 5}, False),
-], ids=["null-margin", "margin-string", "bits-list", "gate-number", "reason-number"])
+    ({"reason": 5}, False), ({"margin": -math.inf}, False), ({"gate_margin": math.nan}, False),
+    ({"worst_gate": 3}, False), ({"extra": [math.inf]}, False),
+], ids=["null-margin", "margin-string", "bits-list", "gate-number", "reason-number", "margin-infinity",
+        "gate-margin-nan", "worst-gate-number", "infinity-elsewhere"])
 def test_montecarlo_lines_are_checked_before_a_resume_counts_them(tmp_path, monkeypatch, sample, ok):
     from mech2spice.experiments import mc_run
     monkeypatch.setattr(mc_run.mc, "job_key", lambda job: "k")
@@ -283,7 +285,8 @@ def test_montecarlo_lines_are_checked_before_a_resume_counts_them(tmp_path, monk
     if ok:
         assert mc_run.read_results(out, {})[0]["margin"] is None
     else:
-        with pytest.raises(Mech2SpiceError, match="line 2: not a Monte-Carlo results record"):
+        field = next(iter(sample))
+        with pytest.raises(Mech2SpiceError, match=rf"line 2: not a Monte-Carlo results record \(\$\.{field}\b"):
             mc_run.read_results(out, {})
 
 

@@ -20,7 +20,8 @@ from pathlib import Path
 
 from ..backends import progress_bar
 from ..errors import Mech2SpiceError
-from ..inputs import first_json_line, is_int, strict_json
+from ..inputs import first_json_line, strict_json
+from ..schema import BOOL, COUNT, NUMBER, STR, Map, Opt, SchemaError, check, non_finite_path
 from . import montecarlo as mc
 
 IN_FLIGHT = 2                  # tasks submitted per worker at a time
@@ -94,11 +95,11 @@ def read_results(path: Path, job: dict) -> dict[int, dict]:
     return done
 
 
-_SAMPLE = {"pass": lambda v: isinstance(v, bool),
-           "margin": lambda v: v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
-           "failing_bits": lambda v: isinstance(v, dict) and all(is_int(c) for c in v.values()),
-           "failing_gates": lambda v: isinstance(v, list) and all(isinstance(g, str) for g in v),
-           "reason": lambda v: isinstance(v, str)}
+# A sample line as the summary reads it back (mech2spice/schema.py's language; a failed sample's margin is
+# null, its reason beside it).
+SAMPLE = {"i": COUNT, "pass": BOOL, "stable?": BOOL, "margin?": Opt(NUMBER), "gate_margin?": Opt(NUMBER),
+          "failing_bits?": Map(COUNT), "failing_gates?": [STR], "worst_gate?": Opt(STR), "periods?": COUNT,
+          "reason?": STR}
 
 
 def _cut_torn_line(path: Path) -> None:
@@ -117,11 +118,15 @@ def _record(raw: bytes, n: int, path: Path) -> dict:
         rec = None
     if not isinstance(rec, dict):
         raise Mech2SpiceError(f"{path}, line {n}: damaged (not a JSON record): give another --out")
-    sample_ok = is_int(rec.get("i")) and rec["i"] >= 0 and isinstance(rec.get("pass"), bool) and all(
-        check(rec[k]) for k, check in _SAMPLE.items() if k in rec)
-    if rec.get("type") == "sample" and not sample_ok:
-        raise Mech2SpiceError(f"{path}, line {n}: not a Monte-Carlo results record (a sample without its index "
-                              "'i' or its verdict 'pass', or a field of the wrong type): give another --out")
+    if rec.get("type") == "sample":
+        try:
+            check(rec, SAMPLE)
+            where = non_finite_path(rec)
+            if where:
+                raise SchemaError(where, "not a finite number (the tool writes null and a reason)")
+        except SchemaError as err:
+            raise Mech2SpiceError(f"{path}, line {n}: not a Monte-Carlo results record ({err.path}: {err.message}): "
+                                  "give another --out") from None
     return rec
 
 

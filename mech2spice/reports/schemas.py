@@ -3531,7 +3531,19 @@ def files_read(report: str, stem: str | None = None) -> list[tuple[str, object]]
             for s in stems]
 
 
-def check_file(path, report: str, schema) -> None:
+_WRITERS = {"envelope_spice": "mech2spice report speed_accuracy", "vacask": "python -m mech2spice.studies.vacask"}
+
+
+def writer(file: str) -> str:
+    """The command that writes stored JSON `file` (the one to run again); any other name is cpu_physical's
+    (its --name STEM)."""
+    stem = file.removesuffix(".json")
+    if stem in _WRITERS:
+        return _WRITERS[stem]
+    return f"mech2spice report {stem if stem in _SCHEMAS and not stem.startswith('cpu_physical_') else 'cpu_physical'}"
+
+
+def check_file(path, command: str, schema) -> None:
     """The stored JSON at `path` (if there is one) fits `schema`, or one Mech2SpiceError line names the file
     and the JSON path of the first field that does not."""
     from ..errors import Mech2SpiceError
@@ -3553,15 +3565,16 @@ def check_file(path, report: str, schema) -> None:
         if where:
             raise SchemaError(where, "not a finite number (the study writes a non-finite figure as null)")
     except SchemaError as err:
-        raise Mech2SpiceError(f"{path}: {err.path}: {err.message}; not what `mech2spice report {report}` "
-                              "writes: measure it again (without --render)") from None
+        raise Mech2SpiceError(f"{path}: {err.path}: {err.message}; not what `{command}` writes: measure it "
+                              "again (without --render)") from None
     except RecursionError:
-        raise Mech2SpiceError(f"{path}: nested too deeply to be what `mech2spice report {report}` writes: "
-                              "measure it again (without --render)") from None
+        raise Mech2SpiceError(f"{path}: nested too deeply to be what `{command}` writes: measure it again "
+                              "(without --render)") from None
 
 
 def check_stored(report: str, directory, stem: str | None = None) -> None:
     """Every stored JSON `report --render` reads from `directory` fits its schema (before anything is drawn)."""
     from pathlib import Path
     for name, schema in files_read(report, stem):
-        check_file(Path(directory) / name, report, schema)
+        command = "mech2spice report cpu_physical" if name == f"{stem}.json" else writer(name)
+        check_file(Path(directory) / name, command, schema)

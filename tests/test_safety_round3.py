@@ -181,11 +181,16 @@ def _step(**over) -> dict:
 @pytest.mark.parametrize("steps, needle", [
     ([], "no steps"),
     ([_step(accepted=False)], "no accepted step"),
-    ([{k: v for k, v in _step().items() if k != "tolerance_linear"}], "'tolerance_linear'"),
-    ([_step(nominal_margin="0.07")], "'nominal_margin'"),
-    ([_step(beta_target="big")], "'beta_target'"),
-    ([_step(step=True)], "'step'"),
-], ids=["empty", "none-accepted", "missing-field", "figure-string", "beta-string", "step-bool"])
+    ([{k: v for k, v in _step().items() if k != "tolerance_linear"}], "$.steps[0].tolerance_linear: missing"),
+    ([_step(nominal_margin="0.07")], "$.steps[0].nominal_margin: a string"),
+    ([_step(beta_target="big")], "$.steps[0].beta_target: a string"),
+    ([_step(step=True)], "$.steps[0].step: true/false"),
+    ([_step(), _step(beta_target=math.nan)], "$.steps[1].beta_target: nan"),
+    ([_step(x=[0.1])], "$.steps[0].x: 1 numbers, not the block's"),
+    ([_step(limiting_target={"margin": -math.inf})], "$.steps[0].limiting_target.margin: not a finite number"),
+    ([_step(trust_next=0)], "$.steps[0].trust_next: a whole number, not a number > 0"),
+], ids=["empty", "none-accepted", "missing-field", "figure-string", "beta-string", "step-bool", "beta-nan",
+        "x-short", "infinity-inside", "trust-zero"])
 def test_a_damaged_centering_record_is_one_line(capsys, tmp_path, steps, needle):
     out = tmp_path / "run"
     record = write(out.mkdir() or out / centering.RECORD, json.dumps(_record(steps)))

@@ -40,7 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import Mech2SpiceError
-from ..inputs import head, is_number
+from ..inputs import head
+from ..schema import ANY, BOOL, COUNT, NUMBER, Leaf, Map, Opt, SchemaError, check, non_finite_path
 from ..physics import loaded, spread, steady_batch
 from ..physics.params import GateParams, Levels
 
@@ -588,37 +589,27 @@ def _is_best(path) -> bool:
 BEST_KIND = ("a block `center` wrote", _is_best)
 
 
-def _opt(check):
-    return lambda v: v is None or check(v)
-
-
-# A step of the record as run() reads it back (docs/architecture.md, "Files the tool reads back"): field ->
-# (test, what it must be); FIGURES are what the summary prints and best.json keeps.
-STEP = {"step": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, "a whole number >= 0"),
-        "trust_next": (lambda v: is_number(v) and v > 0, "a number > 0"),
-        "accepted": (lambda v: isinstance(v, bool), "true or false"),
-        "beta_target": (_opt(is_number), "a number or null"),
-        "nominal_margin": (_opt(is_number), "a number or null"),
-        "tolerance_linear": (is_number, "a number")}
-OPTIONAL = {"growth": (_opt(is_number), "a number or null"),
-            "limiting_target": (_opt(lambda v: isinstance(v, dict)), "an object or null")}
+# A record as run() reads it back (docs/architecture.md, "Files the tool reads back"), in mech2spice/schema.py's
+# language; each step's x is also as long as the block's variables.  FIGURES are what the summary prints and
+# best.json keeps.
+POSITIVE = Leaf("a number > 0", lambda v: NUMBER.test(v) and v > 0)
+STEP = {"step": COUNT, "x": [NUMBER], "trust_next": POSITIVE, "accepted": BOOL, "beta_target": Opt(NUMBER),
+        "nominal_margin": Opt(NUMBER), "tolerance_linear": NUMBER, "growth?": Opt(NUMBER),
+        "limiting_target?": Opt(Map(ANY)), "wall_s?": NUMBER}
 FIGURES = ("nominal_margin", "tolerance_linear", "beta_target", "growth", "beta_stability_target")
 
 
-def _step_problem(st, n_vars: int) -> str | None:
-    """What is wrong with one step of a record (None: nothing)."""
-    if not isinstance(st, dict):
-        return "not an object"
-    x = st.get("x")
-    if not (isinstance(x, list) and len(x) == n_vars and all(map(is_number, x))):
-        return f"'x' is not a list of {n_vars} numbers"
-    for key, (ok, what) in STEP.items():
-        if key not in st or not ok(st[key]):
-            return f"'{key}' is not {what}"
-    for key, (ok, what) in OPTIONAL.items():
-        if key in st and not ok(st[key]):
-            return f"'{key}' is not {what}"
-    return None
+def _steps_problem(steps: list, n_vars: int) -> SchemaError | None:
+    """What is wrong with a record's steps, at its JSON path (None: nothing)."""
+    try:
+        check(steps, [STEP], "$.steps")
+    except SchemaError as err:
+        return err
+    for k, st in enumerate(steps):
+        if len(st["x"]) != n_vars:
+            return SchemaError(f"$.steps[{k}].x", f"{len(st['x'])} numbers, not the block's {n_vars} variables")
+    where = non_finite_path(steps, "$.steps")
+    return SchemaError(where, "not a finite number") if where else None
 
 
 def read_record(path, settings: dict, n_vars: int) -> dict:
@@ -638,10 +629,9 @@ def read_record(path, settings: dict, n_vars: int) -> dict:
         return None
     if not rec["steps"]:
         raise Mech2SpiceError(f"centering record {path} has no steps (not even the seed's): delete it to start again")
-    for k, st in enumerate(rec["steps"]):
-        problem = _step_problem(st, n_vars)
-        if problem:
-            raise Mech2SpiceError(f"centering record {path}: step {k}: {problem}")
+    problem = _steps_problem(rec["steps"], n_vars)
+    if problem:
+        raise Mech2SpiceError(f"centering record {path}: {problem.path}: {problem.message}: delete it to start again")
     if _best(rec["steps"]) is None:
         raise Mech2SpiceError(f"centering record {path} has no accepted step with a worst-case distance "
                               "(beta_target): delete it to start again")

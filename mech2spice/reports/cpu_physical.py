@@ -79,10 +79,6 @@ def write(directory="reports", cycles: int = 0, program: str = "programs/sieve.a
     return render_json(out, name)
 
 
-# The stored run's fields the report reads, and their types (_common.stored checks them before any figure;
-# primes: null for a program that is not the sieve).
-
-
 def render_json(out: Path, name: str) -> Path:
     """NAME.md and the figures from NAME.json (a JSON written before the study kept its rows: one error line)."""
     res = stored(out / f"{name}.json", "cpu_physical")

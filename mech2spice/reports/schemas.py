@@ -581,7 +581,7 @@ CPU_PHYSICAL = {
     'wall_s': NUMBER,
     'wall_s_total': NUMBER,
     'cpu_s_total': NUMBER,
-    'results?': {'primes': [COUNT]},
+    'results?': Map([COUNT]),
     'iss_check': {'from_cycle?': COUNT, 'cycles_checked': COUNT, 'mismatches': COUNT, 'first_mismatch?': Opt(ANY)},
     'model': {'oscillators': COUNT, 'linear_springs': COUNT, 'nonlinear_springs': COUNT, 'dashpots': COUNT},
     'periods': COUNT,
@@ -822,7 +822,7 @@ CPU = {
                 'wall_s': NUMBER,
                 'wall_s_total': NUMBER,
                 'cpu_s_total': NUMBER,
-                'results': {'primes': [COUNT]},
+                'results': Map([COUNT]),
             },
             'logic': {
                 'backend': STR,
@@ -841,7 +841,7 @@ CPU = {
                 'wall_s': NUMBER,
                 'wall_s_total': NUMBER,
                 'cpu_s_total': NUMBER,
-                'results': {'primes': [COUNT]},
+                'results': Map([COUNT]),
                 'iss_check': {
                     'from_cycle?': COUNT,
                     'cycles_checked': COUNT,
@@ -3329,7 +3329,7 @@ DESIGN = {
             'trim?': STR,
             'trim_residual?': NUMBER,
             'drift?': NUMBER,
-            'results?': {'primes': [COUNT]},
+            'results?': Map([COUNT]),
             'iss_check?': {
                 'from_cycle?': COUNT,
                 'cycles_checked': COUNT,

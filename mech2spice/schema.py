@@ -105,7 +105,7 @@ def child(path: str, key) -> str:
     """The JSON path of `key` under `path`: $.a.b, $.rows[3], $["odd key"]."""
     if isinstance(key, int):
         return f"{path}[{key}]"
-    if _IDENT.match(key):
+    if _IDENT.match(key) and len(key) <= 40:
         return f"{path}.{key}"
     return f"{path}[{_quoted(key)}]"
 

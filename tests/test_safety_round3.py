@@ -216,7 +216,8 @@ def test_a_renderer_failing_on_the_stored_shape_is_one_line(capsys, tmp_path):
     stored = json.loads((ROOT / "reports/gate.json").read_text())
     first = next(k for k, v in stored.items() if isinstance(v, dict))
     write(tmp_path / "gate.json", json.dumps({**stored, first: "x"}))
-    report_refused(capsys, "report", "gate", "--render", "--out", tmp_path, needle=f"$.{first}: a string, not an object")
+    report_refused(capsys, "report", "gate", "--render", "--out", tmp_path,
+                   needle=f"$.{first}: a string, not an object")
 
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog (iverilog, vvp) not installed")

@@ -65,7 +65,7 @@ def out_dir(directory) -> Path:
 
 def stored(path: Path, report: str) -> dict:
     """The JSON a study wrote at `path`; without it one Mech2SpiceError line says how to measure it.  Its
-    fields are reports/schemas.py's to check (`--render` checks them before any report is drawn)."""
+    fields are mech2spice/reports/schemas.py's to check (`--render` checks them before any report is drawn)."""
     from ..errors import Mech2SpiceError
     data = read_json(path)
     if data is None:

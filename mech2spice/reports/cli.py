@@ -152,7 +152,7 @@ SHAPE_ERRORS = (KeyError, TypeError, IndexError, ValueError, AttributeError, Zer
 @contextlib.contextmanager
 def _stored_shape(name: str, directory: str, render: bool):
     """--render measures nothing: what fails on the stored JSON's shape is the file's fault, one line naming
-    it (reports/schemas.py has checked every file it reads, field by field; this is the net under it)."""
+    it (mech2spice/reports/schemas.py has checked every file it reads, field by field; this is the net under it)."""
     try:
         yield
     except SHAPE_ERRORS as err:

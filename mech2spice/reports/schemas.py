@@ -1,5 +1,5 @@
 """The schema of every report's stored JSON (reports/*.json), checked before `mech2spice report NAME --render`
-draws anything (reports/cli.py): a field of the wrong type, a missing field, a non-finite number, paired
+draws anything (mech2spice/reports/cli.py): a field of the wrong type, a missing field, a non-finite number, paired
 lists of different lengths or an unknown `report_version` is one line naming the file and the JSON path of
 the field, exit 2, nothing written.  The language is mech2spice/schema.py's.
 
@@ -1844,7 +1844,8 @@ CARRIER = {
         },
         'carrier_iss_mismatches?': [ANY],
         'envelope_iss_mismatches?': [ANY],
-    }, same=(('worst_ur', 'worst_probe', 'registers_equal', 'min_margin_carrier', 'min_margin_envelope', 'periods_carrier', 'periods_envelope'),)),
+    }, same=(('worst_ur', 'worst_probe', 'registers_equal', 'min_margin_carrier', 'min_margin_envelope',
+              'periods_carrier', 'periods_envelope'),)),
     'latency?': Obj({
         'latency_trace': STR,
         'carrier_trace': STR,
@@ -3411,7 +3412,8 @@ _SCHEMAS = {"gate": GATE, "adder": ADDER, "sequential": SEQUENTIAL, "spice": SPI
             "cpu": CPU, "envelope": ENVELOPE, "performance": PERFORMANCE, "carrier": CARRIER,
             "speed_accuracy": SPEED_ACCURACY, "envelope_spice": ENVELOPE_SPICE, "vacask": VACASK,
             "robustness": ROBUSTNESS, "domain": DOMAIN, "design": DESIGN}
-READS = {"cpu_physical": ("cpu_physical", "fidelity"), "spice": ("spice", "speed_accuracy"), "fidelity": ("fidelity", "carrier"),
+READS = {"cpu_physical": ("cpu_physical", "fidelity"), "spice": ("spice", "speed_accuracy"),
+         "fidelity": ("fidelity", "carrier"),
          "cpu": ("cpu", "cpu_physical", "cpu_physical_tm_increment"),
          "performance": ("performance", "cpu_physical", "carrier"),
          "speed_accuracy": ("speed_accuracy", "envelope_spice", "vacask", "carrier")}

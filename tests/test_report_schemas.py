@@ -264,3 +264,21 @@ def test_the_any_fields_refuse_non_finite_numbers_too(capsys, tmp_path):
     data, _ = _load("cpu_physical")
     data["first_mismatch"] = [1, math.inf]
     _refused_naming(capsys, tmp_path, "cpu_physical", "cpu_physical.json", data, "$.first_mismatch[1]")
+
+
+def test_a_pipe_or_a_folder_in_place_of_the_json_is_refused_not_read(capsys, tmp_path):
+    """A FIFO named gate.json would block the read for ever: refused before it is opened."""
+    import os
+    out = tmp_path / "r"
+    out.mkdir()
+    os.mkfifo(out / "gate.json")
+    rc, _, err = run(capsys, "report", "gate", "--render", "--out", out)
+    assert rc == 2 and err.count("\n") == 1 and "is not a regular file" in err, err
+
+
+def test_a_stored_json_larger_than_any_report_is_refused_unread(capsys, tmp_path, monkeypatch):
+    from mech2spice.reports import schemas
+    monkeypatch.setattr(schemas, "MAX_BYTES", 1000)
+    out = _copy("spice", tmp_path / "r")
+    rc, _, err = run(capsys, "report", "spice", "--render", "--out", out)
+    assert rc == 2 and err.count("\n") == 1 and "more than any `mech2spice report spice` writes" in err, err

@@ -14,6 +14,8 @@ writing it; a change of meaning bumps REPORT_VERSION, which the file then carrie
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 from ..schema import ANY, BOOL, COUNT, INT, NUMBER, STR, Either, Map, Obj, Opt  # noqa: F401
 
 # The version of the stored JSON's layout this renderer reads; a file without the field is version 1.
@@ -3444,6 +3446,7 @@ def check_file(path, command: str, schema) -> None:
     from ..errors import Mech2SpiceError
     from ..schema import SchemaError, check, kind_of, non_finite_path
     from ..studies import read_json
+    _check_readable(Path(path), command)
     data = read_json(path)
     if data is None:
         return
@@ -3467,9 +3470,22 @@ def check_file(path, command: str, schema) -> None:
                               "(without --render)") from None
 
 
+MAX_BYTES = 256 << 20          # the largest committed report JSON is 1.4 MB; past this it is not one
+
+
+def _check_readable(path: Path, command: str) -> None:
+    """A stored JSON is a regular file of a report's size: a pipe would block the read, a device never end."""
+    from ..errors import Mech2SpiceError
+    if path.exists() and not path.is_file():
+        raise Mech2SpiceError(f"{path} is not a regular file (a pipe, a device or a folder): not what `{command}` "
+                              "writes")
+    if path.is_file() and path.stat().st_size > MAX_BYTES:
+        raise Mech2SpiceError(f"{path} holds {path.stat().st_size:,} bytes, more than any `{command}` writes "
+                              f"({MAX_BYTES >> 20} MiB): measure it again (without --render)")
+
+
 def check_stored(report: str, directory, stem: str | None = None) -> None:
     """Every stored JSON `report --render` reads from `directory` fits its schema (before anything is drawn)."""
-    from pathlib import Path
     for name, schema in files_read(report, stem):
         command = "mech2spice report cpu_physical" if name == f"{stem}.json" else writer(name)
         check_file(Path(directory) / name, command, schema)

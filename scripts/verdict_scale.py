@@ -15,7 +15,7 @@ fixed point, as before the second session of #38 and as now, timed in the same m
 backend equals Icarus Verilog on the same vectors (`logic_equals_icarus`).
 
 Usage:  OMP_NUM_THREADS=1 nice -n 5 python scripts/verdict_scale.py [--only adder,c432] [--limit 600] [--no-rk4]
-                                                                      [--out reports/verdict_scale]
+                                                  [--processor CYCLES] [--out reports/verdict_scale]
 Writes <out>.json and <out>.png (verdict and run seconds against the linearisation's unknowns) and prints the
 table of docs/stability.md (--render: the table of an existing <out>.json, nothing measured).
 """
@@ -199,6 +199,30 @@ def measure(name: str, path: Path, top: str | None, seed: int, limit: int, rk4: 
     return row
 
 
+def measure_processor(cycles: int) -> dict:
+    """The processor (programs/sieve.asm on the envelope): `cycles` cycles without and with a verdict after
+    every cycle (`--stability cycle`), one after the other; CPU seconds are the comparable numbers on a shared
+    machine.  run_s: the plain run's CPU-s; verdict_s: the judged run's CPU-s less the plain run's."""
+    from mech2spice.cpu.run import run_program
+    sieve = REPO / "programs/sieve.asm"
+    plain = run_program(sieve, "envelope", max_cycles=cycles)
+    judged = run_program(sieve, "envelope", max_cycles=cycles, stability="cycle")
+    verdicts = judged.get("stability_cycles", [])
+    run_s, with_s = plain["cpu_s_total"], judged["cpu_s_total"]
+    fast = {"backend": "envelope", "timed_out": False, "wall_s": judged["wall_s_total"], "run_s": run_s,
+            "verdict_s": with_s - run_s, "periods": judged["periods"], "batch": 1, "valid": True,
+            "stable": bool(judged.get("stable")), "settled": True,
+            "equal_to_logic": plain["iss_check"]["mismatches"] == 0 and judged["iss_check"]["mismatches"] == 0,
+            "growth_rate_max": max(v["growth_rate"] for v in verdicts) if verdicts else None,
+            "cpu_seconds": True, "cycles": cycles, "verdict_wall_s": [v["wall_s"] for v in verdicts]}
+    oscillators = judged["model"]["oscillators"]
+    row = {"design": f"processor ({cycles} cycles, CPU-s)", "source": "programs/sieve.asm", "top": None,
+           "oscillators": oscillators, "unknowns": 2 * oscillators, "vector": "the sieve",
+           "logic_equals_icarus": None, "fast": fast}
+    print(f"processor: {json.dumps(fast)}", flush=True)
+    return row
+
+
 def plot(rows: list[dict], path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -257,6 +281,10 @@ def main() -> None:
     ap.add_argument("--no-rk4", action="store_true", help="skip the adder's RK4 run")
     ap.add_argument("--out", default=str(REPO / "reports/verdict_scale"))
     ap.add_argument("--render", action="store_true", help="print the table of <out>.json, measure nothing")
+    ap.add_argument("--keep", action="store_true",
+                    help="keep the rows of <out>.json this run does not measure (each row says when it was measured)")
+    ap.add_argument("--processor", type=int, default=0, metavar="CYCLES",
+                    help="also the sieve on the processor for CYCLES cycles, with and without a verdict per cycle")
     args = ap.parse_args()
     if args.render:
         print(table(json.loads(Path(args.out + ".json").read_text())["designs"]))
@@ -273,10 +301,21 @@ def main() -> None:
         if (only and name not in only) or not path.is_file():
             continue
         rows.append(measure(name, path, top, args.seed, args.limit, not args.no_rk4))
-    out = {"conditions": {"machine": platform.node(), "python": platform.python_version(),
-                          "load_before": os.getloadavg(), "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
-                          "cayley_ncv": stability.CAYLEY_NCV, "dense_limit": stability.DENSE_LIMIT,
-                          "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}, "designs": rows}
+    if args.processor:
+        rows.append(measure_processor(args.processor))
+    conditions = {"machine": platform.node(), "python": platform.python_version(),
+                  "load_before": os.getloadavg(), "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
+                  "cayley_ncv": stability.CAYLEY_NCV, "dense_limit": stability.DENSE_LIMIT,
+                  "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    for r in rows:
+        r["measured"] = {"date": conditions["date"], "load_before": conditions["load_before"]}
+    if args.keep and Path(args.out + ".json").is_file():
+        old = json.loads(Path(args.out + ".json").read_text())
+        done = {r["design"] for r in rows}
+        kept = [{"measured": {k: old["conditions"][k] for k in ("date", "load_before")}, **r}
+                for r in old["designs"] if r["design"] not in done]
+        rows = sorted(kept + rows, key=lambda r: r["unknowns"])
+    out = {"conditions": conditions, "designs": rows}
     Path(args.out + ".json").write_text(json.dumps(out, indent=1) + "\n")
     plot(rows, Path(args.out + ".png"))
     print(table(rows))

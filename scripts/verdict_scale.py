@@ -252,8 +252,8 @@ def plot(rows: list[dict], path: Path) -> None:
 
 def table(rows: list[dict]) -> str:
     """The markdown table of docs/stability.md."""
-    lines = ["| design | oscillators | unknowns | periods | run s | verdict s | verdict / run | valid, stable, = logic, "
-             "logic = Icarus |", "|---|---|---|---|---|---|---|---|"]
+    lines = ["| design | oscillators | unknowns | periods | run s | verdict s | verdict / run | "
+             "valid, stable, = logic, logic = Icarus |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         for path in ("fast", "reference", "rk4"):
             m = r.get(path)

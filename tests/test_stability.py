@@ -75,6 +75,27 @@ def test_cayley_search_finds_the_rightmost_eigenvalues(q_i):
 
 
 @pytest.mark.parametrize("q_i", [params.DEFAULT.q_i, 1.5, SELF_OSCILLATING_QI])
+@pytest.mark.parametrize("residual_max", [stability.RESIDUAL_MAX, 0.0])
+def test_loose_cayley_search_keeps_the_leading_eigenvalue(q_i, residual_max, monkeypatch):
+    """The fast path's sparse search (ARPACK at tolerance 1e-4, its leading pair's pencil residual checked):
+    the dense spectrum's rightmost eigenvalue to 1e-8 per period and its period to 1e-6, for a stable block,
+    the old insulator Q and a self-oscillating one; also where the check refuses the loose result
+    (RESIDUAL_MAX 0: the search goes on at 1e-6)."""
+    monkeypatch.setattr(stability, "RESIDUAL_MAX", residual_max)
+    env, A, s = _settled_adder(replace(params.DEFAULT, q_i=q_i))
+    E, J = stability.linearise(env, A, s)
+    T = env.model.period
+    dense = sla.eigvals(J.toarray(), E.toarray())
+    dense = dense[np.isfinite(dense)]
+    want = dense[np.argmax(dense.real)]
+    lam, vec = stability._cayley_checked(E, J, 2 * np.pi / (50 * T), 6, None, T)
+    lead = int(np.argmax(lam.real))
+    assert lam[lead].real * T == pytest.approx(want.real * T, abs=1e-8)
+    assert abs(lam[lead].imag) == pytest.approx(abs(want.imag), rel=1e-6)
+    assert stability._residuals(E, J, lam[[lead]], vec[:, [lead]])[0] * T < 1e-9
+
+
+@pytest.mark.parametrize("q_i", [params.DEFAULT.q_i, 1.5, SELF_OSCILLATING_QI])
 def test_fast_dense_modes_equal_the_reference(q_i):
     """The fast dense path (eigenvalues of E^-1 J alone, vectors by inverse iteration) gives the reference
     path's (generalised QZ with every vector) leading modes: growth to 1e-9 per period, period to 1e-6
@@ -111,6 +132,24 @@ def test_a_fixed_point_seen_before_reuses_its_spectrum():
     assert one is two and len(env.model.derived["stability_spectra"]) == 1
     other = stability._cached_modes(env, Af * 1.01, sf, True, None, "fast")
     assert other is not one and len(env.model.derived["stability_spectra"]) == 2
+
+
+def test_no_fixed_point_no_spectrum(adder_env, monkeypatch):
+    """Where Newton finds no fixed point near the state (here: one Newton step allowed from a random state),
+    the fast verdict is "not stable" without an eigenvalue search (nothing reads a spectrum there: issue #38's
+    c432 vector paid 0.21 s for one) and hands the warm start through; the reference path still searches."""
+    monkeypatch.setattr(stability, "NEWTON_MAX", 1)
+    A, s, _ = _random_state(adder_env)
+    F = adder_env.forcing(np.full((len(adder_env.model.drives), 1), params.DEFAULT.f_r))[:, 0]
+    searched = []
+    real = stability.leading_modes
+    monkeypatch.setattr(stability, "leading_modes", lambda *a, **k: searched.append(1) or real(*a, **k))
+    start = np.ones(4)
+    v = stability.verdict(adder_env.model, A, s, F, start=start)
+    assert not v.converged and not v.stable and not searched and v.start is start
+    assert v.to_json()["growth_rate"] is None and v.slowest_decay == float("inf")
+    ref = stability.verdict(adder_env.model, A, s, F, method="reference")
+    assert not ref.converged and not ref.stable and searched
 
 
 def test_operating_point_is_a_fixed_point():
@@ -403,6 +442,31 @@ def test_c432_vector_is_valid_at_the_defaults(capsys):
     assert res["stability"]["fixed_point_found"] and res["stability"]["growth_rate"] < 0
     rc, logic, _ = _simulate(capsys, "simulate", design, "--top", "Circuit432", *sets, "--backend", "logic")
     assert res["outputs"] == logic["outputs"]
+
+
+@pytest.mark.skipif(not (BENCHMARKS / "iscas85/c432_hansen.v").is_file(),
+                    reason="MECH2SPICE_BENCHMARKS/iscas85/c432_hansen.v (Hansen's c432 model) not present")
+def test_c432_fast_verdict_equals_the_reference():
+    """Beyond the dense limit (c432: 2088 unknowns) the fast path (loose ARPACK, its leading residual checked)
+    gives, at the fixed point of issue #38's c432 vector, the leading growth of a search converged to 1e-10
+    within 1e-8 per period, and the reference's verdict (ARPACK at 1e-6, subspace 40: itself 2.4e-8 off here)
+    within 1e-7, with the same period and DOFs."""
+    from mech2spice.backends import make_engine
+    nl = synthesize(str(BENCHMARKS / "iscas85/c432_hansen.v"), top="Circuit432")
+    m = network.build(nl, params.DEFAULT)
+    stim = network.stimulus(m, nl, params.DEFAULT, [(0, [C432_VECTOR])])
+    run = make_engine("envelope").run(m, 6000, stim)
+    env = Envelope.of(m)
+    A, s, ok = stability.operating_point(env, run.state[0][:, 0], run.state[1][:, 0], env.forcing(stim.at(0))[:, 0])
+    assert ok and 2 * env.fast.size + 2 * env.slow.size > stability.DENSE_LIMIT
+    fast, _ = stability.leading_modes(env, A, s, method="fast")
+    ref, _ = stability.leading_modes(env, A, s, method="reference")
+    E, J = stability.linearise(env, A, s)
+    T = m.period
+    tight, _ = stability._cayley(E, J, 2 * np.pi / (50 * T), 6, ncv=120, tol=1e-10)
+    assert fast[0].growth == pytest.approx(tight.real.max() * T, abs=1e-8) and fast[0].growth < 0
+    assert fast[0].growth == pytest.approx(ref[0].growth, abs=1e-7)
+    assert fast[0].period == pytest.approx(ref[0].period, rel=1e-6) and fast[0].dofs[:3] == ref[0].dofs[:3]
 
 
 def test_a_clocked_read_unsettled_is_held_until_settled():

@@ -16,7 +16,8 @@ file is ever rewritten.  In such a file, and only there:
   register from the co-simulation.
 
 Every line keeps its number, so Yosys's and Icarus's messages point into the file as written.  Synthesis,
-the proof and Icarus all read the text `standard_text` returns (`standard_source` gives it a path).
+the proof and Icarus all read the text `standard_text` returns (`standard_source` gives it a path), which
+also guards memory writes by their address range in every file (memory_guard.py).
 
 ``$ND(a, b, ...)``, VIS's nondeterministic choice (each evaluation may yield any of the listed values), is
 refused in any file: a NOR network computes one function of its inputs and has no source of choice; the
@@ -32,6 +33,7 @@ from pathlib import Path
 from typing import Iterator
 
 from ..errors import Mech2SpiceError
+from . import memory_guard
 
 __all__ = ["standard_text", "standard_source", "is_vis"]
 
@@ -75,8 +77,14 @@ def _width(values: str) -> int | None:
 
 
 def standard_text(path, text: str) -> str:
-    """`text` as standard SystemVerilog: unchanged unless it is in the VIS dialect (module docstring), line
-    numbers kept either way; refuses `$ND` naming the file and line."""
+    """The text every tool reads (synthesis, the proof, Icarus), line numbers kept: the VIS dialect as
+    SystemVerilog (module docstring), then memory writes guarded by their address range
+    (memory_guard.py: a no-op under Verilog's rules that Yosys needs); refuses `$ND` naming the file and line."""
+    return memory_guard.guarded(_vis_as_standard(path, text))
+
+
+def _vis_as_standard(path, text: str) -> str:
+    """`text` unchanged unless it is in the VIS dialect; `$ND` refused."""
     blanked = _blanked(text)
     nd = _ND.search(blanked)
     if nd:

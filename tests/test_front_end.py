@@ -225,3 +225,16 @@ def test_rtllm_ram_agrees_with_icarus(tmp_path):
     nl = synthesize(path)
     co = verify.cosim(path, nl, "logic", 1000, False, seed=0, resets=[{"port": "rst_n", "level": 0}])
     assert co["agree"], co["mismatches"][:3]
+
+
+@needs_icarus
+def test_a_rewritten_file_still_finds_its_includes(tmp_path):
+    (tmp_path / "width.vh").write_text("`define W 4\n")
+    text = PLAIN.replace("module mem(", "`include \"width.vh\"\nmodule mem(").replace("[3:0] d", "[`W-1:0] d")
+    path = _file(tmp_path, text, "mem.v")
+    nl = synthesize(path)
+    assert nl.inputs["d"] == 4
+    with dialect.standard_source(path) as src:
+        assert src != path
+        co = verify.cosim(src, nl, "logic", 200, False, seed=2, resets=[])
+    assert co["agree"], co["mismatches"][:3]

@@ -35,7 +35,7 @@ from typing import Iterator
 from ..errors import Mech2SpiceError
 from . import memory_guard
 
-__all__ = ["standard_text", "standard_source", "is_vis"]
+__all__ = ["standard_text", "standard_source", "is_vis", "mirror_siblings"]
 
 _COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
 _ENUM = re.compile(r"\btypedef\s+enum\s*(?P<base>[^{;]*?)\s*\{(?P<values>[^{}]*)\}\s*(?P<name>[A-Za-z_]\w*)\s*;")
@@ -110,6 +110,16 @@ def _vis_as_standard(path, text: str) -> str:
     return text
 
 
+def mirror_siblings(path: Path, folder: Path, text: str) -> None:
+    """Links in `folder` to the other files beside `path`, when `text` includes files: an `include resolves
+    beside the rewritten copy as it did beside the original (Yosys and Icarus look in the file's folder)."""
+    if "`include" not in text:
+        return
+    for entry in Path(path).resolve().parent.iterdir():
+        if entry.name != Path(path).name:
+            (folder / entry.name).symlink_to(entry)
+
+
 @contextlib.contextmanager
 def standard_source(path) -> Iterator[Path]:
     """A path holding the source as the tools must read it: `path` itself for standard Verilog; for the VIS
@@ -125,6 +135,7 @@ def standard_source(path) -> Iterator[Path]:
         yield path
         return
     with tempfile.TemporaryDirectory(prefix="mech2spice_dialect_") as tmp:
+        mirror_siblings(path, Path(tmp), standard)
         out = Path(tmp) / path.name
         out.write_text(standard, encoding="utf-8")
         yield out

@@ -239,9 +239,12 @@ def _non_constant_init(msg: str, path: Path) -> str | None:
             "the state the network is prepared in before any input is applied, so it must be a constant")
 
 
-def _flow(source: str, top: str | None) -> str:
-    """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python)."""
+def _flow(source: str, top: str | None, include: str | None = None) -> str:
+    """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python).
+    `include`: a folder to search for `include files (the original's, when Yosys reads a rewritten copy)."""
     read = "read_verilog -sv" if source.endswith(".sv") else "read_verilog"
+    if include is not None and re.fullmatch(r"[\w./+-]+", include):     # Yosys takes -I's folder unquoted
+        read += f" -I {include}"
     return "\n".join([                             # ast.txt, *.il: for refusals.py
         f'tee -o ast.txt {read} -dump_ast1 {identifiers.yosys_path(source)}',   # not -q: its errors must reach the log
         "write_rtlil read.il",                      # before hierarchy drops the modules the top leaves unused
@@ -339,11 +342,13 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict]:
     with tempfile.TemporaryDirectory(prefix="mech2spice_yosys_") as tmp:
         # A relative path works for both yowasp (which maps /tmp elsewhere) and `include`s.
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
+        include = None
         if source != _read_source(path):
             rel = f"src/{path.name}"
             (Path(tmp) / "src").mkdir()
             (Path(tmp) / rel).write_text(source, encoding="utf-8")
-        result = yosys.run_script(_flow(rel, top), tmp)
+            include = Path(os.path.relpath(path.resolve().parent, Path(tmp).resolve())).as_posix()
+        result = yosys.run_script(_flow(rel, top, include), tmp)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))
             if (init := _non_constant_init(msg, path)) is not None:

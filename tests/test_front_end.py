@@ -201,6 +201,9 @@ def test_memory_writes_are_guarded_on_their_own_line_and_initial_writes_are_not(
     assert "begin if ((i) >= 0 && (i) <= 11) m[i] <= 0; end" in guarded(MEM2REG)
     no_memory = "module t(input a, output y); reg [3:0] r; assign y = a; endmodule\n"
     assert guarded(no_memory) == no_memory
+    vector = ("module t(input clk, input [1:0] i, input b, output reg [7:0] v);\n  reg [3:0] x = v[3:0], m [0:1];\n"
+              "  always @(posedge clk) begin v[i] <= b; m[i] <= v[3:0]; end\nendmodule\n")
+    assert guarded(vector).count("begin if (") == 1 and "if ((i) >= 0 && (i) <= 1) m[i]" in guarded(vector)
 
 
 @needs_icarus

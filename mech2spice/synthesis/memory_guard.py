@@ -38,7 +38,8 @@ def _memories(blanked: str) -> dict[str, tuple[str, str]]:
     """Memory name -> (first bound, second bound), as written, for one-dimensional memories."""
     found = {}
     for decl in _DECL.finditer(blanked):
-        for m in _MEMORY.finditer(decl["names"]):
+        names = re.sub(r"=[^,]*", "", decl["names"])      # `reg [7:0] a = b[3:0], m [0:3];`: b is no memory
+        for m in _MEMORY.finditer(names):
             found[m["name"]] = (m["a"].strip(), m["b"].strip())
     return found
 

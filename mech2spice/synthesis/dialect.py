@@ -1,0 +1,141 @@
+"""The VIS Verilog dialect, read as standard SystemVerilog (docs/rtl.md, "The VIS dialect").
+
+VIS (the Verification Interacting with Synthesis system, whose `vl2mv` front end reads its own Verilog) lets an
+enumerated type declare a register: ``typedef enum {A, B, C} State;`` then ``State reg stato;``.  Neither
+IEEE 1364 nor IEEE 1800 has that form (a SystemVerilog variable of an enum type is ``State stato;``), so Yosys
+and Icarus stop at it with a syntax error.  F. Somenzi's translations of the ITC'99 benchmarks use it.
+
+The rule (no option to give): a file is read in the VIS dialect when a declaration names one of its own
+``typedef enum`` types followed by ``reg``.  That form is a syntax error in standard Verilog, so no standard
+file is ever rewritten.  In such a file, and only there:
+
+* ``State reg stato;`` becomes ``State     stato;`` (``reg`` blanked, columns kept);
+* an enum so used that has no base type, ``typedef enum {A, B, C}``, gets ``logic [W-1:0]`` with W the bits
+  for its values: VIS encodes an enumerated variable in that many bits, and it is x until given a value.
+  SystemVerilog's own default, ``int``, is 2-state and starts at 0, which would hide an uninitialised state
+  register from the co-simulation.
+
+Every line keeps its number, so Yosys's and Icarus's messages point into the file as written.  Synthesis,
+the proof and Icarus all read the text `standard_text` returns (`standard_source` gives it a path), which
+also guards memory writes by their address range in every file (memory_guard.py).
+
+``$ND(a, b, ...)``, VIS's nondeterministic choice (each evaluation may yield any of the listed values), is
+refused in any file: a NOR network computes one function of its inputs and has no source of choice; the
+environment's choice is an input port.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+from ..errors import Mech2SpiceError
+from . import memory_guard
+
+__all__ = ["standard_text", "standard_source", "is_vis", "mirror_siblings"]
+
+_COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
+_ENUM = re.compile(r"\btypedef\s+enum\s*(?P<base>[^{;]*?)\s*\{(?P<values>[^{}]*)\}\s*(?P<name>[A-Za-z_]\w*)\s*;")
+_ND = re.compile(r"\$ND\s*\(")
+
+
+def _blanked(text: str) -> str:
+    """The text with comments and strings blanked (every character but newlines), offsets kept."""
+    return _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
+
+
+def _line(text: str, at: int) -> int:
+    return text.count("\n", 0, at) + 1
+
+
+def _enum_register(names) -> re.Pattern:
+    """`<enum type> reg`: the VIS declaration (the type at a statement's start: after `;`, a block or BOL)."""
+    alts = "|".join(re.escape(n) for n in sorted(names, key=len, reverse=True))
+    return re.compile(rf"(?:(?<=[;\n])|^)(?P<lead>\s*)(?P<type>{alts})(?P<gap>\s+)(?P<reg>reg)\b", re.M)
+
+
+def _enums(blanked: str) -> dict[str, re.Match]:
+    return {m["name"]: m for m in _ENUM.finditer(blanked)}
+
+
+def is_vis(text: str) -> bool:
+    """Whether the text uses the VIS enum-register declaration (the dialect's detection rule)."""
+    blanked = _blanked(text)
+    enums = _enums(blanked)
+    return bool(enums) and _enum_register(enums).search(blanked) is not None
+
+
+def _width(values: str) -> int | None:
+    """Bits for an enum's plain value list (None when it gives values or ranges: left as written)."""
+    items = [v.strip() for v in values.split(",") if v.strip()]
+    if not items or not all(re.fullmatch(r"[A-Za-z_]\w*", v) for v in items):
+        return None
+    return max(1, (len(items) - 1).bit_length())
+
+
+def standard_text(path, text: str) -> str:
+    """The text every tool reads (synthesis, the proof, Icarus), line numbers kept: the VIS dialect as
+    SystemVerilog (module docstring), then memory writes guarded by their address range
+    (memory_guard.py: a no-op under Verilog's rules that Yosys needs); refuses `$ND` naming the file and line."""
+    return memory_guard.guarded(_vis_as_standard(path, text))
+
+
+def _vis_as_standard(path, text: str) -> str:
+    """`text` unchanged unless it is in the VIS dialect; `$ND` refused."""
+    blanked = _blanked(text)
+    nd = _ND.search(blanked)
+    if nd:
+        raise Mech2SpiceError(
+            f"{path}, line {_line(blanked, nd.start())}: $ND (VIS's nondeterministic choice): each evaluation may "
+            "take any of the listed values, and a NOR network computes one function of its inputs, with no "
+            "source of choice; make the choice an input port of the design (the environment then picks it)")
+    enums = _enums(blanked)
+    if not enums:
+        return text
+    declared = list(_enum_register(enums).finditer(blanked))
+    if not declared:
+        return text
+    edits = [(m.start("reg"), m.end("reg"), "   ") for m in declared]
+    for name in {m["type"] for m in declared}:
+        e = enums[name]
+        width = _width(e["values"])
+        if not e["base"] and width is not None:
+            brace = blanked.index("{", e.start())
+            edits.append((brace, brace, f"logic [{width - 1}:0] "))
+    for start, end, new in sorted(edits, reverse=True):
+        text = text[:start] + new + text[end:]
+    return text
+
+
+def mirror_siblings(path: Path, folder: Path, text: str) -> None:
+    """Links in `folder` to the other files beside `path`, when `text` includes files: an `include resolves
+    beside the rewritten copy as it did beside the original (Yosys and Icarus look in the file's folder)."""
+    if "`include" not in text:
+        return
+    for entry in Path(path).resolve().parent.iterdir():
+        if entry.name != Path(path).name:
+            (folder / entry.name).symlink_to(entry)
+
+
+@contextlib.contextmanager
+def standard_source(path) -> Iterator[Path]:
+    """A path holding the source as the tools must read it: `path` itself for standard Verilog; for the VIS
+    dialect, the rewritten text in a scratch folder under the same file name (removed afterwards).  Messages
+    from a tool that read it name the scratch path: replace ``str(that path)`` with ``str(path)``."""
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("utf-8", errors="replace")
+    except OSError as err:
+        raise Mech2SpiceError(f"cannot read Verilog file {path}: {err.strerror or err}") from None
+    standard = standard_text(path, text)
+    if standard == text:
+        yield path
+        return
+    with tempfile.TemporaryDirectory(prefix="mech2spice_dialect_") as tmp:
+        mirror_siblings(path, Path(tmp), standard)
+        out = Path(tmp) / path.name
+        out.write_text(standard, encoding="utf-8")
+        yield out

@@ -2,11 +2,12 @@
 
 Two independent checks of one synthesised design:
 
-* equivalence -- the NOR netlist is written back as structural Verilog and proved equal to the source by
+* equivalence -- the NOR netlist is written back as structural Verilog and proved equal to the source:
+  first by Berkeley ABC when it is installed (the miter as AIGER: pdr, or iprove without latches), then by
   Yosys (a miter, SAT with x modelled, memories mapped: an induction step, and a bounded check from the
   all-zero state with the design's resets asserted in the first cycle), within a time budget; a
   counterexample is replayed on Icarus and the logic backend before it is reported.  See docs/verify.md
-  for what is and is not proved.
+  for what each engine proves.
 * co-simulation -- the source runs on Icarus Verilog (an independent simulator), the network on a
   backend, on the same vectors (clocked: a reset cycle, then random inputs per cycle); every
   differing output bit is listed.

@@ -511,8 +511,10 @@ def _aiger_script(path: Path, rel: str, netlist: Netlist) -> str:
     a power-up value starts at 0 (the sat runs' all-zero start; with power-up values, where sat starts such a
     source register at x, 0 is one of its refinements).  Asynchronous flip-flops in the cycle view
     (async2sync), as for sat."""
+    # Tri-state buses as synthesis resolves them (a write_aiger wire has one driver; conflict checks dropped,
+    # as synthesis drops them), before setundef makes "no driver enabled" a free value.
     lines = _read_source(path, rel, netlist.top) + [
-        "setundef -undriven -anyseq", "read_verilog wrap.v", "read_verilog gate.v", "read_verilog top.v",
+        "tribuf -formal", "delete n:$tribuf_conflict*", "setundef -undriven -anyseq", "read_verilog wrap.v", "read_verilog gate.v", "read_verilog top.v",
         "proc", "opt_clean", f"miter -equiv -flatten {PREFIX}gold {PREFIX}gate {PREFIX}miter",
         f"hierarchy -top {PREFIX}top", "flatten", "async2sync", "dffunmap", "techmap", "setundef -zero -init",
         "aigmap", "opt_clean", "write_aiger -zinit -map m.map m.aig"]

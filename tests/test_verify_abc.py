@@ -121,3 +121,14 @@ def test_abc_reads_an_internal_tri_state_bus_as_synthesis_does(tmp_path):
                    "  always @(posedge clk) y <= bus;\nendmodule\n")
     eq = V.equivalence(src, synthesize(src), 60, engine="abc")
     assert eq["status"] == "proved" and eq["equivalence_engine"] == "abc"
+
+
+@needs_abc
+def test_proof_engine_flag_and_json_fields(capsys):
+    from mech2spice import cli
+    import json
+    for engine in ("abc", "sat"):
+        code = cli.main(["verify", str(VERILOG / "counter4.v"), "--json", "--cycles", "50", "--proof-engine", engine])
+        eq = json.loads(capsys.readouterr().out)["equivalence"]
+        assert code == 0 and eq["status"] == "proved" and eq["equivalence_engine"] == engine
+        assert eq["engine_note"] is None and ("pdr" in eq["method"]) == (engine == "abc")

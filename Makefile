@@ -3,8 +3,8 @@ PY ?= python3
 
 .PHONY: setup demo test test-all reports subckts
 
-setup:  ## install ngspice and Icarus Verilog (Debian) and the package with its Python dependencies
-	@dpkg -s ngspice libngspice0 iverilog >/dev/null 2>&1 || sh scripts/apt_install.sh ngspice libngspice0 iverilog
+setup:  ## install ngspice, Icarus Verilog and Berkeley ABC (Debian) and the package with its Python dependencies
+	@dpkg -s ngspice libngspice0 iverilog berkeley-abc >/dev/null 2>&1 || sh scripts/apt_install.sh ngspice libngspice0 iverilog berkeley-abc
 	@echo "make setup: pip install -e '.[test,vacask,mc]' (quiet: prints nothing until it ends)"
 	$(PY) -m pip install -q --root-user-action=ignore -e '.[test,vacask,mc]'
 

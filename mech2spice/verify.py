@@ -2,11 +2,12 @@
 
 Two independent checks of one synthesised design:
 
-* equivalence -- the NOR netlist is written back as structural Verilog and proved equal to the source by
+* equivalence -- the NOR netlist is written back as structural Verilog and proved equal to the source:
+  first by Berkeley ABC when it is installed (the miter as AIGER: pdr, or iprove without latches), then by
   Yosys (a miter, SAT with x modelled, memories mapped: an induction step, and a bounded check from the
   all-zero state with the design's resets asserted in the first cycle), within a time budget; a
   counterexample is replayed on Icarus and the logic backend before it is reported.  See docs/verify.md
-  for what is and is not proved.
+  for what each engine proves.
 * co-simulation -- the source runs on Icarus Verilog (an independent simulator), the network on a
   backend, on the same vectors (clocked: a reset cycle, then random inputs per cycle); every
   differing output bit is listed.
@@ -231,30 +232,74 @@ def _initial_state(netlist: Netlist) -> str:
     return "-set-init-undef" if any(g.nodes[q].get("inverted") for q in netlist.latches()) else "-set-init-zero"
 
 
-def equivalence(path, netlist: Netlist, budget_s: float = PROOF_BUDGET_S, resets: list[dict] = ()) -> dict:
+def equivalence(path, netlist: Netlist, budget_s: float = PROOF_BUDGET_S, resets: list[dict] = (),
+                engine: str = "auto") -> dict:
     """Prove the network equal to the source within `budget_s` seconds: {status: proved | counterexample |
     unknown, method, counterexample (input ports per cycle) or None, detail, depth (cycles from the start
-    the base case covered), budget_s, wall_s}."""
+    the base case covered; None for ABC's unbounded proof), budget_s, wall_s, equivalence_engine (abc |
+    sat: the one that decided, or ran last), engine_note (why ABC did not decide, or None)}.  `engine`:
+    auto (ABC first with ABC_SHARE of the budget when it is installed and applies, then sat), abc, sat."""
+    t0 = time.time()
+    note = None
+    if engine in ("auto", "abc") and abc_tool() is None:
+        note = "berkeley-abc not found: proved with Yosys sat alone"
+    elif engine in ("auto", "abc"):
+        res = _abc_prove(Path(path), netlist, budget_s * (1 if engine == "abc" else ABC_SHARE), resets)
+        if res["applies"] and res["cex"]:
+            res = _replayed(path, netlist, res, resets)
+        if res["applies"] and (res["status"] != "unknown" or engine == "abc"):
+            return _result(res, _abc_method(netlist, resets, budget_s), budget_s, t0, "abc", None)
+        note = res["detail"] if not res.get("replay") else (
+            "ABC: a counterexample the replay did not confirm (a value ABC chose for an x of the source, or the "
+            "start, made the difference): sat decided")
+    out = _sat_equivalence(path, netlist, budget_s - (time.time() - t0), resets, budget_s)
+    return {**out, "budget_s": budget_s, "wall_s": time.time() - t0, "equivalence_engine": "sat",
+            "engine_note": note}
+
+
+def _result(res: dict, method: str, budget_s: float, t0: float, engine: str, note) -> dict:
+    out = {"status": res["status"], "method": method, "counterexample": res["cex"], "detail": res["detail"],
+           "depth": res["depth"], "budget_s": budget_s, "wall_s": time.time() - t0,
+           "equivalence_engine": engine, "engine_note": note}
+    if "replay" in res:
+        out["replay"] = res["replay"]
+    return out
+
+
+def _start_text(netlist: Netlist, resets) -> str:
+    reset = ", ".join(f"{r['port']}={r['level']}" for r in resets)
+    state = "the all-zero state" if _initial_state(netlist) == "-set-init-zero" else "the power-up state"
+    return f"{state}, reset {reset} in cycle 0" if resets else state
+
+
+def _abc_method(netlist: Netlist, resets, budget_s: float) -> str:
+    if netlist.latches():
+        return (f"yosys miter as AIGER + ABC scorr, pdr (IC3: every cycle from {_start_text(netlist, resets)}); "
+                f"budget {budget_s:.0f} s")
+    return f"yosys miter as AIGER + ABC iprove (all input vectors); budget {budget_s:.0f} s"
+
+
+def _sat_equivalence(path, netlist: Netlist, budget_s: float, resets, shown_s: float) -> dict:
+    """The two sat runs (`_prove`) within `budget_s`, the plain miter after an undecided strengthened one: as
+    `equivalence`; the texts name `shown_s`, the whole proof's budget (ABC may have used part of it)."""
     t0 = time.time()
     sequential = bool(netlist.latches())
     regs = register_names(netlist) if sequential else []
-    res = _prove(Path(path), netlist, regs, budget_s, resets)
+    res = _prove(Path(path), netlist, regs, budget_s, resets, shown_s)
     if res["cex"]:
         res = _replayed(path, netlist, res, resets)
     left = budget_s - (time.time() - t0)
     if regs and res["status"] not in ("proved", "counterexample") and left > 1:
         # The strengthened miter also compares the matched registers: a failure there may be a wrong match,
         # not a wrong output.  A counterexample its replay confirms stands; otherwise the plain miter decides.
-        plain = _prove(Path(path), netlist, [], left, resets)
+        plain = _prove(Path(path), netlist, [], left, resets, shown_s)
         res = _replayed(path, netlist, plain, resets) if plain["cex"] else plain
     n = len(res["regs"])
     matched = f", {n} matched register{'s' * (n != 1)}" if n else ""
-    reset = ", ".join(f"{r['port']}={r['level']}" for r in resets)
-    state = "the all-zero state" if _initial_state(netlist) == "-set-init-zero" else "the power-up state"
-    start = f"{state}, reset {reset} in cycle 0" if resets else state
+    start = _start_text(netlist, resets)
     method = (f"yosys miter: sat induction step (length <= {INDUCTION_STEPS}{matched}) + bounded check from "
-              f"{start} (sat -seq); budget {budget_s:.0f} s" if sequential else
-              f"yosys miter + sat (all input vectors: induction step and one-cycle check); budget {budget_s:.0f} s")
+              f"{start} (sat -seq); budget {shown_s:.0f} s" if sequential else
+              f"yosys miter + sat (all input vectors: induction step and one-cycle check); budget {shown_s:.0f} s")
     out = {"status": res["status"], "method": method, "counterexample": res["cex"], "detail": res["detail"],
            "depth": res["depth"], "budget_s": budget_s, "wall_s": time.time() - t0}
     if "replay" in res:
@@ -341,7 +386,8 @@ def _text(out) -> str:
     return out.decode(errors="replace") if isinstance(out, bytes) else (out or "")
 
 
-def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUDGET_S, resets=()) -> dict:
+def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUDGET_S, resets=(),
+           shown_s: float | None = None) -> dict:
     """The two halves of the temporal induction as two sat runs: the induction step alone (no start state,
     no reset: the length k at which it closes), then the base case from the start (all-zero, the resets
     asserted in its first cycle) for k cycles, or for INDUCTION_STEPS when the step did not close (a bounded
@@ -367,7 +413,7 @@ def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUD
     depth = steps if _PROVED.search(base.stdout) else 0
     if cut:
         return {"regs": regs, "status": "unknown", "cex": None, "depth": depth, "budget_spent": True,
-                "detail": f"the proof's time budget ({budget_s:.0f} s) ran out: the bounded check of {steps} cycles from "
+                "detail": f"the proof's time budget ({shown_s or budget_s:.0f} s) ran out: the bounded check of {steps} cycles from "
                           f"the start was not finished, and the induction " +
                           (f"closed at length {tried} but its base case was not finished" if closed else
                            f"had not closed (tried up to length {tried})")}
@@ -386,7 +432,7 @@ def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUD
     return {"regs": regs, "depth": depth, "status": "unknown", "cex": None,
             "detail": f"no counterexample within {depth} cycles of the start, but the induction did not close "
                       f"within {INDUCTION_STEPS} steps ({time.time() - t0:.0f} s of the proof's "
-                      f"{budget_s:.0f} s budget used)"}
+                      f"{shown_s or budget_s:.0f} s budget used)"}
 
 
 # sat's lines (Yosys 0.3x-0.70): the step proved, a counterexample, the step giving up, the base case.
@@ -431,6 +477,138 @@ def _counterexample(log: str, netlist: Netlist) -> list[dict] | None:
 def _signed(netlist: Netlist, port: str, value: int) -> int:
     w = netlist.inputs[port]
     return value - (1 << w) if port in netlist.signed and value >> (w - 1) & 1 else value
+
+
+# --------------------------------------------------------------------------- equivalence (ABC)
+
+ABC_SHARE = 0.75              # of the budget, ABC's first: the sat runs get the rest when ABC is undecided
+
+
+def abc_tool() -> str | None:
+    """Berkeley ABC's executable (Debian's `berkeley-abc`), or None: verify then proves with sat alone."""
+    return shutil.which("berkeley-abc")
+
+
+def _abc_top(netlist: Netlist, names: dict[str, str], resets) -> str:
+    """Module m2s__top around the miter: the resets forced to their level in the first cycle (a register
+    that powers up 1 and is 0 ever after), every other input free in every cycle."""
+    widths = {netlist.clock: 1, **netlist.inputs} if netlist.clock else dict(netlist.inputs)
+    level = {r["port"]: r["level"] for r in resets}
+    ports = [f"input {_decl(w)}{names[p]}" for p, w in widths.items()] + ["output trigger"]
+    lines = [f"module {PREFIX}top({', '.join(ports)});"]
+    if level:
+        lines += [f"  reg {PREFIX}first = 1'b1;", f"  always @(posedge {names[netlist.clock]}) {PREFIX}first <= 1'b0;"]
+    conns = [f".in_{names[p]}({PREFIX}first ? 1'b{level[p]} : {names[p]})" if p in level else
+             f".in_{names[p]}({names[p]})" for p in widths]
+    lines += [f"  {PREFIX}miter {PREFIX}m({', '.join(conns + ['.trigger(trigger)'])});", "endmodule", ""]
+    return "\n".join(lines)
+
+
+def _aiger_script(path: Path, rel: str, netlist: Netlist) -> str:
+    """The miter of the sat runs as 2-valued AIGER for ABC.  Where sat reads an `x` of the source as "either
+    value agrees" (-ignore_gold_x), here every x constant and undriven net of the source is a free input in
+    every cycle ($anyseq): the network must agree for every choice, a stronger claim.  Every register without
+    a power-up value starts at 0 (the sat runs' all-zero start; with power-up values, where sat starts such a
+    source register at x, 0 is one of its refinements).  Asynchronous flip-flops in the cycle view
+    (async2sync), as for sat."""
+    # Tri-state buses as synthesis resolves them (a write_aiger wire has one driver; conflict checks dropped,
+    # as synthesis drops them), before setundef makes "no driver enabled" a free value.
+    lines = _read_source(path, rel, netlist.top) + [
+        "tribuf -formal", "delete n:$tribuf_conflict*", "setundef -undriven -anyseq", "read_verilog wrap.v", "read_verilog gate.v", "read_verilog top.v",
+        "proc", "opt_clean", f"miter -equiv -flatten {PREFIX}gold {PREFIX}gate {PREFIX}miter",
+        f"hierarchy -top {PREFIX}top", "flatten", "async2sync", "dffunmap", "techmap", "setundef -zero -init",
+        "aigmap", "opt_clean", "write_aiger -zinit -map m.map m.aig"]
+    return "\n".join(lines + [""])
+
+
+def _aiger_inputs(mapfile: Path) -> dict[int, tuple[str, int]]:
+    """write_aiger's map: AIGER input index -> (port, bit), for the named inputs (the free values that stand
+    for the source's x have no name)."""
+    out = {}
+    for line in mapfile.read_text().splitlines():
+        parts = line.split()
+        if len(parts) == 4 and parts[0] == "input":
+            out[int(parts[1])] = (parts[3], int(parts[2]))
+    return out
+
+
+_ABC_PROVED = re.compile(r"^Property proved\.|^UNSATISFIABLE\b", re.M)          # pdr, iprove
+_ABC_FAILED = re.compile(r"was asserted in frame \d+|^SATISFIABLE\b", re.M)
+_AIGER_HEADER = re.compile(r"^aig \d+ (\d+) (\d+) ")
+
+
+def _abc_run(workdir: str, budget_s: float) -> tuple[str, str, tuple[int, int]]:
+    """ABC on m.aig: `pdr` (IC3) with a latch, else `iprove` (combinational): (verdict: proved, counterexample
+    (in cex.txt) or undecided; ABC's log; the AIGER's (inputs, latches))."""
+    with open(Path(workdir) / "m.aig", "rb") as fh:
+        head = _AIGER_HEADER.match(fh.readline().decode(errors="replace"))
+    size = (int(head.group(1)), int(head.group(2))) if head else (0, 1)
+    engine = f"scorr; pdr -T {max(1, int(budget_s))}" if size[1] else "iprove"
+    try:
+        proc = subprocess.run([abc_tool(), "-c", f"read_aiger m.aig; {engine}; write_cex -a cex.txt"],
+                              cwd=workdir, capture_output=True, text=True, timeout=max(1.0, budget_s) + 5)
+    except subprocess.TimeoutExpired as cut:
+        return "undecided", _text(cut.stdout), size
+    log = proc.stdout + proc.stderr
+    if _ABC_FAILED.search(log) and (Path(workdir) / "cex.txt").exists():
+        return "counterexample", log, size
+    return ("proved" if _ABC_PROVED.search(log) else "undecided"), log, size
+
+
+def _abc_cex(workdir: str, netlist: Netlist, resets, size: tuple[int, int]) -> list[dict] | None:
+    """ABC's counterexample (write_cex -a: the latches' start values when there are latches, then a line per
+    frame, a 0/1 per AIGER input) as sat's: [{"cycle": k, "inputs": {port: int}}], the resets at their level
+    in cycle 0 as the miter forced them; None when the file does not read as one.  The free values standing
+    for the source's x are no port: the replay decides whether they made the difference."""
+    names = {v: p for p, v in proof_ports(netlist).items()}
+    inputs = _aiger_inputs(Path(workdir) / "m.map")
+    rows = [ln.split("#")[0].strip() for ln in (Path(workdir) / "cex.txt").read_text().splitlines()]
+    rows = [r for r in rows if re.fullmatch(r"[01x]+", r)][1 if size[1] else 0:]
+    if not rows or any(len(r) != size[0] for r in rows):
+        return None
+    level = {r["port"]: r["level"] for r in resets}
+    out = []
+    for k, frame in enumerate(rows):
+        vals = dict.fromkeys(netlist.inputs, 0)
+        for i, ch in enumerate(frame):
+            port, bit = inputs.get(i, (None, 0))
+            if names.get(port) in vals and ch == "1":
+                vals[names[port]] |= 1 << bit
+        if k == 0:
+            vals.update(level)
+        ins = {p: _signed(netlist, p, v) for p, v in vals.items()}
+        out.append({"cycle": k, "inputs": ins} if netlist.latches() or len(rows) > 1 else {"inputs": ins})
+    return out
+
+
+def _abc_prove(path: Path, netlist: Netlist, budget_s: float, resets=()) -> dict:
+    """The miter proved by ABC within `budget_s`: as `_prove`'s result, with `applies` False (and the reason in
+    `detail`) when Yosys cannot write it as AIGER (e.g. a level-sensitive latch in the source)."""
+    t0 = time.time()
+    with tempfile.TemporaryDirectory(prefix="mech2spice_abc_") as tmp:
+        rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
+        names = proof_ports(netlist)
+        (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", (), names))
+        (Path(tmp) / "wrap.v").write_text(_wrapper(netlist, names, 0))
+        (Path(tmp) / "top.v").write_text(_abc_top(netlist, names, resets))
+        built, cut = _run_yosys(_aiger_script(path, rel, netlist), tmp, budget_s)
+        if cut or built.returncode != 0 or not (Path(tmp) / "m.aig").exists():
+            why = "the budget ran out writing the miter" if cut else f"yosys: {yosys.error_line(built)}"
+            return {"applies": False, "detail": f"ABC not used: {why}"}
+        verdict, log, size = _abc_run(tmp, budget_s - (time.time() - t0))
+        cex = _abc_cex(tmp, netlist, resets, size) if verdict == "counterexample" else None
+    base = {"applies": True, "regs": [], "cex": cex}
+    if verdict == "proved":
+        return {**base, "status": "proved", "depth": None,
+                "detail": "no input (sequence) makes an output differ (ABC " +
+                          ("pdr: an inductive invariant)" if size[1] else "iprove)")}
+    if cex:
+        return {**base, "status": "counterexample", "depth": len(cex),
+                "detail": "the outputs differ on this input" +
+                          (f" (sequence), read after {len(cex) - 1} clock edges" if "cycle" in cex[0] else "")}
+    frames = re.findall(r"frame (\d+)", log)
+    return {**base, "status": "unknown", "depth": 0,
+            "detail": f"ABC undecided within {budget_s:.0f} s" + (f" (pdr reached frame {frames[-1]})" if frames else "")}
 
 
 # --------------------------------------------------------------------------- Icarus Verilog
@@ -789,9 +967,10 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
 def verify(path, top: str | None = None, backend: str = "logic", vectors: int | None = None,
            exhaustive: bool = False, seed: int = 0, params=None, progress=False, log=None,
            netlist: Netlist | None = None, reset=None, equivalence_check: bool = True,
-           proof_time: float = PROOF_BUDGET_S, keep_trace: bool = False) -> dict:
+           proof_time: float = PROOF_BUDGET_S, keep_trace: bool = False, proof_engine: str = "auto") -> dict:
     """Equivalence and co-simulation of one design; `netlist` replaces the synthesised one (tests);
-    `keep_trace`: the co-simulation's compared values too (cosim.trace, for --vcd)."""
+    `keep_trace`: the co-simulation's compared values too (cosim.trace, for --vcd); `proof_engine`: auto, abc
+    or sat (`equivalence`)."""
     t0 = time.time()
     from .synthesis.synth import synthesize
     log = log or (lambda msg: None)
@@ -801,9 +980,9 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
            "gates": len(nl.gates()), "latches": len(nl.latches())}
     resets = reset_ports(nl, reset, path) if nl.clock is not None else []
     if equivalence_check:
-        log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source (yosys, at most "
+        log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source ({proof_engine}, at most "
             f"{proof_time:.0f} s)")
-        out["equivalence"] = equivalence(path, nl, proof_time, resets)
+        out["equivalence"] = equivalence(path, nl, proof_time, resets, proof_engine)
         log(f"equivalence: {out['equivalence']['status']} ({out['equivalence']['wall_s']:.1f} s)")
     log(f"co-simulation against Icarus on {backend}")
     out["cosim"] = cosim(path, nl, backend, vectors, exhaustive, seed, params, progress, reset, resets, keep_trace)
@@ -869,6 +1048,8 @@ def text(result: dict) -> str:
     eq = result.get("equivalence")
     if eq is not None:
         lines.append(f"equivalence: {eq['status']} ({eq['method']}, {eq['wall_s']:.1f} s)")
+        if eq.get("engine_note"):
+            lines.append(f"  {eq['engine_note']}")
         if eq["status"] != "proved":
             lines.append(f"  {eq['detail']}")
         if eq.get("replay"):

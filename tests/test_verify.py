@@ -147,7 +147,7 @@ def test_processor_proved_with_its_registers_matched():
     nl = synthesize(VERILOG / "cpu.v")
     regs = V.register_names(nl)
     assert len(regs) == len(nl.latches()) == 43
-    eq = V.equivalence(VERILOG / "cpu.v", nl)
+    eq = V.equivalence(VERILOG / "cpu.v", nl, engine="sat")
     assert eq["status"] == "proved" and "43 matched registers" in eq["method"]
 
 
@@ -373,11 +373,11 @@ def test_a_fifo_with_a_memory_is_proved(tmp_path, capsys):
     the 64 memory bits are matched registers and the induction closes."""
     src = tmp_path / "fifo8.v"
     src.write_text(FIFO)
-    code, out, err = _run(capsys, src, "--cycles", 300, "--json")
+    code, out, err = _run(capsys, src, "--cycles", 300, "--json", "--proof-engine", "sat")
     res = json.loads(out)
     assert code == 0, out + err
     eq = res["equivalence"]
-    assert eq["status"] == "proved" and "77 matched registers" in eq["method"]
+    assert eq["status"] == "proved" and "77 matched registers" in eq["method"] and eq["equivalence_engine"] == "sat"
     assert res["cosim"]["agree"] and res["cosim"]["undefined_bits"] > 0     # dout reads unwritten words: x
 
 
@@ -439,7 +439,7 @@ def test_a_proof_out_of_time_is_unknown_and_says_so():
     """The budget bounds the proof: cut short, the status is `unknown`, never a hang or a pass."""
     nl = _swap_outputs(synthesize(VERILOG / "cpu.v"), "waddr[0]", "waddr[1]")
     t0 = time.time()
-    eq = V.equivalence(VERILOG / "cpu.v", nl, budget_s=2)
+    eq = V.equivalence(VERILOG / "cpu.v", nl, budget_s=2, engine="sat")
     assert eq["status"] == "unknown" and "time budget (2 s) ran out" in eq["detail"]
     assert eq["budget_s"] == 2 and time.time() - t0 < 30
 
@@ -493,7 +493,7 @@ def test_an_induction_that_does_not_close_states_its_depth_and_budget(tmp_path, 
                    "      default: state <= 2'd0;\n    endcase\n  assign y = state == 2'd2;\nendmodule\n")
     nl = synthesize(src)
     monkeypatch.setattr(V, "INDUCTION_STEPS", 3)
-    res = V.equivalence(src, nl, budget_s=100, resets=[{"port": "rst", "level": 1}])
+    res = V.equivalence(src, nl, budget_s=100, resets=[{"port": "rst", "level": 1}], engine="sat")
     assert res["status"] == "unknown" and res["depth"] == 3
     assert re.search(r"no counterexample within 3 cycles of the start, but the induction did not close within "
                      r"3 steps \(\d+ s of the proof's \d+ s budget used\)", res["detail"])

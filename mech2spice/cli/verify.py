@@ -37,6 +37,9 @@ def add_parser(subparsers) -> None:
     s.add_argument("--proof-time", type=inputs.number(1, 86400), metavar="S", default=PROOF_BUDGET_S,
                    help=f"wall-clock budget of the proof in seconds (default {PROOF_BUDGET_S}); when it runs out the "
                         "equivalence is 'unknown' with the depth reached")
+    s.add_argument("--proof-engine", choices=("auto", "abc", "sat"), default="auto",
+                   help="the equivalence proof's engine: auto (default: Berkeley ABC's pdr/iprove first with 3/4 of "
+                        "the budget when berkeley-abc is installed, then Yosys sat), abc, or sat (docs/verify.md)")
     s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, help="random seed (default 0)")
     s.add_argument("--params", default="default", help="gate parameters of a physical backend")
     s.add_argument("--no-equivalence", action="store_true", help="co-simulation only")
@@ -102,7 +105,7 @@ def cmd_verify(args) -> int:
     res = verify(args.design, backend=args.backend, vectors=args.cycles or args.vectors, exhaustive=args.exhaustive,
                  seed=args.seed, params=params, progress=_progress(args), log=_log(args), netlist=nl,
                  reset=args.reset, equivalence_check=not args.no_equivalence, proof_time=args.proof_time,
-                 keep_trace=args.vcd is not None)
+                 keep_trace=args.vcd is not None, proof_engine=args.proof_engine)
     if args.junit:
         inputs.write_text(args.junit, junit_xml(res))
     if args.vcd is not None:

@@ -76,8 +76,8 @@ def check_names(netlist: Netlist) -> None:
 
 def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] = (),
                   rename: dict[str, str] | None = None) -> str:
-    """The netlist as structural Verilog: one `assign` per NOR, one posedge register per latch (starting
-    wherever the simulator starts it; the proofs fix it at 0 like the logic backend).  `expose`: (port name,
+    """The netlist as structural Verilog: one `assign` per NOR, one posedge register per latch (initialised
+    at its power-up value: 0, or 1 for an inverted latch, as the logic backend starts it).  `expose`: (port name,
     latch) pairs made extra 1-bit outputs, for the register-correspondence proof; `rename`: port -> the name
     it gets (the proof's, `proof_ports`).  Every user name is written by ids.verilog (escaped where it is
     not a plain identifier)."""
@@ -91,10 +91,8 @@ def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] =
         + [f"output {_decl(w)}{v(p)}" for p, w in netlist.outputs.items()] \
         + [f"output {name}" for name, _ in expose]
     lines = [f"module {ids.verilog(module)}({', '.join(ports)});"]
-    inverted = any(g.nodes[q].get("inverted") for q in netlist.latches())     # then every power-up is written
-    for q in netlist.latches():
-        lines.append(f"  reg {_expr(netlist, q, rename)} = {g.nodes[q].get('inverted', 0)};" if inverted
-                     else f"  reg {_expr(netlist, q, rename)};")
+    for q in netlist.latches():                 # every power-up written: the proof starts from them
+        lines.append(f"  reg {_expr(netlist, q, rename)} = {g.nodes[q].get('inverted', 0)};")
     for gate in netlist.gates():
         a, b = (_expr(netlist, u, rename) for u, _, _ in sorted(g.in_edges(gate, data="pin"), key=lambda e: e[2]))
         lines.append(f"  wire {_expr(netlist, gate, rename)} = ~({a} | {b});")
@@ -175,7 +173,7 @@ def _read_source(path: Path, rel: str, top: str) -> list[str]:
     read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
     # `memory`: the source's memories as flip-flops and multiplexers, as synthesis maps them (sat has no
     # model for $mem cells); its memory_dff folds a read register into the port only as synthesis does.
-    return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), "proc",
+    return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), "proc", yosys.DROP_PRINTS,
             "flatten", "memory", "opt_clean", f"rename -top {PREFIX}src"]
 
 
@@ -225,11 +223,11 @@ def _script(path: Path, rel: str, netlist: Netlist, regs: list, resets=(), mode:
 
 
 def _initial_state(netlist: Netlist) -> str:
-    """The bounded check's start: all-zero registers, as the latches power up; where some latch powers up at 1
-    (`inverted`), every network register carries its power-up value as an init attribute, and the source's
-    registers without an initial value start undefined (x: any power-up value refines it, as on Icarus)."""
-    g = netlist.graph
-    return "-set-init-undef" if any(g.nodes[q].get("inverted") for q in netlist.latches()) else "-set-init-zero"
+    """The bounded check's start: every network register at its power-up value (an init attribute, gate.v),
+    the source's registers without an initial value undefined (x: any power-up value refines it, as on
+    Icarus).  An all-zero source start instead made a register that synthesis fixed at 1 (rom_dds's `done`,
+    x in the source until loaded) look like a difference the replay from power-up never showed."""
+    return "-set-init-undef"
 
 
 def equivalence(path, netlist: Netlist, budget_s: float = PROOF_BUDGET_S, resets: list[dict] = (),
@@ -268,7 +266,7 @@ def _result(res: dict, method: str, budget_s: float, t0: float, engine: str, not
 
 def _start_text(netlist: Netlist, resets) -> str:
     reset = ", ".join(f"{r['port']}={r['level']}" for r in resets)
-    state = "the all-zero state" if _initial_state(netlist) == "-set-init-zero" else "the power-up state"
+    state = "the power-up state"
     return f"{state}, reset {reset} in cycle 0" if resets else state
 
 
@@ -972,20 +970,23 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
     `keep_trace`: the co-simulation's compared values too (cosim.trace, for --vcd); `proof_engine`: auto, abc
     or sat (`equivalence`)."""
     t0 = time.time()
+    from .synthesis.dialect import standard_source
     from .synthesis.synth import synthesize
     log = log or (lambda msg: None)
     nl = netlist if netlist is not None else synthesize(path, top=top)
     check_names(nl)
     out = {"design": str(path), "top": nl.top, "clocked": nl.clock is not None,
            "gates": len(nl.gates()), "latches": len(nl.latches())}
-    resets = reset_ports(nl, reset, path) if nl.clock is not None else []
-    if equivalence_check:
-        log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source ({proof_engine}, at most "
-            f"{proof_time:.0f} s)")
-        out["equivalence"] = equivalence(path, nl, proof_time, resets, proof_engine)
-        log(f"equivalence: {out['equivalence']['status']} ({out['equivalence']['wall_s']:.1f} s)")
-    log(f"co-simulation against Icarus on {backend}")
-    out["cosim"] = cosim(path, nl, backend, vectors, exhaustive, seed, params, progress, reset, resets, keep_trace)
+    with standard_source(path) as src:        # the text synthesis read (VIS dialect rewritten, docs/rtl.md)
+        resets = reset_ports(nl, reset, src) if nl.clock is not None else []
+        if equivalence_check:
+            log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source ({proof_engine}, at "
+                f"most {proof_time:.0f} s)")
+            out["equivalence"] = equivalence(src, nl, proof_time, resets, proof_engine)
+            log(f"equivalence: {out['equivalence']['status']} ({out['equivalence']['wall_s']:.1f} s)")
+        log(f"co-simulation against Icarus on {backend}")
+        out["cosim"] = cosim(src, nl, backend, vectors, exhaustive, seed, params, progress, reset, resets,
+                             keep_trace)
     eq = out.get("equivalence", {}).get("status", "proved")
     out["verdict"] = "pass" if eq == "proved" and out["cosim"]["agree"] else \
         "fail" if eq == "counterexample" or not out["cosim"]["agree"] else "unknown"

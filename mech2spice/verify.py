@@ -69,6 +69,9 @@ def check_names(netlist: Netlist) -> None:
     be written (ids.verilog), or a port whose name starts with the prefix of the generated ones."""
     for name in [netlist.top, *netlist.inputs, *netlist.outputs, *([netlist.clock] if netlist.clock else [])]:
         ids.verilog(name)
+        if name == "#":                         # measured on Icarus 11: `\\# ` alone is not bound ("sorry")
+            raise Mech2SpiceError(f"{netlist.top}: a name that is only '#' (written `\\# `) is not bound by "
+                                  "Icarus Verilog, which co-simulates the source: rename it")
         if name.startswith(PREFIX):
             raise Mech2SpiceError(f"{netlist.top}: the name {name!r} starts with {PREFIX!r}, which verify "
                                   "keeps for the names it generates: rename it")

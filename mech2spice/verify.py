@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import re
+import secrets
 import shutil
 import subprocess
 import tempfile
@@ -621,12 +622,13 @@ def _icarus_tools() -> tuple[str, str]:
     return iverilog, vvp
 
 
-def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False) -> str:
+def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False, tag: str = f"{PREFIX}row") -> str:
     """Apply vectors.txt (one line of input bits per vector / cycle, ports in declaration order with the
     first port leftmost) and $display the outputs.  Clocked: the inputs of cycle k are on before edge k;
     one time unit after it cycle k+1's are applied and the outputs read, as simulation.run_clocked_logic.
-    `first_read`: also read once before the first edge (a counterexample's replay: its cycle 0).
-    Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has."""
+    `first_read`: also read once before the first edge (a counterexample's replay: its cycle 0).  Each result
+    line starts with `tag` (a fresh random word per run), so a line the design itself prints (`$display`,
+    kept on Icarus) is never read as a result.  Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has."""
     v = ids.verilog
     ins, outs = [v(p) for p in netlist.inputs], [v(p) for p in netlist.outputs]
     width = max(1, sum(netlist.inputs.values()))
@@ -643,7 +645,7 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
               f"  reg [{width - 1}:0] {mem} [0:{n - 1}];", f"  integer {k};"]
     def apply(index: str) -> str:                  # a function, not `%`: a name may hold a `%`
         return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
-    show = '$display("' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
+    show = f'$display("{tag} ' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
     lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if clocked:
         lines += [f"    {apply('0')}"] + ([f"    #1 {show}"] if first_read else []) + [
@@ -671,7 +673,8 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
     order = input_bits(netlist)
     with tempfile.TemporaryDirectory(prefix="mech2spice_icarus_") as tmp:
         tb = Path(tmp) / "tb.v"
-        tb.write_text(_testbench(netlist, len(vectors), clocked, first_read))
+        tag = f"{PREFIX}{secrets.token_hex(8)}"
+        tb.write_text(_testbench(netlist, len(vectors), clocked, first_read, tag))
         (Path(tmp) / "vectors.txt").write_text("".join(_vector_line(netlist, order, v) for v in vectors))
         built, gen = _compile(iverilog, path, tmp)
         out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout
@@ -680,7 +683,7 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
     if warnings is not None:
         warnings += sorted({f"output port {m.group(1)} is coerced to inout (iverilog): the source never drives it"
                             for m in COERCED.finditer(built.stderr)})
-    rows = [ln.split() for ln in out.splitlines() if ln.strip() and not ln.startswith(("VCD", "WARNING"))]
+    rows = [ln.split()[1:] for ln in out.splitlines() if ln.startswith(tag + " ") or ln == tag]
     rows = [r for r in rows if len(r) == len(netlist.outputs) and all(re.fullmatch(r"[01xzXZ]+", s) for s in r)]
     if len(rows) != len(vectors) + (first_read and clocked):
         raise Mech2SpiceError(f"Icarus printed {len(rows)} result lines for {len(vectors)} vectors")

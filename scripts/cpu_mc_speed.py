@@ -1,6 +1,7 @@
-"""Samples per core-second of the processor Monte-Carlo at the processor's own envelope step and at --step S.
+"""Samples per core-second of the processor Monte-Carlo before and after: the processor's own envelope step
+and OpenBLAS's own thread count (the cores) against --step S (0: the processor's own) and --blas-threads N.
 
-    python scripts/cpu_mc_speed.py [--samples 8] [--cycles 30] [--step 10] [--max-fanout 4]
+    python scripts/cpu_mc_speed.py [--samples 8] [--cycles 30] [--step 10] [--blas-threads 1] [--max-fanout 4]
         [--params centered_fc2] [--spread 0.01] [--trim fc] [--trim-residual 1e-4] [--seed 7]
         [--program programs/sieve.asm] [--indices 0,9] [--out reports/cpu_mc_speed.json]
 
@@ -23,6 +24,7 @@ import time
 import numpy as np
 
 from mech2spice.experiments import montecarlo as mc
+from mech2spice.experiments.blas import set_blas_threads
 from mech2spice.experiments.mc_clocked import CpuMC
 from mech2spice.physics.params import load_params
 
@@ -50,7 +52,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--samples", type=int, default=8)
     ap.add_argument("--cycles", type=int, default=30)
-    ap.add_argument("--step", type=float, default=10.0)
+    ap.add_argument("--step", type=float, default=10.0, help="the step 'after' (0: the processor's own)")
+    ap.add_argument("--blas-threads", type=int, default=1, help="OpenBLAS threads 'after' (before: the cores)")
     ap.add_argument("--max-fanout", type=int, default=4)
     ap.add_argument("--params", default="centered_fc2")
     ap.add_argument("--spread", type=float, default=0.01)
@@ -64,24 +67,27 @@ def main():
     load0, t0 = os.getloadavg(), time.time()
     spec = mc.spec_of({"local": a.spread, "trim": a.trim, "trim_residual": a.trim_residual})
     p = load_params(a.params)
-    ways = {"default": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout),
-            "step": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout, step=a.step)}
-    for mcx in ways.values():              # warm-up: the compiled kernels loaded for both
+    ways = {"before": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout),
+            "after": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout, step=a.step or None)}
+    threads = {"before": os.cpu_count(), "after": a.blas_threads}
+    for k, mcx in ways.items():            # warm-up: the compiled kernels loaded for both
+        set_blas_threads(threads[k])
         mcx._machine(0).step()
     runs = {k: [] for k in ways}
     indices = [int(x) for x in a.indices.split(",")] if a.indices else list(range(a.samples))
     for n, i in enumerate(indices):
         order = list(ways) if n % 2 == 0 else list(ways)[::-1]
         for k in order:
+            set_blas_threads(threads[k])
             runs[k].append(run_sample(ways[k], i))
     per = []
-    for i, x, y in zip(indices, runs["default"], runs["step"]):
+    for i, x, y in zip(indices, runs["before"], runs["after"]):
         dev = max((float(np.abs(u - v).max()) for u, v in zip(x["amps"], y["amps"])), default=None)
-        per.append({"i": i, "pass_default": x["pass"], "pass_step": y["pass"], "verdict_equal": x["pass"] == y["pass"],
+        per.append({"i": i, "pass_before": x["pass"], "pass_after": y["pass"], "verdict_equal": x["pass"] == y["pass"],
                     "cycles_equal": x["cycles"] == y["cycles"], "cycles_run": [len(x["cycles"]), len(y["cycles"])],
                     "max_read_difference_uR": dev, "cpu_s": [round(x["cpu_s"], 3), round(y["cpu_s"], 3)],
                     "block_steps": [x["block_steps"], y["block_steps"]], "reason": [x["reason"], y["reason"]]})
-    total = {k: {"step_periods": v[0]["step"], "cpu_s": round(sum(r["cpu_s"] for r in v), 2),
+    total = {k: {"step_periods": v[0]["step"], "blas_threads": threads[k], "cpu_s": round(sum(r["cpu_s"] for r in v), 2),
                  "samples_per_core_s": len(v) / sum(r["cpu_s"] for r in v),
                  "block_steps": sum(r["block_steps"] for r in v)} for k, v in runs.items()}
     res = {"command": "python scripts/cpu_mc_speed.py " + " ".join(
@@ -90,8 +96,8 @@ def main():
            "spread": a.spread, "trim": a.trim, "trim_residual": a.trim_residual, "seed": a.seed,
            "cores": os.cpu_count(), "load_avg_before": load0, "load_avg_after": os.getloadavg(),
            "wall_s": round(time.time() - t0, 1), **total,
-           "speed_ratio": total["step"]["samples_per_core_s"] / total["default"]["samples_per_core_s"],
-           "work_ratio": total["default"]["block_steps"] / total["step"]["block_steps"],
+           "speed_ratio": total["after"]["samples_per_core_s"] / total["before"]["samples_per_core_s"],
+           "work_ratio": total["before"]["block_steps"] / total["after"]["block_steps"],
            "all_cycles_equal": all(r["cycles_equal"] for r in per), "all_verdicts_equal": all(r["verdict_equal"] for r in per),
            "per_sample": per}
     text = json.dumps(res, indent=1, default=str)

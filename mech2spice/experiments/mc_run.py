@@ -175,6 +175,8 @@ def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: i
     try:
         with open(out, "a", encoding="utf-8") as fh:
             if scheduler == "inline":
+                from .blas import set_blas_threads
+                set_blas_threads(1)          # as Dask's workers have it: no spinning BLAS threads (blas.py)
                 stats["workers"] = 1
                 for n, g in enumerate(groups):
                     _stream(fh, task(job, g), done, bar, n, stop_after)

@@ -37,9 +37,9 @@ def test_an_inline_sweep_runs_blas_on_one_thread_with_the_same_records(tmp_path)
            "spread": mc.parse_spread("0.02").describe(), "seed": 3, "periods": None, "union": 2}
     try:
         set_blas_threads(2)
-        mc_run.design_for.__globals__["_DESIGNS"].clear()         # samples built anew at two threads
+        mc_run._DESIGNS.clear()         # samples built anew at two threads
         two = mc_run.task(job, [0, 1, 2, 3])
-        mc_run.design_for.__globals__["_DESIGNS"].clear()
+        mc_run._DESIGNS.clear()
         mc_run.run(job, 4, tmp_path / "one.jsonl", scheduler="inline")
         assert blas_threads() == [1] * len(before)
         one = [json.loads(line) for line in (tmp_path / "one.jsonl").read_text().splitlines()[1:]]

@@ -198,7 +198,8 @@ def add_cpu_parser(sub) -> None:
     c.add_argument("--step", type=inputs.number(0), default=None, metavar="PERIODS",
                    help="envelope: the step in drive periods (default: the processor's own, 16 or the largest of "
                         "16, 8, 4 .. within the model's stability bound; a whole number up to that bound, e.g. 10 "
-                        "where the ladder gives 8: fewer steps, docs/robustness.md)")
+                        "where the ladder gives 8: fewer steps, but a marginal sample may fail at another cycle: "
+                        "docs/design.md, 'A cheaper sample')")
     add_sweep_arguments(c)
     c.set_defaults(func=cmd_cpu_montecarlo)
 

@@ -106,3 +106,38 @@ def test_cpu_job_keys_stay_for_the_defaults():
     assert job()["union"] == 1 and "max_fanout" not in job()
     assert mc.job_key(job(max_fanout=network.MAX_FANOUT)) == mc.job_key(job())
     assert mc.job_key(job(max_fanout=4)) != mc.job_key(job())
+
+
+def test_cpu_job_step_enters_the_key_only_when_set():
+    """--step: files of the processor's own step keep their keys; another step is another job; off the
+    envelope backend it is refused before any work."""
+    import argparse
+    from mech2spice.cli.montecarlo import cpu_job_of
+    from mech2spice.errors import Mech2SpiceError
+    base = dict(program=SIEVE, cycles=30, params="centered_fc2", backend="envelope", spread="0.01", trim="fc",
+                trim_residual=1e-4, drift=None, seed=7, noise=0.0, max_fanout=4)
+    job = lambda **kw: cpu_job_of(argparse.Namespace(**{**base, **kw}))
+    assert "step" not in job() and mc.job_key(job(step=None)) == mc.job_key(job())
+    assert job(step=10.0)["step"] == 10.0 and mc.job_key(job(step=10.0)) != mc.job_key(job())
+    with pytest.raises(Mech2SpiceError, match="envelope backend"):
+        job(step=10.0, backend="rk4")
+
+
+def test_cpu_montecarlo_step_above_the_bound_is_refused_up_front(capsys):
+    assert main(["cpu", "montecarlo", SIEVE, "--samples", "1", "--cycles", "1", "--spread", "0.01",
+                 "--max-fanout", "4", "--params", "centered_fc2", "--scheduler", "inline", "--step", "50"]) == 2
+    assert "exceeds the stability limit" in capsys.readouterr().err
+
+
+def test_a_longer_step_gives_a_sample_the_same_cycles():
+    """Step 10 (the fan-out-4 processor's ladder gives 8; its bound is ~11): the sample really runs at 10
+    and its cycles (read and write addresses and data) are the ones step 8 gives, and the ISS's."""
+    p, spec = load_params("centered_fc2"), _trimmed(0.01)
+    runs = {}
+    for step in (None, 10.0):
+        mcx = CpuMC(SIEVE, 2, p, "envelope", spec, 7, max_fanout=4, step=step)
+        cpu = mcx._machine(1)
+        runs[step] = (cpu.step_periods, [cpu.step() for _ in mcx.want], mcx.want)
+    assert runs[None][0] == 8.0 and runs[10.0][0] == 10.0
+    assert runs[10.0][1] == runs[None][1]
+    assert [(c.pc, c.raddr, c.rdata) for c in runs[10.0][1]] == [(c.pc, c.raddr, c.rdata) for c in runs[10.0][2]]

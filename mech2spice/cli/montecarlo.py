@@ -195,6 +195,11 @@ def add_cpu_parser(sub) -> None:
     c.add_argument("--cycles", type=inputs.integer(1, 100_000), default=30, help="clock cycles per sample (default 30)")
     c.add_argument("--backend", default="envelope", choices=names(continuing, first="envelope"))
     max_fanout_arg(c)
+    c.add_argument("--step", type=inputs.number(0), default=None, metavar="PERIODS",
+                   help="envelope: the step in drive periods (default: the processor's own, 16 or the largest of "
+                        "16, 8, 4 .. within the model's stability bound; a whole number up to that bound, e.g. 10 "
+                        "where the ladder gives 8: fewer steps, but a marginal sample may fail at another cycle: "
+                        "docs/design.md, 'A cheaper sample')")
     add_sweep_arguments(c)
     c.set_defaults(func=cmd_cpu_montecarlo)
 
@@ -217,7 +222,21 @@ def cpu_job_of(args) -> dict:
             "cycles": args.cycles, "params": args.params, "backend": args.backend,
             "spread": spread_spec(args).describe(), "seed": args.seed, "union": 1,
             **({"noise": args.noise} if args.noise else {}),      # noiseless files keep their keys
-            **_fanout_key(args.max_fanout)}
+            **_fanout_key(args.max_fanout), **_step_key(args)}
+
+
+def _step_key(args) -> dict:
+    """The job's envelope step, only when set (results files of the default step keep their keys)."""
+    step = getattr(args, "step", None)
+    if step is None:
+        return {}
+    if args.backend != "envelope":
+        raise Mech2SpiceError(f"--step applies to the envelope backend, not {args.backend}")
+    return {"step": step}
+
+
+def _step_key_of(job: dict) -> dict:
+    return {"step": job["step"]} if "step" in job else {}
 
 
 def _fanout_key(max_fanout: int | None) -> dict:
@@ -234,12 +253,14 @@ def cmd_cpu_montecarlo(args) -> int:
     from ..physics import network
     check_out(args, {"the program": args.program})
     job = cpu_job_of(args)
+    if "step" in job:
+        mc_run.design_for(job)           # an explicit step is checked against the stability bound before any work
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out) if args.out else Path(tmp) / "results.jsonl"
         res = mc_run.run(job, args.samples, out, scheduler=args.scheduler, workers=args.workers,
                          progress=_progress(args), log=_log(args))
     res.update({"program": job["program"], "cycles": job["cycles"], "backend": job["backend"],
-                "max_fanout": job.get("max_fanout", network.MAX_FANOUT),
+                "max_fanout": job.get("max_fanout", network.MAX_FANOUT), **_step_key_of(job),
                 "spread": job["spread"], "seed": job["seed"], "noise": job.get("noise", 0.0), **trim_json(job["spread"])})
     if not args.out:
         res.pop("out")

@@ -92,7 +92,7 @@ class CpuMC:
     """The processor running a program for `cycles` cycles; evaluates samples against the ISS cycle by cycle."""
 
     def __init__(self, program: str, cycles: int, p, backend: str, spec: SpreadSpec, seed: int, noise: float = 0.0,
-                 batch: int = 1, max_fanout: int | None = None):
+                 batch: int = 1, max_fanout: int | None = None, step: float | None = None):
         from ..cpu.physical import PHYSICAL
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"cpu montecarlo runs on {', '.join(PHYSICAL)}, not '{backend}'")
@@ -102,8 +102,23 @@ class CpuMC:
         # samples per union model (cpu/batch.py); with noise one per run, as DesignMC does
         self.batch = 1 if self.noise else batch
         self.spec, self.seed = spec, seed
+        self.step = step
+        if step is not None:
+            self._check_step()
         self.want = self._iss()
         self.gates, self.union, self.outs = [], 1, ["pc", "phase", "raddr", "rdata", "we", "waddr", "wdata"]
+
+    def _check_step(self) -> None:
+        """An explicit envelope step, checked once on the nominal machine (not found out sample by sample as
+        a refusal that would count as a failed processor)."""
+        from ..backends import envelope
+        from ..cpu.physical import EXPONENTIAL, PhysicalCPU
+        from ..cpu.run import load_program, make_memory
+        if self.backend != "envelope":
+            raise Mech2SpiceError(f"a step applies to the envelope backend, not {self.backend}")
+        cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
+                          step=self.step, max_fanout=self.max_fanout)
+        envelope._check_step(cpu.model, self.step, EXPONENTIAL)
 
     def compared(self, want) -> list[str]:
         """The fields a cycle must match: the write address and data only when the ISS writes (else they
@@ -134,7 +149,8 @@ class CpuMC:
         from ..cpu.physical import PhysicalCPU
         from ..cpu.run import load_program, make_memory
         cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
-                          noise=(self.noise, noise_seed(self.seed, i)), max_fanout=self.max_fanout)
+                          noise=(self.noise, noise_seed(self.seed, i)), max_fanout=self.max_fanout,
+                          step=self.step)
         nominal = cpu.model
         model, _ = sampled(nominal, spread.elements(nominal), self.spec, self.seed, i)
         cpu.model = model               # the probes (latch outputs) are copied with the model

@@ -44,7 +44,8 @@ def design_for(job: dict) -> mc.DesignMC:
         if "program" in job:             # the processor (cpu montecarlo)
             from .mc_clocked import CpuMC
             _DESIGNS[key] = CpuMC(job["program"], job["cycles"], p, job["backend"], spec, job["seed"], noise,
-                                  batch=job.get("union", 1), max_fanout=job.get("max_fanout"))
+                                  batch=job.get("union", 1), max_fanout=job.get("max_fanout"),
+                                  step=job.get("step"))
             return _DESIGNS[key]
         nl = synthesize(job["design"], max_fanout=network.MAX_FANOUT)
         if "steps" in job:               # a clocked design under a stimulus of cycles
@@ -179,6 +180,8 @@ def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: i
     try:
         with open(out, "a", encoding="utf-8") as fh:
             if scheduler == "inline":
+                from .blas import set_blas_threads
+                set_blas_threads(1)          # as Dask's workers have it: no spinning BLAS threads (blas.py)
                 stats["workers"] = 1
                 for n, g in enumerate(groups):
                     _stream(fh, task(job, g), done, bar, n, stop_after)

@@ -683,7 +683,8 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
     if warnings is not None:
         warnings += sorted({f"output port {m.group(1)} is coerced to inout (iverilog): the source never drives it"
                             for m in COERCED.finditer(built.stderr)})
-    rows = [ln.split()[1:] for ln in out.splitlines() if ln.startswith(tag + " ") or ln == tag]
+    # after the tag: a source's `$write` without a newline puts its text before it on the same line
+    rows = [ln[ln.index(tag) + len(tag):].split() for ln in out.splitlines() if tag in ln]
     rows = [r for r in rows if len(r) == len(netlist.outputs) and all(re.fullmatch(r"[01xzXZ]+", s) for s in r)]
     if len(rows) != len(vectors) + (first_read and clocked):
         raise Mech2SpiceError(f"Icarus printed {len(rows)} result lines for {len(vectors)} vectors")

@@ -140,3 +140,18 @@ def test_itc99_b12_and_b13_race(name, expected):
     assert {r.variable for r in nl.races} == expected
     if name == "b13":      # docs/rtl.md: `tx_end = 1` in one block, `if (tx_end)` in another
         assert any(r.variable == "tx_end" and r.write_line == 220 and r.read_line == 169 for r in nl.races)
+
+
+def test_a_cache_entry_with_malformed_races_is_rebuilt(tmp_path, capsys, monkeypatch):
+    """The cache is anyone's data: races that are not (str, str, str, int|None, int|None) rows send the
+    design through Yosys again, which finds the race anew."""
+    from mech2spice.synthesis import synth
+    text = _design("t1 = a;", "y <= t1;")
+    _races(tmp_path, text)
+    key = synth._cache_key((tmp_path / "t.v").read_text(), None)
+    entry = json.loads(synth._cache_path(key).read_text())
+    for bad in (None, [{"variable": 3}], [{**entry["races"][0], "write_line": "5"}]):
+        synth._cache_path(key).write_text(json.dumps({**entry, "races": bad}))
+        assert synth._cache_read(key) is None
+    capsys.readouterr()
+    assert [r.variable for r in _races(tmp_path, text)] == ["t1"]

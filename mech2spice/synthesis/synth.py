@@ -313,9 +313,12 @@ def _cache_read(key: str | None) -> tuple[str, dict, list] | None:
 def _cached_races(rows) -> list | None:
     """The races a cache entry lists; None when it is no list of them (the entry is then rebuilt)."""
     try:
-        return [races.Race(**row) for row in rows]
+        found = [races.Race(**row) for row in rows]
     except TypeError:
         return None
+    text = all(isinstance(v, str) for r in found for v in (r.module, r.variable, r.edge))
+    lines = all(v is None or type(v) is int for r in found for v in (r.write_line, r.read_line))
+    return found if text and lines else None
 
 
 def _is_module(module) -> bool:

@@ -983,7 +983,7 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
     nl = netlist if netlist is not None else synthesize(path, top=top)
     check_names(nl)
     out = {"design": str(path), "top": nl.top, "clocked": nl.clock is not None,
-           "gates": len(nl.gates()), "latches": len(nl.latches())}
+           "gates": len(nl.gates()), "latches": len(nl.latches()), "races": [r.as_dict() for r in nl.races]}
     with standard_source(path) as src:        # the text synthesis read (VIS dialect rewritten, docs/rtl.md)
         resets = reset_ports(nl, reset, src) if nl.clock is not None else []
         if equivalence_check:
@@ -1090,5 +1090,21 @@ def text(result: dict) -> str:
         cex = w["counterexample"]
         lines.append(f"waveform: {w['file']} (co-simulation at times {w['cosim'][0]}-{w['cosim'][1]}"
                      + (f", counterexample at times {cex[0]}-{cex[1]})" if cex else ")"))
-    lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)" + _undefined_text(co))
+    lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)" + _undefined_text(co)
+                 + _race_text(result))
     return "\n".join(lines)
+
+
+def _race_text(result: dict) -> str:
+    """The verdict line's note on races between clocked blocks (synthesis/races.py): with one, a mismatch
+    may be the simulator's choice of order, not an error of the network."""
+    found = result.get("races") or []
+    if not found:
+        return ""
+    named = ", ".join(f"'{r['variable']}' (written line {r['write_line']}, read line {r['read_line']})"
+                      for r in found)
+    mismatches = result["cosim"]["mismatches"]
+    return (f"; the source races: clocked blocks pass {named} through blocking '=' on the same edge"
+            + ("; the source's meaning depends on the simulator's order of those blocks (IEEE 1364 section 11), "
+               "so these mismatches may be Icarus's order, not an error of the network (synthesis reads "
+               "flip-flops)" if mismatches else ""))

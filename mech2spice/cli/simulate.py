@@ -140,7 +140,8 @@ def cmd_synth(args) -> int:
     out = {"top": nl.top, "gates": len(model.design.gates), "latches": len(nl.latches()), **model.counts(),
            "inputs": nl.inputs, "outputs": nl.outputs, "clock": nl.clock, "logic_gates": len(nl.gates()),
            "logic_depth": network.logic_depth(nl),
-           "signed": [p for p in {**nl.inputs, **nl.outputs} if p in nl.signed]}     # two's complement ports
+           "signed": [p for p in {**nl.inputs, **nl.outputs} if p in nl.signed],     # two's complement ports
+           "races": [r.as_dict() for r in nl.races]}       # warned on stderr too (synthesis/races.py)
     if args.json:
         _print_json(out)
     else:

@@ -41,7 +41,7 @@ import networkx as nx
 
 from .. import identifiers
 from ..errors import Mech2SpiceError
-from . import dialect, refusals, yosys
+from . import dialect, races, refusals, yosys
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
@@ -57,6 +57,7 @@ class Netlist:
     outputs: dict[str, int]   # port name -> width, in declaration order
     clock: str | None = None  # the flip-flops' clock port, if any
     signed: frozenset = frozenset()   # ports declared signed: their values are two's complement
+    races: tuple = ()                 # races.Race: clocked blocks passing a value through `=` on one edge
 
     def gates(self) -> list[str]:
         """NOR gates in topological order (level by level, by gate number within a level); latch
@@ -122,8 +123,12 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     _check_source(path, source)
     if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
         raise Mech2SpiceError(f"invalid top module name {top!r}")
-    name, module = _run_yosys(path, top, source)
-    return clean(build_netlist(name, module, path), max_fanout=max_fanout)
+    name, module, found = _run_yosys(path, top, source)
+    for race in found:                  # warned, not refused: the network is Yosys's (flip-flop) reading
+        _warn(races.warning(race, path))
+    netlist = build_netlist(name, module, path)
+    netlist.races = tuple(found)
+    return clean(netlist, max_fanout=max_fanout)
 
 
 def clean(netlist: Netlist, *, max_fanout: int | None = None) -> Netlist:
@@ -151,7 +156,7 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
     remove_dead_gates(g)
     outputs = {p: w for p, w in netlist.outputs.items() if p in ports}
     clock = netlist.clock if any(d["kind"] == "latch" for _, d in g.nodes(data=True)) else None
-    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed)
+    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed, netlist.races)
 
 
 # --------------------------------------------------------------------------- running Yosys
@@ -264,16 +269,16 @@ def _flow(source: str, top: str | None, include: str | None = None) -> str:
         "write_json netlist.json", ""])
 
 
-def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict]:
-    """(top module name, its Yosys JSON module): from the cache when this source went through this flow
-    and this Yosys before, else from a run of the flow in a scratch folder (`_yosys_run`)."""
+def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict, list]:
+    """(top module name, its Yosys JSON module, the source's races): from the cache when this source went
+    through this flow and this Yosys before, else from a run of the flow in a scratch folder (`_yosys_run`)."""
     key = _cache_key(source, top)
     cached = _cache_read(key)
     if cached is not None:
         return cached
-    name, module = _yosys_run(path, top, source)
-    _cache_write(key, name, module)
-    return name, module
+    name, module, found = _yosys_run(path, top, source)
+    _cache_write(key, name, module, found)
+    return name, module, found
 
 
 def _cache_key(source: str, top: str | None) -> str | None:
@@ -290,7 +295,7 @@ def _cache_path(key: str) -> Path:
     return cache_dir() / "yosys" / f"{key}.json"
 
 
-def _cache_read(key: str | None) -> tuple[str, dict] | None:
+def _cache_read(key: str | None) -> tuple[str, dict, list] | None:
     """The cached (top, module); None (Yosys runs again and replaces the entry) when there is none or it is
     not a Yosys JSON module in the shape build_netlist reads: the cache is rebuildable data, anyone's."""
     if key is None:
@@ -301,7 +306,19 @@ def _cache_read(key: str | None) -> tuple[str, dict] | None:
         return None
     if not (isinstance(data, dict) and isinstance(data.get("top"), str) and _is_module(data.get("module"))):
         return None
-    return data["top"], data["module"]
+    found = _cached_races(data.get("races"))
+    return None if found is None else (data["top"], data["module"], found)
+
+
+def _cached_races(rows) -> list | None:
+    """The races a cache entry lists; None when it is no list of them (the entry is then rebuilt)."""
+    try:
+        found = [races.Race(**row) for row in rows]
+    except TypeError:
+        return None
+    text = all(isinstance(v, str) for r in found for v in (r.module, r.variable, r.edge))
+    lines = all(v is None or type(v) is int for r in found for v in (r.write_line, r.read_line))
+    return found if text and lines else None
 
 
 def _is_module(module) -> bool:
@@ -322,7 +339,7 @@ def _is_module(module) -> bool:
         and table("netnames", {"hide_name": lambda v: isinstance(v, int), "bits": bits})
 
 
-def _cache_write(key: str | None, name: str, module: dict) -> None:
+def _cache_write(key: str | None, name: str, module: dict, found: list) -> None:
     """Keep a synthesised module (atomically; a cache that cannot be written is skipped)."""
     if key is None:
         return
@@ -330,14 +347,14 @@ def _cache_write(key: str | None, name: str, module: dict) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps({"top": name, "module": module}))
+        tmp.write_text(json.dumps({"top": name, "module": module, "races": [r.as_dict() for r in found]}))
         os.replace(tmp, path)
     except OSError:
         pass
 
 
-def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict]:
-    """Run the flow in a scratch folder; return (top module name, its Yosys JSON module).  `source` is the
+def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, list]:
+    """Run the flow in a scratch folder; return (top module name, its Yosys JSON module, its races).  `source` is the
     text to read: the file's own, or its standard rewriting (dialect.py), which then is read from the folder."""
     with tempfile.TemporaryDirectory(prefix="mech2spice_yosys_") as tmp:
         # A relative path works for both yowasp (which maps /tmp elsewhere) and `include`s.
@@ -357,11 +374,12 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict]:
                                   else f"yosys error: {path}: {msg}")
         refusals.check(Path(tmp), path, source, top)
         _check_drivers(Path(tmp), path)
+        found = races.find((Path(tmp) / "ast.txt").read_text(), path)
         out = Path(tmp) / "netlist.json"
         if not out.exists():
             raise Mech2SpiceError(f"yosys wrote no netlist for {path} (its run stopped early)")
         modules = json.loads(out.read_text())["modules"]
-    return _pick_top(modules, top, path)
+    return (*_pick_top(modules, top, path), found)
 
 
 _UNDRIVEN = re.compile(r"Wire (?P<mod>[^.\s]+)\.\\?(?P<net>.+?) is used but has no driver")

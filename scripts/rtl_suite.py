@@ -59,6 +59,8 @@ VERIFY_CLASSES = [
     ("proof budget ran out", r"time budget \(\d+ s\) ran out"),
     ("induction did not close (bounded check found no difference)", r"induction did not close"),
     ("equivalence not proved", r"not proved|unproved|induction"),
+    ("co-simulation mismatch in a source that races (blocking '=' between clocked blocks on one edge)",
+     r"co-simulation mismatches; the source races"),
     ("co-simulation mismatch", r"co-simulation mismatches"),
     ("Icarus could not run the source", r"iverilog failed"),
 ]
@@ -217,6 +219,10 @@ def _verdict(res: dict) -> dict:
     detail = eq.get("detail", "") if eq.get("status") not in (None, "proved") else ""
     if cosim and not cosim.get("agree", True):
         detail = (detail + "; " if detail else "") + f"{len(cosim.get('mismatches', []))} co-simulation mismatches"
+    if out.get("races"):                        # the source's meaning depends on the simulator (docs/rtl.md)
+        names = sorted({r["variable"] for r in out["races"]})
+        detail += (f"; the source races: {len(out['races'])} values passed by blocking '=' between clocked "
+                   f"blocks on one edge ({', '.join(names)})")
     resets = [f"{r['port']}={r['level']} ({r.get('rule', '?')})" for r in cosim.get("resets") or []]
     return {"verdict": out.get("verdict"), "equivalence": eq.get("status"), "cosim_agree": cosim.get("agree"),
             "resets": resets,

@@ -9,8 +9,10 @@ reports/*.json, then reviewed): every field present is typed; a field is require
 measured yet, or a figure an older run lacks, is optional, `?`; tests/test_report_schemas.py holds the rule).
 A null where the study wrote a non-finite figure is allowed where that figure may be one
 (`_common.non_finite`: margin_quantiles, output_delays; others where a run records "not reached" as null).
-Objects keyed by data (reasons, failing bits, quantiles) are `Map`s.  Add a field here when a study starts
-writing it; a change of meaning bumps REPORT_VERSION, which the file then carries.
+Objects keyed by data (reasons, failing bits, quantiles; scenes, backends, designs where the renderer
+iterates them) are `Map`s; where a renderer reads one such key by name the object keeps its fixed keys.
+Add a field here when a study starts writing it; a change of meaning bumps REPORT_VERSION, which the file then
+carries.
 """
 from __future__ import annotations
 
@@ -642,17 +644,7 @@ PERFORMANCE = {
             'ngspice?': {'exponent': NUMBER, 'range': [COUNT], 'last_exponent': NUMBER},
         },
     },
-    'section_wall_s?': {
-        'scaling?': NUMBER, 'adder?': NUMBER, 'sqrt?': NUMBER, 'cpu?': NUMBER, 'profile?': NUMBER,
-        'sqrt_rk4 (previous sqrt.v)?': NUMBER,
-    },
-    'sieve?': {'issue_processor': _ISSUE_PROCESSOR, 'cpu_v': _ISSUE_PROCESSOR},
-    'adder?': {
-        'rows': {
-            'envelope?': _ADDER_RUN, 'rk4?': _ADDER_RUN, 'rk4_numpy?': _ADDER_RUN, 'ngspice?': _ADDER_RUN,
-            'envelope_again': _ADDER_RUN,
-        },
-    },
+    'section_wall_s?': Map(NUMBER), 'sieve?': Map(_ISSUE_PROCESSOR), 'adder?': {'rows': Map(_ADDER_RUN)},
     'cpu?': {
         'oscillators?': COUNT, 'gate_blocks': COUNT, 'logic_gates': COUNT, 'latches': COUNT,
         'logic_depth': COUNT,
@@ -704,7 +696,7 @@ CARRIER = {
     },
     'convergence?': {
         'reference': STR, 'fail_ur': NUMBER, 'quick': BOOL, 'load': [NUMBER],
-        'scenes': {'gate': _CARRIER_SCENE, 'adder2': _CARRIER_SCENE},
+        'scenes': Map(_CARRIER_SCENE),
     },
     'charts?': {'speed_accuracy': STR, 'roofline?': STR, 'sieve?': STR, 'latency?': STR},
     'processor?': {
@@ -803,8 +795,7 @@ SPEED_ACCURACY = {
             'logic_depth': COUNT, 'period_budget': COUNT, 'case_labels': [STR],
         },
     },
-    'tolerances?': {'nor_gate?': _TOLERANCE_SCENE, 'chain3': _TOLERANCE_SCENE},
-    'stability?': {'nor_gate?': _STABILITY_SCENE, 'chain3': _STABILITY_SCENE},
+    'tolerances?': Map(_TOLERANCE_SCENE), 'stability?': Map(_STABILITY_SCENE),
     'damping?': {
         'q_true': NUMBER, 'driven_periods': COUNT, 'fit_periods': [COUNT],
         'rows': [{
@@ -821,7 +812,7 @@ SPEED_ACCURACY = {
     'total_wall_s?': NUMBER, 'charts?': [STR], 'partial_rerun_s?': NUMBER, 'note?': STR,
     'section_wall_s?': {'accuracy (adder2)?': NUMBER, 'forms?': NUMBER},
     'section_load_avg?': {'accuracy (adder2)?': [NUMBER], 'forms?': [NUMBER]},
-    'forms?': {'nor_gate?': _FORMS_SCENE, 'chain3': _FORMS_SCENE, 'adder2': _FORMS_SCENE},
+    'forms?': Map(_FORMS_SCENE),
 }
 
 
@@ -846,9 +837,7 @@ ENVELOPE_SPICE = {
             'wall_s': NUMBER, 'rc?': COUNT, 'reached_period?': NUMBER, 'last_step_periods?': NUMBER,
             'steps_into_stall_periods?': [NUMBER], 'stall_from_period?': NUMBER,
         }],
-        'large_steps': {
-            'nor_gate?': _LARGE_STEP_SCENE, 'chain3': _LARGE_STEP_SCENE, 'adder': _LARGE_STEP_SCENE,
-        },
+        'large_steps': Map(_LARGE_STEP_SCENE),
     },
     'scaling': {
         'periods': [COUNT], 'spice_options?': _SPICE_OPTIONS,
@@ -958,12 +947,7 @@ ROBUSTNESS = {
         'gate, robust?': _GATE_LEVEL_SWEEP, 'chain, robust?': _GATE_LEVEL_SWEEP,
         'adder, robust?': _GATE_LEVEL_SWEEP,
     },
-    'clocked?': {
-        'sqrt': _PROCESSOR_SWEEP, 'processor': _PROCESSOR_SWEEP, 'sieve': _PROCESSOR_SWEEP,
-        'sqrt, robust?': _PROCESSOR_SWEEP, 'processor, robust?': _PROCESSOR_SWEEP,
-        'sieve, robust?': _PROCESSOR_SWEEP,
-    },
-    'noise': {'gate': _NOISE_SWEEP, 'adder': _NOISE_SWEEP, 'gate (rk4)?': _NOISE_SWEEP},
+    'clocked?': Map(_PROCESSOR_SWEEP), 'noise': Map(_NOISE_SWEEP),
     'noise_agreement': Map({
         'T': NUMBER, 'prediction': NUMBER, 'envelope_prediction': Opt(NUMBER), 'rk4': NUMBER,
         'rk4_batch': COUNT, 'envelope': NUMBER, 'envelope_batch': COUNT, 'ngspice': NUMBER,

@@ -107,12 +107,12 @@ _VS_RK4_DETAIL = {
     }],
     **_CROSSING_CHECK_FIELDS,
 }
-_REGISTER_FIELDS = {
+_REGISTERS = {
     'pc': COUNT, 'a': COUNT, 'b': COUNT, 'c?': COUNT, 'd': COUNT, 'ov?': COUNT, 'phase': STR,
 }
 _CPU_RESULT = {
     'backend': STR, 'cycles?': COUNT, 'halted': BOOL, 'wall_s': NUMBER, 'periods?': COUNT,
-    'simulated_periods': COUNT, 'step?': NUMBER, 'settle?': NUMBER, 'registers': _REGISTER_FIELDS,
+    'simulated_periods': COUNT, 'step?': NUMBER, 'settle?': NUMBER, 'registers': _REGISTERS,
 }
 _VS_RK4_NULL_TIME = {'amp_err': NUMBER, 'time_err': Opt(NUMBER), **_CROSSING_CHECK_FIELDS}
 _NOISE_SWEEP = [{
@@ -166,10 +166,26 @@ _TRACE_FIELDS = {
     'bits?': Map(COUNT), 'valid': BOOL, 'min_margin': NUMBER, 'stable': BOOL, 'settled': BOOL,
     'stability': _STABILITY, 'amplitudes': Map(NUMBER),
 }
-_SEQUENTIAL_RUN = {
-    'trace': [{'cycle': COUNT, 'outputs': {'q?': COUNT}, **_TRACE_FIELDS}], 'wall_s': NUMBER,
-    'periods': COUNT,
-}
+
+_STEP_STABILITY = [{
+    'period': COUNT, 'max_abs_eig': NUMBER, 'rk4_stable_step_periods': NUMBER, 'max_growth': NUMBER,
+}]
+_PROBE_TRACE = Obj({'t': [NUMBER], 'amp': [[[NUMBER]]]}, same=(('t', 'amp'),))
+_WAVEFORM = {'every': COUNT, 'amplitude': [[NUMBER]], 'reads': [COUNT], 'probes': [STR]}
+
+
+def _logic_run(outputs: dict) -> dict:
+    """A clocked design run at the logic level: each cycle's outputs and decoded bits."""
+    trace = {'cycle': COUNT, 'outputs': outputs, 'bits?': Map(COUNT), 'valid': BOOL, 'min_margin': Opt(NUMBER)}
+    return {'trace': [trace], 'wall_s': NUMBER, 'periods': COUNT}
+
+
+def _engine_run(outputs: dict, **more) -> dict:
+    """A clocked design run on an oscillator engine: each cycle's outputs, margins and stability."""
+    return {'trace': [{'cycle': COUNT, 'outputs': outputs, **_TRACE_FIELDS}], 'wall_s': NUMBER, 'periods': COUNT,
+            **more}
+
+
 _CARRIER_SCENE = {
     'description': STR, 'periods?': COUNT, 'members': COUNT, 'oscillators': COUNT, 'ref_wall_s': NUMBER,
     'rows': [{
@@ -207,12 +223,12 @@ _LATCH_RUN_FIELDS = {
     'output_delays': [Opt(NUMBER)],
 }
 _LATCH_RUN = Obj(_LATCH_RUN_FIELDS, same=(('phases', 'decoded'),))
-_SOLVER_STATS_FIELDS = {
+_SOLVER_STATS = {
     'unknowns': NUMBER, 'nonzeros': NUMBER, 'accepted': NUMBER, 'rejected': NUMBER,
     'newton_iterations': NUMBER, 'newton_s': NUMBER, 'eval_s': NUMBER, 'refactor_s': NUMBER,
     'solve_s': NUMBER,
 }
-_WITHOUT_MEMORY = {'points': COUNT, 'wall_s': NUMBER, **_SOLVER_STATS_FIELDS}
+_WITHOUT_MEMORY = {'points': COUNT, 'wall_s': NUMBER, **_SOLVER_STATS}
 _ISSUE_PROCESSOR = {
     'pulse': COUNT, 'pause': COUNT, 'periods_per_cycle': COUNT, 'cycles': COUNT, 'logic_depth': COUNT,
     'total_periods': COUNT, 'oscillators?': COUNT,
@@ -261,18 +277,18 @@ _DOMAIN_RESULT_FIELDS = {
     'spread': {'sigma': NUMBER, 'trim': STR, 'residual': NUMBER, 'seed': COUNT},
 }
 _CPU_RUN_FIELDS = {
-    'backend': STR, 'cycles': COUNT, 'halted': BOOL, 'memory': [COUNT], 'registers': _REGISTER_FIELDS,
+    'backend': STR, 'cycles': COUNT, 'halted': BOOL, 'memory': [COUNT], 'registers': _REGISTERS,
     'wall_s': NUMBER, 'wall_s_total': NUMBER, 'cpu_s_total': NUMBER,
 }
-_BUS_CYCLE_FIELDS = {
+_BUS_CYCLE = {
     'cycle': COUNT, 'pc': COUNT, 'instr': STR, 'raddr': COUNT, 'rdata': COUNT, 'we': COUNT, 'waddr': COUNT,
     'wdata': COUNT, 'same': BOOL,
 }
 _CIRCUIT_RUN_FIELDS = {
     'cycles': COUNT, 'max_step': NUMBER, 'reltol': NUMBER,
     'schedule': {'pulse': COUNT, 'pause': COUNT, 'settle': COUNT, 'cycles': COUNT}, 'wall_s': NUMBER,
-    'simulator_wall_s': NUMBER, 'stats': _SOLVER_STATS_FIELDS, 'time_points': COUNT, 'points_reset?': COUNT,
-    'points_per_cycle': [COUNT], 'rows': [_BUS_CYCLE_FIELDS], 'stopped': Opt(ANY), 'halted': BOOL,
+    'simulator_wall_s': NUMBER, 'stats': _SOLVER_STATS, 'time_points': COUNT, 'points_reset?': COUNT,
+    'points_per_cycle': [COUNT], 'rows': [_BUS_CYCLE], 'stopped': Opt(ANY), 'halted': BOOL,
     'circuit_memory': [COUNT], 'iss_memory': [COUNT],
 }
 _TIMING_FIELDS = {
@@ -305,7 +321,7 @@ _NGSPICE_COST_FIELDS = {
     'step_periods?': NUMBER, 'ngspice_process_s?': NUMBER, 'points?': COUNT, 'ngspice_maxrss_mb?': NUMBER,
     'fixed_s?': NUMBER, 's_per_period_incl_setup?': NUMBER,
 }
-_TRUTH_ROW_FIELDS = {
+_TRUTH_ROW = {
     'inputs': [COUNT], 'output_amplitude': NUMBER, 'logic': COUNT, 'expected': COUNT, 'margin': NUMBER,
 }
 _ENGINE_COMPARE_FIELDS = {
@@ -318,7 +334,7 @@ _VACASK_FIELDS = {
 
 GATE = {
     'characterise': Obj({
-        'params': _GATE_PARAMS, 'truth_table': [_TRUTH_ROW_FIELDS], **_GATE_CHECK_FIELDS,
+        'params': _GATE_PARAMS, 'truth_table': [_TRUTH_ROW], **_GATE_CHECK_FIELDS,
         'delay_periods': NUMBER, 'delay_max_periods': NUMBER, 'cascade': _CASCADE, 'fanout': _FANOUT,
         'history_spread?': NUMBER,
         'stability': {
@@ -377,44 +393,17 @@ SEQUENTIAL = {
     }, same=(('phases', 'decoded'),)),
     'latch_envelope': _LATCH_RUN, 'short_pulse': _LATCH_RUN,
     'counter': {
-        'logic': {
-            'trace': [{
-                'cycle': COUNT, 'outputs': {'q?': COUNT}, 'bits?': Map(COUNT), 'valid': BOOL,
-                'min_margin': Opt(NUMBER),
-            }],
-            'wall_s': NUMBER, 'periods': COUNT,
-        },
-        'rk4': _SEQUENTIAL_RUN, 'envelope': _SEQUENTIAL_RUN,
+        'logic': _logic_run({'q?': COUNT}), 'rk4': _engine_run({'q?': COUNT}),
+        'envelope': _engine_run({'q?': COUNT}),
     },
     'counter_timing': _TIMING_FIELDS,
     'fsm': {
-        'logic': {
-            'trace': [{
-                'cycle': COUNT, 'outputs': {'state?': COUNT, 'found?': COUNT}, 'bits?': Map(COUNT),
-                'valid': BOOL, 'min_margin': Opt(NUMBER),
-            }],
-            'wall_s': NUMBER, 'periods': COUNT,
-        },
-        'rk4': {
-            'trace': [{'cycle': COUNT, 'outputs': {'state?': COUNT, 'found?': COUNT}, **_TRACE_FIELDS}],
-            'wall_s': NUMBER, 'periods': COUNT,
-            'waveform': {'every': COUNT, 'amplitude': [[NUMBER]], 'reads': [COUNT], 'probes': [STR]},
-        },
+        'logic': _logic_run({'state?': COUNT, 'found?': COUNT}),
+        'rk4': _engine_run({'state?': COUNT, 'found?': COUNT}, waveform=_WAVEFORM),
     },
     'fsm_timing?': _TIMING_FIELDS,
     'sqrt': {
-        'logic': {
-            'trace': [{
-                'cycle': COUNT, 'outputs': {'root': COUNT}, 'bits?': Map(COUNT), 'valid': BOOL,
-                'min_margin': Opt(NUMBER),
-            }],
-            'wall_s': NUMBER, 'periods': COUNT,
-        },
-        'envelope': {
-            'trace': [{'cycle': COUNT, 'outputs': {'root': COUNT}, **_TRACE_FIELDS}], 'wall_s': NUMBER,
-            'periods': COUNT,
-            'waveform': {'every': COUNT, 'amplitude': [[NUMBER]], 'reads': [COUNT], 'probes': [STR]},
-        },
+        'logic': _logic_run({'root': COUNT}), 'envelope': _engine_run({'root': COUNT}, waveform=_WAVEFORM),
     },
     'sqrt_timing': _TIMING_FIELDS, 'sqrt_counts': _NETWORK_COUNTS, 'sqrt_latches': COUNT, 'sqrt_logic': COUNT,
     'sqrt_rk4': BOOL, 'fsm_x': [COUNT], 'envelope_step': NUMBER, 'clocked_settle_tol': NUMBER,
@@ -488,7 +477,7 @@ CPU_PHYSICAL = {
         'checkpoint': Opt(ANY), 'resume': BOOL, 'name': STR,
     },
     'sieve': BOOL, 'speedups': {'latency': NUMBER, 'exponential': BOOL},
-    'rows?': [{**_BUS_CYCLE_FIELDS, 'wall_s': NUMBER}], 'moments': _MOMENTS, 'conditions': _CONDITIONS,
+    'rows?': [{**_BUS_CYCLE, 'wall_s': NUMBER}], 'moments': _MOMENTS, 'conditions': _CONDITIONS,
     'devices?': {'255?': {'cells': Map(COUNT), 'head': COUNT, 'steps': COUNT, 'idle?': COUNT}},
 }
 
@@ -567,22 +556,14 @@ ENVELOPE = {
         },
     }],
     'traces': {
-        'chain3': {
-            'rk4_80': Obj({'t': [NUMBER], 'amp': [[[NUMBER]]]}, same=(('t', 'amp'),)),
-            'rk4_160': Obj({'t': [NUMBER], 'amp': [[[NUMBER]]]}, same=(('t', 'amp'),)),
-            'envelope': Obj({'t': [NUMBER], 'amp': [[[NUMBER]]]}, same=(('t', 'amp'),)),
-        },
-        'adder2': {
-            'rk4_80': Obj({'t': [NUMBER], 'amp': [[[NUMBER]]]}, same=(('t', 'amp'),)),
-            'envelope': Obj({'t': [NUMBER], 'amp': [[[NUMBER]]]}, same=(('t', 'amp'),)),
-        },
+        'chain3': {'rk4_80': _PROBE_TRACE, 'rk4_160': _PROBE_TRACE, 'envelope': _PROBE_TRACE},
+        'adder2': {'rk4_80': _PROBE_TRACE, 'envelope': _PROBE_TRACE},
         'latch': {
             'sequence': {
                 'rk4': Obj({'t': [NUMBER], 'amp': [[NUMBER]]}, same=(('t', 'amp'),)),
                 'env': Obj({'t': [NUMBER], 'amp': [[NUMBER]]}, same=(('t', 'amp'),)),
             },
-            'starts': [COUNT], 'rk4_80': Obj({'t': [NUMBER], 'amp': [[[NUMBER]]]}, same=(('t', 'amp'),)),
-            'envelope_1': Obj({'t': [NUMBER], 'amp': [[[NUMBER]]]}, same=(('t', 'amp'),)),
+            'starts': [COUNT], 'rk4_80': _PROBE_TRACE, 'envelope_1': _PROBE_TRACE,
         },
     },
     'latch': Obj({
@@ -597,16 +578,8 @@ ENVELOPE = {
             'step': COUNT, 'wall_s': NUMBER, 'finite': BOOL, 'path': STR, 'vs80?': _VS_RK4,
             'blowup_period?': NUMBER,
         }],
-        'stability': [{
-            'period': COUNT, 'max_abs_eig': NUMBER, 'rk4_stable_step_periods': NUMBER, 'max_growth': NUMBER,
-        }],
-        'bound': NUMBER, 'gershgorin_rate': NUMBER, 'spectral_rate': NUMBER, 'rate_safety': NUMBER,
-        'gate_stability': [{
-            'period': COUNT, 'max_abs_eig': NUMBER, 'rk4_stable_step_periods': NUMBER, 'max_growth': NUMBER,
-        }],
-        'chain_stability': [{
-            'period': COUNT, 'max_abs_eig': NUMBER, 'rk4_stable_step_periods': NUMBER, 'max_growth': NUMBER,
-        }],
+        'stability': _STEP_STABILITY, 'bound': NUMBER, 'gershgorin_rate': NUMBER, 'spectral_rate': NUMBER,
+        'rate_safety': NUMBER, 'gate_stability': _STEP_STABILITY, 'chain_stability': _STEP_STABILITY,
         'gate_bound': NUMBER, 'chain_bound': NUMBER, 'T': NUMBER,
         'eigs_worst': Obj({'re': [NUMBER], 'im': [NUMBER]}, same=(('re', 'im'),)),
         'two_omega': Map({
@@ -749,7 +722,7 @@ CARRIER = {
         'result': {
             'backend': STR, 'cycles?': COUNT, 'halted': BOOL, 'wall_s': NUMBER, 'wall_s_total?': NUMBER,
             'cpu_s_total?': NUMBER, 'periods?': COUNT, 'simulated_periods': COUNT, 'step?': NUMBER,
-            'settle?': NUMBER, 'latency?': NUMBER, 'block_steps': COUNT, 'registers': _REGISTER_FIELDS,
+            'settle?': NUMBER, 'latency?': NUMBER, 'block_steps': COUNT, 'registers': _REGISTERS,
         },
         'vs_carrier': Obj({
             'worst_ur': [NUMBER], 'worst_probe?': [STR], 'registers_equal': [BOOL], 'min_margin_a?': [NUMBER],
@@ -1063,7 +1036,7 @@ DESIGN = {
                 'steps': [{'sigma': NUMBER, 'pass': BOOL, 'failures_seen?': COUNT, 'evaluated?': COUNT}],
                 'sigma': NUMBER, 'bracket': [NUMBER],
             },
-            'wall_s': NUMBER, 'truth_table?': [_TRUTH_ROW_FIELDS], 'switches?': BOOL,
+            'wall_s': NUMBER, 'truth_table?': [_TRUTH_ROW], 'switches?': BOOL,
             'steady_states?': [[{'amplitude': NUMBER, 'stable': BOOL}]], 'step_halving_change?': NUMBER,
             'steps_per_period?': COUNT, 'rk4_vs_steady?': NUMBER, 'min_margin?': NUMBER,
             'min_margin_detail?': _MIN_MARGIN_DETAIL, 'delay_periods?': NUMBER, 'delay_max_periods?': NUMBER,
@@ -1077,7 +1050,7 @@ DESIGN = {
             }],
             'periods?': COUNT, 'timing?': _TIMING_FIELDS, 'envelope_step?': NUMBER, 'settle?': NUMBER,
             'simulated_periods?': COUNT, 'cycles?': COUNT, 'halted?': BOOL, 'memory?': [COUNT],
-            'registers?': _REGISTER_FIELDS, 'wall_s_total?': NUMBER, 'cpu_s_total?': NUMBER, 'step?': NUMBER,
+            'registers?': _REGISTERS, 'wall_s_total?': NUMBER, 'cpu_s_total?': NUMBER, 'step?': NUMBER,
             'stability?': {
                 'single_gate?': {'growth_rate?': NUMBER, 'mode_period?': NUMBER, 'at_inputs': [NUMBER]},
                 'chain': _CHAIN, 'stable': BOOL, 'worst_growth_rate?': NUMBER,

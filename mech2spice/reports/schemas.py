@@ -193,12 +193,8 @@ _CARRIER_SCENE = {
         'failed?': STR,
     }],
 }
-_CASCADE = {
-    'delays': [[NUMBER]],
-    'restoration': [{
-        'inputs': [NUMBER], 'outputs': [NUMBER], 'stage_margins': [NUMBER], 'input_margin?': NUMBER,
-    }],
-}
+_RESTORATION = [{'inputs': [NUMBER], 'outputs': [NUMBER], 'stage_margins': [NUMBER], 'input_margin?': NUMBER}]
+_CASCADE = {'delays': [[NUMBER]], 'restoration': _RESTORATION}
 _PROFILE_RUN = [{
     'oscillators?': COUNT, 'step_s': NUMBER, 'ns_per_osc_step': NUMBER, 'osc_steps_per_s': NUMBER,
     'accel_s?': NUMBER, 'accel_share_of_step': NUMBER, 'fused_step_s?': NUMBER,
@@ -348,11 +344,8 @@ GATE = {
             'sequence': [[COUNT]], 'hold': COUNT, 't_periods': [COUNT], 'amplitude': [NUMBER],
         }, same=(('t_periods', 'amplitude'),)),
         'cascade': Obj({
-            'hold': COUNT, 'delay_periods': NUMBER,
-            'restoration': [{
-                'inputs': [NUMBER], 'outputs': [NUMBER], 'stage_margins': [NUMBER], 'input_margin?': NUMBER,
-            }],
-            't_periods': [COUNT], 'amplitude': [[NUMBER]],
+            'hold': COUNT, 'delay_periods': NUMBER, 'restoration': _RESTORATION, 't_periods': [COUNT],
+            'amplitude': [[NUMBER]],
         }, same=(('t_periods', 'amplitude'),)),
     },
     'map': Obj({

@@ -282,3 +282,22 @@ def test_a_stored_json_larger_than_any_report_is_refused_unread(capsys, tmp_path
     out = _copy("spice", tmp_path / "r")
     rc, _, err = run(capsys, "report", "spice", "--render", "--out", out)
     assert rc == 2 and err.count("\n") == 1 and "more than any `mech2spice report spice` writes" in err, err
+
+
+# Objects keyed by data that the renderer iterates are Maps: a scene, design or backend a run did not measure
+# renders without it (no "missing" refusal, no traceback).
+ABSENT = [("carrier", "carrier.json", ("convergence", "scenes", "gate")),
+          ("robustness", "robustness.json", ("noise", "gate")),
+          ("speed_accuracy", "envelope_spice.json", ("failures", "large_steps", "adder"))]
+
+
+@pytest.mark.parametrize("report, file, keys", ABSENT, ids=[f"{r}-{k[-2]}" for r, _, k in ABSENT])
+def test_a_scene_the_renderer_iterates_may_be_absent(capsys, tmp_path, report, file, keys):
+    if not (ROOT / "reports" / file).is_file():
+        pytest.skip(f"no committed {file}")
+    out = _copy(report, tmp_path / "r")
+    data = json.loads((out / file).read_text())
+    (out / file).write_text(json.dumps(_mutated(data, keys, "delete")))
+    rc, _, err = run(capsys, "report", report, "--render", "--out", out)
+    assert rc == 0 and "Traceback" not in err, err[-2000:]
+    assert (out / f"{report}.md").read_text().strip()

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import re
 
+from .verilog_text import statement_or_block_end
+
 __all__ = ["guarded"]
 
 _COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
@@ -73,7 +75,6 @@ def _statement_end(text: str, at: int) -> int:
 
 def _initial_spans(blanked: str) -> list[tuple[int, int]]:
     """Where the `initial` blocks are (their writes are power-up values, not guarded)."""
-    from .synth import _statement_end as statement_or_block_end
     return [(m.start(), statement_or_block_end(blanked, m.end())) for m in re.finditer(r"\binitial\b", blanked)]
 
 

@@ -42,6 +42,7 @@ import networkx as nx
 from .. import identifiers
 from ..errors import Mech2SpiceError
 from . import dialect, races, refusals, yosys
+from .verilog_text import statement_or_block_end
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
@@ -198,34 +199,13 @@ def _check_source(path: Path, text: str) -> None:
     happens in simulated time is refused with its line."""
     blanked = _blanked(text)
     for m in re.finditer(r"\binitial\b", blanked):
-        body_start, body_end = m.end(), _statement_end(blanked, m.end())
+        body_start, body_end = m.end(), statement_or_block_end(blanked, m.end())
         body = blanked[body_start:body_end]
         for pattern, what, why in _NOT_AN_INITIAL_VALUE:
             hit = pattern.search(body)
             if hit:
                 line = blanked.count("\n", 0, body_start + hit.start()) + 1
                 raise Mech2SpiceError(f"{path}, line {line}: {what} in an `initial` block: {why}")
-
-
-def _statement_end(text: str, at: int) -> int:
-    """Where the statement starting at `at` ends: its `;` outside parentheses and begin/end, or the `end`
-    closing its block."""
-    parens = blocks = 0
-    for tok in re.finditer(r"\b(?:begin|end|fork|join)\b|[();]", text[at:]):
-        t = tok.group()
-        if t == "(":
-            parens += 1
-        elif t == ")":
-            parens -= 1
-        elif t in ("begin", "fork"):
-            blocks += 1
-        elif t in ("end", "join"):
-            blocks -= 1
-            if blocks <= 0:
-                return at + tok.end()
-        elif t == ";" and parens == 0 and blocks == 0:
-            return at + tok.end()
-    return len(text)
 
 
 _NON_CONSTANT_INIT = re.compile(r"Failed to get a constant init value for \\?(\S+?): \\?(\S+)")

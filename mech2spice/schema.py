@@ -175,6 +175,14 @@ def _fields(value, spec: Obj, path: str) -> None:
             raise SchemaError(path, f"lists of different lengths ({told}), paired item by item")
 
 
+def check_finite(value, spec, path: str = "$", why: str = "not a finite number") -> None:
+    """`check`, then no NaN or Infinity anywhere, not even where the spec says ANY (`why` says so)."""
+    check(value, spec, path)
+    where = non_finite_path(value, path)
+    if where:
+        raise SchemaError(where, why)
+
+
 def non_finite_path(value, path: str = "$") -> str | None:
     """The path of the first NaN or Infinity anywhere in `value` (None: none): a file read with Python's
     lenient parser may hold them wherever a schema says ANY."""

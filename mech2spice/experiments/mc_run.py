@@ -21,7 +21,7 @@ from pathlib import Path
 from ..backends import progress_bar
 from ..errors import Mech2SpiceError
 from ..inputs import first_json_line, strict_json
-from ..schema import BOOL, COUNT, NUMBER, STR, Map, Opt, SchemaError, check, non_finite_path
+from ..schema import BOOL, COUNT, NUMBER, STR, Map, Opt, SchemaError, check_finite
 from . import montecarlo as mc
 
 IN_FLIGHT = 2                  # tasks submitted per worker at a time
@@ -121,10 +121,7 @@ def _record(raw: bytes, n: int, path: Path) -> dict:
         raise Mech2SpiceError(f"{path}, line {n}: damaged (not a JSON record): give another --out")
     if rec.get("type") == "sample":
         try:
-            check(rec, SAMPLE)
-            where = non_finite_path(rec)
-            if where:
-                raise SchemaError(where, "not a finite number (the tool writes null and a reason)")
+            check_finite(rec, SAMPLE, why="not a finite number (the tool writes null and a reason)")
         except SchemaError as err:
             raise Mech2SpiceError(f"{path}, line {n}: not a Monte-Carlo results record ({err.path}: {err.message}): "
                                   "give another --out") from None

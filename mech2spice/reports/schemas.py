@@ -1114,7 +1114,7 @@ def check_file(path, command: str, schema) -> None:
     """The stored JSON at `path` (if there is one) fits `schema`, or one Mech2SpiceError line names the file
     and the JSON path of the first field that does not."""
     from ..errors import Mech2SpiceError
-    from ..schema import SchemaError, check, kind_of, non_finite_path
+    from ..schema import SchemaError, check, check_finite, kind_of
     from ..studies import read_json
     _check_readable(Path(path), command)
     data = read_json(path)
@@ -1128,10 +1128,7 @@ def check_file(path, command: str, schema) -> None:
         if version != REPORT_VERSION or isinstance(version, bool):
             shown = repr(version)[:40] if isinstance(version, (int, float, str)) else kind_of(version)
             raise SchemaError(f"$.{VERSION_FIELD}", f"{shown}, not a version this tool reads ({REPORT_VERSION})")
-        check(data, schema)
-        where = non_finite_path(data)
-        if where:
-            raise SchemaError(where, "not a finite number (the study writes a non-finite figure as null)")
+        check_finite(data, schema, why="not a finite number (the study writes a non-finite figure as null)")
     except SchemaError as err:
         raise Mech2SpiceError(f"{path}: {err.path}: {err.message}; not what `{command}` writes: measure it "
                               "again (without --render)") from None

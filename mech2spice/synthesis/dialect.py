@@ -34,17 +34,12 @@ from typing import Iterator
 
 from ..errors import Mech2SpiceError
 from . import memory_guard
+from .verilog_text import blanked as blank
 
 __all__ = ["standard_text", "standard_source", "is_vis", "mirror_siblings"]
 
-_COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
 _ENUM = re.compile(r"\btypedef\s+enum\s*(?P<base>[^{;]*?)\s*\{(?P<values>[^{}]*)\}\s*(?P<name>[A-Za-z_]\w*)\s*;")
 _ND = re.compile(r"\$ND\s*\(")
-
-
-def _blanked(text: str) -> str:
-    """The text with comments and strings blanked (every character but newlines), offsets kept."""
-    return _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
 
 
 def _line(text: str, at: int) -> int:
@@ -63,7 +58,7 @@ def _enums(blanked: str) -> dict[str, re.Match]:
 
 def is_vis(text: str) -> bool:
     """Whether the text uses the VIS enum-register declaration (the dialect's detection rule)."""
-    blanked = _blanked(text)
+    blanked = blank(text)
     enums = _enums(blanked)
     return bool(enums) and _enum_register(enums).search(blanked) is not None
 
@@ -85,7 +80,7 @@ def standard_text(path, text: str) -> str:
 
 def _vis_as_standard(path, text: str) -> str:
     """`text` unchanged unless it is in the VIS dialect; `$ND` refused."""
-    blanked = _blanked(text)
+    blanked = blank(text)
     nd = _ND.search(blanked)
     if nd:
         raise Mech2SpiceError(

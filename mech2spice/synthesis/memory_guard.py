@@ -20,20 +20,15 @@ from __future__ import annotations
 
 import re
 
-from .verilog_text import statement_or_block_end
+from .verilog_text import blanked as blank, statement_or_block_end
 
 __all__ = ["guarded"]
 
-_COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
 # `reg [7:0] RAM [11:0], other [0:3];`: memories are names followed by one unpacked range.
 _DECL = re.compile(r"\b(?:reg|logic)\b(?:\s+(?:signed|unsigned))?\s*(?:\[[^\]]*\]\s*)*(?P<names>[^;]*);")
 _MEMORY = re.compile(r"(?P<name>[A-Za-z_]\w*)\s*\[(?P<a>[^\]:]+):(?P<b>[^\]]+)\]\s*(?=[,;=]|$)")
 # What may stand just before a procedural statement.
 _STATEMENT_START = re.compile(r"(?:[;:)]|\bbegin|\belse|\bend)\s*$")
-
-
-def _blanked(text: str) -> str:
-    return _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
 
 
 def _memories(blanked: str) -> dict[str, tuple[str, str]]:
@@ -89,7 +84,7 @@ def _bounds(a: str, b: str) -> tuple[str, str]:
 def guarded(text: str) -> str:
     """`text` with every procedural memory write guarded by its address range (module docstring); the
     text itself when it writes no memory at a non-literal index.  Lines are kept."""
-    blanked = _blanked(text)
+    blanked = blank(text)
     memories = _memories(blanked)
     if not memories:
         return text

@@ -42,7 +42,7 @@ import networkx as nx
 from .. import identifiers
 from ..errors import Mech2SpiceError
 from . import dialect, races, refusals, yosys
-from .verilog_text import statement_or_block_end
+from .verilog_text import blanked as _blanked, statement_or_block_end
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
@@ -167,14 +167,6 @@ def _read_source(path: Path) -> str:
         return path.read_bytes().decode("utf-8", errors="replace")
     except OSError as err:
         raise Mech2SpiceError(f"cannot read Verilog file {path}: {err.strerror or err}") from None
-
-
-_COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
-
-
-def _blanked(text: str) -> str:
-    """The source with comments and strings blanked out (lines kept), so keywords in them do not count."""
-    return _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
 
 
 # What an `initial` block may not hold: each is an event in simulated time, and a power-up value is the state

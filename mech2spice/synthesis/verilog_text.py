@@ -4,6 +4,14 @@ from __future__ import annotations
 
 import re
 
+_COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
+
+
+def blanked(text: str) -> str:
+    """The text with comments and strings blanked (every character but newlines), so keywords in them do
+    not count; offsets and lines kept."""
+    return _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
+
 
 def statement_or_block_end(text: str, at: int) -> int:
     """Where the statement starting at `at` ends: its `;` outside parentheses and begin/end, or the `end`

@@ -46,7 +46,7 @@ from ..physics import loaded, spread, steady_batch
 from ..physics.params import GateParams, Levels
 
 Z99 = 2.3263478740408408        # one-sided standard normal quantile of 99 %
-TRIMS = spread.TRIMS
+TRIMS = spread.LINEAR_TRIMS
 
 
 # --- the spread (one relative sigma, trimmed or not) and its noise matrices ---------------------------------------------------------

@@ -37,11 +37,13 @@ class ContextGate:
     input_drives: tuple[int, int]
     loads: list[tuple[int, ...]]           # output load pairs
     up_loads: list[tuple[int, ...]]        # the drivers' other load pairs
+    load_insulators: list[int] = ()        # each load pair's own insulator (loads, then up_loads): held, see `held`
 
     @property
     def block_dofs(self) -> list[int]:
-        """DOFs the spread covers: the gate's, every load pair's (output and upstream), with their links."""
-        return [*self.gate.dofs, *[d for pair in self.loads + self.up_loads for d in pair]]
+        """DOFs the spread covers: the gate's, every load pair's (output and upstream) with its links and its
+        coupling to its own insulator."""
+        return [*self.gate.dofs, *[d for pair in self.loads + self.up_loads for d in pair], *self.load_insulators]
 
     def input_groups(self) -> np.ndarray:
         """Per drive: 0 for constant drives, k for drives scaled by input level k (1, 2)."""
@@ -65,9 +67,19 @@ def build(p: GateParams, n_loads: int, up_loads: tuple[int, int] = (0, 0)) -> Co
     gate = nor.add_nor(m, p, GATE)
     for u, pair in zip(ups, gate.inputs):
         nor.connect(m, p, u, pair)
-    loads = [_pair(m, p, gate.channel, f"load{j}") for j in range(n_loads)]
+    names = [f"load{j}" for j in range(n_loads)]
+    loads = [_pair(m, p, gate.channel, name) for name in names]
+    up_names = [f"{loaded.INPUTS[k]}.load{j}" for k in (0, 1) for j in range(up_loads[k])]
     extra = [_pair(m, p, ups[k], f"{loaded.INPUTS[k]}.load{j}") for k in (0, 1) for j in range(up_loads[k])]
-    return ContextGate(m, gate, tuple(ups), tuple(drives), loads, extra)
+    # the loads' own insulators last, so that `held` drops them by truncation (the pairs keep their indices)
+    ins = b.dof(b.slow_dofs[0])
+    gam = pair_gammas(p)
+    insulators = []
+    for name, pair in zip(names + up_names, loads + extra):
+        insulators.append(m.add_dof(f"{name}.{ins.name}", ins.m, ins.k, ins.c, slow=True))
+        for dof, g in zip(pair, gam):
+            m.add_quad(dof, insulators[-1], g)
+    return ContextGate(m, gate, tuple(ups), tuple(drives), loads, extra, insulators)
 
 
 def _pair(m: MechModel, p: GateParams, channel: int, name: str) -> tuple[int, ...]:
@@ -86,16 +98,20 @@ def pair_gammas(p: GateParams) -> np.ndarray:
 
 
 def held(cg: ContextGate, model: MechModel, s_loads, s_up=0.0) -> MechModel:
-    """A copy of `model` (cg.model or a spread copy) with each output load pair's oscillators detuned by
-    2 gamma s_j (s_loads: one position per load, or one for all) and the drivers' other loads by s_up."""
+    """A copy of `model` (cg.model or a spread copy) with each output load's insulator held at s_j (s_loads: one
+    position per load, or one for all) and the drivers' other loads' at s_up: each pair oscillator detuned by
+    2 gamma s_j with its own (spread) gamma, the held insulators then dropped from the model."""
     from .spread import _copy
-    gam = pair_gammas(model.params)
+    gamma = {f: g for f, _, g in model.quads}
     k = np.array(model.k_total, float)
     for pairs, s in ((cg.loads, s_loads), (cg.up_loads, s_up)):
         s = np.broadcast_to(np.asarray(s, float), (len(pairs),))
         for pair, sj in zip(pairs, s):
-            k[list(pair)] += 2 * gam * sj
-    return _copy(model, k_total=list(k))
+            for d in pair:
+                k[d] += 2 * gamma[d] * sj
+    n = model.n - len(cg.load_insulators)
+    return _copy(model, names=model.names[:n], slow=model.slow[:n], mass=model.mass[:n], k_total=list(k[:n]),
+                 c_total=list(model.c_total[:n]), quads=[q for q in model.quads if q[1] < n])
 
 
 def insulator_positions(p: GateParams) -> dict[tuple[int, int], float]:

@@ -30,7 +30,8 @@ from ..errors import Mech2SpiceError
 from .model import Drive, MechModel
 
 PER_DOF = ("k", "m", "c")
-TRIMS = ("none", "f", "fc")    # nothing; total k/m; total k/m and c/m
+TRIMS = ("none", "f", "fc", "fcb")   # nothing; total k/m; total k/m and c/m; fc plus each input pair's balance
+LINEAR_TRIMS = ("none", "f", "fc")   # the trims trim_map linearises (design centering's)
 
 
 @dataclass(frozen=True)
@@ -109,7 +110,7 @@ def check_trim(mode: str, residual: float) -> None:
     if isinstance(residual, bool) or not isinstance(residual, (int, float)) or not 0 <= residual < 1:
         raise Mech2SpiceError(f"trim residual must be a number in [0, 1), got {residual!r}")
     if mode == "none" and residual:
-        raise Mech2SpiceError("a trim residual needs a trim (f or fc)")
+        raise Mech2SpiceError("a trim residual needs a trim (f, fc or fcb)")
 
 
 def trim_rng(seed: int, index: int) -> np.random.Generator:
@@ -129,8 +130,10 @@ def trimmed(model: MechModel, nominal: MechModel, elems: list[Element], mode: st
     nominal times (1 + residual z), with "fc" its total c likewise for c/m.  Totals minus the (spread)
     couplings are the local parts, so this sets the local spring and dashpot, as a trim would.
 
-    Draws 2 x len(trimmed DOFs) normals from rng (k row, then c row) whatever the mode, so "f" and "fc"
-    share their k residuals."""
+    "fcb" is "fc" with each input pair balanced (`balanced`).
+
+    Draws 2 x len(trimmed DOFs) normals from rng (k row, then c row) whatever the mode, so "f", "fc" and
+    "fcb" share their k residuals ("fcb" draws its pairs' residuals after them)."""
     check_trim(mode, residual)
     if mode == "none":
         return model
@@ -140,9 +143,111 @@ def trimmed(model: MechModel, nominal: MechModel, elems: list[Element], mode: st
     k = np.array(model.k_total, float)
     k[dofs] = m * np.asarray(nominal.k_total, float)[dofs] / m0 * (1 + residual * z[0])
     c = np.array(model.c_total, float)
-    if mode == "fc":
+    if mode in ("fc", "fcb"):
         c[dofs] = m * np.asarray(nominal.c_total, float)[dofs] / m0 * (1 + residual * z[1])
-    return _copy(model, k_total=list(k), c_total=list(c))
+    out = _copy(model, k_total=list(k), c_total=list(c))
+    if mode == "fcb":
+        out = balanced(out, nominal, set(dofs), residual, rng, k_target=k)
+    return out
+
+
+# --- the input pairs' balance (trim "fcb", issue #36) ------------------------------------------------
+@dataclass(frozen=True)
+class InputPair:
+    """One gate input: its spring-linked and dashpot-linked oscillators and their links' indices."""
+    channel: int
+    spring_dof: int
+    dashpot_dof: int
+    spring: int       # index into model.springs
+    dashpot: int      # index into model.dashpots
+
+
+def input_pairs(model: MechModel) -> list[InputPair]:
+    """Every gate input of `model` linked by one spring and one dashpot from the same channel (the classic
+    input pair), found by the structure's DOF names (prefix.G1s / prefix.G1d)."""
+    p = model.params
+    if p is None:
+        return []
+    pins = [tuple(a.dof for a in pin) for pin in p.structure.inputs]
+    kinds = [tuple(a.link for a in pin) for pin in p.structure.inputs]
+    spring_of = {j: (e, i) for e, (i, j, _) in enumerate(model.springs)}
+    dashpot_of = {j: (e, i) for e, (i, j, _) in enumerate(model.dashpots)}
+    index = {name: i for i, name in enumerate(model.names)}
+    out = []
+    for pin, kind in zip(pins, kinds):
+        if sorted(kind) != ["dashpot", "spring"]:
+            continue
+        s_name, d_name = (pin if kind[0] == "spring" else pin[::-1])
+        for name, i in index.items():
+            prefix, _, local = name.rpartition(".")
+            if local != s_name or f"{prefix}.{d_name}" not in index:
+                continue
+            d = index[f"{prefix}.{d_name}"]
+            if i in spring_of and d in dashpot_of and spring_of[i][1] == dashpot_of[d][1]:
+                out.append(InputPair(spring_of[i][1], i, d, spring_of[i][0], dashpot_of[d][0]))
+    return out
+
+
+def balanced(model: MechModel, nominal: MechModel, trimmed_set: set[int], residual: float,
+             rng: np.random.Generator, k_target: np.ndarray) -> MechModel:
+    """`model` (spread and fc-trimmed) with every input pair balanced, so that the pair's two back-actions on
+    the channel that drives it cancel at the detuning its own gate's insulator gives it (docs/design.md,
+    "The balance trim"):
+      * each pair oscillator's k/m is trimmed with its insulator held at s_t, the block's position with both
+        inputs '0' (where a load's insulator sits when it fails its driver), not at rest: its total k is
+        m (k0 + 2 gamma0 s_t) / m0 (1 + residual z) - 2 gamma s_t, gamma its own (spread) coupling;
+      * the spring link is trimmed so that k_link^2 / m_s = (omega c_link)^2 / m_d as in the nominal pair
+        (times 1 + residual z'), through the link's own beam; the two oscillators' totals stay trimmed.
+    Each pair draws one normal from rng for its link, in pair order."""
+    pairs = input_pairs(nominal)
+    if not pairs:
+        raise Mech2SpiceError("trim fcb balances input pairs linked by one spring and one dashpot; "
+                              "this model has none")
+    s_t = balance_point(nominal.params)
+    gamma, gamma0 = _pair_gammas(model, nominal)
+    m, m0 = np.asarray(model.mass, float), np.asarray(nominal.mass, float)
+    k = np.array(k_target, float)
+    k0 = np.asarray(nominal.k_total, float)
+    z_link = rng.standard_normal(len(pairs))
+    springs = list(model.springs)
+    w = model.omega
+    for pair, zl in zip(pairs, z_link):
+        for d in (pair.spring_dof, pair.dashpot_dof):
+            if d in trimmed_set:
+                error = k[d] * m0[d] / (m[d] * k0[d])            # the fc trim's residual, 1 + residual z
+                k[d] = error * m[d] * (k0[d] + 2 * gamma0[d] * s_t) / m0[d] - 2 * gamma[d] * s_t
+        i, j, k_link0 = nominal.springs[pair.spring]
+        c_link0 = nominal.dashpots[pair.dashpot][2]
+        ratio0 = k_link0 * np.sqrt(m0[pair.dashpot_dof] / m0[pair.spring_dof]) / (w * c_link0)
+        c_link = model.dashpots[pair.dashpot][2]
+        k_link = ratio0 * w * c_link * np.sqrt(m[pair.spring_dof] / m[pair.dashpot_dof]) * (1 + residual * zl)
+        springs[pair.spring] = (i, j, k_link)
+    return _copy(model, k_total=list(k), springs=springs)
+
+
+def _pair_gammas(model: MechModel, nominal: MechModel) -> tuple[np.ndarray, np.ndarray]:
+    """Per DOF: its coupling to an insulator in `model` and in `nominal` (0 where it has none)."""
+    out = []
+    for m in (model, nominal):
+        g = np.zeros(m.n)
+        for f, _, v in m.quads:
+            g[f] = v
+        out.append(g)
+    return out[0], out[1]
+
+
+_BALANCE_POINT: dict[str, float] = {}
+
+
+def balance_point(p) -> float:
+    """The block's insulator position with both inputs at nominal '0' (context.insulator_positions[(0, 0)]):
+    where each input pair is balanced by trim fcb (cached per block)."""
+    from .context import insulator_positions
+    from .loaded import digest
+    key = digest(p)
+    if key not in _BALANCE_POINT:
+        _BALANCE_POINT[key] = insulator_positions(p)[(0, 0)]
+    return _BALANCE_POINT[key]
 
 
 def check_drift(rel: float) -> None:
@@ -175,6 +280,8 @@ def trim_map(model: MechModel, elems: list[Element], mode: str) -> np.ndarray:
     element (of c/m): there the local part is what the trim leaves,
         t_k = (K (u_k + u_m) - sum of the DOF's spread springs k_s u_s) / k_local,  likewise c."""
     check_trim(mode, 0.0)
+    if mode not in LINEAR_TRIMS:
+        raise Mech2SpiceError(f"trim {mode!r} is not linearised (design centering takes {', '.join(LINEAR_TRIMS)})")
     n = len(elems)
     J = np.eye(n)
     if mode == "none":
@@ -209,6 +316,8 @@ def sigmas(elems: list[Element], model: MechModel, spread: float, trim: str = "n
     "fc", c) element, `spread` everywhere else.  A margin with gradient g in t has, linearised, the
     standard deviation ||sigmas * (J^T g)||."""
     check_trim(trim, residual)
+    if trim not in LINEAR_TRIMS:
+        raise Mech2SpiceError(f"trim {trim!r} is not linearised (design centering takes {', '.join(LINEAR_TRIMS)})")
     out = np.full(len(elems), float(spread))
     dofs = set(trimmed_dofs(model, elems)) if trim != "none" else set()
     own = {"k"} | ({"c"} if trim == "fc" else set())

@@ -53,7 +53,8 @@ class Sampler:
 
     def finished(self, nominal, elems, model, i: int):
         """Sample i's spread `model` trimmed (its own residual draws) and drifted, as in service."""
-        model = spread.trimmed(model, nominal, elems, self.trim, self.residual, spread.trim_rng(self.seed, i))
+        model = spread.trimmed(model, nominal, elems, self.trim, self.residual, spread.trim_rng(self.seed, i),
+                                params=self.p)
         return spread.drifted(model, self.drift)
 
     def margins(self, model) -> np.ndarray:

@@ -20,7 +20,9 @@ def add_trim_arguments(parser) -> None:
     parser.add_argument("--trim", choices=spread.TRIMS, default=None,
                         help="after the spread, trim each oscillator back to nominal: f = its total k/m, fc = "
                              "k/m and c/m (through its own spring and dashpot; couplings, gammas, drives and "
-                             "insulators keep their spread); default none (docs/robustness.md)")
+                             "insulators keep their spread); fcb = fc with each input pair balanced (its two "
+                             "oscillators trimmed with their insulator held at both-inputs-'0', its spring link "
+                             "matched to its dashpot link); default none (docs/robustness.md, docs/design.md)")
     parser.add_argument("--trim-residual", type=inputs.number(0, 1, lo_open=False), default=None, metavar="SIGMA",
                         help="relative Gaussian error left on each trimmed quantity (default 0: exact)")
     parser.add_argument("--drift", type=inputs.number(-1, 1), default=None, metavar="REL",
@@ -37,7 +39,7 @@ def trim_from_args(args, spread_given: bool = True) -> tuple[str, float, float]:
     residual = 0.0 if args.trim_residual is None else args.trim_residual
     drift = 0.0 if args.drift is None else args.drift
     if residual and mode == "none":
-        raise Mech2SpiceError("--trim-residual needs --trim f or fc")
+        raise Mech2SpiceError("--trim-residual needs --trim f, fc or fcb")
     if not residual < 1:
         raise Mech2SpiceError(f"--trim-residual must be below 1, got {residual:g}")
     if not -1 < drift < 1:

@@ -125,12 +125,13 @@ def trimmed_dofs(model: MechModel, elems: list[Element]) -> list[int]:
 
 
 def trimmed(model: MechModel, nominal: MechModel, elems: list[Element], mode: str, residual: float,
-            rng: np.random.Generator) -> MechModel:
+            rng: np.random.Generator, params=None) -> MechModel:
     """`model` (a spread copy of `nominal`) after trimming: each trimmed DOF's total k set so that k/m is
     nominal times (1 + residual z), with "fc" its total c likewise for c/m.  Totals minus the (spread)
     couplings are the local parts, so this sets the local spring and dashpot, as a trim would.
 
-    "fcb" is "fc" with each input pair balanced (`balanced`).
+    "fcb" is "fc" with each input pair balanced (`balanced`; `params`: the block, where nominal.params is
+    not set).
 
     Draws 2 x len(trimmed DOFs) normals from rng (k row, then c row) whatever the mode, so "f", "fc" and
     "fcb" share their k residuals ("fcb" draws its pairs' residuals after them)."""
@@ -147,7 +148,7 @@ def trimmed(model: MechModel, nominal: MechModel, elems: list[Element], mode: st
         c[dofs] = m * np.asarray(nominal.c_total, float)[dofs] / m0 * (1 + residual * z[1])
     out = _copy(model, k_total=list(k), c_total=list(c))
     if mode == "fcb":
-        out = balanced(out, nominal, set(dofs), residual, rng, k_target=k)
+        out = balanced(out, nominal, set(dofs), residual, rng, k_target=k, params=params)
     return out
 
 
@@ -162,10 +163,11 @@ class InputPair:
     dashpot: int      # index into model.dashpots
 
 
-def input_pairs(model: MechModel) -> list[InputPair]:
+def input_pairs(model: MechModel, params=None) -> list[InputPair]:
     """Every gate input of `model` linked by one spring and one dashpot from the same channel (the classic
-    input pair), found by the structure's DOF names (prefix.G1s / prefix.G1d)."""
-    p = model.params
+    input pair), found by the structure's DOF names (prefix.G1s / prefix.G1d) of `params` (default
+    model.params)."""
+    p = params or model.params
     if p is None:
         return []
     pins = [tuple(a.dof for a in pin) for pin in p.structure.inputs]
@@ -189,7 +191,7 @@ def input_pairs(model: MechModel) -> list[InputPair]:
 
 
 def balanced(model: MechModel, nominal: MechModel, trimmed_set: set[int], residual: float,
-             rng: np.random.Generator, k_target: np.ndarray) -> MechModel:
+             rng: np.random.Generator, k_target: np.ndarray, params=None) -> MechModel:
     """`model` (spread and fc-trimmed) with every input pair balanced, so that the pair's two back-actions on
     the channel that drives it cancel at the detuning its own gate's insulator gives it (docs/design.md,
     "The balance trim"):
@@ -199,11 +201,12 @@ def balanced(model: MechModel, nominal: MechModel, trimmed_set: set[int], residu
       * the spring link is trimmed so that k_link^2 / m_s = (omega c_link)^2 / m_d as in the nominal pair
         (times 1 + residual z'), through the link's own beam; the two oscillators' totals stay trimmed.
     Each pair draws one normal from rng for its link, in pair order."""
-    pairs = input_pairs(nominal)
+    p = params or nominal.params
+    pairs = input_pairs(nominal, p)
     if not pairs:
         raise Mech2SpiceError("trim fcb balances input pairs linked by one spring and one dashpot; "
                               "this model has none")
-    s_t = balance_point(nominal.params)
+    s_t = balance_point(p)
     gamma, gamma0 = _pair_gammas(model, nominal)
     m, m0 = np.asarray(model.mass, float), np.asarray(nominal.mass, float)
     k = np.array(k_target, float)

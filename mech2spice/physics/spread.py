@@ -192,40 +192,49 @@ def input_pairs(model: MechModel, params=None) -> list[InputPair]:
 
 def balanced(model: MechModel, nominal: MechModel, trimmed_set: set[int], residual: float,
              rng: np.random.Generator, k_target: np.ndarray, params=None) -> MechModel:
-    """`model` (spread and fc-trimmed) with every input pair balanced, so that the pair's two back-actions on
-    the channel that drives it cancel at the detuning its own gate's insulator gives it (docs/design.md,
-    "The balance trim"):
+    """`model` (spread and fc-trimmed to totals `k_target`) with every input pair balanced, so that the pair's
+    two back-actions on the channel that drives it cancel at the detuning its own gate's insulator gives it
+    (docs/robustness.md, "The balance trim"):
       * each pair oscillator's k/m is trimmed with its insulator held at s_t, the block's position with both
-        inputs '0' (where a load's insulator sits when it fails its driver), not at rest: its total k is
-        m (k0 + 2 gamma0 s_t) / m0 (1 + residual z) - 2 gamma s_t, gamma its own (spread) coupling;
+        inputs '0' (where a load's insulator sits when it fails its driver), not at rest (`_detuned_totals`);
       * the spring link is trimmed so that k_link^2 / m_s = (omega c_link)^2 / m_d as in the nominal pair
-        (times 1 + residual z'), through the link's own beam; the two oscillators' totals stay trimmed.
+        (`_matched_springs`), through the link's own beam; the two oscillators' totals stay trimmed.
     Each pair draws one normal from rng for its link, in pair order."""
     p = params or nominal.params
     pairs = input_pairs(nominal, p)
     if not pairs:
         raise Mech2SpiceError("trim fcb balances input pairs linked by one spring and one dashpot; "
                               "this model has none")
-    s_t = balance_point(p)
+    z_link = rng.standard_normal(len(pairs))
+    k = _detuned_totals(model, nominal, pairs, trimmed_set, k_target, balance_point(p))
+    return _copy(model, k_total=list(k), springs=_matched_springs(model, nominal, pairs, residual * z_link))
+
+
+def _detuned_totals(model, nominal, pairs, trimmed_set, k_target, s_t) -> np.ndarray:
+    """k_target with each trimmed pair oscillator's total k set so that (k + 2 gamma s_t) / m is nominal's,
+    gamma its own coupling to its insulator, keeping the fc trim's residual (k_target = m k0 / m0 (1 + r))."""
     gamma, gamma0 = _pair_gammas(model, nominal)
     m, m0 = np.asarray(model.mass, float), np.asarray(nominal.mass, float)
-    k = np.array(k_target, float)
     k0 = np.asarray(nominal.k_total, float)
-    z_link = rng.standard_normal(len(pairs))
+    k = np.array(k_target, float)
+    for d in {d for q in pairs for d in (q.spring_dof, q.dashpot_dof)} & trimmed_set:
+        error = k[d] * m0[d] / (m[d] * k0[d])            # the fc trim's 1 + residual z
+        k[d] = error * m[d] * (k0[d] + 2 * gamma0[d] * s_t) / m0[d] - 2 * gamma[d] * s_t
+    return k
+
+
+def _matched_springs(model, nominal, pairs, errors) -> list:
+    """model.springs with each pair's spring link set to omega c_link sqrt(m_s / m_d) times nominal's ratio
+    (1 for the classic block) times (1 + error): the two branches' reactions k_l^2 / (m_s z) and
+    (omega c_l)^2 / (m_d z) then cancel wherever the two oscillators' z = Z / m agree."""
+    m, m0, w = np.asarray(model.mass, float), np.asarray(nominal.mass, float), model.omega
     springs = list(model.springs)
-    w = model.omega
-    for pair, zl in zip(pairs, z_link):
-        for d in (pair.spring_dof, pair.dashpot_dof):
-            if d in trimmed_set:
-                error = k[d] * m0[d] / (m[d] * k0[d])            # the fc trim's residual, 1 + residual z
-                k[d] = error * m[d] * (k0[d] + 2 * gamma0[d] * s_t) / m0[d] - 2 * gamma[d] * s_t
-        i, j, k_link0 = nominal.springs[pair.spring]
-        c_link0 = nominal.dashpots[pair.dashpot][2]
-        ratio0 = k_link0 * np.sqrt(m0[pair.dashpot_dof] / m0[pair.spring_dof]) / (w * c_link0)
-        c_link = model.dashpots[pair.dashpot][2]
-        k_link = ratio0 * w * c_link * np.sqrt(m[pair.spring_dof] / m[pair.dashpot_dof]) * (1 + residual * zl)
-        springs[pair.spring] = (i, j, k_link)
-    return _copy(model, k_total=list(k), springs=springs)
+    for q, err in zip(pairs, errors):
+        i, j, k_link0 = nominal.springs[q.spring]
+        ratio0 = k_link0 * np.sqrt(m0[q.dashpot_dof] / m0[q.spring_dof]) / (w * nominal.dashpots[q.dashpot][2])
+        c_link = model.dashpots[q.dashpot][2]
+        springs[q.spring] = (i, j, ratio0 * w * c_link * np.sqrt(m[q.spring_dof] / m[q.dashpot_dof]) * (1 + err))
+    return springs
 
 
 def _pair_gammas(model: MechModel, nominal: MechModel) -> tuple[np.ndarray, np.ndarray]:

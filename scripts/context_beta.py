@@ -1,7 +1,10 @@
 """The gate in its network context (physics/context.py) under spread: margin distribution and beta per fan-out.
 
     python scripts/context_beta.py [--params centered_fc2] [--spread 0.01] [--trim fc] [--trim-residual 1e-4]
-        [--samples 40] [--seed 7] [--per-band 6] --config N:U ...
+        [--samples 40] [--seed 7] [--per-band 6] [--without KIND ...] --config N:U ...
+
+`--without KIND ...` leaves those element kinds (k, m, c, spring, dashpot, gamma, drive) unspread: run once per
+kind, it says which kind's spread the failures and the margins' spread come from.
 
 Each --config N:U is a gate with N output load pairs and U other load pairs on each of its two drivers.  Every
 sample spreads the gate's, the loads' and the links' elements (experiments/montecarlo.SpreadSpec: the draws of
@@ -66,11 +69,14 @@ def main():
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--per-band", type=int, default=6)
     ap.add_argument("--config", nargs="+", default=["1:0", "4:3", "12:11"])
+    ap.add_argument("--without", nargs="*", default=[], choices=mc.KINDS, metavar="KIND")
     a = ap.parse_args()
     p = load_params(a.params)
-    spec = mc.spec_of({"local": a.spread, "trim": a.trim, "trim_residual": a.trim_residual})
+    local = {"*": a.spread, **{kind: 0.0 for kind in a.without}}
+    spec = mc.spec_of({"local": local, "trim": a.trim, "trim_residual": a.trim_residual})
     tab = context.insulator_positions(p)
-    print(json.dumps({"params": a.params, "spread": a.spread, "trim": a.trim, "trim_residual": a.trim_residual,
+    print(json.dumps({"params": a.params, "spread": a.spread, "without": a.without, "trim": a.trim,
+                      "trim_residual": a.trim_residual,
                       "insulator_positions": {f"{k[0]}{k[1]}": v for k, v in tab.items()}}), flush=True)
     for c in a.config:
         n, u = map(int, c.split(":"))

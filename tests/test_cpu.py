@@ -368,3 +368,15 @@ def test_processor_step_within_a_faster_blocks_bound():
     equals the ISS."""
     res = run_program(PROGRAMS / "sieve.asm", "envelope", 1, p=load_params("centered2"))
     assert res["step"] == 4.0 and res["cycles"] == 1 and res["iss_check"]["mismatches"] == 0
+
+
+def test_register_map_refuses_a_latch_with_a_set_or_reset(tmp_path):
+    """The processor's state is read from D latches fed by next_<reg> nets; an asynchronously reset register
+    (a latch with a forcing input) is one clear refusal, not an unpacking error."""
+    from mech2spice import Mech2SpiceError
+    from mech2spice.synthesis import synth
+    src = tmp_path / "r.v"
+    src.write_text("module r(input clk, input rst, input d, output reg q);\n"
+                   "  always @(posedge clk or posedge rst) if (rst) q <= 1'b0; else q <= d;\nendmodule\n")
+    with pytest.raises(Mech2SpiceError, match="set/reset"):
+        register_map(synth.synthesize(str(src)))

@@ -22,7 +22,11 @@ def register_map(netlist) -> dict[str, tuple[str, int]]:
     g = netlist.graph
     out = {}
     for q in netlist.latches():
-        (src,) = g.predecessors(q)
+        pins = {g.edges[src, q].get("pin", "D"): src for src in g.predecessors(q)}
+        if set(pins) != {"D"}:
+            raise Mech2SpiceError(f"latch {q} has a set/reset input ({', '.join(sorted(set(pins) - {'D'}))}); "
+                                  "the processor's state is read from plain D latches")
+        src = pins["D"]
         net = str(g.nodes[src].get("net", ""))
         name, _, idx = net.partition("[")
         if not name.startswith("next_"):

@@ -4,7 +4,9 @@
         [--samples 40] [--seed 7] [--per-band 6] [--without KIND ...] --config N:U ...
 
 `--without KIND ...` leaves those element kinds (k, m, c, spring, dashpot, gamma, drive) unspread: run once per
-kind, it says which kind's spread the failures and the margins' spread come from.
+kind, it says which kind's spread the failures and the margins' spread come from.  `--limits` adds, per config,
+each failing draw's margin with one kind at a time left unspread (`limits`: draw -> kind -> margin): a kind whose
+removal gives a positive margin is one that draw fails by.
 
 Each --config N:U is a gate with N output load pairs and U other load pairs on each of its two drivers.  Every
 sample spreads the gate's, the loads' and the links' elements (experiments/montecarlo.SpreadSpec: the draws of
@@ -22,6 +24,7 @@ import argparse
 import json
 import os
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -39,7 +42,20 @@ def beta_failures(fails: int, n: int) -> dict:
     return {"beta_failures": z(fails / n), "beta_failures_ci95": [z(hi), z(lo)]}
 
 
-def one_config(p, spec, tab, n, u, samples, seed, per_band):
+def limits(cg, elems, held, spec, failing, seed, per_band) -> dict:
+    """Per failing draw: its margin with each element kind left unspread in turn (the rest as in `spec`)."""
+    out = {}
+    for i in failing:
+        row = {}
+        for kind in mc.KINDS:
+            one = replace(spec, local={**spec.local, kind: 0.0})
+            sm, _ = one.sample(cg.model, elems, seed, i)
+            row[kind] = round(float(context.margins(cg, held(sm, 0) + held(sm, 1), per_band).min()), 4)
+        out[str(i)] = row
+    return out
+
+
+def one_config(p, spec, tab, n, u, samples, seed, per_band, with_limits=False):
     cg = context.build(p, n, (u, u))
     elems = spread.elements(cg.model, cg.block_dofs)
     held = lambda model, other: [context.held(cg, model, tab[(o, other)], tab[(1, other)]) for o in (0, 1)]
@@ -50,13 +66,15 @@ def one_config(p, spec, tab, n, u, samples, seed, per_band):
         m[i] = context.margins(cg, held(sm, 0) + held(sm, 1), per_band)
     worst = m.min(axis=1)
     fails = int((worst < 0).sum())
+    extra = {"limits": limits(cg, elems, held, spec, np.flatnonzero(worst < 0).tolist(), seed, per_band)} \
+        if with_limits else {}
     ok = worst[worst > -0.5]               # a lost or jumped state (-1 or far below) is no Gaussian tail
     return {"loads": n, "driver_loads": u, "nominal_margin": nominal, "samples": samples, "failures": fails,
             "fail_ci95": list(wilson(fails, samples)), "mean": float(worst.mean()), "std": float(worst.std(ddof=1)),
             "beta_gaussian": float(ok.mean() / ok.std(ddof=1)) if ok.size > 2 else None,
             **beta_failures(fails, samples),
             "failures_other0": int((m[:, 0] < 0).sum()), "failures_other1": int((m[:, 1] < 0).sum()),
-            "elements": len(elems)}
+            "elements": len(elems), **extra}
 
 
 def main():
@@ -70,6 +88,7 @@ def main():
     ap.add_argument("--per-band", type=int, default=6)
     ap.add_argument("--config", nargs="+", default=["1:0", "4:3", "12:11"])
     ap.add_argument("--without", nargs="*", default=[], choices=mc.KINDS, metavar="KIND")
+    ap.add_argument("--limits", action="store_true")
     a = ap.parse_args()
     p = load_params(a.params)
     local = {"*": a.spread, **{kind: 0.0 for kind in a.without}}
@@ -81,7 +100,7 @@ def main():
     for c in a.config:
         n, u = map(int, c.split(":"))
         t0 = time.process_time()
-        rec = one_config(p, spec, tab, n, u, a.samples, a.seed, a.per_band)
+        rec = one_config(p, spec, tab, n, u, a.samples, a.seed, a.per_band, a.limits)
         rec.update(cpu_s=round(time.process_time() - t0, 1), load_avg=os.getloadavg()[0])
         print(json.dumps(rec), flush=True)
 

@@ -6,7 +6,8 @@
 `--without KIND ...` leaves those element kinds (k, m, c, spring, dashpot, gamma, drive) unspread: run once per
 kind, it says which kind's spread the failures and the margins' spread come from.  `--limits` adds, per config,
 each failing draw's margin with one kind at a time left unspread (`limits`: draw -> kind -> margin): a kind whose
-removal gives a positive margin is one that draw fails by.
+removal gives a positive margin is one that draw fails by.  `--balance-point S`: trim fcb balances the pairs at
+insulator position S instead of the block's s(0,0) (the choice of s(0,0), measured).
 
 Each --config N:U is a gate with N output load pairs and U other load pairs on each of its two drivers.  Every
 sample spreads the gate's, the loads' and the links' elements (experiments/montecarlo.SpreadSpec: the draws of
@@ -89,12 +90,17 @@ def main():
     ap.add_argument("--config", nargs="+", default=["1:0", "4:3", "12:11"])
     ap.add_argument("--without", nargs="*", default=[], choices=mc.KINDS, metavar="KIND")
     ap.add_argument("--limits", action="store_true")
+    ap.add_argument("--balance-point", type=float, default=None)
     a = ap.parse_args()
     p = load_params(a.params)
+    if a.balance_point is not None:
+        from mech2spice.physics.loaded import digest
+        spread._BALANCE_POINT[digest(p)] = a.balance_point
     local = {"*": a.spread, **{kind: 0.0 for kind in a.without}}
     spec = mc.spec_of({"local": local, "trim": a.trim, "trim_residual": a.trim_residual})
     tab = context.insulator_positions(p)
     print(json.dumps({"params": a.params, "spread": a.spread, "without": a.without, "trim": a.trim,
+                      "balance_point": spread.balance_point(p) if a.trim == "fcb" else None,
                       "trim_residual": a.trim_residual,
                       "insulator_positions": {f"{k[0]}{k[1]}": v for k, v in tab.items()}}), flush=True)
     for c in a.config:

@@ -95,12 +95,12 @@ def main():
     p = load_params(a.params)
     if a.balance_point is not None:
         from mech2spice.physics.loaded import digest
-        spread._BALANCE_POINT[digest(p)] = a.balance_point
+        context._BALANCE_POINT[digest(p)] = a.balance_point
     local = {"*": a.spread, **{kind: 0.0 for kind in a.without}}
     spec = mc.spec_of({"local": local, "trim": a.trim, "trim_residual": a.trim_residual})
     tab = context.insulator_positions(p)
     print(json.dumps({"params": a.params, "spread": a.spread, "without": a.without, "trim": a.trim,
-                      "balance_point": spread.balance_point(p) if a.trim == "fcb" else None,
+                      "balance_point": context.balance_point(p) if a.trim == "fcb" else None,
                       "trim_residual": a.trim_residual,
                       "insulator_positions": {f"{k[0]}{k[1]}": v for k, v in tab.items()}}), flush=True)
     for c in a.config:

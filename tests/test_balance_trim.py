@@ -38,7 +38,8 @@ def network():
 
 def test_fcb_leaves_the_nominal_design_as_it_is(network):
     cg, elems = network
-    out = spread.trimmed(cg.model, cg.model, elems, "fcb", 0.0, np.random.default_rng(0))
+    out = spread.trimmed(cg.model, cg.model, elems, "fcb", 0.0, np.random.default_rng(0),
+                         balance_point=context.balance_point(P))
     assert out.k_total == cg.model.k_total and out.springs == cg.model.springs and out.c_total == cg.model.c_total
 
 
@@ -58,7 +59,7 @@ def test_fcb_cancels_each_pairs_back_action_at_the_balance_point(network):
     (no residual) the reaction at the balance point s(0,0) is zero to rounding, and at rest it is smaller than
     fc's at s(0,0)."""
     cg, elems = network
-    s_t = spread.balance_point(P)
+    s_t = context.balance_point(P)
     nominal = abs(P.k_couple ** 2 / (P.structure.dof("G1s").k + 2 * context.pair_gammas(P)[0] * s_t
                                       - P.structure.dof("G1s").m * P.omega ** 2))
     fc, fcb = _sample(cg.model, elems, "fc"), _sample(cg.model, elems, "fcb")

@@ -38,7 +38,7 @@ from .. import simulation
 from ..backends import engine_class, logic, make_engine
 from ..errors import DivergenceError
 from ..errors import Mech2SpiceError
-from ..physics import network, spread
+from ..physics import context, network, spread
 from ..physics.noise import check_temperature
 from ..physics.params import GateParams
 from ..physics.stimulus import Stimulus
@@ -76,7 +76,8 @@ class SpreadSpec:
         """Sample `index` of `nominal`: spread, trimmed, drifted; and the factor of every element."""
         f = self.factors(elems, seed, index)
         model = spread.scaled(nominal, elems, f)
-        model = spread.trimmed(model, nominal, elems, self.trim, self.trim_residual, spread.trim_rng(seed, index))
+        model = spread.trimmed(model, nominal, elems, self.trim, self.trim_residual, spread.trim_rng(seed, index),
+                               balance_point=context.balance_point(nominal.params) if self.trim == "fcb" else None)
         return spread.drifted(model, self.drift), f
 
     def factors(self, elems: list, seed: int, index: int) -> np.ndarray:

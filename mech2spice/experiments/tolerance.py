@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from ..errors import Mech2SpiceError
-from ..physics import loaded, spread, steady_batch
+from ..physics import context, loaded, spread, steady_batch
 from ..physics.loaded import band_margin, input_grid, point_margins
 from ..physics.params import GateParams
 
@@ -54,7 +54,7 @@ class Sampler:
     def finished(self, nominal, elems, model, i: int):
         """Sample i's spread `model` trimmed (its own residual draws) and drifted, as in service."""
         model = spread.trimmed(model, nominal, elems, self.trim, self.residual, spread.trim_rng(self.seed, i),
-                                params=self.p)
+                               params=self.p, balance_point=context.balance_point(self.p) if self.trim == "fcb" else None)
         return spread.drifted(model, self.drift)
 
     def margins(self, model) -> np.ndarray:

@@ -131,6 +131,18 @@ def insulator_positions(p: GateParams) -> dict[tuple[int, int], float]:
     return out
 
 
+_BALANCE_POINT: dict[str, float] = {}
+
+
+def balance_point(p: GateParams) -> float:
+    """The block's insulator position with both inputs at nominal '0' (insulator_positions[(0, 0)]): where
+    trim fcb balances each input pair (physics/spread.balanced; cached per block)."""
+    key = loaded.digest(p)
+    if key not in _BALANCE_POINT:
+        _BALANCE_POINT[key] = insulator_positions(p)[(0, 0)]
+    return _BALANCE_POINT[key]
+
+
 def reduced(cg: ContextGate, model: MechModel) -> MechModel:
     """`model` (cg.model or a spread, held copy) with every load pair eliminated: held, a pair is linear, so
     at the drive frequency it adds -Z_cp Z_pp^-1 Z_pc to the impedance of the channel it hangs on (a stiffness

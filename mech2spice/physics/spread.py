@@ -125,13 +125,13 @@ def trimmed_dofs(model: MechModel, elems: list[Element]) -> list[int]:
 
 
 def trimmed(model: MechModel, nominal: MechModel, elems: list[Element], mode: str, residual: float,
-            rng: np.random.Generator, params=None) -> MechModel:
+            rng: np.random.Generator, params=None, balance_point: float | None = None) -> MechModel:
     """`model` (a spread copy of `nominal`) after trimming: each trimmed DOF's total k set so that k/m is
     nominal times (1 + residual z), with "fc" its total c likewise for c/m.  Totals minus the (spread)
     couplings are the local parts, so this sets the local spring and dashpot, as a trim would.
 
-    "fcb" is "fc" with each input pair balanced (`balanced`; `params`: the block, where nominal.params is
-    not set).
+    "fcb" is "fc" with each input pair balanced at insulator position `balance_point` (`balanced`;
+    physics/context.balance_point gives the block's; `params`: the block, where nominal.params is not set).
 
     Draws 2 x len(trimmed DOFs) normals from rng (k row, then c row) whatever the mode, so "f", "fc" and
     "fcb" share their k residuals ("fcb" draws its pairs' residuals after them)."""
@@ -148,7 +148,9 @@ def trimmed(model: MechModel, nominal: MechModel, elems: list[Element], mode: st
         c[dofs] = m * np.asarray(nominal.c_total, float)[dofs] / m0 * (1 + residual * z[1])
     out = _copy(model, k_total=list(k), c_total=list(c))
     if mode == "fcb":
-        out = balanced(out, nominal, set(dofs), residual, rng, k_target=k, params=params)
+        if balance_point is None:
+            raise Mech2SpiceError("trim fcb needs the block's balance point (physics/context.balance_point)")
+        out = balanced(out, nominal, set(dofs), residual, rng, k, balance_point, params)
     return out
 
 
@@ -191,12 +193,13 @@ def input_pairs(model: MechModel, params=None) -> list[InputPair]:
 
 
 def balanced(model: MechModel, nominal: MechModel, trimmed_set: set[int], residual: float,
-             rng: np.random.Generator, k_target: np.ndarray, params=None) -> MechModel:
+             rng: np.random.Generator, k_target: np.ndarray, s_t: float, params=None) -> MechModel:
     """`model` (spread and fc-trimmed to totals `k_target`) with every input pair balanced, so that the pair's
     two back-actions on the channel that drives it cancel at the detuning its own gate's insulator gives it
     (docs/robustness.md, "The balance trim"):
-      * each pair oscillator's k/m is trimmed with its insulator held at s_t, the block's position with both
-        inputs '0' (where a load's insulator sits when it fails its driver), not at rest (`_detuned_totals`);
+      * each pair oscillator's k/m is trimmed with its insulator held at s_t (context.balance_point: the block's
+        position with both inputs '0', where a load's insulator sits when it fails its driver), not at rest
+        (`_detuned_totals`);
       * the spring link is trimmed so that k_link^2 / m_s = (omega c_link)^2 / m_d as in the nominal pair
         (`_matched_springs`), through the link's own beam; the two oscillators' totals stay trimmed.
     Each pair draws one normal from rng for its link, in pair order."""
@@ -206,7 +209,7 @@ def balanced(model: MechModel, nominal: MechModel, trimmed_set: set[int], residu
         raise Mech2SpiceError("trim fcb balances input pairs linked by one spring and one dashpot; "
                               "this model has none")
     z_link = rng.standard_normal(len(pairs))
-    k = _detuned_totals(model, nominal, pairs, trimmed_set, k_target, balance_point(p))
+    k = _detuned_totals(model, nominal, pairs, trimmed_set, k_target, s_t)
     return _copy(model, k_total=list(k), springs=_matched_springs(model, nominal, pairs, residual * z_link))
 
 
@@ -246,20 +249,6 @@ def _pair_gammas(model: MechModel, nominal: MechModel) -> tuple[np.ndarray, np.n
             g[f] = v
         out.append(g)
     return out[0], out[1]
-
-
-_BALANCE_POINT: dict[str, float] = {}
-
-
-def balance_point(p) -> float:
-    """The block's insulator position with both inputs at nominal '0' (context.insulator_positions[(0, 0)]):
-    where each input pair is balanced by trim fcb (cached per block)."""
-    from .context import insulator_positions
-    from .loaded import digest
-    key = digest(p)
-    if key not in _BALANCE_POINT:
-        _BALANCE_POINT[key] = insulator_positions(p)[(0, 0)]
-    return _BALANCE_POINT[key]
 
 
 def check_drift(rel: float) -> None:

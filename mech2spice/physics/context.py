@@ -69,8 +69,9 @@ def build(p: GateParams, n_loads: int, up_loads: tuple[int, int] = (0, 0)) -> Co
         nor.connect(m, p, u, pair)
     names = [f"load{j}" for j in range(n_loads)]
     loads = [_pair(m, p, gate.channel, name) for name in names]
-    up_names = [f"{loaded.INPUTS[k]}.load{j}" for k in (0, 1) for j in range(up_loads[k])]
-    extra = [_pair(m, p, ups[k], f"{loaded.INPUTS[k]}.load{j}") for k in (0, 1) for j in range(up_loads[k])]
+    up = [(k, f"{loaded.INPUTS[k]}.load{j}") for k in (0, 1) for j in range(up_loads[k])]
+    up_names = [name for _, name in up]
+    extra = [_pair(m, p, ups[k], name) for k, name in up]
     # the loads' own insulators last, so that `held` drops them by truncation (the pairs keep their indices)
     ins = b.dof(b.slow_dofs[0])
     gam = pair_gammas(p)

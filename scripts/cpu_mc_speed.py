@@ -1,5 +1,8 @@
 """Samples per core-second of the processor Monte-Carlo before and after: the processor's own envelope step
-and OpenBLAS's own thread count (the cores) against --step S (0: the processor's own) and --blas-threads N.
+and OpenBLAS's own thread count (the cores) against --step S (0: the processor's own) and --blas-threads N;
+or, with --compare etd, the exponential step before ETDRK4 (insulators exact, RK4 on every amplitude: the
+processor's own step under it) against ETDRK4 (each amplitude's own rate exact too: its own step), both at
+--blas-threads N.
 
     python scripts/cpu_mc_speed.py [--samples 8] [--cycles 30] [--step 10] [--blas-threads 1] [--max-fanout 4]
         [--params centered_fc2] [--spread 0.01] [--trim fc] [--trim-residual 1e-4] [--seed 7]
@@ -63,13 +66,21 @@ def main():
     ap.add_argument("--program", default="programs/sieve.asm")
     ap.add_argument("--indices", default=None, help="sample indices, comma-separated (default 0 .. samples-1)")
     ap.add_argument("--out", default=None, help="JSON file (default: print)")
+    ap.add_argument("--compare", choices=["step", "etd"], default="step",
+                    help="step: --step and --blas-threads against the defaults; etd: the step without and with ETDRK4")
     a = ap.parse_args()
     load0, t0 = os.getloadavg(), time.time()
     spec = mc.spec_of({"local": a.spread, "trim": a.trim, "trim_residual": a.trim_residual})
     p = load_params(a.params)
-    ways = {"before": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout),
-            "after": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout, step=a.step or None)}
-    threads = {"before": os.cpu_count(), "after": a.blas_threads}
+    if a.compare == "etd":
+        ways = {k: CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout, etd=etd)
+                for k, etd in (("before", False), ("after", True))}
+        threads = {"before": a.blas_threads, "after": a.blas_threads}
+    else:
+        ways = {"before": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout),
+                "after": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout,
+                               step=a.step or None)}
+        threads = {"before": os.cpu_count(), "after": a.blas_threads}
     for k, mcx in ways.items():            # warm-up: the compiled kernels loaded for both
         set_blas_threads(threads[k])
         mcx._machine(0).step()

@@ -363,11 +363,11 @@ def test_sieve_at_envelope_fidelity_matches_iss_and_resumes_exactly(tmp_path):
 
 
 def test_processor_step_within_a_faster_blocks_bound():
-    """centered2 (low Qs: envelope rates bound its step at 6.4 periods) runs the processor at the longest
-    whole step within that bound, not the default block's 16 (which the engine refuses), and its first cycle
-    equals the ISS."""
+    """centered2 (low Qs: envelope rates bound its ETDRK4 step at 15.6 periods, its RK4 one at 6.4) runs the
+    processor at the longest whole step within that bound, not the default block's 16 (which the engine
+    refuses), and its first cycle equals the ISS."""
     res = run_program(PROGRAMS / "sieve.asm", "envelope", 1, p=load_params("centered2"))
-    assert res["step"] == 4.0 and res["cycles"] == 1 and res["iss_check"]["mismatches"] == 0
+    assert res["step"] == 8.0 and res["cycles"] == 1 and res["iss_check"]["mismatches"] == 0
 
 
 def test_register_map_refuses_a_latch_with_a_set_or_reset(tmp_path):

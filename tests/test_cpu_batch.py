@@ -130,14 +130,14 @@ def test_cpu_montecarlo_step_above_the_bound_is_refused_up_front(capsys):
 
 
 def test_a_longer_step_gives_a_sample_the_same_cycles():
-    """Step 10 (the fan-out-4 processor's ladder gives 8; its bound is ~11): the sample really runs at 10
-    and its cycles (read and write addresses and data) are the ones step 8 gives, and the ISS's."""
+    """Step 20 (the fan-out-4 processor's ladder gives 16 under the ETDRK4 step; its bound is ~24): the sample
+    really runs at 20 and its cycles (read and write addresses and data) are the ones step 16 gives, and the ISS's."""
     p, spec = load_params("centered_fc2"), _trimmed(0.01)
     runs = {}
-    for step in (None, 10.0):
+    for step in (None, 20.0):
         mcx = CpuMC(SIEVE, 2, p, "envelope", spec, 7, max_fanout=4, step=step)
         cpu = mcx._machine(1)
         runs[step] = (cpu.step_periods, [cpu.step() for _ in mcx.want], mcx.want)
-    assert runs[None][0] == 8.0 and runs[10.0][0] == 10.0
-    assert runs[10.0][1] == runs[None][1]
-    assert [(c.pc, c.raddr, c.rdata) for c in runs[10.0][1]] == [(c.pc, c.raddr, c.rdata) for c in runs[10.0][2]]
+    assert runs[None][0] == 16.0 and runs[20.0][0] == 20.0
+    assert runs[20.0][1] == runs[None][1]
+    assert [(c.pc, c.raddr, c.rdata) for c in runs[20.0][1]] == [(c.pc, c.raddr, c.rdata) for c in runs[20.0][2]]

@@ -253,6 +253,7 @@ class Kernel:
         self.inv_ms = 1.0 / env.ms if env.slow.size else np.zeros(0)
         self.watch = env.watch.astype(np.int64)
         self.blocks = _envelope_latency.Blocks(env, Binv) if Binv is not None else None
+        self.own = _envelope_latency.own_rates(env, Binv) if Binv is not None else None
 
     def run(self, A, s, sd, nchunks, sub, per, h, F, prow, bound, settle_tol=0.0, check_every=1, settle_from=0,
             parallel=False):
@@ -266,27 +267,31 @@ class Kernel:
                                  self.watch, check_every, settle_from, parallel)
         return amp, int(done), int(status)
 
-    def propagators(self, env, h):
-        """The insulators' exact propagators over h/2 and h (cached per step), or None."""
+    def propagators(self, env, h, own: bool = True):
+        """The exponential step's exact parts (cached per step): the insulators' propagators over h/2 and h
+        and, with `own`, each amplitude's own rate (own_rates); None where the insulators are coupled."""
         cache = self.__dict__.setdefault("_props", {})
-        if h not in cache:
-            cache[h] = _envelope_latency.propagators(env, h)
-        return cache[h]
+        if (h, own) not in cache:
+            ins = _envelope_latency.propagators(env, h)
+            rates = self.own if own else (np.zeros(1, complex), np.zeros(1, complex))
+            cache[h, own] = None if ins is None or rates is None else (*ins, *rates, own)
+        return cache[h, own]
 
     def run_latent(self, A, s, sd, lat, nchunks, sub, per, h, F, prow, bound, settle_tol, check_every, settle_from,
                    tol, hold, lat_check, need, props=None):
         """`run` with per-block latency (_envelope_latency); `lat` (the blocks' latency state) is updated
-        in place; props: the insulators' propagators (exponential step) or None.  Returns (amp, steps done,
+        in place; props: Kernel.propagators (the exponential step) or None.  Returns (amp, steps done,
         status, block-steps integrated)."""
         amp = np.empty((nchunks * per, prow.size, A.shape[1]), complex)
         expo = props is not None
-        Eh, Ef = props if expo else (np.zeros((1, 4)), np.zeros((1, 4)))
+        Eh, Ef, own0, binv, etd = props if expo else (np.zeros((1, 4)), np.zeros((1, 4)), np.zeros(1, complex),
+                                                       np.zeros(1, complex), False)
         active, quiet, snap_f, snap_s, snap_F = lat
         done, status, work = _envelope_latency.run_latent(
             A, s, sd, nchunks * sub, sub, per, h, np.ascontiguousarray(F, complex), self.Z, self.G, self.H,
             self.Ks, self.Cs, self.inv_ms, self.Binv, prow.astype(np.int64), amp, bound, settle_tol, self.watch,
             check_every, settle_from, self.blocks.arrays(), active, quiet, snap_f, snap_s, snap_F, tol, hold,
-            lat_check, need, self.blocks.always, expo, Eh, Ef)
+            lat_check, need, self.blocks.always, expo, Eh, Ef, etd, own0, binv)
         return amp, int(done), int(status), int(work)
 
 

@@ -21,6 +21,9 @@ import scipy.sparse as sp
 from ._rk4_kernel import njit
 
 FAST = {"contract", "reassoc", "nsz", "arcp"}
+LAMBDA_TOL = 1e-6    # |lambda h| a row's own rate may move (its insulator's detuning) before its ETDRK4 weights are
+                     # recomputed: any lambda keeps the step 4th-order and exact at rest if N = f - lambda A uses the
+                     # same one; the lag only leaves <= LAMBDA_TOL / h of the own rate to the RK4 part
 SETTLED, DIVERGED, DONE = 1, 2, 0
 CHANNELS_ONLY = True
 
@@ -119,6 +122,17 @@ def propagators(env, h: float):
         E = np.array([expm(np.array([[0.0, 1.0], [-k, -c]]) * tau).ravel() for k, c in kinds]).reshape(-1, 4)
         out.append(np.ascontiguousarray(E[np.asarray(which).ravel()]))
     return out
+
+
+def own_rates(env, Binv) -> tuple[np.ndarray, np.ndarray]:
+    """Each amplitude's own rate at rest, d(A_f')/dA_f = -(Bop^-1 Z0)_ff, and (Bop^-1)_ff, by which an
+    insulator's detuning G s adds to it: the exponential step advances A_f by exp(lambda_f h), lambda_f =
+    own0_f - binv_ff (G s)_f at the step's start, and leaves RK4 only the coupling between amplitudes.
+    At rest the largest own rate (an input pair's oscillator, detuned from the drive: |lambda| T = 0.145 on
+    the processor) is what bounded the step; the coupling's rate is 0.026 (docs/latency.md)."""
+    Binv = sp.csr_matrix(Binv)
+    own0 = -np.asarray((Binv @ sp.csc_matrix(env.Z0)).diagonal(), complex)
+    return np.ascontiguousarray(own0), np.ascontiguousarray(np.asarray(Binv.diagonal(), complex))
 
 
 @njit(cache=True, fastmath=FAST)
@@ -279,15 +293,55 @@ def _mark_ref(A, s, Aref, sref, blk, b):
 
 
 @njit(cache=True, fastmath=FAST)
+def _phi1(w, e):
+    """phi_1(w) = (e^w - 1) / w given e = e^w; a series where |w| < 1/2 (the closed form cancels there)."""
+    if abs(w) >= 0.5:
+        return (e - 1.0) / w
+    p = 0j
+    fact = 14.0 * 13.0 * 12.0 * 11.0 * 10.0 * 9.0 * 8.0 * 7.0 * 6.0 * 5.0 * 4.0 * 3.0 * 2.0    # 14!
+    for j in range(13, -1, -1):           # Horner on sum_j w^j / (j + 1)!, j <= 13
+        p = p * w + 1.0 / fact
+        fact /= j + 1
+    return p
+
+
+@njit(cache=True, fastmath=FAST)
+def _etd_weights(z):
+    """ETDRK4's weights for one row, z = lambda h: exp(z/2), phi_1(z/2) and, from phi_k(z) = sum_j z^j / (j + k)!,
+    phi_1 - 3 phi_2 + 4 phi_3, phi_2 - 2 phi_3, 4 phi_3 - phi_2 (Cox & Matthews 2002); one exp."""
+    e2 = np.exp(0.5 * z)
+    e = e2 * e2
+    p1h = _phi1(0.5 * z, e2)
+    if abs(z) >= 0.5:
+        iz = 1.0 / z
+        p1 = (e - 1.0) * iz
+        p2 = (p1 - 1.0) * iz
+        p3 = (p2 - 0.5) * iz
+    else:                                 # phi_3's series, then phi_2 = 1/2 + z phi_3
+        p3 = 0j
+        fact = 15.0 * 14.0 * 13.0 * 12.0 * 11.0 * 10.0 * 9.0 * 8.0 * 7.0 * 6.0 * 5.0 * 4.0 * 3.0 * 2.0   # 15!
+        for j in range(12, -1, -1):
+            p3 = p3 * z + 1.0 / fact
+            fact /= j + 3
+        p2 = 0.5 + z * p3
+        p1 = 1.0 + z * p2
+    return e2, p1h, p1 - 3.0 * p2 + 4.0 * p3, p2 - 2.0 * p3, 4.0 * p3 - p2
+
+
+@njit(cache=True, fastmath=FAST)
 def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, prow, amp, bound,
                settle_tol, watch, check_every, settle_from, blk, active, quiet, snap_f, snap_s, snap_F,
-               tol, hold, lat_check, need, always, expo, Eh, Ef):
+               tol, hold, lat_check, need, always, expo, Eh, Ef, etd, own0, binv):
     """run_steps (_envelope_kernel) with per-block latency: only active blocks' rows are integrated.
     A block freezes after `need` quiet checks in a row (lat_check steps apart): its channel moved < tol,
     its rates predict < tol over `hold`, its inputs moved < tol since the last check.  tol = 0: only blocks
     standing exactly still freeze.  expo: the insulators' linear oscillator (s, s') is stepped exactly (Lawson RK4 with its
     propagators over h/2 and h, Eh and Ef as (ns, 4) rows [e00, e01, e10, e11]); RK4 then no longer
-    resolves their ringing, the stiffest mode at rest.
+    resolves their ringing, the stiffest mode at rest.  With etd too, each amplitude's own rate lambda_f
+    (own_rates: at rest own0, plus its insulators' detuning through binv, at the step's start) is stepped
+    exactly too, by ETDRK4 (Cox & Matthews 2002: the stages carry N = f - lambda A, weighted by phi functions
+    of lambda h): exact for a constant N, so a settled state is a fixed point of the step at any h, which
+    Lawson's RK4 is not (its settled amplitudes were off by 0.011 u_R at 8 periods on the chain).
     Returns (steps done, DONE | SETTLED | DIVERGED, block-steps integrated)."""
     nf, B = A.shape
     ns = s.shape[0]
@@ -306,6 +360,13 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
     v2 = sd.copy()
     v3 = sd.copy()
     v4 = sd.copy()
+    lam = np.full_like(A, 1e300)                  # etd: each row's lambda and its ETDRK4 weights (none yet)
+    eh = np.ones_like(A)
+    qh = np.zeros_like(A)
+    w1 = np.zeros_like(A)
+    w2 = np.zeros_like(A)
+    w3 = np.zeros_like(A)
+    Gp, Gi, Gd = G
     Aref = A.copy()
     sref = s.copy()
     work = np.zeros(nf, A.dtype)
@@ -364,10 +425,29 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
                 nfr, nsr, nr, na = _relist(active, blk, mark, frows, srows, rrows, ablk, nr, na)
                 if na == 0:
                     return n, SETTLED, work_done
-        for b in range(B):            # members outside: the row loops run with a fixed b
-            for q in range(nfr):
-                f = frows[q]
-                At[f, b] = A[f, b] + 0.5 * h * a1[f, b]
+        if etd:                       # ETDRK4: a = E(h/2) u + Q N(u), N(u) = f(u) - lambda u
+            for b in range(B):
+                for q in range(nfr):
+                    f = frows[q]
+                    gs = 0.0
+                    for k in range(Gp[f], Gp[f + 1]):
+                        gs += Gd[k] * s[Gi[k], b]
+                    la = own0[f] - binv[f] * gs
+                    if abs(la - lam[f, b]) * h > LAMBDA_TOL:      # weights kept while lambda h moves less
+                        lam[f, b] = la
+                        e2, p1h, x1, x2, x3 = _etd_weights(h * la)
+                        eh[f, b] = e2
+                        qh[f, b] = 0.5 * h * p1h
+                        w1[f, b] = h * x1
+                        w2[f, b] = h * x2
+                        w3[f, b] = h * x3
+                    la = lam[f, b]
+                    At[f, b] = eh[f, b] * A[f, b] + qh[f, b] * (a1[f, b] - la * A[f, b])
+        else:
+            for b in range(B):        # members outside: the row loops run with a fixed b
+                for q in range(nfr):
+                    f = frows[q]
+                    At[f, b] = A[f, b] + 0.5 * h * a1[f, b]
         for b in range(B):
             for q in range(nsr):
                 j = srows[q]
@@ -382,7 +462,11 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         for b in range(B):
             for q in range(nfr):
                 f = frows[q]
-                At[f, b] = A[f, b] + 0.5 * h * a2[f, b]
+                if etd:                   # b = E(h/2) u + Q N(a)
+                    a2[f, b] -= lam[f, b] * At[f, b]
+                    At[f, b] = eh[f, b] * A[f, b] + qh[f, b] * a2[f, b]
+                else:
+                    At[f, b] = A[f, b] + 0.5 * h * a2[f, b]
         for b in range(B):
             for q in range(nsr):
                 j = srows[q]
@@ -396,7 +480,13 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         for b in range(B):
             for q in range(nfr):
                 f = frows[q]
-                At[f, b] = A[f, b] + h * a3[f, b]
+                if etd:                   # c = E(h/2) a + Q (2 N(b) - N(u)), a rebuilt from u and N(u)
+                    a3[f, b] -= lam[f, b] * At[f, b]
+                    n1 = a1[f, b] - lam[f, b] * A[f, b]
+                    e2, qq = eh[f, b], qh[f, b]
+                    At[f, b] = e2 * (e2 * A[f, b] + qq * n1) + qq * (2.0 * a3[f, b] - n1)
+                else:
+                    At[f, b] = A[f, b] + h * a3[f, b]
         for b in range(B):
             for q in range(nsr):
                 j = srows[q]
@@ -410,7 +500,13 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         for b in range(B):
             for q in range(nfr):
                 f = frows[q]
-                A[f, b] += (h / 6.0) * (a1[f, b] + 2.0 * a2[f, b] + 2.0 * a3[f, b] + a4[f, b])
+                if etd:                   # u+ = E(h) u + w1 N(u) + 2 w2 (N(a) + N(b)) + w3 N(c)
+                    la = lam[f, b]
+                    e2 = eh[f, b]
+                    A[f, b] = (e2 * e2 * A[f, b] + w1[f, b] * (a1[f, b] - la * A[f, b])
+                               + 2.0 * w2[f, b] * (a2[f, b] + a3[f, b]) + w3[f, b] * (a4[f, b] - la * At[f, b]))
+                else:
+                    A[f, b] += (h / 6.0) * (a1[f, b] + 2.0 * a2[f, b] + 2.0 * a3[f, b] + a4[f, b])
                 z = A[f, b]
                 if not z.real * z.real + z.imag * z.imag < bound2:     # |A| < bound without a hypot; NaN too
                     return n, DIVERGED, work_done

@@ -6,8 +6,9 @@ clocked run may skip idle time: a stretch of constant stimulus ends once every c
 equations; what each speed-up costs in accuracy is measured in reports/fidelity.md.
 
 Three more options (docs/latency.md): `latency` freezes settled gate blocks until an input moves
-(_envelope_latency.py), `exponential` steps the insulators' linear oscillators exactly (Lawson RK4), which
-lifts the stability bound they set, `parallel` computes the rates on all cores.
+(_envelope_latency.py), `exponential` steps the insulators' linear oscillators exactly (Lawson RK4) and, with
+`etd` (the default), each amplitude's own rate too (ETDRK4), which lifts the stability bounds they set and
+leaves RK4 only the coupling between oscillators, `parallel` computes the rates on all cores.
 """
 from __future__ import annotations
 
@@ -28,6 +29,10 @@ from ._base import (SPEED_FLAGS, Capabilities, Engine, probe_dofs, progress_bar,
 RK4_STABILITY = 2.5          # |lambda h| RK4 keeps stable (its region reaches ~2.8 on both axes)
 RATE_SAFETY = 1.5            # x the largest |eigenvalue| at rest: along switching trajectories it moved by
                              # <= 3 % (reports/envelope.md), so this leaves a wide margin
+ETD_ROTATION = 3.5           # rad: the most an amplitude's own rate may turn it in one ETDRK4 step.  The coupling
+                             # alone would allow 63 periods on the centred processor, but its sieve diverged at 40
+                             # periods (5.8 rad; fan-out 12) and ran at 32 (4.6 rad): stepped exactly, the own
+                             # rotation still beats against the coupling the RK4 part integrates (docs/latency.md)
 
 
 DEFAULT_STEP = 4.0           # periods, at most: no accuracy cost on the adder (reports/envelope.md; bound 15.1)
@@ -35,30 +40,39 @@ PROCESSOR_LATENCY = 0.1      # u_R: a processor run's per-gate latency threshold
 EXPONENTIAL_STEP = 16.0      # periods, at most, with the exponential step: 0.005 u_R on the chain (docs/latency.md)
 
 
-def rate_bound(model: MechModel, exponential: bool = False) -> float:
+def rate_bound(model: MechModel, exponential: bool = False, etd: bool = True) -> float:
     """The envelope rate the step limit uses: RATE_SAFETY x the spectral rate (Gershgorin where that
-    cannot be computed); `exponential`: without the insulators' own modes, which that step treats exactly.
-    Cached with the model."""
-    key = "envelope_rate_fast" if exponential else "envelope_rate"
+    cannot be computed); `exponential`: without the insulators' own modes, which that step treats exactly,
+    and with `etd` without each amplitude's own rate (the same).  Cached with the model."""
+    own = exponential and etd
+    key = "envelope_rate_coupling" if own else "envelope_rate_fast" if exponential else "envelope_rate"
     rate = model.derived.get(key)
     if rate is None:
         env = Envelope.of(model)
-        rho = spectral_rate(env, slow_modes=not exponential)
+        rho = spectral_rate(env, slow_modes=not exponential, own_rates=not own)
         rate = model.derived[key] = RATE_SAFETY * rho if rho is not None else gershgorin_rate(env)
+        if own and rho is not None:
+            rate = model.derived[key] = max(rate, RK4_STABILITY / ETD_ROTATION * own_rate_max(env))
     return rate
 
 
-def max_step_periods(model: MechModel, exponential: bool = False) -> float:
+def own_rate_max(env: Envelope) -> float:
+    """The largest |own rate| of any amplitude at rest (the diagonal of Bop^-1 Z0; _envelope_latency.own_rates)."""
+    from ._envelope_latency import own_rates
+    return float(np.abs(own_rates(env, env.block_inverse())[0]).max()) if env.fast.size else 0.0
+
+
+def max_step_periods(model: MechModel, exponential: bool = False, etd: bool = True) -> float:
     """The longest stable RK4 step on this model's envelope equations, in drive periods."""
-    return RK4_STABILITY / rate_bound(model, exponential) / model.period
+    return RK4_STABILITY / rate_bound(model, exponential, etd) / model.period
 
 
-def default_step(model: MechModel, cap: float | None = None, exponential: bool = False) -> float:
+def default_step(model: MechModel, cap: float | None = None, exponential: bool = False, etd: bool = True) -> float:
     """The longest of 16, 8, 4, 2, 1 periods within `cap` (DEFAULT_STEP, EXPONENTIAL_STEP with the
     exponential step) and the model's stability bound (else half a period): whole steps keep stimulus
     changes, which fall on whole periods, on step boundaries."""
     cap = cap or (EXPONENTIAL_STEP if exponential else DEFAULT_STEP)
-    bound = max_step_periods(model, exponential)
+    bound = max_step_periods(model, exponential, etd)
     for step in (16, 8, 4, 2, 1):
         if step <= min(cap, bound):
             return float(step)
@@ -85,7 +99,8 @@ CHUNK_PERIODS = 2000         # periods per compiled call: bounds the progress-ba
 def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stimulus=None, state=None,
               start_period: int = 0, probes: list[str] | None = None, progress: bool = False,
               settle_tol: float | None = None, compiled: bool = True, latency: float | None = None,
-              parallel: bool = False, exponential: bool = False, keep_periods: int | None = None) -> Run:
+              parallel: bool = False, exponential: bool = False, keep_periods: int | None = None,
+              etd: bool = True) -> Run:
     """RK4 on the envelope equations with a step of `step_periods` drive periods (must divide 1 or be whole).
 
     Returns a Run whose per-period amplitudes are the envelope itself.  A step beyond the measured
@@ -102,7 +117,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     long pauses need not have every period written: the processor)."""
     env = Envelope.of(model)
     T = model.period
-    _check_step(model, step_periods, exponential)
+    _check_step(model, step_periods, exponential, etd)
     sub, per = _step_layout(step_periods)
     h = T * per / sub
     stimulus = stimulus or Stimulus.constant(model)
@@ -116,7 +131,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     tol = settle_tol * model.amplitude_unit if settle_tol else 0.0
     check = sub * max(1, int(round(SETTLE_WINDOW / per)))
     kern = kernel(model) if compiled else None
-    props = _propagators(kern, env, exponential, T * per / sub)
+    props = _propagators(kern, env, exponential, T * per / sub, etd)
     lat = _latency_state(kern, state, B) if latency or exponential else None
     lat_tol, hold = (latency or 0.0) * model.amplitude_unit, LATENCY_HOLD * T
     lat_check = max(1, int(round(LATENCY_WINDOW / per))) * sub
@@ -193,11 +208,11 @@ LATENCY_HOLD = 200           # periods, about one gate delay (173 mean, reports/
                              # threshold over this
 
 
-def _propagators(kern, env, exponential: bool, h: float):
-    """The insulators' propagators for the exponential step (None without it)."""
+def _propagators(kern, env, exponential: bool, h: float, etd: bool = True):
+    """The exponential step's exact parts (Kernel.propagators; None without it)."""
     if not exponential:
         return None
-    props = kern.propagators(env, h) if kern is not None and kern.blocks is not None else None
+    props = kern.propagators(env, h, etd) if kern is not None and kern.blocks is not None else None
     if props is None:
         raise Mech2SpiceError("the exponential envelope step needs the compiled loop (numba), small Bop "
                               "blocks and uncoupled insulators")
@@ -213,14 +228,14 @@ def _latency_state(kern, state, B: int):
     return kern.blocks.fresh_state(B)
 
 
-def _check_step(model: MechModel, step_periods: float, exponential: bool = False) -> None:
-    limit = max_step_periods(model, exponential)
+def _check_step(model: MechModel, step_periods: float, exponential: bool = False, etd: bool = True) -> None:
+    limit = max_step_periods(model, exponential, etd)
     if not step_periods > 0:
         raise Mech2SpiceError(f"envelope step {step_periods:g} periods: must be positive")
     if step_periods > limit:
         raise Mech2SpiceError(f"envelope step {step_periods:g} periods exceeds the stability limit "
                               f"{limit:.3g} periods for this network (fastest envelope rate "
-                              f"{rate_bound(model, exponential):.3g} 1/s)")
+                              f"{rate_bound(model, exponential, etd):.3g} 1/s)")
 
 
 def _probe_rows(env: Envelope, dofs: np.ndarray) -> np.ndarray:
@@ -289,6 +304,7 @@ class EnvelopeOptions:
     latency: float | None = None         # u_R; None: integrate every gate at every step
     parallel: bool = False               # the compiled loop's rates on all cores (without latency)
     exponential: bool = False            # the insulators stepped exactly: lifts the stability bound
+    etd: bool = True                     # with exponential: each amplitude's own rate stepped exactly too (ETDRK4)
     keep_periods: int | None = None      # the Run keeps only the last so many periods (None: all)
 
     def __post_init__(self):
@@ -337,10 +353,10 @@ class EnvelopeEngine(Engine):
         """Build what the model caches for this engine (the envelope operator, the compiled loop's arrays,
         the stability bound, the insulators' propagators): after it, run() only integrates."""
         step = self.step(model)
-        _check_step(model, step, self.options.exponential)
+        _check_step(model, step, self.options.exponential, self.options.etd)
         kern = kernel(model) if self.options.compiled else None
         sub, per = _step_layout(step)
-        _propagators(kern, Envelope.of(model), self.options.exponential, model.period * per / sub)
+        _propagators(kern, Envelope.of(model), self.options.exponential, model.period * per / sub, self.options.etd)
 
     @classmethod
     def processor_latency(cls, threads: int = 1) -> float | None:
@@ -349,11 +365,12 @@ class EnvelopeEngine(Engine):
 
     def longest_step(self, model: MechModel, cap: float) -> float:
         """The longest of 16, 8, 4, 2, 1 periods up to `cap` within the model's stability bound (default_step)."""
-        return default_step(model, cap, exponential=self.options.exponential)
+        return default_step(model, cap, exponential=self.options.exponential, etd=self.options.etd)
 
     def step(self, model: MechModel) -> float:
         """The step this engine takes on `model`, in drive periods."""
-        return self.options.step_periods or default_step(model, exponential=self.options.exponential)
+        return self.options.step_periods or default_step(model, exponential=self.options.exponential,
+                                                         etd=self.options.etd)
 
     def dynamical_state(self, state):
         """(A, s, s'): the latency record (integrate's state[3:]) dropped."""
@@ -374,4 +391,5 @@ class EnvelopeEngine(Engine):
                          start_period=start_period, probes=probes, progress=progress,
                          settle_tol=self.options.settle_tol, compiled=self.options.compiled,
                          latency=self.options.latency, parallel=self.options.parallel,
-                         exponential=self.options.exponential, keep_periods=self.options.keep_periods)
+                         exponential=self.options.exponential, keep_periods=self.options.keep_periods,
+                         etd=self.options.etd)

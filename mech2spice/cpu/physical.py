@@ -42,7 +42,7 @@ EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability
 
 def _options(backend: str, **settings):
     """The engine's options from the processor's settings: each engine takes those among its own fields
-    (envelope: step_periods, latency, exponential, parallel; carrier: latency, threads, steps_per_period;
+    (envelope: step_periods, latency, exponential, etd, parallel; carrier: latency, threads, steps_per_period;
     rk4: steps_per_period); steps_per_period only where given, else the engine's default."""
     from dataclasses import fields
     cls = engine_class(backend).Options
@@ -64,7 +64,7 @@ class PhysicalCPU:
 
     def __init__(self, memory: Memory, backend: str = "envelope", p=DEFAULT, *, step: float | None = None,
                  settle: float | None = SETTLE_TOL, latency: float | None | str = OWN_LATENCY,
-                 exponential: bool = EXPONENTIAL, parallel: bool = False, power_up: bool = True,
+                 exponential: bool = EXPONENTIAL, etd: bool = True, parallel: bool = False, power_up: bool = True,
                  noise: tuple[float, int] | None = None, steps_per_period: int | None = None, threads: int = 1,
                  settle_check: int | None = None, max_fanout: int | None = None):
         if backend not in PHYSICAL:
@@ -80,7 +80,8 @@ class PhysicalCPU:
         self.probes = list(self.model.probes)
         if latency == OWN_LATENCY:
             latency = engine_class(backend).processor_latency(threads)
-        settings = dict(latency=latency, exponential=exponential, parallel=parallel, steps_per_period=steps_per_period,
+        settings = dict(latency=latency, exponential=exponential, etd=etd, parallel=parallel,
+                        steps_per_period=steps_per_period,
                         threads=threads, keep_periods=READ_PERIODS)
         if not step:      # the processor's step, shortened where a block's faster envelope rates bound it
             step = PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP

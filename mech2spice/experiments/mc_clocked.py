@@ -92,7 +92,7 @@ class CpuMC:
     """The processor running a program for `cycles` cycles; evaluates samples against the ISS cycle by cycle."""
 
     def __init__(self, program: str, cycles: int, p, backend: str, spec: SpreadSpec, seed: int, noise: float = 0.0,
-                 batch: int = 1, max_fanout: int | None = None, step: float | None = None):
+                 batch: int = 1, max_fanout: int | None = None, step: float | None = None, etd: bool = True):
         from ..cpu.physical import PHYSICAL
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"cpu montecarlo runs on {', '.join(PHYSICAL)}, not '{backend}'")
@@ -102,7 +102,7 @@ class CpuMC:
         # samples per union model (cpu/batch.py); with noise one per run, as DesignMC does
         self.batch = 1 if self.noise else batch
         self.spec, self.seed = spec, seed
-        self.step = step
+        self.step, self.etd = step, etd      # etd: the envelope's exponential step with ETDRK4 (backends/envelope.py)
         if step is not None:
             self._check_step()
         self.want = self._iss()
@@ -117,8 +117,8 @@ class CpuMC:
         if self.backend != "envelope":
             raise Mech2SpiceError(f"a step applies to the envelope backend, not {self.backend}")
         cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
-                          step=self.step, max_fanout=self.max_fanout)
-        envelope._check_step(cpu.model, self.step, EXPONENTIAL)
+                          step=self.step, max_fanout=self.max_fanout, etd=self.etd)
+        envelope._check_step(cpu.model, self.step, EXPONENTIAL, self.etd)
 
     def compared(self, want) -> list[str]:
         """The fields a cycle must match: the write address and data only when the ISS writes (else they
@@ -150,7 +150,7 @@ class CpuMC:
         from ..cpu.run import load_program, make_memory
         cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
                           noise=(self.noise, noise_seed(self.seed, i)), max_fanout=self.max_fanout,
-                          step=self.step)
+                          step=self.step, etd=self.etd)
         nominal = cpu.model
         model, _ = sampled(nominal, spread.elements(nominal), self.spec, self.seed, i)
         cpu.model = model               # the probes (latch outputs) are copied with the model

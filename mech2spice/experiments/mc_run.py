@@ -45,7 +45,7 @@ def design_for(job: dict) -> mc.DesignMC:
             from .mc_clocked import CpuMC
             _DESIGNS[key] = CpuMC(job["program"], job["cycles"], p, job["backend"], spec, job["seed"], noise,
                                   batch=job.get("union", 1), max_fanout=job.get("max_fanout"),
-                                  step=job.get("step"))
+                                  step=job.get("step"), etd=job.get("integrator") == "etd")
             return _DESIGNS[key]
         nl = synthesize(job["design"], max_fanout=network.MAX_FANOUT)
         if "steps" in job:               # a clocked design under a stimulus of cycles

@@ -187,11 +187,13 @@ def _slow_rate_bound(env: Envelope) -> float:
 DENSE_RATE_MAX = 300      # fast DOFs up to which spectral_rate takes the dense spectrum (~0.1 s at 300)
 
 
-def spectral_rate(env: Envelope, slow_modes: bool = True) -> float | None:
+def spectral_rate(env: Envelope, slow_modes: bool = True, own_rates: bool = True) -> float | None:
     """The largest |eigenvalue| of the linear part at rest: ARPACK on A' = -Bop^-1 Z0 A for the amplitudes,
     exact roots for the insulators (each its own damped oscillator when Ks, Cs are diagonal; left out with
-    slow_modes=False, for a step that treats them exactly).  None if ARPACK does not converge or the slow
-    block is coupled."""
+    slow_modes=False, for a step that treats them exactly).  own_rates=False: each amplitude's own rate (the
+    diagonal of -Bop^-1 Z0) left out too, for a step that treats it exactly, so only the coupling between
+    amplitudes is left.  None if ARPACK does not converge, the slow block is coupled, or (own_rates=False)
+    Bop has no small blocks."""
     slow = 0.0
     if env.slow.size and slow_modes:
         if env.Ks.nnz > env.slow.size or env.Cs.nnz > env.slow.size:
@@ -202,7 +204,13 @@ def spectral_rate(env: Envelope, slow_modes: bool = True) -> float | None:
     nf = env.fast.size
     if nf == 0:
         return slow
-    op = spla.LinearOperator((nf, nf), matvec=lambda x: -env.solve_rate(env.Z0 @ x), dtype=complex)
+    own = np.zeros(nf, complex)
+    if not own_rates:
+        Binv = env.block_inverse()
+        if Binv is None:
+            return None
+        own = -np.asarray((sp.csr_matrix(Binv) @ sp.csc_matrix(env.Z0)).diagonal(), complex)
+    op = spla.LinearOperator((nf, nf), matvec=lambda x: -env.solve_rate(env.Z0 @ x) - own * x, dtype=complex)
     try:
         if nf <= DENSE_RATE_MAX:     # small networks: every eigenvalue (ARPACK can stall on them, error 3)
             lam = np.linalg.eigvals(np.column_stack([op.matvec(e) for e in np.eye(nf, dtype=complex)]))

@@ -110,7 +110,7 @@ def test_exponential_default_step_and_prepare():
     assert rk4.step(sc.model) == envelope.DEFAULT_STEP and expo.step(sc.model) == 16.0
     expo.prepare(sc.model)
     cached = set(sc.model.derived)
-    assert {"envelope", "envelope_kernel", "envelope_rate_coupling"} <= cached
+    assert {"envelope", "envelope_kernel", "envelope_rate_fast"} <= cached
     expo.run(sc.model, 100, sc.stimulus)
     assert set(sc.model.derived) == cached
 

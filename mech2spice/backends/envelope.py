@@ -62,6 +62,14 @@ def own_rate_max(env: Envelope) -> float:
     return float(np.abs(own_rates(env, env.block_inverse())[0]).max()) if env.fast.size else 0.0
 
 
+def needs_etd(model: MechModel, step_periods: float, exponential: bool, etd: bool = True) -> bool:
+    """Whether the exponential step takes ETDRK4 at this step: only where the amplitudes' own rates bound it
+    (the insulators-only bound is shorter).  Elsewhere RK4 on the amplitudes is within its bound and each
+    block-step costs ~1.5x less (docs/latency.md): the default block's processor (bound 27.5, step 16) is
+    stepped as before."""
+    return bool(exponential and etd and step_periods > max_step_periods(model, True, False))
+
+
 def max_step_periods(model: MechModel, exponential: bool = False, etd: bool = True) -> float:
     """The longest stable RK4 step on this model's envelope equations, in drive periods."""
     return RK4_STABILITY / rate_bound(model, exponential, etd) / model.period
@@ -117,6 +125,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     long pauses need not have every period written: the processor)."""
     env = Envelope.of(model)
     T = model.period
+    etd = needs_etd(model, step_periods, exponential, etd)
     _check_step(model, step_periods, exponential, etd)
     sub, per = _step_layout(step_periods)
     h = T * per / sub
@@ -305,6 +314,7 @@ class EnvelopeOptions:
     parallel: bool = False               # the compiled loop's rates on all cores (without latency)
     exponential: bool = False            # the insulators stepped exactly: lifts the stability bound
     etd: bool = True                     # with exponential: each amplitude's own rate stepped exactly too (ETDRK4)
+                                         # where that alone lets the step be taken (needs_etd)
     keep_periods: int | None = None      # the Run keeps only the last so many periods (None: all)
 
     def __post_init__(self):
@@ -353,10 +363,11 @@ class EnvelopeEngine(Engine):
         """Build what the model caches for this engine (the envelope operator, the compiled loop's arrays,
         the stability bound, the insulators' propagators): after it, run() only integrates."""
         step = self.step(model)
-        _check_step(model, step, self.options.exponential, self.options.etd)
+        etd = needs_etd(model, step, self.options.exponential, self.options.etd)
+        _check_step(model, step, self.options.exponential, etd)
         kern = kernel(model) if self.options.compiled else None
         sub, per = _step_layout(step)
-        _propagators(kern, Envelope.of(model), self.options.exponential, model.period * per / sub, self.options.etd)
+        _propagators(kern, Envelope.of(model), self.options.exponential, model.period * per / sub, etd)
 
     @classmethod
     def processor_latency(cls, threads: int = 1) -> float | None:

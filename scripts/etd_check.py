@@ -90,7 +90,7 @@ def chain(a) -> dict:
     u, out = sc.model.amplitude_unit, {"params": a.params, "reference": "step 1, same integrator"}
     chosen = envelope.needs_etd
     for etd in (False, True):
-        envelope.needs_etd = lambda *args, **kw: etd      # ETDRK4 at every step, not only where it is needed
+        envelope.needs_etd = lambda *args, **kw: etd      # ETDRK4 at every step (or never), not only where needed
         run = lambda st: np.abs(envelope.integrate(sc.model, sc.periods, step_periods=st, stimulus=sc.stimulus,
                                                    exponential=True, etd=etd).amp)
         try:

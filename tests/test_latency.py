@@ -121,3 +121,21 @@ def test_latency_off_parses_to_none():
     assert parse("off") == 0.0 and parse("0.1") == 0.1
     with pytest.raises(Exception, match="'off' or a number"):
         parse("1")
+
+
+def test_etd_step_on_the_centred_chain_agrees_with_a_fine_step(monkeypatch):
+    """centered_fc2's 3-gate chain: RK4 with exact insulators is refused at 16 periods (the pairs' own rates
+    bound it near 11); ETDRK4 (each amplitude's own rate exact) takes 16 and its settled amplitudes stay within
+    0.005 u_R of the same integrator at step 1; at step 8 it agrees with the insulators-only step to 1e-3."""
+    from mech2spice.physics.params import load_params
+    sc = S.chain_scene(load_params("centered_fc2"))
+    m, u = sc.model, sc.model.amplitude_unit
+    with pytest.raises(Mech2SpiceError, match="stability limit"):
+        integrate(m, 100, step_periods=16, stimulus=sc.stimulus, exponential=True, etd=False)
+    assert not envelope.needs_etd(m, 8, True) and envelope.needs_etd(m, 16, True)
+    monkeypatch.setattr(envelope, "needs_etd", lambda model, step, exponential, etd=True: exponential and etd)
+    end = lambda st, etd=True: np.abs(integrate(m, sc.periods, step_periods=st, stimulus=sc.stimulus,
+                                                exponential=True, etd=etd).amp[-1])
+    fine = end(1)
+    assert np.abs(end(16) - fine).max() / u < 5e-3
+    assert np.abs(end(8) - end(8, etd=False)).max() / u < 1e-3

@@ -88,7 +88,8 @@ def envelope_speed_args(parser) -> None:
                         help="envelope, carrier: freeze settled gates until an input moves by TOL u_R (off: "
                              "integrate every gate; docs/latency.md, docs/carrier.md)")
     parser.add_argument("--exponential", choices=["on", "off"], default=None,
-                        help="envelope: step the insulators exactly, which lifts the stability bound on the step")
+                        help="envelope: step the insulators exactly and, where they bound the step, each "
+                             "amplitude's own rate too (ETDRK4), which lifts the stability bound on the step")
     parser.add_argument("--parallel", choices=["on", "off"], default=None,
                         help="envelope: the rates on all cores (without latency; slower on a busy machine)")
 

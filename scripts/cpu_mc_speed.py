@@ -2,7 +2,8 @@
 and OpenBLAS's own thread count (the cores) against --step S (0: the processor's own) and --blas-threads N;
 or, with --compare etd, the exponential step before ETDRK4 (insulators exact, RK4 on every amplitude: the
 processor's own step under it) against ETDRK4 (each amplitude's own rate exact too: its own step), both at
---blas-threads N.
+--blas-threads N; or, with --compare step20, ETDRK4 as the processor stepped it before (its step capped at 16, its
+weights refreshed when lambda h moved by 0.01) against now (cpu/physical.ETD_PROCESSOR_STEP, LAMBDA_TOL).
 
     python scripts/cpu_mc_speed.py [--samples 8] [--cycles 30] [--step 10] [--blas-threads 1] [--max-fanout 4]
         [--params centered_fc2] [--spread 0.01] [--trim fc] [--trim-residual 1e-4] [--seed 7]
@@ -26,6 +27,7 @@ import time
 
 import numpy as np
 
+from mech2spice.backends import _envelope_latency as _lat
 from mech2spice.experiments import montecarlo as mc
 from mech2spice.experiments.blas import set_blas_threads
 from mech2spice.experiments.mc_clocked import CpuMC
@@ -66,13 +68,22 @@ def main():
     ap.add_argument("--program", default="programs/sieve.asm")
     ap.add_argument("--indices", default=None, help="sample indices, comma-separated (default 0 .. samples-1)")
     ap.add_argument("--out", default=None, help="JSON file (default: print)")
-    ap.add_argument("--compare", choices=["step", "etd"], default="step",
-                    help="step: --step and --blas-threads against the defaults; etd: the step without and with ETDRK4")
+    ap.add_argument("--compare", choices=["step", "etd", "step20"], default="step",
+                    help="step: --step and --blas-threads against the defaults; etd: the step without and with ETDRK4; "
+                         "step20: the ETD step as session 15 left it (cap 16, weights refreshed at |d lambda h| 0.01) "
+                         "against now (cap 20, 0.1)")
     a = ap.parse_args()
     load0, t0 = os.getloadavg(), time.time()
     spec = mc.spec_of({"local": a.spread, "trim": a.trim, "trim_residual": a.trim_residual})
     p = load_params(a.params)
-    if a.compare == "etd":
+    lam = {"before": _lat.LAMBDA_TOL, "after": _lat.LAMBDA_TOL}
+    if a.compare == "step20":
+        ways = {"before": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout,
+                                etd_step=16.0),
+                "after": CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout)}
+        threads = {"before": a.blas_threads, "after": a.blas_threads}
+        lam["before"] = 0.01
+    elif a.compare == "etd":
         ways = {k: CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout, etd=etd)
                 for k, etd in (("before", False), ("after", True))}
         threads = {"before": a.blas_threads, "after": a.blas_threads}
@@ -83,6 +94,7 @@ def main():
         threads = {"before": os.cpu_count(), "after": a.blas_threads}
     for k, mcx in ways.items():            # warm-up: the compiled kernels loaded for both
         set_blas_threads(threads[k])
+        _lat.LAMBDA_TOL = lam[k]
         mcx._machine(0).step()
     runs = {k: [] for k in ways}
     indices = [int(x) for x in a.indices.split(",")] if a.indices else list(range(a.samples))
@@ -90,6 +102,7 @@ def main():
         order = list(ways) if n % 2 == 0 else list(ways)[::-1]
         for k in order:
             set_blas_threads(threads[k])
+            _lat.LAMBDA_TOL = lam[k]
             runs[k].append(run_sample(ways[k], i))
     per = []
     for i, x, y in zip(indices, runs["before"], runs["after"]):
@@ -98,7 +111,7 @@ def main():
                     "cycles_equal": x["cycles"] == y["cycles"], "cycles_run": [len(x["cycles"]), len(y["cycles"])],
                     "max_read_difference_uR": dev, "cpu_s": [round(x["cpu_s"], 3), round(y["cpu_s"], 3)],
                     "block_steps": [x["block_steps"], y["block_steps"]], "reason": [x["reason"], y["reason"]]})
-    total = {k: {"step_periods": v[0]["step"], "blas_threads": threads[k], "cpu_s": round(sum(r["cpu_s"] for r in v), 2),
+    total = {k: {"step_periods": v[0]["step"], "blas_threads": threads[k], "lambda_tol": lam[k], "cpu_s": round(sum(r["cpu_s"] for r in v), 2),
                  "samples_per_core_s": len(v) / sum(r["cpu_s"] for r in v),
                  "block_steps": sum(r["block_steps"] for r in v)} for k, v in runs.items()}
     res = {"command": "python scripts/cpu_mc_speed.py " + " ".join(

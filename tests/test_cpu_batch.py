@@ -123,21 +123,40 @@ def test_cpu_job_step_enters_the_key_only_when_set():
         job(step=10.0, backend="rk4")
 
 
+def test_cpu_job_records_the_processors_etd_step_cap():
+    """A new envelope job records the step cap under ETDRK4 (20) and is a job of its own; a results file written
+    before it (its job names the integrator but no cap) resumes at the 16 it was run at."""
+    import argparse
+    from mech2spice.cli.montecarlo import cpu_job_of
+    from mech2spice.cpu.physical import ETD_PROCESSOR_STEP
+    from mech2spice.experiments import mc_run
+    base = dict(program=SIEVE, cycles=2, params="centered_fc2", backend="envelope", spread="0.01", trim="fc",
+                trim_residual=1e-4, drift=None, seed=7, noise=0.0, max_fanout=4, step=None)
+    job = cpu_job_of(argparse.Namespace(**base))
+    assert job["integrator"] == "etd" and job["etd_step"] == ETD_PROCESSOR_STEP == 20.0
+    old = {k: v for k, v in job.items() if k != "etd_step"}
+    assert mc.job_key(old) != mc.job_key(job)
+    assert mc_run.design_for(old)._machine(0, power_up=False).step_periods == 16.0
+    assert mc_run.design_for(job)._machine(0, power_up=False).step_periods == 20.0
+    assert "etd_step" not in cpu_job_of(argparse.Namespace(**{**base, "backend": "rk4"}))
+
+
 def test_cpu_montecarlo_step_above_the_bound_is_refused_up_front(capsys):
     assert main(["cpu", "montecarlo", SIEVE, "--samples", "1", "--cycles", "1", "--spread", "0.01",
                  "--max-fanout", "4", "--params", "centered_fc2", "--scheduler", "inline", "--step", "50"]) == 2
     assert "exceeds the stability limit" in capsys.readouterr().err
 
 
-def test_a_longer_step_gives_a_sample_the_same_cycles():
-    """Step 20 (the fan-out-4 processor's ladder gives 16 under the ETDRK4 step; its bound is ~24): the sample
-    really runs at 20 and its cycles (read and write addresses and data) are the ones step 16 gives, and the ISS's."""
+def test_the_etd_step_gives_a_sample_the_same_cycles():
+    """The processor's own step under ETDRK4 (20: the fan-out-4 processor's bound is ~24) against 16, the cap before
+    it (as older Monte-Carlo files ask): the sample really runs at 20 and its cycles (read and write addresses and
+    data) are the ones step 16 gives, and the ISS's."""
     p, spec = load_params("centered_fc2"), _trimmed(0.01)
     runs = {}
-    for step in (None, 20.0):
-        mcx = CpuMC(SIEVE, 2, p, "envelope", spec, 7, max_fanout=4, step=step)
+    for cap in (None, 16.0):
+        mcx = CpuMC(SIEVE, 2, p, "envelope", spec, 7, max_fanout=4, etd_step=cap)
         cpu = mcx._machine(1)
-        runs[step] = (cpu.step_periods, [cpu.step() for _ in mcx.want], mcx.want)
-    assert runs[None][0] == 16.0 and runs[20.0][0] == 20.0
-    assert runs[20.0][1] == runs[None][1]
-    assert [(c.pc, c.raddr, c.rdata) for c in runs[20.0][1]] == [(c.pc, c.raddr, c.rdata) for c in runs[20.0][2]]
+        runs[cap] = (cpu.step_periods, [cpu.step() for _ in mcx.want], mcx.want)
+    assert runs[None][0] == 20.0 and runs[16.0][0] == 16.0
+    assert runs[16.0][1] == runs[None][1]
+    assert [(c.pc, c.raddr, c.rdata) for c in runs[None][1]] == [(c.pc, c.raddr, c.rdata) for c in runs[None][2]]

@@ -96,6 +96,11 @@ class Engine(FromFlags, ABC):
         `cap` itself for engines whose step is not in drive periods."""
         return cap
 
+    def takes_etd(self, model: MechModel, step: float) -> bool:
+        """Whether this engine steps each amplitude's own rate exactly (ETDRK4) on `model` at `step`: then its
+        step error is that of ETDRK4, smaller than RK4's at the same step (the envelope; docs/latency.md)."""
+        return False
+
     def reported_step(self, step: float) -> float:
         """The step (drive periods) a processor run records for this engine, given the whole-period step
         `step` it schedules with; by default that step itself."""

@@ -291,7 +291,7 @@ class Kernel:
             A, s, sd, nchunks * sub, sub, per, h, np.ascontiguousarray(F, complex), self.Z, self.G, self.H,
             self.Ks, self.Cs, self.inv_ms, self.Binv, prow.astype(np.int64), amp, bound, settle_tol, self.watch,
             check_every, settle_from, self.blocks.arrays(), active, quiet, snap_f, snap_s, snap_F, tol, hold,
-            lat_check, need, self.blocks.always, expo, Eh, Ef, etd, own0, binv)
+            lat_check, need, self.blocks.always, expo, Eh, Ef, etd, own0, binv, _envelope_latency.LAMBDA_TOL)
         return amp, int(done), int(status), int(work)
 
 

@@ -76,13 +76,14 @@ def max_step_periods(model: MechModel, exponential: bool = False, etd: bool = Tr
 
 
 def default_step(model: MechModel, cap: float | None = None, exponential: bool = False, etd: bool = True) -> float:
-    """The longest of 16, 8, 4, 2, 1 periods within `cap` (DEFAULT_STEP, EXPONENTIAL_STEP with the
-    exponential step) and the model's stability bound (else half a period): whole steps keep stimulus
-    changes, which fall on whole periods, on step boundaries."""
+    """The longest of 20, 16, 8, 4, 2, 1 periods within `cap` (DEFAULT_STEP, EXPONENTIAL_STEP with the
+    exponential step; the processor's ETD_PROCESSOR_STEP) and the model's stability bound (else half a period):
+    whole steps keep stimulus changes, which fall on whole periods, on step boundaries.  20 only where ETDRK4
+    steps the model there (needs_etd): that is the accuracy it was measured at (cpu/physical.py)."""
     cap = cap or (EXPONENTIAL_STEP if exponential else DEFAULT_STEP)
     bound = max_step_periods(model, exponential, etd)
-    for step in (16, 8, 4, 2, 1):
-        if step <= min(cap, bound):
+    for step in (20, 16, 8, 4, 2, 1):
+        if step <= min(cap, bound) and (step <= 16 or needs_etd(model, step, exponential, etd)):
             return float(step)
     return 0.5
 
@@ -375,8 +376,12 @@ class EnvelopeEngine(Engine):
         return PROCESSOR_LATENCY
 
     def longest_step(self, model: MechModel, cap: float) -> float:
-        """The longest of 16, 8, 4, 2, 1 periods up to `cap` within the model's stability bound (default_step)."""
+        """The longest of 20, 16, 8, 4, 2, 1 periods up to `cap` within the model's stability bound (default_step)."""
         return default_step(model, cap, exponential=self.options.exponential, etd=self.options.etd)
+
+    def takes_etd(self, model: MechModel, step: float) -> bool:
+        """ETDRK4 at this step (needs_etd): the exponential step, and the insulators-only bound shorter."""
+        return needs_etd(model, step, self.options.exponential, self.options.etd)
 
     def step(self, model: MechModel) -> float:
         """The step this engine takes on `model`, in drive periods."""

@@ -13,7 +13,7 @@ from ..errors import Mech2SpiceError
 from ..inputs import (MAX_CPU_CYCLES, check_output_file, envelope_speed_args, force_arg, head, integer, number,
                       strict_json, write_bytes, write_text)
 from ..backends import BACKENDS as ENGINES
-from ..cpu.physical import PHYSICAL, PROCESSOR_STEP, SETTLE_TOL
+from ..cpu.physical import ETD_PROCESSOR_STEP, PHYSICAL, PROCESSOR_STEP, SETTLE_TOL
 from ..cpu.settle_check import PERIODS as SETTLE_CHECK_PERIODS
 from ..cpu.machines import BACKENDS, CIRCUIT
 from ..cpu.isa import MEM_SIZE
@@ -73,8 +73,8 @@ def add_parser(subparsers) -> None:
                         "FILE.state-*.npz that FILE names; for vacask-envelope also the cycles per simulator "
                         "process)")
     r.add_argument("--step", type=number(0), default=None, metavar="PERIODS",
-                   help=f"envelope step in drive periods (default {PROCESSOR_STEP:g}; refused above the "
-                        "stability bound)")
+                   help=f"envelope step in drive periods (default {PROCESSOR_STEP:g}, {ETD_PROCESSOR_STEP:g} where ETDRK4 "
+                        "steps the amplitudes, shortened to the stability bound; refused above it)")
     r.add_argument("--settle", type=number(0, lo_open=False), default=None, metavar="TOL",
                    help=f"envelope, carrier, rk4: end each pause once every channel stays within TOL u_R for two 200-period "
                         f"windows (default {SETTLE_TOL}; 0 = full fixed-length pauses)")

@@ -196,8 +196,8 @@ def add_cpu_parser(sub) -> None:
     c.add_argument("--backend", default="envelope", choices=names(continuing, first="envelope"))
     max_fanout_arg(c)
     c.add_argument("--step", type=inputs.number(0), default=None, metavar="PERIODS",
-                   help="envelope: the step in drive periods (default: the processor's own, 16 or the largest of "
-                        "16, 8, 4 .. within the model's stability bound; a whole number up to that bound, e.g. 10 "
+                   help="envelope: the step in drive periods (default: the processor's own, 16 (20 where ETDRK4 steps "
+                        "the amplitudes) or the largest of 16, 8, 4 .. within the model's stability bound; a whole number up to that bound, e.g. 10 "
                         "where the ladder gives 8: fewer steps, but a marginal sample may fail at another cycle: "
                         "docs/design.md, 'A cheaper sample')")
     add_sweep_arguments(c)
@@ -236,9 +236,11 @@ def _step_key(args) -> dict:
 
 
 def _integrator_key(args) -> dict:
-    """The envelope's exponential step with ETDRK4 (each amplitude's own rate exact, backends/envelope.py): a
-    job of its own, so a results file written before it resumes with the integrator it was written with."""
-    return {"integrator": "etd"} if args.backend == "envelope" else {}
+    """The envelope's exponential step with ETDRK4 (each amplitude's own rate exact, backends/envelope.py) and
+    the processor's step cap under it (cpu/physical.ETD_PROCESSOR_STEP): a job of its own, so a results file
+    written before either resumes with the integrator and step it was written with."""
+    from ..cpu.physical import ETD_PROCESSOR_STEP
+    return {"integrator": "etd", "etd_step": ETD_PROCESSOR_STEP} if args.backend == "envelope" else {}
 
 
 def _step_key_of(job: dict) -> dict:

@@ -32,6 +32,9 @@ PHYSICAL = names(continuing, first="envelope")   # engines that continue from a 
 # The defaults: 0.0098 u_R from the full envelope at step 2 over the first 30 sieve cycles, 7.2x faster than
 # step 8 + settle alone (reports/fidelity.md; latency 0.2: 0.042 u_R, over the 0.02 bound; step 20: slower)
 PROCESSOR_STEP = 16.0   # envelope periods with the exponential step (its bound: 27.5)
+ETD_PROCESSOR_STEP = 20.0   # ... where ETDRK4 steps the amplitudes (engine.takes_etd): centered_fc2's first 30 sieve
+                            # cycles read within 0.0051 u_R of step 2 (0.0037 at 16), against the insulators-only
+                            # step's 0.0098 at 16 on the default block; 24 saved only 2 % more block-steps (docs/latency.md)
 RK4_PROCESSOR_STEP = 8.0   # the step without it (RK4's bound: 15.1 periods)
 SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fidelity.md)
 LATENCY = envelope.PROCESSOR_LATENCY   # u_R: the envelope's per-gate latency threshold (docs/latency.md)
@@ -66,7 +69,8 @@ class PhysicalCPU:
                  settle: float | None = SETTLE_TOL, latency: float | None | str = OWN_LATENCY,
                  exponential: bool = EXPONENTIAL, etd: bool = True, parallel: bool = False, power_up: bool = True,
                  noise: tuple[float, int] | None = None, steps_per_period: int | None = None, threads: int = 1,
-                 settle_check: int | None = None, max_fanout: int | None = None):
+                 settle_check: int | None = None, max_fanout: int | None = None,
+                 etd_step: float = ETD_PROCESSOR_STEP):
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
         if settle_check and noise and noise[0]:
@@ -85,7 +89,10 @@ class PhysicalCPU:
                         threads=threads, keep_periods=READ_PERIODS)
         if not step:      # the processor's step, shortened where a block's faster envelope rates bound it
             step = PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP
-            step = make_engine(backend, _options(backend, step=step, **settings)).longest_step(self.model, step)
+            engine = make_engine(backend, _options(backend, step=step, **settings))
+            step = engine.longest_step(self.model, step)
+            if exponential and engine.takes_etd(self.model, etd_step):   # etd_step: older Monte-Carlo files' 16
+                step = max(step, engine.longest_step(self.model, etd_step))
         options = _options(backend, step=step, **settings)
         # only pauses may end early once settled; pulses always run in full
         self.pulse_engine = make_engine(backend, options)

@@ -42,10 +42,12 @@ def design_for(job: dict) -> mc.DesignMC:
         _DESIGNS.clear()                 # one design per worker at a time bounds its memory
         spec, p, noise = mc.spec_of(job["spread"]), load_params(job["params"]), job.get("noise", 0.0)
         if "program" in job:             # the processor (cpu montecarlo)
+            from ..cpu.physical import PROCESSOR_STEP     # files before ETD_PROCESSOR_STEP: the cap was 16
             from .mc_clocked import CpuMC
             _DESIGNS[key] = CpuMC(job["program"], job["cycles"], p, job["backend"], spec, job["seed"], noise,
                                   batch=job.get("union", 1), max_fanout=job.get("max_fanout"),
-                                  step=job.get("step"), etd=job.get("integrator") == "etd")
+                                  step=job.get("step"), etd=job.get("integrator") == "etd",
+                                  etd_step=job.get("etd_step", PROCESSOR_STEP))
             return _DESIGNS[key]
         nl = synthesize(job["design"], max_fanout=network.MAX_FANOUT)
         if "steps" in job:               # a clocked design under a stimulus of cycles

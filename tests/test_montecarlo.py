@@ -202,3 +202,16 @@ def test_cli_errors_are_one_line(nor_v, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("mech2spice: error: spread spec") and "\n" not in err
     assert main(["montecarlo", str(ROOT / "verilog/counter4.v"), "--samples", "2", "--spread", "0"]) == 2
+
+
+def test_local_workers_keep_glibc_malloc_thresholds_and_no_profiler():
+    """A LocalCluster's workers run without the Nanny's MALLOC_TRIM_THRESHOLD_ (which made every compiled call's
+    scratch arrays fresh pages: 10x the system time) and without the 10 ms statistical profiler; the thread
+    limits Dask sets stay."""
+    import dask
+    from mech2spice.experiments.mc_run import _worker_config
+    with dask.config.set(_worker_config()):
+        environ = dask.config.get("distributed.nanny.pre-spawn-environ")
+        assert "MALLOC_TRIM_THRESHOLD_" not in environ and int(environ["OMP_NUM_THREADS"]) == 1
+        assert dask.config.get("distributed.worker.profile.enabled") is False
+    assert "MALLOC_TRIM_THRESHOLD_" in dask.config.get("distributed.nanny.pre-spawn-environ")   # only inside

@@ -134,7 +134,7 @@ def _rates(parallel, A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c,
         _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Ad, sdd, work, work2, Binv)
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True, fastmath=FAST, nogil=True)     # nogil: a Dask worker's own threads run beside it (mc_run)
 def run_steps(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, L, U, perm_r, perm_c, Binv, prow,
               amp, bound, settle_tol, watch, check_every, settle_from, parallel):
     """Advance up to nsteps RK4 steps of h (sub steps span `per` periods), writing A[prow] for each

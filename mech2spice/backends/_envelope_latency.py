@@ -330,7 +330,7 @@ def _etd_weights(z):
     return e2, p1h, p1 - 3.0 * p2 + 4.0 * p3, p2 - 2.0 * p3, 4.0 * p3 - p2
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True, fastmath=FAST, nogil=True)     # nogil: a Dask worker's own threads run beside it (mc_run)
 def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, prow, amp, bound,
                settle_tol, watch, check_every, settle_from, blk, active, quiet, snap_f, snap_s, snap_F,
                tol, hold, lat_check, need, always, expo, Eh, Ef, etd, own0, binv, lambda_tol):

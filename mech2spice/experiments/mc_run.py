@@ -221,16 +221,29 @@ def _stream(fh, records, done, bar, n, stop_after) -> None:
         raise Interrupted(f"stopped after {stop_after} tasks")
 
 
+def _worker_config() -> dict:
+    """A LocalCluster's workers without two of Dask's defaults that cost a compute-bound worker its core: the
+    Nanny's MALLOC_TRIM_THRESHOLD_ (it turns off glibc's dynamic thresholds, so every compiled call's scratch
+    arrays come back as fresh pages: 1.4 s of system time in 9.7 s of two 80-cycle processor samples, 0.25
+    without, docs/design.md section 7), and the statistical profiler, which samples each thread every 10 ms."""
+    import dask
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+    return {"distributed.nanny.pre-spawn-environ": environ, "distributed.worker.profile.enabled": False}
+
+
 def _run_dask(job, groups, fh, done, bar, scheduler, workers, stop_after) -> dict:
     """Tasks on a LocalCluster (one single-threaded worker per core) or the scheduler at an address."""
     try:
+        import dask
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:
         raise Mech2SpiceError("montecarlo needs Dask: pip install 'mech2spice[mc]' (or --scheduler inline)") from None
     cluster = None
     if scheduler == "local":
-        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", memory_limit="4GiB")
+        with dask.config.set(_worker_config()):
+            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", memory_limit="4GiB")
         client = Client(cluster)
     else:
         client = Client(scheduler)

@@ -227,6 +227,7 @@ def _worker_config() -> dict:
     arrays come back as fresh pages: 1.4 s of system time in 9.7 s of two 80-cycle processor samples, 0.25
     without, docs/design.md section 7), and the statistical profiler, which samples each thread every 10 ms."""
     import dask
+    import distributed  # noqa: F401  (its defaults into dask.config)
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
     environ.pop("MALLOC_TRIM_THRESHOLD_", None)
     return {"distributed.nanny.pre-spawn-environ": environ, "distributed.worker.profile.enabled": False}

@@ -196,9 +196,9 @@ def add_cpu_parser(sub) -> None:
     c.add_argument("--backend", default="envelope", choices=names(continuing, first="envelope"))
     max_fanout_arg(c)
     c.add_argument("--step", type=inputs.number(0), default=None, metavar="PERIODS",
-                   help="envelope: the step in drive periods (default: the processor's own, 16 (20 where ETDRK4 steps "
-                        "the amplitudes) or the largest of 16, 8, 4 .. within the model's stability bound; a whole number up to that bound, e.g. 10 "
-                        "where the ladder gives 8: fewer steps, but a marginal sample may fail at another cycle: "
+                   help="envelope: the step in drive periods (default: the processor's own, 16 (20 where ETDRK4 "
+                        "steps the amplitudes) or the largest of 16, 8, 4 .. within the model's stability bound; a "
+                        "whole number up to that bound, e.g. 10 where the ladder gives 8: fewer steps, but a marginal sample may fail at another cycle: "
                         "docs/design.md, 'A cheaper sample')")
     add_sweep_arguments(c)
     c.set_defaults(func=cmd_cpu_montecarlo)

@@ -88,11 +88,11 @@ class PhysicalCPU:
                         steps_per_period=steps_per_period,
                         threads=threads, keep_periods=READ_PERIODS)
         if not step:      # the processor's step, shortened where a block's faster envelope rates bound it
-            step = PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP
-            engine = make_engine(backend, _options(backend, step=step, **settings))
-            step = engine.longest_step(self.model, step)
+            cap = PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP
+            engine = make_engine(backend, _options(backend, step=cap, **settings))
             if exponential and engine.takes_etd(self.model, etd_step):   # etd_step: older Monte-Carlo files' 16
-                step = max(step, engine.longest_step(self.model, etd_step))
+                cap = etd_step
+            step = engine.longest_step(self.model, cap)
         options = _options(backend, step=step, **settings)
         # only pauses may end early once settled; pulses always run in full
         self.pulse_engine = make_engine(backend, options)

@@ -224,7 +224,7 @@ def _stream(fh, records, done, bar, n, stop_after) -> None:
 def _worker_config() -> dict:
     """A LocalCluster's workers without two of Dask's defaults that cost a compute-bound worker its core: the
     Nanny's MALLOC_TRIM_THRESHOLD_ (it turns off glibc's dynamic thresholds, so every compiled call's scratch
-    arrays come back as fresh pages: 1.4 s of system time in 9.7 s of two 80-cycle processor samples, 0.25
+    arrays come back as fresh pages: two 80-cycle processor samples took 1.67 s of system time with it, 0.25 s
     without, docs/design.md section 7), and the statistical profiler, which samples each thread every 10 ms."""
     import dask
     import distributed  # noqa: F401  (its defaults into dask.config)

@@ -160,3 +160,41 @@ def test_the_etd_step_gives_a_sample_the_same_cycles():
     assert runs[None][0] == 20.0 and runs[16.0][0] == 16.0
     assert runs[16.0][1] == runs[None][1]
     assert [(c.pc, c.raddr, c.rdata) for c in runs[None][1]] == [(c.pc, c.raddr, c.rdata) for c in runs[None][2]]
+
+
+def test_cpu_job_records_the_processors_calm_rule():
+    """A new envelope job records the latency calm rule (cpu/physical.LATENCY_CALM) and is a job of its own; a
+    results file written before it resumes under the hold rule it was run with (latency_calm None)."""
+    import argparse
+    from mech2spice.cli.montecarlo import cpu_job_of
+    from mech2spice.cpu.physical import LATENCY_CALM
+    from mech2spice.experiments import mc_run
+    base = dict(program=SIEVE, cycles=2, params="centered_fc2", backend="envelope", spread="0.01", trim="fc",
+                trim_residual=1e-4, drift=None, seed=7, noise=0.0, max_fanout=4, step=None)
+    job = cpu_job_of(argparse.Namespace(**base))
+    assert job["latency_calm"] == LATENCY_CALM == 40.0
+    old = {k: v for k, v in job.items() if k != "latency_calm"}
+    assert mc.job_key(old) != mc.job_key(job)
+    assert mc_run.design_for(old)._machine(0, power_up=False).latency_calm is None
+    assert mc_run.design_for(job)._machine(0, power_up=False).latency_calm == 40.0
+    assert "latency_calm" not in cpu_job_of(argparse.Namespace(**{**base, "backend": "rk4"}))
+
+
+def test_the_calm_rule_integrates_fewer_blocks_to_the_same_cycles():
+    """A spread sample under the calm rule and under the hold rule before it: the same cycle records (the ISS's),
+    every latch and port bit read in the same band within 0.02 u_R, and fewer gate-block steps (docs/latency.md:
+    20 % fewer on the fan-out-12 processor's first 30 sieve cycles)."""
+    p, spec = load_params("centered_fc2"), _trimmed(0.01)
+    runs = {}
+    for calm in ("own", None):
+        mcx = CpuMC(SIEVE, 3, p, "envelope", spec, 7, max_fanout=4, latency_calm=calm)
+        cpu = mcx._machine(1)
+        cycles = [cpu.step() for _ in mcx.want]
+        runs[calm] = (cpu.latency_calm, cycles, np.array([cpu.amps[q] for q in cpu.probes]), cpu.block_steps)
+    assert runs["own"][0] == 40.0 and runs[None][0] is None
+    assert runs["own"][1] == runs[None][1]
+    assert [(c.pc, c.raddr, c.rdata) for c in runs["own"][1]] == [(c.pc, c.raddr, c.rdata) for c in mcx.want]
+    bands = np.vectorize(p.levels.band_of)
+    assert (bands(runs["own"][2]) == bands(runs[None][2])).all()
+    assert np.abs(runs["own"][2] - runs[None][2]).max() < 0.02
+    assert runs["own"][3] < 0.95 * runs[None][3]

@@ -28,6 +28,8 @@ LAMBDA_TOL = 0.1     # |lambda h| a row's own rate may move (its insulator's det
                      # 0.0014 u_R (3 fcb samples x 80 sieve cycles; docs/latency.md)
 SETTLED, DIVERGED, DONE = 1, 2, 0
 CHANNELS_ONLY = True
+QUIET_BASE = 1 << 20  # a block's quiet counts packed in one int64 (the state's format): checks in a row with its
+                      # inputs calm + QUIET_BASE x checks in a row with its inputs and its own channel calm
 
 
 def _csr_pattern(M) -> tuple[np.ndarray, np.ndarray]:
@@ -79,6 +81,9 @@ class Blocks:
         self.slow = _csr_pattern(Rs)
         self.res = _csr_pattern(res)
         self.ext_f = _csr_pattern(ext_f)
+        watched = np.zeros(nf, np.int8)
+        watched[env.watch] = 1
+        self.ext_channel = watched[self.ext_f[1]]       # which recorded inputs are channels (the calm test's)
         self.ext_s = _csr_pattern(ext_s)
         dep = pat(ext_f @ Rf.T + ext_s @ Rs.T).T          # (a, d): d reads a's DOFs
         self.dep = _csr_pattern(dep)
@@ -101,7 +106,7 @@ class Blocks:
         """The tuple the compiled loop takes."""
         return (self.fast[0], self.fast[1], self.slow[0], self.slow[1], self.res[0], self.res[1],
                 self.ext_f[0], self.ext_f[1], self.ext_s[0], self.ext_s[1], self.dep[0], self.dep[1],
-                self.s_scale, self.key[0], self.key[1], self.key_s[0], self.key_s[1])
+                self.s_scale, self.key[0], self.key[1], self.key_s[0], self.key_s[1], self.ext_channel)
 
     def fresh_state(self, B: int):
         """Every block active, nothing recorded: (active, quiet, snap_f, snap_s, snap_F)."""
@@ -223,12 +228,16 @@ def _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nf, srows
 
 
 @njit(cache=True, fastmath=FAST)
-def _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol, forcing=True):
+def _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol, forcing=True, channels=False):
     """Whether frozen block b's inputs (or, with `forcing`, the forcing on its residual rows) left their
-    record by > tol.  Within one compiled call the forcing is constant: the wake-ups after each step skip it."""
-    xp, xi, yp, yi, rp, ri, scale = blk[6], blk[7], blk[8], blk[9], blk[4], blk[5], blk[12]
+    record by > tol; with `channels`, of its inputs only the channels (its drivers' news, not its loads'
+    ringing back-action).  Within one compiled call the forcing is constant: the wake-ups after each step
+    skip it."""
+    xp, xi, yp, yi, rp, ri, scale, is_channel = blk[6], blk[7], blk[8], blk[9], blk[4], blk[5], blk[12], blk[17]
     for bb in range(A.shape[1]):
         for k in range(xp[b], xp[b + 1]):
+            if channels and is_channel[k] == 0:
+                continue
             d = A[xi[k], bb] - snap_f[k, bb]
             if d.real * d.real + d.imag * d.imag > tol * tol:
                 return True
@@ -333,10 +342,13 @@ def _etd_weights(z):
 @njit(cache=True, fastmath=FAST, nogil=True)     # nogil: a Dask worker's own threads run beside it (mc_run)
 def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, prow, amp, bound,
                settle_tol, watch, check_every, settle_from, blk, active, quiet, snap_f, snap_s, snap_F,
-               tol, hold, lat_check, need, always, expo, Eh, Ef, etd, own0, binv, lambda_tol):
+               tol, hold, lat_check, need, always, expo, Eh, Ef, etd, own0, binv, lambda_tol, amp_from, need_calm,
+               channels_calm):
     """run_steps (_envelope_kernel) with per-block latency: only active blocks' rows are integrated.
-    A block freezes after `need` quiet checks in a row (lat_check steps apart): its channel moved < tol,
-    its rates predict < tol over `hold`, its inputs moved < tol since the last check.  tol = 0: only blocks
+    A block freezes once its inputs moved < tol since the last check at `need` checks in a row (lat_check
+    steps apart) and, at the last `need_calm` (<= need) of them, its channel moved < tol too and its rates
+    predicted < tol over `hold` (quiet: the two counts, QUIET_BASE); channels_calm: the inputs' calm test
+    reads the input channels only (the wake-ups read every recorded input).  tol = 0: only blocks
     standing exactly still freeze.  expo: the insulators' linear oscillator (s, s') is stepped exactly (Lawson RK4 with its
     propagators over h/2 and h, Eh and Ef as (ns, 4) rows [e00, e01, e10, e11]); RK4 then no longer
     resolves their ringing, the stiffest mode at rest.  With etd too, each amplitude's own rate lambda_f
@@ -344,7 +356,8 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
     exactly too, by ETDRK4 (Cox & Matthews 2002: the stages carry N = f - lambda A, weighted by phi functions
     of lambda h): exact for a constant N, so a settled state is a fixed point of the step at any h, which
     Lawson's RK4 is not (its settled amplitudes were off by 0.011 u_R at 8 periods on the chain).
-    lambda_tol: LAMBDA_TOL, an argument so that a comparison can set it at run time.
+    lambda_tol: LAMBDA_TOL, an argument so that a comparison can set it at run time.  amp: the probes' amplitude
+    at each period from amp_from on (the periods before are left unwritten: the caller keeps the last ones).
     Returns (steps done, DONE | SETTLED | DIVERGED, block-steps integrated)."""
     nf, B = A.shape
     ns = s.shape[0]
@@ -415,11 +428,13 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
                 b = ablk[q]
                 if b == always:
                     continue
-                calm = (_quiet(A, s, sd, a1, Aref, sref, blk, b, tol, hold)
-                        and not _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol))
+                calm_own = _quiet(A, s, sd, a1, Aref, sref, blk, b, tol, hold)
+                calm_in = not _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol, True, channels_calm)
                 _record(A, s, F, blk, b, snap_f, snap_s, snap_F)
-                quiet[b] = quiet[b] + 1 if calm else 0
-                if quiet[b] >= need:
+                q_in = quiet[b] % QUIET_BASE + 1 if calm_in else 0
+                q_all = quiet[b] // QUIET_BASE + 1 if calm_own and calm_in else 0
+                quiet[b] = q_in + QUIET_BASE * q_all
+                if q_in >= need and q_all >= need_calm:
                     active[b] = 0
                     froze = True
                     _freeze(A, s, blk, b, At, st, sd, v2, v3, v4)
@@ -545,7 +560,7 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
                     nfr, nsr, nr, na = _append(d, blk, mark, frows, srows, rrows, ablk, nfr, nsr, nr, na)
         if (n + 1) % sub == 0:
             c = (n + 1) // sub - 1
-            for p in range(per):
+            for p in range(max(0, amp_from - c * per), per):
                 for q in range(prow.size):
                     for b in range(B):
                         amp[c * per + p, q, b] = A[prow[q], b]

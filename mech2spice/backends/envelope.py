@@ -109,7 +109,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
               start_period: int = 0, probes: list[str] | None = None, progress: bool = False,
               settle_tol: float | None = None, compiled: bool = True, latency: float | None = None,
               parallel: bool = False, exponential: bool = False, keep_periods: int | None = None,
-              etd: bool = True) -> Run:
+              etd: bool = True, latency_calm: float | None = None) -> Run:
     """RK4 on the envelope equations with a step of `step_periods` drive periods (must divide 1 or be whole).
 
     Returns a Run whose per-period amplitudes are the envelope itself.  A step beyond the measured
@@ -123,7 +123,10 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     (without latency: its active rows are too few to share out).  exponential: the insulators' linear
     oscillators are stepped exactly (Lawson RK4), which lifts the stability bound they set.  keep_periods:
     the Run keeps only the last so many periods' amplitudes (a caller that reads the end of each of many
-    long pauses need not have every period written: the processor)."""
+    long pauses need not have every period written: the processor; the loop writes only those).
+    latency_calm: the processor's freeze rule (docs/latency.md, "The calm rule"): a block freezes once its
+    input channels stayed calm for LATENCY_HOLD and its own channel for `latency_calm` periods; None: once
+    it and every input it records stayed calm for LATENCY_HOLD."""
     env = Envelope.of(model)
     T = model.period
     etd = needs_etd(model, step_periods, exponential, etd)
@@ -146,6 +149,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     lat_tol, hold = (latency or 0.0) * model.amplitude_unit, LATENCY_HOLD * T
     lat_check = max(1, int(round(LATENCY_WINDOW / per))) * sub
     need = -(-LATENCY_HOLD // (lat_check // sub * per)) + 1     # quiet checks spanning HOLD periods
+    need_calm = need if latency_calm is None else min(need, int(-(-latency_calm // (lat_check // sub * per))) + 1)
     block_steps = 0
     bound = blowup_bound(model)
     settled_periods = 0
@@ -163,7 +167,9 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
         nchunks = min(to_change, max(1, CHUNK_PERIODS // per))
         if lat is not None:
             seg, done, status, work = kern.run_latent(A, s, sd, lat, nchunks, sub, per, h, F, prow, bound, tol,
-                                                      check, settle_from, lat_tol, hold, lat_check, need, props)
+                                                      check, settle_from, lat_tol, hold, lat_check, need, props,
+                                                      amp_from=max(0, rec.first - k), need_calm=need_calm,
+                                                      channels_calm=latency_calm is not None)
             block_steps += work
         elif kern is not None:
             seg, done, status = kern.run(A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from,
@@ -214,8 +220,8 @@ class _Record:
 
 LATENCY_WINDOW = 32          # periods between freeze checks
 LATENCY_HOLD = 200           # periods, about one gate delay (173 mean, reports/gate.md): a block freezes once
-                             # it and its inputs stayed quiet this long and its rates predict < the
-                             # threshold over this
+                             # its inputs and itself stayed quiet this long (the calm rule where
+                             # Options.latency_calm is set) and its rates predict < the threshold over this
 
 
 def _propagators(kern, env, exponential: bool, h: float, etd: bool = True):
@@ -317,6 +323,8 @@ class EnvelopeOptions:
     etd: bool = True                     # with exponential: each amplitude's own rate stepped exactly too (ETDRK4)
                                          # where that alone lets the step be taken (needs_etd)
     keep_periods: int | None = None      # the Run keeps only the last so many periods (None: all)
+    latency_calm: float | None = None    # the calm rule (integrate): periods a gate block's own channel stays calm
+                                         # before it freezes, its input channels LATENCY_HOLD; None: the hold rule
 
     def __post_init__(self):
         self.validate()              # a bad value fails where it is set, not later inside a run
@@ -330,6 +338,8 @@ class EnvelopeOptions:
             _step_layout(self.step_periods)
         if self.settle_tol is not None and not (np.isfinite(self.settle_tol) and self.settle_tol > 0):
             raise Mech2SpiceError(f"settle tolerance {self.settle_tol!r} u_R: must be a positive number")
+        if self.latency_calm is not None and not (np.isfinite(self.latency_calm) and self.latency_calm > 0):
+            raise Mech2SpiceError(f"latency calm time {self.latency_calm!r} periods: must be a positive number")
         if self.keep_periods is not None and self.keep_periods < 1:
             raise Mech2SpiceError(f"keep_periods {self.keep_periods!r}: must be at least 1")
         if self.latency is not None and not (np.isfinite(self.latency) and 0 < self.latency < 1):
@@ -408,4 +418,4 @@ class EnvelopeEngine(Engine):
                          settle_tol=self.options.settle_tol, compiled=self.options.compiled,
                          latency=self.options.latency, parallel=self.options.parallel,
                          exponential=self.options.exponential, keep_periods=self.options.keep_periods,
-                         etd=self.options.etd)
+                         etd=self.options.etd, latency_calm=self.options.latency_calm)

@@ -236,11 +236,12 @@ def _step_key(args) -> dict:
 
 
 def _integrator_key(args) -> dict:
-    """The envelope's exponential step with ETDRK4 (each amplitude's own rate exact, backends/envelope.py) and
-    the processor's step cap under it (cpu/physical.ETD_PROCESSOR_STEP): a job of its own, so a results file
-    written before either resumes with the integrator and step it was written with."""
-    from ..cpu.physical import ETD_PROCESSOR_STEP
-    return {"integrator": "etd", "etd_step": ETD_PROCESSOR_STEP} if args.backend == "envelope" else {}
+    """The envelope's exponential step with ETDRK4 (each amplitude's own rate exact, backends/envelope.py), the
+    processor's step cap under it (cpu/physical.ETD_PROCESSOR_STEP) and its latency calm rule (LATENCY_CALM): a
+    job of its own, so a results file written before any of them resumes with the settings it was written with."""
+    from ..cpu.physical import ETD_PROCESSOR_STEP, LATENCY_CALM
+    return ({"integrator": "etd", "etd_step": ETD_PROCESSOR_STEP, "latency_calm": LATENCY_CALM}
+            if args.backend == "envelope" else {})
 
 
 def _step_key_of(job: dict) -> dict:

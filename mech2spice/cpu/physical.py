@@ -38,6 +38,9 @@ ETD_PROCESSOR_STEP = 20.0   # ... where ETDRK4 steps the amplitudes (engine.take
 RK4_PROCESSOR_STEP = 8.0   # the step without it (RK4's bound: 15.1 periods)
 SETTLE_TOL = 0.1        # u_R: end a pause once the channels settle (reports/fidelity.md)
 LATENCY = envelope.PROCESSOR_LATENCY   # u_R: the envelope's per-gate latency threshold (docs/latency.md)
+LATENCY_CALM = 40.0     # the calm rule: a gate block freezes once its own channel stayed calm this many periods and
+                        # its input channels the envelope's LATENCY_HOLD (200); 20 % fewer block-steps, reads as
+                        # close to step 2 (docs/latency.md, "The calm rule"); None: the hold rule before it
 OWN_LATENCY = "own"     # latency: the engine's own default (Engine.processor_latency; rk4 has none)
 READ_PERIODS = 10       # periods a read averages over, at the end of each pulse or pause: all a run keeps
 EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability bound; docs/latency.md)
@@ -70,7 +73,7 @@ class PhysicalCPU:
                  exponential: bool = EXPONENTIAL, etd: bool = True, parallel: bool = False, power_up: bool = True,
                  noise: tuple[float, int] | None = None, steps_per_period: int | None = None, threads: int = 1,
                  settle_check: int | None = None, max_fanout: int | None = None,
-                 etd_step: float = ETD_PROCESSOR_STEP):
+                 etd_step: float = ETD_PROCESSOR_STEP, latency_calm: float | None = LATENCY_CALM):
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
         if settle_check and noise and noise[0]:
@@ -84,8 +87,8 @@ class PhysicalCPU:
         self.probes = list(self.model.probes)
         if latency == OWN_LATENCY:
             latency = engine_class(backend).processor_latency(threads)
-        settings = dict(latency=latency, exponential=exponential, etd=etd, parallel=parallel,
-                        steps_per_period=steps_per_period,
+        settings = dict(latency=latency, latency_calm=latency_calm, exponential=exponential, etd=etd,
+                        parallel=parallel, steps_per_period=steps_per_period,
                         threads=threads, keep_periods=READ_PERIODS)
         if not step:      # the processor's step, shortened where a block's faster envelope rates bound it
             cap = PROCESSOR_STEP if exponential else RK4_PROCESSOR_STEP
@@ -107,6 +110,8 @@ class PhysicalCPU:
         self.pulse, self.pause = -(-t["pulse"] // whole) * whole, -(-t["pause"] // whole) * whole
         self.backend, self.p, self.mem = backend, p, memory
         self.step_periods, self.settle, self.latency = step, settle, latency
+        # where the engine takes a calm time (the envelope; the carrier's latency has its own rule)
+        self.latency_calm = latency_calm if latency and hasattr(self.pause_engine.options, "latency_calm") else None
         self.block_steps = 0        # gate blocks x steps integrated (latency); 0 without it
         self.simulated = 0          # periods actually integrated (a settled pause skips the rest)
         self.state, self.period, self.rdata = None, 0, 0

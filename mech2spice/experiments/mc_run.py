@@ -47,7 +47,8 @@ def design_for(job: dict) -> mc.DesignMC:
             _DESIGNS[key] = CpuMC(job["program"], job["cycles"], p, job["backend"], spec, job["seed"], noise,
                                   batch=job.get("union", 1), max_fanout=job.get("max_fanout"),
                                   step=job.get("step"), etd=job.get("integrator") == "etd",
-                                  etd_step=job.get("etd_step", PROCESSOR_STEP))
+                                  etd_step=job.get("etd_step", PROCESSOR_STEP),
+                                  latency_calm=job.get("latency_calm"))     # None: files before it
             return _DESIGNS[key]
         nl = synthesize(job["design"], max_fanout=network.MAX_FANOUT)
         if "steps" in job:               # a clocked design under a stimulus of cycles

@@ -139,3 +139,31 @@ def test_etd_step_on_the_centred_chain_agrees_with_a_fine_step(monkeypatch):
     fine = end(1)
     assert np.abs(end(16) - fine).max() / u < 5e-3
     assert np.abs(end(8) - end(8, etd=False)).max() / u < 1e-3
+
+
+def test_a_frozen_gate_records_its_loads_oscillators_and_wakes_by_its_drivers_channels(adder):
+    """The latency record of a gate block (docs/latency.md, "Per-gate latency") holds every other block's fast DOF
+    its rates read: its drivers' channels and its loads' gate oscillators (their back-action; a record of the
+    channels alone left a processor latch wrong after power-up, issue 36); the wake-up graph's edges are the
+    channels it reads, the calm rule's input test marks exactly those."""
+    from mech2spice.physics.envelope import Envelope
+    model = adder.model
+    env, b = Envelope.of(model), envelope.kernel(model).blocks
+    pos = {int(d): q for q, d in enumerate(env.fast)}
+    gates = model.design.gates
+    owner = {pos[d]: k for k, g in enumerate(gates) for d in (g.channel, *[x for pair in g.inputs for x in pair])}
+    channels = {pos[g.channel] for g in gates}
+    watched = set(int(f) for f in env.watch)
+    xp, xi = b.ext_f
+    dp, di = b.dep
+    with_loads = 0
+    for k in range(len(gates)):
+        rec = [int(f) for f in xi[xp[k]:xp[k + 1]]]
+        assert rec and all(owner.get(f, b.always) != k for f in rec)
+        assert list(b.ext_channel[xp[k]:xp[k + 1]]) == [int(f in watched) for f in rec]
+        loads = [f for f in rec if f not in watched]
+        assert all(f in owner and f not in channels for f in loads)       # other gates' gate oscillators
+        with_loads += bool(loads)
+        wakers = {a for a in range(b.n) if k in di[dp[a]:dp[a + 1]]}
+        assert wakers == {owner.get(f, b.always) for f in rec if f in watched}
+    assert with_loads > len(gates) // 2

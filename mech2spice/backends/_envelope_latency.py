@@ -65,12 +65,14 @@ class Blocks:
         res = pat(Rf @ Pb)                                 # residual rows each block's rates read
         ext_f = pat(res @ Pz + Rs @ Ph).tolil()
         ext_s = pat(res @ Pg).tolil()
-        ext_f = self._drop_own(ext_f, of_f)
-        ext_s = self._drop_own(ext_s, of_s)
-        if CHANNELS_ONLY:
+        ext_f = self._drop_own(ext_f, of_f)      # the record: every other block's fast DOF its rates read (its
+        ext_s = self._drop_own(ext_s, of_s)      # drivers' channels, its loads' gate oscillators; docs/latency.md)
+        wake_f = ext_f
+        if CHANNELS_ONLY:                        # the wake-ups' graph follows the channels a block reads
             ch = np.zeros(nf, bool)
             ch[env.watch] = True
-            ext_f = sp.csr_matrix(ext_f.multiply(ch[None, :].astype(float)))
+            wake_f = sp.csr_matrix(ext_f.multiply(ch[None, :].astype(float)))
+            wake_f.eliminate_zeros()
             ext_s = sp.csr_matrix(ext_s.shape)
             Rk = sp.csr_matrix((np.ones(ch.sum()), (of_f[ch], np.flatnonzero(ch))), shape=(nblk, nf))
             self.key = _csr_pattern(Rk)
@@ -85,7 +87,7 @@ class Blocks:
         watched[env.watch] = 1
         self.ext_channel = watched[self.ext_f[1]]       # which recorded inputs are channels (the calm test's)
         self.ext_s = _csr_pattern(ext_s)
-        dep = pat(ext_f @ Rf.T + ext_s @ Rs.T).T          # (a, d): d reads a's DOFs
+        dep = pat(wake_f @ Rf.T + ext_s @ Rs.T).T         # (a, d): d reads a's channel (its DOFs)
         self.dep = _csr_pattern(dep)
         # amplitude-equivalent scale of an insulator displacement (module docstring)
         z = np.abs(env.Z0.diagonal())

@@ -374,13 +374,15 @@ def test_processor_judged_every_cycle(capsys):
 
 def test_processor_reads_are_settled_at_the_defaults(capsys):
     """--settle-check: each of the sieve's first reads continued 6000 periods with nothing skipped moves by
-    far less than its margin (measured over the whole sieve: at most 0.0106 band widths, reports/fidelity.md)."""
+    far less than its margin (the whole sieve on the default block: at most 0.0106 band widths under the hold
+    rule, reports/fidelity.md; 0.094 under the processor's calm rule, 9 % of a margin at most, docs/stability.md;
+    these 3 cycles: 0.0085 and 0.048)."""
     rc, res, err = _simulate(capsys, "cpu", "run", ROOT / "programs/sieve.asm", "--backend", "envelope",
                              "--settle-check", "--max-cycles", "3")
     sc = res["settle_check"]
     assert rc == 1 and not res["halted"]            # exit 1: did not halt within 3 cycles
     assert res["settled"] and sc["reads"] == 8     # the power-up's two pauses, two a cycle and sc["reads_not_settled"] == 0 and sc["reads_unconverged"] == 0
-    assert 1e-4 < sc["worst_still_to_come_bw"] < 0.02
+    assert 1e-4 < sc["worst_still_to_come_bw"] < 0.08
 
 
 def test_processor_read_cut_short_is_not_settled(capsys):

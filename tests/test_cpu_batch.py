@@ -163,11 +163,12 @@ def test_the_etd_step_gives_a_sample_the_same_cycles():
 
 
 def test_cpu_job_records_the_processors_calm_rule():
-    """A new envelope job records the latency calm rule (cpu/physical.LATENCY_CALM) and is a job of its own; a
-    results file written before it resumes under the hold rule it was run with (latency_calm None)."""
+    """A new envelope job records the latency calm rule (cpu/physical.LATENCY_CALM) and wake threshold
+    (LATENCY_WAKE) and is a job of its own; a results file written before either resumes under the rule it was
+    run with (latency_calm, latency_wake None)."""
     import argparse
     from mech2spice.cli.montecarlo import cpu_job_of
-    from mech2spice.cpu.physical import LATENCY_CALM
+    from mech2spice.cpu.physical import LATENCY_CALM, LATENCY_WAKE
     from mech2spice.experiments import mc_run
     base = dict(program=SIEVE, cycles=2, params="centered_fc2", backend="envelope", spread="0.01", trim="fc",
                 trim_residual=1e-4, drift=None, seed=7, noise=0.0, max_fanout=4, step=None)
@@ -178,6 +179,11 @@ def test_cpu_job_records_the_processors_calm_rule():
     assert mc_run.design_for(old)._machine(0, power_up=False).latency_calm is None
     assert mc_run.design_for(job)._machine(0, power_up=False).latency_calm == 40.0
     assert "latency_calm" not in cpu_job_of(argparse.Namespace(**{**base, "backend": "rk4"}))
+    assert job["latency_wake"] == LATENCY_WAKE == 0.05
+    calm_only = {k: v for k, v in job.items() if k != "latency_wake"}
+    assert mc.job_key(calm_only) != mc.job_key(job)
+    assert mc_run.design_for(calm_only)._machine(0, power_up=False).latency_wake is None
+    assert mc_run.design_for(job)._machine(0, power_up=False).latency_wake == 0.05
 
 
 def test_the_calm_rule_integrates_fewer_blocks_to_the_same_cycles():

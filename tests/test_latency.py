@@ -84,7 +84,9 @@ def test_exponential_step_on_chain():
 
 @pytest.mark.parametrize("opts, msg", [(dict(latency=1.5), "latency threshold"),
                                        (dict(latency=-0.1), "latency threshold"),
-                                       (dict(latency=float("nan")), "latency threshold")])
+                                       (dict(latency=float("nan")), "latency threshold"),
+                                       (dict(latency=0.1, latency_wake=0.0), "latency wake threshold"),
+                                       (dict(latency=0.1, latency_calm=-1.0), "latency calm time")])
 def test_bad_options(opts, msg):
     with pytest.raises(Mech2SpiceError, match=msg):
         EnvelopeOptions(**opts).validate()

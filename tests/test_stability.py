@@ -385,6 +385,26 @@ def test_processor_reads_are_settled_at_the_defaults(capsys):
     assert 1e-4 < sc["worst_still_to_come_bw"] < 0.08
 
 
+def test_the_wake_threshold_lets_a_frozen_gate_follow_its_drivers_drift():
+    """centered_fc2's raddr[1] in sieve cycle 2: frozen while its drivers' channels drift by less than the latency
+    threshold (0.1 u_R), it is read 0.031 u_R (0.3 of its margin) short of where it settles; waking at 0.05 u_R
+    (cpu/physical.LATENCY_WAKE) it is read at rest (the whole sieve: 0 of 914 reads unsettled against 420,
+    docs/latency.md, "The wake threshold")."""
+    from mech2spice.cpu.physical import LATENCY_WAKE, PhysicalCPU
+    from mech2spice.cpu.run import load_program, make_memory
+    checks = {}
+    for wake in (LATENCY_WAKE, None):
+        cpu = PhysicalCPU(make_memory(load_program(str(ROOT / "programs/sieve.asm"))), "envelope",
+                          params.load_params("centered_fc2"), settle_check=6000, latency_wake=wake)
+        for _ in range(3):
+            cpu.step()
+        checks[wake] = cpu.settle_check.to_json()
+    assert checks[LATENCY_WAKE]["settled"] and checks[LATENCY_WAKE]["largest_margin_share"] < 0.1
+    old = checks[None]
+    assert not old["settled"] and old["largest_margin_share"] > 0.25
+    assert {(r["cycle"], r["bit"]) for r in old["not_settled"]} >= {(2, "raddr[1]")}
+
+
 def test_processor_read_cut_short_is_not_settled(capsys):
     """Pauses ended far too early (settle and latency 0.3 u_R): every decoded value still equals the ISS,
     but a read is still moving by a large part of its margin, so the run is not `settled` and exits 1."""

@@ -279,11 +279,12 @@ class Kernel:
 
     def run_latent(self, A, s, sd, lat, nchunks, sub, per, h, F, prow, bound, settle_tol, check_every, settle_from,
                    tol, hold, lat_check, need, props=None, amp_from: int = 0, need_calm: int | None = None,
-                   channels_calm: bool = False):
+                   channels_calm: bool = False, wake_tol: float = -1.0):
         """`run` with per-block latency (_envelope_latency); `lat` (the blocks' latency state) is updated
         in place; props: Kernel.propagators (the exponential step) or None; amp's periods before amp_from
         are not written; need_calm: the quiet checks of a block's own channel (None: need); channels_calm:
-        the inputs' calm test on channels only.  Returns (amp, steps done, status, block-steps integrated)."""
+        the inputs' calm test on channels only; wake_tol >= 0: the wake-ups' threshold on input channels.
+        Returns (amp, steps done, status, block-steps integrated)."""
         amp = np.empty((nchunks * per, prow.size, A.shape[1]), complex)
         expo = props is not None
         Eh, Ef, own0, binv, etd = props if expo else (np.zeros((1, 4)), np.zeros((1, 4)), np.zeros(1, complex),
@@ -294,7 +295,7 @@ class Kernel:
             self.Ks, self.Cs, self.inv_ms, self.Binv, prow.astype(np.int64), amp, bound, settle_tol, self.watch,
             check_every, settle_from, self.blocks.arrays(), active, quiet, snap_f, snap_s, snap_F, tol, hold,
             lat_check, need, self.blocks.always, expo, Eh, Ef, etd, own0, binv, _envelope_latency.LAMBDA_TOL,
-            amp_from, need if need_calm is None else need_calm, channels_calm)
+            amp_from, need if need_calm is None else need_calm, channels_calm, wake_tol)
         return amp, int(done), int(status), int(work)
 
 

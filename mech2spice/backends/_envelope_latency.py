@@ -230,18 +230,19 @@ def _rhs(A, s, sd, F, Z, G, H, Ks, Cs, inv_ms, Binv, rrows, nr, frows, nf, srows
 
 
 @njit(cache=True, fastmath=FAST)
-def _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol, forcing=True, channels=False):
+def _moved(A, s, F, blk, b, snap_f, snap_s, snap_F, tol, forcing=True, channels=False, tol_channels=-1.0):
     """Whether frozen block b's inputs (or, with `forcing`, the forcing on its residual rows) left their
-    record by > tol; with `channels`, of its inputs only the channels (its drivers' news, not its loads'
-    ringing back-action).  Within one compiled call the forcing is constant: the wake-ups after each step
-    skip it."""
+    record by > tol (its input channels by > tol_channels where that is >= 0); with `channels`, of its inputs
+    only the channels (its drivers' news, not its loads' ringing back-action).  Within one compiled call the
+    forcing is constant: the wake-ups after each step skip it."""
     xp, xi, yp, yi, rp, ri, scale, is_channel = blk[6], blk[7], blk[8], blk[9], blk[4], blk[5], blk[12], blk[17]
     for bb in range(A.shape[1]):
         for k in range(xp[b], xp[b + 1]):
             if channels and is_channel[k] == 0:
                 continue
             d = A[xi[k], bb] - snap_f[k, bb]
-            if d.real * d.real + d.imag * d.imag > tol * tol:
+            t = tol_channels if tol_channels >= 0.0 and is_channel[k] != 0 else tol
+            if d.real * d.real + d.imag * d.imag > t * t:
                 return True
         for k in range(yp[b], yp[b + 1]):
             if abs(s[yi[k], bb] - snap_s[k, bb]) * scale[yi[k]] > tol:
@@ -345,12 +346,13 @@ def _etd_weights(z):
 def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, prow, amp, bound,
                settle_tol, watch, check_every, settle_from, blk, active, quiet, snap_f, snap_s, snap_F,
                tol, hold, lat_check, need, always, expo, Eh, Ef, etd, own0, binv, lambda_tol, amp_from, need_calm,
-               channels_calm):
+               channels_calm, wake_tol):
     """run_steps (_envelope_kernel) with per-block latency: only active blocks' rows are integrated.
     A block freezes once its inputs moved < tol since the last check at `need` checks in a row (lat_check
     steps apart) and, at the last `need_calm` (<= need) of them, its channel moved < tol too and its rates
     predicted < tol over `hold` (quiet: the two counts, QUIET_BASE); channels_calm: the inputs' calm test
-    reads the input channels only (the wake-ups read every recorded input).  tol = 0: only blocks
+    reads the input channels only (the wake-ups read every recorded input); wake_tol >= 0: a frozen block wakes
+    once an input channel left its record by that much (its other inputs: tol).  tol = 0: only blocks
     standing exactly still freeze.  expo: the insulators' linear oscillator (s, s') is stepped exactly (Lawson RK4 with its
     propagators over h/2 and h, Eh and Ef as (ns, 4) rows [e00, e01, e10, e11]); RK4 then no longer
     resolves their ringing, the stiffest mode at rest.  With etd too, each amplitude's own rate lambda_f
@@ -554,7 +556,7 @@ def run_latent(A, s, sd, nsteps, sub, per, h, F, Z, G, H, Ks, Cs, inv_ms, Binv, 
         for q in range(n_active):
             for k in range(dp[ablk[q]], dp[ablk[q] + 1]):
                 d = di[k]
-                if active[d] == 0 and _moved(A, s, F, blk, d, snap_f, snap_s, snap_F, tol, False):
+                if active[d] == 0 and _moved(A, s, F, blk, d, snap_f, snap_s, snap_F, tol, False, False, wake_tol):
                     active[d] = 1
                     quiet[d] = 0
                     _mark_ref(A, s, Aref, sref, blk, d)

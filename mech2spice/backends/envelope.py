@@ -109,7 +109,7 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
               start_period: int = 0, probes: list[str] | None = None, progress: bool = False,
               settle_tol: float | None = None, compiled: bool = True, latency: float | None = None,
               parallel: bool = False, exponential: bool = False, keep_periods: int | None = None,
-              etd: bool = True, latency_calm: float | None = None) -> Run:
+              etd: bool = True, latency_calm: float | None = None, latency_wake: float | None = None) -> Run:
     """RK4 on the envelope equations with a step of `step_periods` drive periods (must divide 1 or be whole).
 
     Returns a Run whose per-period amplitudes are the envelope itself.  A step beyond the measured
@@ -126,7 +126,9 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
     long pauses need not have every period written: the processor; the loop writes only those).
     latency_calm: the processor's freeze rule (docs/latency.md, "The calm rule"): a block freezes once its
     input channels stayed calm for LATENCY_HOLD and its own channel for `latency_calm` periods; None: once
-    it and every input it records stayed calm for LATENCY_HOLD."""
+    it and every input it records stayed calm for LATENCY_HOLD.  latency_wake (u_R): a frozen block wakes once
+    one of its input channels moved by this much since it froze (docs/latency.md, "The wake threshold");
+    None: by `latency`, as its other inputs."""
     env = Envelope.of(model)
     T = model.period
     etd = needs_etd(model, step_periods, exponential, etd)
@@ -169,7 +171,9 @@ def integrate(model: MechModel, periods: int, *, step_periods: float = 0.5, stim
             seg, done, status, work = kern.run_latent(A, s, sd, lat, nchunks, sub, per, h, F, prow, bound, tol,
                                                       check, settle_from, lat_tol, hold, lat_check, need, props,
                                                       amp_from=max(0, rec.first - k), need_calm=need_calm,
-                                                      channels_calm=latency_calm is not None)
+                                                      channels_calm=latency_calm is not None,
+                                                      wake_tol=-1.0 if latency_wake is None
+                                                      else latency_wake * model.amplitude_unit)
             block_steps += work
         elif kern is not None:
             seg, done, status = kern.run(A, s, sd, nchunks, sub, per, h, F, prow, bound, tol, check, settle_from,
@@ -325,6 +329,8 @@ class EnvelopeOptions:
     keep_periods: int | None = None      # the Run keeps only the last so many periods (None: all)
     latency_calm: float | None = None    # the calm rule (integrate): periods a gate block's own channel stays calm
                                          # before it freezes, its input channels LATENCY_HOLD; None: the hold rule
+    latency_wake: float | None = None    # u_R: a frozen gate block wakes once an input channel moved this much;
+                                         # None: the latency threshold
 
     def __post_init__(self):
         self.validate()              # a bad value fails where it is set, not later inside a run
@@ -340,6 +346,9 @@ class EnvelopeOptions:
             raise Mech2SpiceError(f"settle tolerance {self.settle_tol!r} u_R: must be a positive number")
         if self.latency_calm is not None and not (np.isfinite(self.latency_calm) and self.latency_calm > 0):
             raise Mech2SpiceError(f"latency calm time {self.latency_calm!r} periods: must be a positive number")
+        if self.latency_wake is not None and not (np.isfinite(self.latency_wake) and 0 < self.latency_wake < 1):
+            raise Mech2SpiceError(f"latency wake threshold {self.latency_wake!r} u_R: must be a number between 0 "
+                                  "and 1")
         if self.keep_periods is not None and self.keep_periods < 1:
             raise Mech2SpiceError(f"keep_periods {self.keep_periods!r}: must be at least 1")
         if self.latency is not None and not (np.isfinite(self.latency) and 0 < self.latency < 1):
@@ -418,4 +427,5 @@ class EnvelopeEngine(Engine):
                          settle_tol=self.options.settle_tol, compiled=self.options.compiled,
                          latency=self.options.latency, parallel=self.options.parallel,
                          exponential=self.options.exponential, keep_periods=self.options.keep_periods,
-                         etd=self.options.etd, latency_calm=self.options.latency_calm)
+                         etd=self.options.etd, latency_calm=self.options.latency_calm,
+                         latency_wake=self.options.latency_wake)

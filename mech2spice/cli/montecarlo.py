@@ -237,10 +237,12 @@ def _step_key(args) -> dict:
 
 def _integrator_key(args) -> dict:
     """The envelope's exponential step with ETDRK4 (each amplitude's own rate exact, backends/envelope.py), the
-    processor's step cap under it (cpu/physical.ETD_PROCESSOR_STEP) and its latency calm rule (LATENCY_CALM): a
-    job of its own, so a results file written before any of them resumes with the settings it was written with."""
-    from ..cpu.physical import ETD_PROCESSOR_STEP, LATENCY_CALM
-    return ({"integrator": "etd", "etd_step": ETD_PROCESSOR_STEP, "latency_calm": LATENCY_CALM}
+    processor's step cap under it (cpu/physical.ETD_PROCESSOR_STEP), its latency calm rule (LATENCY_CALM) and wake
+    threshold (LATENCY_WAKE): a job of its own, so a results file written before any of them resumes with the
+    settings it was written with."""
+    from ..cpu.physical import ETD_PROCESSOR_STEP, LATENCY_CALM, LATENCY_WAKE
+    return ({"integrator": "etd", "etd_step": ETD_PROCESSOR_STEP, "latency_calm": LATENCY_CALM,
+             "latency_wake": LATENCY_WAKE}
             if args.backend == "envelope" else {})
 
 

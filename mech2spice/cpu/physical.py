@@ -41,6 +41,9 @@ LATENCY = envelope.PROCESSOR_LATENCY   # u_R: the envelope's per-gate latency th
 LATENCY_CALM = 40.0     # the calm rule: a gate block freezes once its own channel stayed calm this many periods and
                         # its input channels the envelope's LATENCY_HOLD (200); 20 % fewer block-steps, reads as
                         # close to step 2 (docs/latency.md, "The calm rule"); None: the hold rule before it
+LATENCY_WAKE = 0.05     # u_R: a frozen gate block wakes once an input channel moved this much (the threshold, 0.1,
+                        # left reads up to 0.3 of a margin short of rest: a gate follows its driver's drift below the
+                        # threshold with a gain of ~0.3; docs/latency.md, "The wake threshold"); None: the threshold
 OWN_LATENCY = "own"     # latency: the engine's own default (Engine.processor_latency; rk4 has none)
 READ_PERIODS = 10       # periods a read averages over, at the end of each pulse or pause: all a run keeps
 EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability bound; docs/latency.md)
@@ -73,7 +76,8 @@ class PhysicalCPU:
                  exponential: bool = EXPONENTIAL, etd: bool = True, parallel: bool = False, power_up: bool = True,
                  noise: tuple[float, int] | None = None, steps_per_period: int | None = None, threads: int = 1,
                  settle_check: int | None = None, max_fanout: int | None = None,
-                 etd_step: float = ETD_PROCESSOR_STEP, latency_calm: float | None = LATENCY_CALM):
+                 etd_step: float = ETD_PROCESSOR_STEP, latency_calm: float | None = LATENCY_CALM,
+                 latency_wake: float | None = LATENCY_WAKE):
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"no physical processor backend '{backend}' (choose from {', '.join(PHYSICAL)})")
         if settle_check and noise and noise[0]:
@@ -87,7 +91,8 @@ class PhysicalCPU:
         self.probes = list(self.model.probes)
         if latency == OWN_LATENCY:
             latency = engine_class(backend).processor_latency(threads)
-        settings = dict(latency=latency, latency_calm=latency_calm, exponential=exponential, etd=etd,
+        settings = dict(latency=latency, latency_calm=latency_calm, latency_wake=latency_wake,
+                        exponential=exponential, etd=etd,
                         parallel=parallel, steps_per_period=steps_per_period,
                         threads=threads, keep_periods=READ_PERIODS)
         if not step:      # the processor's step, shortened where a block's faster envelope rates bound it
@@ -112,6 +117,7 @@ class PhysicalCPU:
         self.step_periods, self.settle, self.latency = step, settle, latency
         # where the engine takes a calm time (the envelope; the carrier's latency has its own rule)
         self.latency_calm = latency_calm if latency and hasattr(self.pause_engine.options, "latency_calm") else None
+        self.latency_wake = latency_wake if latency and hasattr(self.pause_engine.options, "latency_wake") else None
         self.block_steps = 0        # gate blocks x steps integrated (latency); 0 without it
         self.simulated = 0          # periods actually integrated (a settled pause skips the rest)
         self.state, self.period, self.rdata = None, 0, 0

@@ -503,7 +503,7 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     if backend in PHYSICAL:
         result.update(periods=cpu.period, simulated_periods=cpu.simulated, step=cpu.step_periods,
                       settle=cpu.settle, latency=cpu.latency, latency_calm=cpu.latency_calm,
-                      block_steps=cpu.block_steps)
+                      latency_wake=cpu.latency_wake, block_steps=cpu.block_steps)
         if cpu.settle_check is not None:      # the reads of this process (a resumed run: since the resume)
             result["settle_check"] = cpu.settle_check.to_json()
             result["settled"] = result["settle_check"]["settled"]

@@ -93,8 +93,9 @@ class CpuMC:
 
     def __init__(self, program: str, cycles: int, p, backend: str, spec: SpreadSpec, seed: int, noise: float = 0.0,
                  batch: int = 1, max_fanout: int | None = None, step: float | None = None, etd: bool = True,
-                 etd_step: float | None = None, latency_calm: float | None | str = "own"):
-        from ..cpu.physical import ETD_PROCESSOR_STEP, LATENCY_CALM, PHYSICAL
+                 etd_step: float | None = None, latency_calm: float | None | str = "own",
+                 latency_wake: float | None | str = "own"):
+        from ..cpu.physical import ETD_PROCESSOR_STEP, LATENCY_CALM, LATENCY_WAKE, PHYSICAL
         if backend not in PHYSICAL:
             raise Mech2SpiceError(f"cpu montecarlo runs on {', '.join(PHYSICAL)}, not '{backend}'")
         self.program, self.cycles, self.p, self.backend = program, cycles, p, backend
@@ -108,6 +109,7 @@ class CpuMC:
         self.etd_step = etd_step or ETD_PROCESSOR_STEP
         # the processor's calm rule ("own": LATENCY_CALM; None: the hold rule, for files written before it)
         self.latency_calm = LATENCY_CALM if latency_calm == "own" else latency_calm
+        self.latency_wake = LATENCY_WAKE if latency_wake == "own" else latency_wake     # None: files before it
         if step is not None:
             self._check_step()
         self.want = self._iss()
@@ -123,7 +125,7 @@ class CpuMC:
             raise Mech2SpiceError(f"a step applies to the envelope backend, not {self.backend}")
         cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
                           step=self.step, max_fanout=self.max_fanout, etd=self.etd, etd_step=self.etd_step,
-                          latency_calm=self.latency_calm)
+                          latency_calm=self.latency_calm, latency_wake=self.latency_wake)
         envelope._check_step(cpu.model, self.step, EXPONENTIAL, self.etd)
 
     def compared(self, want) -> list[str]:
@@ -156,7 +158,8 @@ class CpuMC:
         from ..cpu.run import load_program, make_memory
         cpu = PhysicalCPU(make_memory(load_program(self.program)), self.backend, self.p, power_up=False,
                           noise=(self.noise, noise_seed(self.seed, i)), max_fanout=self.max_fanout,
-                          step=self.step, etd=self.etd, etd_step=self.etd_step, latency_calm=self.latency_calm)
+                          step=self.step, etd=self.etd, etd_step=self.etd_step, latency_calm=self.latency_calm,
+                          latency_wake=self.latency_wake)
         nominal = cpu.model
         model, _ = sampled(nominal, spread.elements(nominal), self.spec, self.seed, i)
         cpu.model = model               # the probes (latch outputs) are copied with the model

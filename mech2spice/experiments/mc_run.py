@@ -48,7 +48,8 @@ def design_for(job: dict) -> mc.DesignMC:
                                   batch=job.get("union", 1), max_fanout=job.get("max_fanout"),
                                   step=job.get("step"), etd=job.get("integrator") == "etd",
                                   etd_step=job.get("etd_step", PROCESSOR_STEP),
-                                  latency_calm=job.get("latency_calm"))     # None: files before it
+                                  latency_calm=job.get("latency_calm"),      # None: files before it
+                                  latency_wake=job.get("latency_wake"))
             return _DESIGNS[key]
         nl = synthesize(job["design"], max_fanout=network.MAX_FANOUT)
         if "steps" in job:               # a clocked design under a stimulus of cycles

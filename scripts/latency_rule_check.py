@@ -2,18 +2,22 @@
 
     python scripts/latency_rule_check.py [--cycles 30] [--indices 0,1,2,3] [--params centered_fc2]
         [--spread 0.01] [--trim fcb] [--trim-residual 1e-4] [--seed 7] [--max-fanout 12]
-        [--nominal centered_fc2,default] [--out reports/latency_calm_rule.json]
+        [--nominal centered_fc2,default] [--out reports/latency_wake_rule.json]
 
 Spread samples (built as `cpu montecarlo` builds them, experiments/mc_clocked.CpuMC): each runs `--cycles` sieve
-cycles three ways at the processor's own step: a reference with latency 1e-6 u_R (nothing freezes that moves),
-the hold rule (latency 0.1, `latency_calm=None`: a block and every input it records calm for LATENCY_HOLD) and
-the calm rule (latency 0.1, cpu/physical.LATENCY_CALM: its input channels calm for LATENCY_HOLD, its own
-channel for LATENCY_CALM).  Each rule is compared with the reference: the fields `cpu montecarlo` compares with
+cycles four ways at the processor's own step: a reference with latency 1e-6 u_R (nothing freezes that moves),
+the hold rule (latency 0.1, `latency_calm=None`: a block and every input it records calm for LATENCY_HOLD), the
+calm rule (latency 0.1, cpu/physical.LATENCY_CALM: its input channels calm for LATENCY_HOLD, its own channel for
+LATENCY_CALM), both waking a frozen block once an input moved 0.1 u_R, and the calm rule with the wake threshold
+(cpu/physical.LATENCY_WAKE: an input channel moved 0.05 u_R), the processor's default.  Each rule is compared with
+the reference: the fields `cpu montecarlo` compares with
 the ISS (write data and address only where the write is enabled), the latch and port bits read in another
 band ("flips"), and the largest read difference of the bits in the same band (u_R); and its gate-block steps.
 
-Nominal blocks: the same cycles at the processor's defaults with each rule against the full envelope at step 2
-(the yardstick of reports/fidelity.md), the largest read difference and whether every cycle record is equal.
+Nominal blocks: the same cycles at the processor's defaults with each rule against the full envelope (step 2, full
+pauses, no latency, RK4: the yardstick of reports/fidelity.md), the largest read difference and whether every cycle
+record is equal.  (Before issue 36's session 18 this reference kept the processor's settle and latency 0.1, so its
+figures left out the latency's own error.)
 """
 import argparse
 import json
@@ -22,15 +26,20 @@ import time
 
 import numpy as np
 
-from mech2spice.cpu.physical import LATENCY_CALM, PhysicalCPU
+from mech2spice.cpu.physical import LATENCY_CALM, LATENCY_WAKE, PhysicalCPU
 from mech2spice.cpu.run import load_program, make_memory
 from mech2spice.experiments import montecarlo as mc
 from mech2spice.experiments.mc_clocked import CpuMC, sampled
 from mech2spice.physics import spread
 from mech2spice.physics.params import load_params
 
-RULES = {"reference": dict(latency=1e-6, latency_calm=None), "hold": dict(latency=0.1, latency_calm=None),
-         "calm": dict(latency=0.1, latency_calm=LATENCY_CALM)}
+RULES = {"reference": dict(latency=1e-6, latency_calm=None, latency_wake=None),
+         "hold": dict(latency=0.1, latency_calm=None, latency_wake=None),
+         "calm": dict(latency=0.1, latency_calm=LATENCY_CALM, latency_wake=None),
+         "wake": dict(latency=0.1, latency_calm=LATENCY_CALM, latency_wake=LATENCY_WAKE)}
+COMPARED = [k for k in RULES if k != "reference"]
+# the full envelope, reports/fidelity.md's yardstick: step 2, full pauses, every gate integrated, RK4
+REFERENCE = dict(step=2.0, settle=None, latency=None, exponential=False, latency_calm=None, latency_wake=None)
 
 
 def run(program: str, p, cycles: int, *, model_of=None, max_fanout=None, **settings) -> dict:
@@ -89,20 +98,20 @@ def main():
         runs = {k: run(a.program, p, a.cycles, model_of=model_of, max_fanout=a.max_fanout, **s)
                 for k, s in RULES.items()}
         samples.append({"index": i, "reference_block_steps": runs["reference"]["block_steps"],
-                        **{k: against(runs["reference"], runs[k]) for k in ("hold", "calm")}})
+                        **{k: against(runs["reference"], runs[k]) for k in COMPARED}})
         print(json.dumps({"sample": i, **{k: {x: samples[-1][k][x] for x in ("block_steps", "bit_flips",
-              "max_read_difference_uR")} for k in ("hold", "calm")}}), flush=True)
+              "max_read_difference_uR")} for k in COMPARED}}), flush=True)
     nominal = []
     for name in [x for x in a.nominal.split(",") if x]:
         q = load_params(name)
-        ref = run(a.program, q, a.cycles, step=2.0, latency_calm=None)
+        ref = run(a.program, q, a.cycles, **REFERENCE)
         nominal.append({"params": name, **{k: against(ref, run(a.program, q, a.cycles, **RULES[k]))
-                                           for k in ("hold", "calm")}})
+                                           for k in COMPARED}})
         print(json.dumps({"nominal": name, **{k: {x: nominal[-1][k][x] for x in ("block_steps", "records_equal",
-              "max_read_difference_uR")} for k in ("hold", "calm")}}), flush=True)
+              "max_read_difference_uR")} for k in COMPARED}}), flush=True)
     res = {"command": "python scripts/latency_rule_check.py " + " ".join(
                f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items() if k != "out"),
-           "latency_calm": LATENCY_CALM, "cycles": a.cycles, "params": a.params, "spread": a.spread, "trim": a.trim,
+           "latency_calm": LATENCY_CALM, "latency_wake": LATENCY_WAKE, "cycles": a.cycles, "params": a.params, "spread": a.spread, "trim": a.trim,
            "trim_residual": a.trim_residual, "seed": a.seed, "max_fanout": a.max_fanout, "cores": os.cpu_count(),
            "load_avg_before": load0, "load_avg_after": os.getloadavg(), "wall_s": round(time.time() - t0, 1),
            "samples": samples, "nominal": nominal}

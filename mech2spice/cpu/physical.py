@@ -41,9 +41,10 @@ LATENCY = envelope.PROCESSOR_LATENCY   # u_R: the envelope's per-gate latency th
 LATENCY_CALM = 40.0     # the calm rule: a gate block freezes once its own channel stayed calm this many periods and
                         # its input channels the envelope's LATENCY_HOLD (200); 20 % fewer block-steps, reads as
                         # close to step 2 (docs/latency.md, "The calm rule"); None: the hold rule before it
-LATENCY_WAKE = 0.05     # u_R: a frozen gate block wakes once an input channel moved this much (the threshold, 0.1,
-                        # left reads up to 0.3 of a margin short of rest: a gate follows its driver's drift below the
-                        # threshold with a gain of ~0.3; docs/latency.md, "The wake threshold"); None: the threshold
+LATENCY_WAKE = 0.05     # u_R: a frozen gate block wakes once an input channel moved this much; at the threshold, 0.1,
+                        # a gate frozen while its driver drifted below it was read up to 0.3 of a margin short of
+                        # rest (centered_fc2: 420 of the sieve's 914 reads, now 0; docs/latency.md, "The wake
+                        # threshold"); None: the threshold
 OWN_LATENCY = "own"     # latency: the engine's own default (Engine.processor_latency; rk4 has none)
 READ_PERIODS = 10       # periods a read averages over, at the end of each pulse or pause: all a run keeps
 EXPONENTIAL = True      # insulators stepped exactly (lifts the step's stability bound; docs/latency.md)

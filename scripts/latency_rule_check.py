@@ -28,8 +28,7 @@ import numpy as np
 
 from mech2spice.cpu.physical import LATENCY_CALM, LATENCY_WAKE, PhysicalCPU
 from mech2spice.cpu.run import load_program, make_memory
-from mech2spice.experiments import montecarlo as mc
-from mech2spice.experiments.mc_clocked import CpuMC, sampled
+from mech2spice.experiments.mc_clocked import add_sample_options, cpu_mc_of, sampled
 from mech2spice.physics import spread
 from mech2spice.physics.params import load_params
 
@@ -78,20 +77,14 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycles", type=int, default=30)
     ap.add_argument("--indices", default="0,1,2,3")
-    ap.add_argument("--params", default="centered_fc2")
-    ap.add_argument("--spread", type=float, default=0.01)
-    ap.add_argument("--trim", default="fcb")
-    ap.add_argument("--trim-residual", type=float, default=1e-4)
-    ap.add_argument("--seed", type=int, default=7)
-    ap.add_argument("--max-fanout", type=int, default=12)
-    ap.add_argument("--nominal", default="centered_fc2,default", help="blocks run against step 2 ('' for none)")
-    ap.add_argument("--program", default="programs/sieve.asm")
+    add_sample_options(ap)
+    ap.add_argument("--nominal", default="centered_fc2,default", help="blocks run against the full envelope "
+                    "('' for none)")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
     t0, load0 = time.time(), os.getloadavg()
-    p = load_params(a.params)
-    spec = mc.spec_of({"local": a.spread, "trim": a.trim, "trim_residual": a.trim_residual})
-    mcx = CpuMC(a.program, 1, p, "envelope", spec, a.seed, max_fanout=a.max_fanout)
+    mcx = cpu_mc_of(a, 1)
+    p = mcx.p
     samples = []
     for i in [int(x) for x in a.indices.split(",") if x]:
         model_of = lambda nominal: sampled(nominal, spread.elements(nominal), mcx.spec, a.seed, i)[0]

@@ -13,9 +13,7 @@ import json
 import time
 
 from mech2spice.cpu.settle_check import PERIODS, SettleCheck
-from mech2spice.experiments import montecarlo as mc
-from mech2spice.experiments.mc_clocked import CpuMC
-from mech2spice.physics.params import load_params
+from mech2spice.experiments.mc_clocked import add_sample_options, cpu_mc_of
 
 
 def main():
@@ -23,18 +21,10 @@ def main():
     ap.add_argument("index", type=int)
     ap.add_argument("--wake", choices=["own", "none"], default="own")
     ap.add_argument("--cycles", type=int, default=457)
-    ap.add_argument("--params", default="centered_fc2")
-    ap.add_argument("--spread", type=float, default=0.01)
-    ap.add_argument("--trim", default="fcb")
-    ap.add_argument("--trim-residual", type=float, default=1e-4)
-    ap.add_argument("--seed", type=int, default=7)
-    ap.add_argument("--max-fanout", type=int, default=12)
-    ap.add_argument("--program", default="programs/sieve.asm")
+    add_sample_options(ap)
     a = ap.parse_args()
-    spec = mc.spec_of({"local": a.spread, "trim": a.trim, "trim_residual": a.trim_residual})
-    p = load_params(a.params)
-    mcx = CpuMC(a.program, a.cycles, p, "envelope", spec, a.seed, max_fanout=a.max_fanout,
-                latency_wake=None if a.wake == "none" else "own")
+    mcx = cpu_mc_of(a, a.cycles, latency_wake=None if a.wake == "none" else "own")
+    p = mcx.p
     t0 = time.time()
     cpu = mcx._machine(a.index)                  # powered up: the power-up's own reads are not checked
     cpu.settle_check = SettleCheck(PERIODS, p.levels)

@@ -218,3 +218,24 @@ class CpuMC:
             return {**_failed(i, e), "cycles_run": n}
         return {"i": i, "pass": not wrong, "margin": None, "failing_bits": wrong, "failing_gates": [],
                 "first_bad_cycle": first, "cycles_run": n}
+
+
+def add_sample_options(ap) -> None:
+    """A script's options naming processor Monte-Carlo samples (`cpu montecarlo`'s): block, spread, trim, seed,
+    fan-out limit and program (scripts/latency_rule_check.py, scripts/spread_settle_check.py)."""
+    ap.add_argument("--params", default="centered_fc2")
+    ap.add_argument("--spread", type=float, default=0.01, help="local spread of every element kind")
+    ap.add_argument("--trim", default="fcb")
+    ap.add_argument("--trim-residual", type=float, default=1e-4)
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--max-fanout", type=int, default=12)
+    ap.add_argument("--program", default="programs/sieve.asm")
+
+
+def cpu_mc_of(args, cycles: int, **options) -> CpuMC:
+    """The envelope processor Monte-Carlo that add_sample_options' `args` name, over `cycles` cycles."""
+    from ..physics.params import load_params
+    from .montecarlo import spec_of
+    spec = spec_of({"local": args.spread, "trim": args.trim, "trim_residual": args.trim_residual})
+    return CpuMC(args.program, cycles, load_params(args.params), "envelope", spec, args.seed,
+                 max_fanout=args.max_fanout, **options)

@@ -11,7 +11,12 @@ subspace of 120 vectors, k = 6 modes, tolerance 1e-4 then checked.  Here, at fix
   records them): each state cold (a flat start) and warm (from the previous state's six eigenvectors folded
   into one vector, as `cpu run --stability cycle` does), and cold with a 60-vector subspace.
 
-Usage:  OMP_NUM_THREADS=1 python scripts/verdict_search_variants.py [--out reports/verdict_search_variants.json]
+- the search's solve (J - sigma E) x = b as the verdict now does it, the oscillators eliminated net by net and
+  only the insulators' Schur complement factorised (stability._shifted_solver), against one sparse LU of the
+  whole: the time of one product and of the whole checked search, alternated twice, on c880, the processor after
+  cycle 21 and c6288 (`--solves`: this part alone, into "solves").
+
+Usage:  OMP_NUM_THREADS=1 python scripts/verdict_search_variants.py [--solves] [--out reports/verdict_search_variants.json]
 """
 from __future__ import annotations
 
@@ -31,7 +36,7 @@ import scipy.sparse.linalg as spla
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from mech2spice.physics import params, stability  # noqa: E402
+from mech2spice.physics import insulators, params, stability  # noqa: E402
 
 _spec = importlib.util.spec_from_file_location("verdict_structure", REPO / "scripts/verdict_structure.py")
 vs = importlib.util.module_from_spec(_spec)
@@ -132,8 +137,8 @@ def c880() -> dict:
             "least_damped_gate": {"gate": modes[0][3], "growth": float(own.real * T)}, "rows": rows}
 
 
-def processor(first: int = 30, last: int = 36) -> dict:
-    from mech2spice.cpu.run import run_program
+def recorded_states(run) -> list:
+    """run() with each verdict's fixed point recorded and its search stubbed out: [(env, A, s)]."""
     states = []
     inner = stability.leading_modes
 
@@ -142,9 +147,20 @@ def processor(first: int = 30, last: int = 36) -> dict:
         return [stability.Mode(-1e-3, None)], None
     stability.leading_modes = recorded
     try:
-        run_program(REPO / "programs/sieve.asm", "envelope", max_cycles=last, stability="cycle")
+        run()
     finally:
         stability.leading_modes = inner
+    return states
+
+
+def sieve_states(last: int) -> list:
+    from mech2spice.cpu.run import run_program
+    return recorded_states(lambda: run_program(REPO / "programs/sieve.asm", "envelope", max_cycles=last,
+                                               stability="cycle"))
+
+
+def processor(first: int = 30, last: int = 36) -> dict:
+    states = sieve_states(last)
     rows, previous = [], None
     for cycle in range(first, last + 1):
         env, A, s = states[cycle - 1]
@@ -164,16 +180,56 @@ def processor(first: int = 30, last: int = 36) -> dict:
                                                 "cold_subspace_60": total("cold_subspace_60")}}
 
 
+def solve_by_nets(name: str, env, A, s) -> dict:
+    """One LU of the whole against the nets eliminated first: one product (50 timed) and the whole checked search,
+    alternated twice; the leading growth of each search."""
+    E, J = stability.linearise(env, A, s)
+    T = env.model.period
+    sigma = 2 * np.pi / (50 * T)
+    nets = insulators.fast_nets(env)
+    K = (J + sigma * E).tocsr()
+    b = np.random.default_rng(0).standard_normal(J.shape[0])
+    row = {"design": name, "unknowns": J.shape[0], "product_ms": {}, "search_s": {"one LU": [], "by nets": []},
+           "growth": {}}
+    for label, how in (("one LU", None), ("by nets", nets)):
+        solve = stability._shifted_solver(E, J, sigma, how)
+        t = time.perf_counter()
+        for _ in range(50):
+            solve(K @ b)
+        row["product_ms"][label] = (time.perf_counter() - t) / 50 * 1e3
+    for label, how in (("one LU", None), ("by nets", nets)) * 2:
+        t = time.perf_counter()
+        lam, _ = stability._cayley_checked(E, J, sigma, stability.MODES, None, T, how)
+        row["search_s"][label].append(time.perf_counter() - t)
+        row["growth"][label] = float(lam.real.max() * T)
+    print(f"solves {json.dumps(row)}", flush=True)
+    return row
+
+
+def solves() -> list[dict]:
+    out = []
+    for name in ("c880", "c6288"):
+        run, _ = vs.combinational(vs.BENCH / f"{name}.v", name, params.DEFAULT)
+        out.append(solve_by_nets(name, *recorded_states(run)[-1]))
+    out.append(solve_by_nets("processor, cycle 21", *sieve_states(21)[20]))
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(REPO / "reports/verdict_search_variants.json"))
+    ap.add_argument("--solves", action="store_true", help="only the solve by nets against one LU (kept beside the rest)")
     args = ap.parse_args()
-    doc = {"conditions": {"machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
-                          "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-                          "omp_threads": os.environ.get("OMP_NUM_THREADS"),
-                          "load": os.getloadavg()[0]},
-           "designs": [c880(), processor()]}
-    Path(args.out).write_text(json.dumps(doc, indent=1) + "\n")
+    out = Path(args.out)
+    conditions = {"machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+                  "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+                  "omp_threads": os.environ.get("OMP_NUM_THREADS"), "load": os.getloadavg()[0]}
+    if args.solves:
+        doc = json.loads(out.read_text()) if out.is_file() else {"conditions": conditions, "designs": []}
+        doc["solves"] = {"conditions": conditions, "rows": solves()}
+    else:
+        doc = {"conditions": conditions, "designs": [c880(), processor()]}
+    out.write_text(json.dumps(doc, indent=1) + "\n")
     return 0
 
 

@@ -70,3 +70,14 @@ def test_the_insulators_problem_holds_the_networks_spectrum(vs, q_i):
     else:                                                     # one own root right of Re = 0 where S is dominant:
         assert not cert.certified and cert.own_rightmost > 0  # exactly one growing pair, and it is g6.I's
         assert abs(cert.own_rightmost - lead.real * T) < 0.25 * lead.real * T
+
+
+def test_the_searchs_solve_by_nets_equals_one_lu(vs):
+    """The sparse search's shifted solve (stability._shifted_solver) with the oscillators eliminated net by net
+    equals one sparse LU of the whole, to round-off: the same operator, the same verdicts, 3-4x cheaper a product."""
+    env, E, J, lead = _adder_at_rest(vs, 1.0)
+    sigma = 2 * np.pi / (50 * env.model.period)
+    b = np.random.default_rng(3).standard_normal(J.shape[0])
+    want = spla.splu((J - sigma * E).tocsc()).solve(b)
+    got = stability._shifted_solver(E, J, sigma, insulators.fast_nets(env))(b)
+    assert np.abs(got - want).max() < 1e-10 * np.abs(want).max()

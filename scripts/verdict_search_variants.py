@@ -16,7 +16,8 @@ subspace of 120 vectors, k = 6 modes, tolerance 1e-4 then checked.  Here, at fix
   whole: the time of one product and of the whole checked search, alternated twice, on c880, the processor after
   cycle 21 and c6288 (`--solves`: this part alone, into "solves").
 
-Usage:  OMP_NUM_THREADS=1 python scripts/verdict_search_variants.py [--solves] [--out reports/verdict_search_variants.json]
+Usage:  OMP_NUM_THREADS=1 python scripts/verdict_search_variants.py [--solves]
+                                                           [--out reports/verdict_search_variants.json]
 """
 from __future__ import annotations
 
@@ -218,7 +219,8 @@ def solves() -> list[dict]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(REPO / "reports/verdict_search_variants.json"))
-    ap.add_argument("--solves", action="store_true", help="only the solve by nets against one LU (kept beside the rest)")
+    ap.add_argument("--solves", action="store_true",
+                    help="only the solve by nets against one LU (kept beside the rest)")
     args = ap.parse_args()
     out = Path(args.out)
     conditions = {"machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),

@@ -292,7 +292,8 @@ def analyse(name: str, run, what: dict) -> dict:
           f"rho on the axis <= {row['slow']['axis']['rho_max']:.3f}, "
           f"half-way {row['slow'].get('half_margin', {}).get('rho_max', float('nan')):.3f}; by loops "
           f"{row['slow']['axis'].get('rho_block_max', float('nan')):.3f}; own root {row['own']['growth']:+.4e} "
-          f"({row['own']['insulator']}); loop root {row.get('local', {}).get('loop', {}).get('growth', float('nan')):+.4e}; "
+          f"({row['own']['insulator']}); loop root "
+          f"{row.get('local', {}).get('loop', {}).get('growth', float('nan')):+.4e}; "
           f"certificate {row['certificate']['certified']} at {line:+.2e} in {row['certificate']['seconds']:.2f} s "
           f"(search {row['search']['seconds']:.2f} s)", flush=True)
     return row
@@ -334,9 +335,11 @@ def table(rows: list[dict]) -> str:
         how = (f"dense, {search['within_2x_of_leading_decay']} within 2x" if search["method"] == "dense" and
                search["within_2x_of_leading_decay"] is not None else "dense" if search["method"] == "dense"
                else f"{search['operator_products']} products")
-        out.append(f"| {r['design']} | {r['unknowns']} | {r['insulators']} ({r['nets']['count']}, {r['nets']['largest']}) | "
+        nets = r["nets"]
+        out.append(f"| {r['design']} | {r['unknowns']} | {r['insulators']} ({nets['count']}, {nets['largest']}) | "
                    f"{search['growth']:+.3e} | {f(r['fast'].get('rightmost'), '%+.3e')} | "
-                   f"{r['slow']['axis']['rho_max']:.3f} | {f(r['slow'].get('half_margin', {}).get('rho_max'), '%.3f')} | "
+                   f"{r['slow']['axis']['rho_max']:.3f} | "
+                   f"{f(r['slow'].get('half_margin', {}).get('rho_max'), '%.3f')} | "
                    f"{f(r['slow']['axis'].get('rho_block_max'), '%.3f')} | {r['own']['growth']:+.3e} "
                    f"({r['own']['insulator']}) | {f(loop and loop['growth'], '%+.3e')}"
                    f"{' (%d)' % loop['size'] if loop else ''} | {'yes' if cert['certified'] else 'no'} "
@@ -357,7 +360,8 @@ def main() -> int:
     out = Path(args.out)
     if args.merge:
         docs = [json.loads(Path(f).read_text()) for f in args.merge]
-        rows = {r["design"]: dict(r, measured=r.get("measured", d["conditions"]["date"])) for d in docs for r in d["designs"]}
+        rows = {r["design"]: dict(r, measured=r.get("measured", d["conditions"]["date"]))
+                for d in docs for r in d["designs"]}
         rows = sorted(rows.values(), key=lambda r: DESIGNS.index(r["design"]))
         out.with_suffix(".json").write_text(json.dumps({"conditions": docs[-1]["conditions"], "designs": rows},
                                                        indent=1) + "\n")

@@ -204,9 +204,9 @@ def leading_modes(env: Envelope, A: np.ndarray, s: np.ndarray, k: int = MODES,
     Cayley transform (J - sigma E)^-1 (J + sigma E), whose largest-magnitude eigenvalues are the
     rightmost ones of the network (|mu| > 1 exactly when Re lambda > 0), with sigma near the rates of the
     slow modes; the fast path factorises only the insulators' Schur complement, the oscillators eliminated
-    net by net (_shifted_solver), the reference one sparse LU of the whole.  `start`: such a vector from a nearby state (the processor's last cycle):
-    ARPACK converges from it in ~15x fewer products than from a flat start (563 against 8141 on the sieve's
-    cycle-20 state when started from its own vectors).
+    net by net (_shifted_solver), the reference one sparse LU of the whole.  `start`: such a vector from a
+    nearby state (the processor's last cycle): ARPACK converges from it in ~15x fewer products than from a
+    flat start (563 against 8141 on the sieve's cycle-20 state when started from its own vectors).
 
     `method`: "fast" (small networks: the eigenvalues of E^-1 J alone, then the k leading ones' vectors by
     inverse iteration; docs/stability.md, "Cost") or "reference" (the generalised problem with every vector:
@@ -312,34 +312,34 @@ def _cayley(E, J, sigma: float, k: int, start: np.ndarray | None = None, ncv: in
 
 
 def _shifted_solver(E, J, sigma: float, nets=None):
-    """x -> (J - sigma E)^-1 x.  With `nets` (label, sizes of the first 2 n_fast unknowns: insulators.fast_nets)
-    the oscillators are eliminated net by net and only the insulators' Schur complement is factorised: the same
-    solve to ~1e-14, 3.3-4.2x faster a product than one sparse LU of the whole (c880, the processor, c6288;
-    docs/stability.md, "The insulators' own problem"); without, or where a net's block is singular, one LU."""
+    """x -> (J - sigma E)^-1 x: net by net where `nets` (insulators.fast_nets) is given and every block is
+    invertible (_solver_by_nets), else one sparse LU of the whole."""
     A = (J - sigma * E).tocsc()
-    if nets is not None:
-        label, sizes = nets
-        f = label.size
-        try:
-            R = _block_inverse(A[:f, :f], label, sizes).tocsr()
-        except np.linalg.LinAlgError:
-            R = None
-        if R is not None and f == A.shape[0]:
+    solve = _solver_by_nets(A, nets) if nets is not None else None
+    return solve or spla.splu(A).solve
+
+
+def _solver_by_nets(A: sp.csc_matrix, nets):
+    """A^-1 with the oscillators (A's first 2 n_fast unknowns, whose `nets` are label and sizes) eliminated by
+    one small dense inverse per net and only the insulators' Schur complement factorised: the same solve to
+    ~1e-14, 3.3-4.3x faster a product than one LU of the whole (c880, the processor, c6288; docs/stability.md,
+    "What the verdict does use").  None where a net's block or the complement is singular."""
+    label, sizes = nets
+    f = label.size
+    try:
+        R = _block_inverse(A[:f, :f], label, sizes).tocsr()
+        if f == A.shape[0]:
             return lambda b: R @ b
-        if R is not None:
-            A_fs, A_sf = A[:f, f:].tocsr(), A[f:, :f].tocsr()
-            RA = (R @ A_fs).tocsr()
-            try:
-                lu = spla.splu((A[f:, f:] - A_sf @ RA).tocsc())
-            except RuntimeError:
-                lu = None
-            if lu is not None:
-                def solve(b):
-                    y_f = R @ b[:f]
-                    y_s = lu.solve(b[f:] - A_sf @ y_f)
-                    return np.concatenate([y_f - RA @ y_s, y_s])
-                return solve
-    return spla.splu(A).solve
+        A_sf, RA = A[f:, :f].tocsr(), (R @ A[:f, f:]).tocsr()
+        lu = spla.splu((A[f:, f:] - A_sf @ RA).tocsc())
+    except (np.linalg.LinAlgError, RuntimeError):
+        return None
+
+    def solve(b):
+        y_f = R @ b[:f]
+        y_s = lu.solve(b[f:] - A_sf @ y_f)
+        return np.concatenate([y_f - RA @ y_s, y_s])
+    return solve
 
 
 def _mode(env: Envelope, lam: complex, v: np.ndarray, T: float) -> Mode:

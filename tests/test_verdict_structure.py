@@ -81,3 +81,15 @@ def test_the_searchs_solve_by_nets_equals_one_lu(vs):
     want = spla.splu((J - sigma * E).tocsc()).solve(b)
     got = stability._shifted_solver(E, J, sigma, insulators.fast_nets(env))(b)
     assert np.abs(got - want).max() < 1e-10 * np.abs(want).max()
+
+
+def test_a_large_net_falls_back_to_one_lu(vs, monkeypatch):
+    """A net larger than NET_MAX is not inverted densely: the search solves with one LU instead."""
+    env, E, J, lead = _adder_at_rest(vs, 1.0)
+    nets = insulators.fast_nets(env)
+    A = (J - 0.1 * E).tocsc()
+    assert stability._solver_by_nets(A, nets) is not None
+    monkeypatch.setattr(stability, "NET_MAX", int(nets[1].max()) - 1)
+    assert stability._solver_by_nets(A, nets) is None
+    b = np.ones(J.shape[0])
+    assert np.allclose(stability._shifted_solver(E, J, 0.1, nets)(b), spla.splu(A).solve(b), rtol=1e-12, atol=0)

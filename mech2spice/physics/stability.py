@@ -44,6 +44,7 @@ CAYLEY_TOLS = (1e-4, 1e-6, 1e-8)   # ARPACK's tolerances on mu in the fast path,
                           # leading one is reported); at 1e-3 c880's "leading" pair was 2e-4 off (residual 9e-5)
 RESIDUAL_MAX = 1e-7       # per period: the leading eigenpair's ||J x - lam E x|| / ||E x|| accepted.  Measured
                           # error of its growth rate against a 1e-10 search: <= 2x the residual (c432, c880)
+NET_MAX = 256             # real unknowns of the largest net the sparse search inverts densely (measured: 38-66)
 MODES = 6                 # leading eigenvalues the sparse (Cayley) search returns
 NEWTON_TOL = 1e-10        # relative residual at which Newton's iterate is the fixed point
 NEWTON_MAX = 30
@@ -323,9 +324,12 @@ def _solver_by_nets(A: sp.csc_matrix, nets):
     """A^-1 with the oscillators (A's first 2 n_fast unknowns, whose `nets` are label and sizes) eliminated by
     one small dense inverse per net and only the insulators' Schur complement factorised: the same solve to
     ~1e-14, 3.3-4.3x faster a product than one LU of the whole (c880, the processor, c6288; docs/stability.md,
-    "What the verdict does use").  None where a net's block or the complement is singular."""
+    "What the verdict does use").  None where a net is larger than NET_MAX or a block or the complement is
+    singular."""
     label, sizes = nets
     f = label.size
+    if sizes.size and sizes.max() > NET_MAX:
+        return None
     try:
         R = _block_inverse(A[:f, :f], label, sizes).tocsr()
         if f == A.shape[0]:

@@ -336,7 +336,7 @@ def test_s344_verdict(capsys):
 
 def test_processor_stops_at_the_first_unstable_cycle(capsys, monkeypatch):
     """--stability cycle judges after every cycle and stops at the first unstable one, exit 1, that cycle's
-    verdict in the JSON (the verdict itself stubbed: the real one costs 10-15 s a cycle, tested below)."""
+    verdict in the JSON (the verdict itself stubbed: the real one costs ~4 s a cycle, tested below)."""
     from mech2spice.cpu.physical import PhysicalCPU
 
     def fake(cpu):

@@ -102,9 +102,9 @@ def add_parser(subparsers) -> None:
                    "(JSON settle_check, exit 1 if not; ~0.2 s a read on the processor, ~3.5 min for the sieve)")
     r.add_argument("--stability", choices=("off", "end", "cycle"), default="off",
                    help="end: the oscillator-level machine's stability verdict at its halt (envelope, carrier, "
-                        "rk4; adds `stable` and `stability` to the JSON; 10-15 s on the processor); cycle: after "
-                        "every cycle too, stopping at the first unstable one (adds `stability_cycles`; 10-15 s a "
-                        "cycle; docs/stability.md)")
+                        "rk4; adds `stable` and `stability` to the JSON; 3-30 s on the processor); cycle: after "
+                        "every cycle too, stopping at the first unstable one (adds `stability_cycles`; ~4 s a "
+                        "cycle, ~30 min for the sieve; docs/stability.md)")
     force_arg(r, "--checkpoint, --trace or --vcd")
     circuit_args(r)
     r.add_argument("--json", action="store_true", help="machine-readable output")

@@ -441,8 +441,8 @@ def run_program(source, backend: str = "iss", max_cycles: int = 100_000, checkpo
     a callable(record, cpu) called after each cycle, or a path for a TraceFile.  Neither file may be the
     program; one of another kind is replaced only with ``force``.  ``stability``: "end" (or True) judges the
     oscillator-level machine at its halt, "cycle" after every cycle as well, stopping at the first unstable
-    one (docs/stability.md; ~10-15 s a cycle on the processor).  ``vcd``: a path for the run's waveform
-    (VcdTrace), written when the run ends."""
+    one (docs/stability.md; ~4 s a cycle on the processor, the sieve ~85x its run).  ``vcd``: a path for the
+    run's waveform (VcdTrace), written when the run ends."""
     stability = {True: "end", False: "off", None: "off"}.get(stability, stability)
     if stability not in ("off", "end", "cycle"):
         raise Mech2SpiceError(f"stability {stability!r}: choose off, end or cycle")

@@ -64,6 +64,7 @@ class InsulatorProblem:
         n = J.shape[0]
         F, D, V = slice(0, 2 * nf), slice(2 * nf, 2 * nf + ns), slice(2 * nf + ns, n)
         E, J = sp.csr_matrix(E), sp.csr_matrix(J)
+        self.E, self.J = E, J
         self.Jff, self.Eff = J[F][:, F], E[F][:, F]
         self.Jfs, self.Jvf = J[F][:, D].tocsc(), J[V][:, F].tocsr()
         self.Jvs, self.Jvv, self.Ms = J[V][:, D], J[V][:, V], E[V][:, V]
@@ -103,10 +104,6 @@ class InsulatorProblem:
         """Each insulator's own modes: the rightmost eigenvalue of the network with that insulator free and every
         other held (its ds, dv and the nets its gate's oscillators belong to), and the rightmost eigenvalue of
         each net alone, both as rates (not per period).  Dense eigenvalue problems batched by size."""
-        E = sp.bmat([[self.Eff, None, None], [None, sp.identity(self.Ms.shape[0]), None],
-                     [None, None, self.Ms]], format="csr")
-        J = sp.bmat([[self.Jff, self.Jfs, None], [None, None, sp.identity(self.Ms.shape[0])],
-                     [self.Jvf, self.Jvs, self.Jvv]], format="csr")
         nf2, ns = self.Eff.shape[0], self.Ms.shape[0]
         touched = (abs(self.Jfs).T + abs(self.Jvf)).tocsr()            # insulator -> fast unknowns it meets
         members = [np.flatnonzero(self.label == b) for b in range(self.sizes.size)]
@@ -115,8 +112,8 @@ class InsulatorProblem:
             nets = np.unique(self.label[touched.indices[touched.indptr[i]:touched.indptr[i + 1]]])
             idx = np.concatenate([members[b] for b in nets] + [[nf2 + i, nf2 + ns + i]]).astype(int)
             problems.append(idx)
-        own = _rightmost(E, J, problems)
-        nets = _rightmost(E, J, members)
+        own = _rightmost(self.E, self.J, problems)
+        nets = _rightmost(self.E, self.J, members)
         return own, nets
 
     def certify(self, line: float, points: int = 61, im_max: float = 0.15) -> Certificate:

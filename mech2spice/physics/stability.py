@@ -271,8 +271,9 @@ def _cayley_checked(E, J, sigma: float, k: int, start: np.ndarray | None, T: flo
     pencil residual (_residuals) exceeds RESIDUAL_MAX per period, again at 1e-6 and 1e-8 from that mode's
     vector.  ARPACK's tolerance alone does not bound the growth rate: at 1e-6 (the search before this check)
     c432's fixed point of issue #38's vector came out 4.3e-7 per period off (residual 2.2e-7)."""
+    solve = _shifted_solver(E, J, sigma, nets)          # one factorisation for every tolerance
     for tol in CAYLEY_TOLS:
-        lam, vec = _cayley(E, J, sigma=sigma, k=k, start=start, ncv=CAYLEY_NCV, tol=tol, nets=nets)
+        lam, vec = _cayley(E, J, sigma=sigma, k=k, start=start, ncv=CAYLEY_NCV, tol=tol, solve=solve)
         lead = int(np.argmax(lam.real))
         if _residuals(E, J, lam[[lead]], vec[:, [lead]])[0] * T <= RESIDUAL_MAX:
             break
@@ -288,8 +289,9 @@ def _residuals(E, J, lam: np.ndarray, vec: np.ndarray) -> np.ndarray:
 
 
 def _cayley(E, J, sigma: float, k: int, start: np.ndarray | None = None, ncv: int = 40, tol: float = 1e-6,
-            nets=None):
-    solve = _shifted_solver(E, J, sigma, nets)
+            solve=None):
+    """ARPACK on the Cayley transform; `solve`: x -> (J - sigma E)^-1 x (_shifted_solver; default one LU)."""
+    solve = solve or _shifted_solver(E, J, sigma)
     K = (J + sigma * E).tocsr()
     op = spla.LinearOperator(J.shape, matvec=lambda x: solve(K @ x), dtype=float)
     n = J.shape[0]

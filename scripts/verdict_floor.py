@@ -103,8 +103,8 @@ def adder() -> dict:
     M = spla.splu(E.tocsc()).solve(J.toarray())
     T = fp["env"].model.period
     member = run["run_s"] / len(vectors)
-    row = {"design": "adder x16", "batch": len(vectors), "unknowns": J.shape[0], "run_s": run["run_s"], "periods": run["periods"],
-           "verdict_s": run["verdict_s"], "parts": run["parts"], "member_run_s": member,
+    row = {"design": "adder x16", "batch": len(vectors), "unknowns": J.shape[0], "run_s": run["run_s"],
+           "periods": run["periods"], "verdict_s": run["verdict_s"], "parts": run["parts"], "member_run_s": member,
            "dense_modes_s": _median_s(lambda: stability._dense_modes(fp["env"], E, J, stability.MODES), 7),
            "eigenvalues_alone_s": _median_s(lambda: sla.eigvals(M, check_finite=False), 7),
            "sparse_search": _without_folded(counted_search(E, J, T, insulators.fast_nets(fp["env"]))),
@@ -114,6 +114,7 @@ def adder() -> dict:
 
 
 def combinational(name: str) -> dict:
+    """An ISCAS-85 circuit on verdict_scale.py's seeded vector: the run, then the search at its final fixed point."""
     nl = synthesize(str(scale.BENCH / f"{name}.v"), top=name)
     run = scale._run(nl, scale._vectors(name, nl, 1), "envelope", 900)
     fp = dict(scale._LAST_FIXED_POINT)
@@ -128,8 +129,8 @@ def combinational(name: str) -> dict:
 
 
 def processor(first: int, last: int) -> dict:
-    """The sieve's cycles: the plain run's CPU-s a cycle (the whole sieve's mean); Newton's seconds a verdict (the searches stubbed while
-    the judged run records its fixed points); then each recorded state searched cold and warm."""
+    """The sieve's cycles: the plain run's CPU-s a cycle (the whole sieve's mean); Newton's CPU-s a verdict (the
+    searches stubbed while the judged run records its fixed points); then each recorded state searched cold and warm."""
     from mech2spice.cpu.run import run_program
     sieve = REPO / "programs/sieve.asm"
     run_program(sieve, "envelope", max_cycles=2)            # the clocked kernels' first compilation

@@ -3,6 +3,7 @@ every printable ASCII character, writes text its target reads back as the same n
 one Mech2SpiceError; a design whose module name is a testbench statement creates no file (issues #35, #37)."""
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -253,3 +254,27 @@ def test_every_name_has_one_writable_vcd_name(name):
     wave = Waveform([0])
     wave.add_wire([ids.vcd(name)], text, 1, [1])
     assert f" {text} $end" in vcd_text(wave)
+
+
+COLLIDING = "module top(input [1:0] a, input \\a[0] , output [1:0] y, output z);\n  assign y = a;\n  assign z = \\a[0] ;\nendmodule\n"
+
+
+@needs_icarus
+def test_a_port_named_like_another_ports_bit_is_that_port(tmp_path, capsys):
+    """`input \\a[0]` beside `input [1:0] a`: `--set a[0]=B` sets the port, as Verilog reads the name. The logic
+    backend took it for bit 0 of `a` and printed wrong outputs with exit 0 (the physical engines did not)."""
+    src = tmp_path / "collide.v"
+    src.write_text(COLLIDING)
+    vectors = [(a, b) for a in range(4) for b in (0, 1)]
+    tb = ["module tb;", "  reg [1:0] a; reg a0; wire [1:0] y; wire z;", "  top dut(.a(a), .\\a[0] (a0), .y(y), .z(z));",
+          "  initial begin", *(f'    a = {a}; a0 = {b}; #1 $display("%0d %0d", y, z);' for a, b in vectors),
+          "  end", "endmodule", ""]
+    (tmp_path / "tb.v").write_text("\n".join(tb))
+    subprocess.run(["iverilog", "-o", tmp_path / "tb.vvp", src, tmp_path / "tb.v"], check=True, capture_output=True)
+    lines = subprocess.run(["vvp", "-n", tmp_path / "tb.vvp"], check=True, capture_output=True, text=True).stdout.split("\n")
+    want = [dict(zip("yz", map(int, line.split()))) for line in lines[:len(vectors)]]
+    for backend, cases in (("logic", range(len(vectors))), ("envelope", [2])):
+        for k in cases:
+            a, b = vectors[k]
+            assert cli.main(["simulate", str(src), "--backend", backend, "--json", "--set", f"a={a}", "--set", f"a[0]={b}"]) == 0
+            assert json.loads(capsys.readouterr().out)["outputs"] == want[k], (backend, a, b)

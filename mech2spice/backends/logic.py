@@ -18,9 +18,11 @@ __all__ = ["evaluate", "evaluate_bits", "evaluate_batch", "power_up", "ClockedLo
 
 
 def _input_bit_values(netlist: Netlist, values: dict) -> dict[str, int]:
-    """Accept port integers ({"a": 3}) and/or single input bits ({"a[0]": 1})."""
+    """Accept port integers ({"a": 3}) and/or single input bits ({"a[0]": 1}). A name that is a port is the
+    port, even where it also names another port's bit (`input [1:0] a, input \\a[0] `): Verilog's meaning."""
     g = netlist.graph
-    single = {k: v for k, v in values.items() if k in g and g.nodes[k]["kind"] == "input"}
+    single = {k: v for k, v in values.items()
+              if k not in netlist.inputs and k in g and g.nodes[k]["kind"] == "input"}
     bits = pack_inputs(netlist, {k: v for k, v in values.items() if k not in single})
     for name, v in single.items():
         if v not in (0, 1):

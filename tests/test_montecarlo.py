@@ -177,6 +177,23 @@ def test_cli_summary_fields(tmp_path, nor_v, capsys):
     assert json.loads(capsys.readouterr().out)["ran"] == 0
 
 
+def test_a_results_file_of_an_edited_design_does_not_resume(tmp_path, capsys):
+    """The file named the design by its path only: editing `y = ~a` into `y = a` and asking for one sample more
+    resumed the first design's samples beside the second's, exit 0 (hostile-input pass, session 21)."""
+    src, out = tmp_path / "d.v", tmp_path / "r.jsonl"
+    run = ["montecarlo", str(src), "--spread", "1e-5", "--scheduler", "inline", "--out", str(out), "--json"]
+    src.write_text("module d(input a, output y);\n  assign y = ~a;\nendmodule\n")
+    assert main([*run, "--samples", "2"]) == 0
+    capsys.readouterr()
+    src.write_text("module d(input a, output y);\n  assign y = a;   // edited\nendmodule\n")
+    assert main([*run, "--samples", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "another job" in err and len(err.strip().splitlines()) == 1
+    src.write_text("module d(input a, output y);\n  // a comment moves no wire\n  assign y = ~a;\nendmodule\n")
+    assert main([*run, "--samples", "3"]) == 0
+    assert json.loads(capsys.readouterr().out)["resumed"] == 2
+
+
 @pytest.mark.parametrize("address", ["foo", "tcp://", "host:port", "tcp://host", "host:0", "host:70000",
                                      "tcp://host:8786/x", "", "local "])
 @pytest.mark.parametrize("command", [["montecarlo", str(ADDER)], ["cpu", "montecarlo", "programs/sieve.asm"]])

@@ -109,7 +109,8 @@ def job_of(args) -> dict:
     nl = synthesize(path, max_fanout=network.MAX_FANOUT)
     if nl.clock:
         return _clocked_job(args, nl, path)
-    job = {"design": str(path), "params": args.params, "vectors": vectors_of(args, nl), "backend": args.backend,
+    job = {"design": str(path), "design_sha256": mc.netlist_sha256(nl), "params": args.params,
+           "vectors": vectors_of(args, nl), "backend": args.backend,
            "spread": spread_spec(args).describe(), "seed": args.seed, "periods": args.periods,
            "union": args.batch}
     if args.noise:                   # only then: results files of noiseless sweeps keep their keys
@@ -119,6 +120,7 @@ def job_of(args) -> dict:
 
 def _clocked_job(args, nl, path) -> dict:
     """A clocked design's job: its stimulus of clock cycles (--stimulus), run one sample per task."""
+    from ..experiments import montecarlo as mc
     from ..experiments.mc_clocked import CLOCKED_BACKENDS
     if not args.stimulus:
         raise Mech2SpiceError(f"{nl.top} is clocked: give its cycles with --stimulus FILE.json "
@@ -128,7 +130,7 @@ def _clocked_job(args, nl, path) -> dict:
     if args.backend not in CLOCKED_BACKENDS:
         raise Mech2SpiceError(f"clocked montecarlo runs on {', '.join(CLOCKED_BACKENDS)}, not '{args.backend}'")
     steps = inputs.stimulus_steps(args.stimulus, {}, engine_class(args.backend))
-    job = {"design": str(path), "params": args.params, "steps": steps,
+    job = {"design": str(path), "design_sha256": mc.netlist_sha256(nl), "params": args.params, "steps": steps,
            "backend": args.backend, "spread": spread_spec(args).describe(), "seed": args.seed,
            "union": 1}
     if args.noise:

@@ -84,7 +84,7 @@ def read_results(path: Path, job: dict) -> dict[int, dict]:
         raise Mech2SpiceError(f"{path} is not a montecarlo results file (its first line is no results header): "
                               "give another --out")
     if first_json_line(path)["key"] != mc.job_key(job):
-        raise Mech2SpiceError(f"{path} holds results of another job (design, spread, seed, backend or "
+        raise Mech2SpiceError(f"{path} holds results of another job (design or its source, spread, seed, backend or "
                               "inputs differ): give another --out")
     done, torn = {}, False
     with open(path, "rb") as fh:

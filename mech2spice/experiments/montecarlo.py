@@ -337,6 +337,16 @@ def job_key(job: dict) -> str:
     return hashlib.sha256(json.dumps(keyed, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def netlist_sha256(netlist) -> str:
+    """What a synthesized design computes, as a digest: top, ports, nodes with their kinds, wires. A results
+    file keyed by it never resumes after its design was edited (the path alone named the edited file too)."""
+    g = netlist.graph
+    nodes = [(n, {k: v for k, v in a.items() if k != "cell"}) for n, a in g.nodes(data=True)]   # not src lines
+    data = [netlist.top, netlist.inputs, netlist.outputs, netlist.clock, sorted(netlist.signed), nodes,
+            [(u, v, a) for u, v, a in g.edges(data=True)]]
+    return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()
+
+
 def summary(records: list[dict], n_gates: int) -> dict:
     """samples, failures, yield with its Wilson interval, margin quantiles, failing bits, per-gate rate."""
     n = len(records)

@@ -105,6 +105,23 @@ def test_subckts_never_writes_over_its_params(capsys, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m2s_couple.subckt"]
 
 
+def test_subckts_replaces_only_its_own_files(capsys, tmp_path):
+    """`subckts -o DIR` wrote over any file that had a library file's name, and through a link out of DIR
+    (hostile-input pass, session 21): now a link is refused, another's file needs --force, its own are replaced."""
+    out, outside = tmp_path / "lib", write(tmp_path / "outside.txt", "keep\n")
+    out.mkdir()
+    (out / "m2s_drive.subckt").symlink_to(outside)
+    refused(capsys, keep(outside), "subckts", "-o", out, needle="is a link")
+    (out / "m2s_drive.subckt").unlink()
+    notes = write(out / "m2s_osc.subckt", "my notes\n")
+    refused(capsys, keep(notes), "subckts", "-o", out, needle="--force")
+    assert [p.name for p in out.iterdir()] == ["m2s_osc.subckt"]          # nothing written before the refusal
+    for argv in (["--force"], []):                                         # then its own files need no --force
+        assert run(capsys, "subckts", "-o", out, *argv)[0] == 0
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == \
+            {p.name: p.read_bytes() for p in (ROOT / "subckts").iterdir() if p.name != "README.md"}
+
+
 def test_report_name_stays_inside_out(capsys, tmp_path):
     sub = tmp_path / "sub"
     sub.mkdir()

@@ -152,11 +152,10 @@ def _precheck(args) -> None:
         read = [*inputs.design_inputs(design_file), ("the --params file", params_file(args.params))]
         inputs.check_output_file(args.output, read, "netlist file", kind=NETLIST, force=args.force)
     elif command == "subckts":
-        from ..spice.oscillator_netlist import subckt_library
+        from ..spice.oscillator_netlist import check_library_files
         inputs.check_output_dir(args.output, "subckt directory")
-        for name in subckt_library(load_params(args.params)):       # the files it writes: never the --params file
-            inputs.check_output_file(Path(args.output) / name, {"the --params file": params_file(args.params)},
-                                     "subckt file", parents=True)
+        check_library_files(args.output, load_params(args.params), {"the --params file": params_file(args.params)},
+                            args.force)
     elif command == "gate" and args.report and not (args.sens or args.spread is not None):
         # (with --sens/--spread, --report is refused as a flag combination, before any path is read)
         from ..reports import REPORTS

@@ -110,6 +110,7 @@ def add_subckts_parser(sub) -> None:
     s.add_argument("-o", "--output", default="subckts", help="directory (default subckts/)")
     s.add_argument("--params", default="default", help="gate parameters")
     s.add_argument("--json", action="store_true")
+    inputs.force_arg(s, "--output")
     s.set_defaults(func=cmd_subckts)
 
 
@@ -326,7 +327,8 @@ def cmd_subckts(args) -> int:
     """`mech2spice subckts`: write the ngspice .subckt library for --params and list its files."""
     from ..physics.params import load_params
     from ..spice.oscillator_netlist import write_subckt_library
-    paths = write_subckt_library(args.output, load_params(args.params))
+    paths = write_subckt_library(args.output, load_params(args.params), {"the --params file": params_file(args.params)},
+                                 args.force)
     if args.json:
         _print_json({"files": [str(x) for x in paths]})
     else:

@@ -157,16 +157,32 @@ def subckt_library(p: GateParams = DEFAULT) -> dict[str, str]:
     return {PARAMS_FILE: params_text(param_values(p), head), **SUBCKTS}
 
 
-def write_subckt_library(directory, p: GateParams = DEFAULT) -> list[Path]:
-    """Write the library files into `directory` (created); returns their paths, sorted."""
-    d = Path(directory)
-    d.mkdir(parents=True, exist_ok=True)
-    out = []
-    for name, text in sorted(subckt_library(p).items()):
-        path = d / name
-        path.write_text(text, encoding="ascii", newline="\n")
-        out.append(path)
-    return out
+LIBRARY_HEADS = (b"* m2s_", b"* mech2spice gate parameters")     # how each library file begins
+
+
+def check_library_files(directory, p: GateParams = DEFAULT, inputs=(), force: bool = False) -> list[Path]:
+    """The library's paths under `directory`, each one a file we may replace: never an input (`inputs`, e.g.
+    the parameter file) nor a link; a file this library did not write only with `force`."""
+    from ..inputs import check_output_file, head
+    ours = ("a file of this library", lambda f: head(f, 64).startswith(LIBRARY_HEADS))
+    paths = [Path(directory) / name for name in sorted(subckt_library(p))]
+    for path in paths:
+        if path.is_symlink():
+            raise Mech2SpiceError(f"subckt file {path} is a link: refusing to replace it (remove it first)")
+        check_output_file(path, inputs, "subckt file", kind=ours, force=force, parents=True)
+    return paths
+
+
+def write_subckt_library(directory, p: GateParams = DEFAULT, inputs=(), force: bool = False) -> list[Path]:
+    """Write the library files into `directory` (created), every one checked before any is written
+    (`check_library_files`), each replaced whole; returns their paths, sorted."""
+    from ..inputs import write_bytes
+    paths = check_library_files(directory, p, inputs, force)
+    Path(directory).mkdir(parents=True, exist_ok=True)
+    texts = subckt_library(p)
+    for path in paths:
+        write_bytes(path, texts[path.name].encode("ascii"))
+    return paths
 
 
 # --- netlist emission ------------------------------------------------------------

@@ -258,7 +258,8 @@ def checkpoint_state(tmp_path_factory):
 
 @pytest.mark.parametrize("edit,needle", [
     (lambda s: s.pop("cycle"), "field 'cycle' is missing"), (lambda s: s.update(cycle="3"), "'cycle'"),
-    (lambda s: s.update(cycle=-1), "'cycle'"), (lambda s: s.update(halted=0), "'halted'"),
+    (lambda s: s.update(cycle=-1), "'cycle'"), (lambda s: s.update(cycle=10**30), "'cycle'"),
+    (lambda s: s.update(halted=0), "'halted'"),
     (lambda s: s.update(version=9), "unknown version 9"), (lambda s: s.pop("registers"), "'registers'"),
     (lambda s: s["registers"].update(a=256), "out of range"), (lambda s: s["registers"].update(phase="x"), "range"),
     (lambda s: s["registers"].pop("pc"), "'registers' must hold"), (lambda s: s.update(memory=[0] * 10), "'memory'"),
@@ -274,6 +275,19 @@ def test_checkpoint_fields(tmp_path, capsys, checkpoint_state, edit, needle):
     ck = tmp_path / "ck.json"
     ck.write_text(json.dumps(state))
     refused(capsys, "cpu", "run", SIEVE, "--checkpoint", ck, "--resume", needle=needle)
+
+
+def test_a_checkpoint_without_its_tape_does_not_resume(tmp_path, capsys):
+    """A checkpoint of a program that maps a tape, its 'devices' field removed, resumed on a blank tape and
+    halted at another cycle, exit 0 (hostile-input pass, session 21)."""
+    from mech2spice.cpu.run import run_program
+    program, ck = ROOT / "programs" / "tm_increment.asm", tmp_path / "ck.json"
+    run_program(program, "iss", 20, checkpoint=ck)
+    state = json.loads(ck.read_text())
+    assert state["devices"], "the program maps a tape"
+    del state["devices"]
+    ck.write_text(json.dumps(state))
+    refused(capsys, "cpu", "run", program, "--checkpoint", ck, "--resume", needle="holds no state for the device")
 
 
 def _physical_checkpoint(tmp_path) -> Path:

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import check_output_file, first_json_line, is_int, read_json, strict_json
+from ..inputs import MAX_CYCLES, check_output_file, first_json_line, is_int, read_json, strict_json
 from ..waveform import Waveform, is_vcd, write_vcd
 from .isa import MEM_SIZE, OPCODES
 from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS
@@ -225,7 +225,7 @@ def _check_fields(state: dict, path) -> None:
         bad(f"unknown version {state.get('version')!r} (this mech2spice reads 1 and {CHECKPOINT_VERSION})")
     for key, ok in (("backend", isinstance(state.get("backend"), str)),
                     ("program_sha256", isinstance(state.get("program_sha256"), str)),
-                    ("cycle", is_int(state.get("cycle")) and state["cycle"] >= 0),
+                    ("cycle", is_int(state.get("cycle")) and 0 <= state["cycle"] <= MAX_CYCLES),
                     ("halted", isinstance(state.get("halted"), bool))):
         if not ok:
             bad(f"field '{key}' is missing or has the wrong type")
@@ -256,10 +256,14 @@ def _restore(cpu, state: dict, path) -> None:
         else:
             cpu.load(physical_state_path(path))
     cpu.mem.cells = [int(v) for v in state["memory"]]
-    for addr, dev_state in state.get("devices", {}).items():
+    devices = state.get("devices", {})
+    for addr, dev_state in devices.items():
         if not addr.isdigit() or int(addr) not in cpu.mem.devices:
             raise Mech2SpiceError(f"checkpoint has a device at {addr} that the program does not map")
         cpu.mem.devices[int(addr)].restore(dev_state)
+    for addr in sorted(set(cpu.mem.devices) - {int(a) for a in devices}):     # its tape would restart blank
+        raise Mech2SpiceError(f"checkpoint {path} holds no state for the device at {addr} that the program "
+                              "maps: it cannot resume (run again without --resume)")
     cpu.set_registers(state["registers"])
     cpu.cycle, cpu.halted = int(state["cycle"]), bool(state["halted"])
 

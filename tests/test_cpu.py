@@ -12,7 +12,7 @@ import pytest
 from mech2spice.cpu import tm
 from mech2spice.cpu.asm import assemble, assemble_program
 from mech2spice.cli.cpu import add_parser
-from mech2spice.cpu.isa import CYCLES, OPCODES
+from mech2spice.cpu.isa import CYCLES, MEM_SIZE, OPCODES
 from mech2spice.cpu.iss import FETCH, ISS
 from mech2spice.cpu.memory import Memory
 from mech2spice.cpu.machines import LogicCPU
@@ -329,6 +329,20 @@ def test_cli_user_errors(tmp_path):
         cli(["cpu", "run", str(tmp_path / "missing.asm")])
     with pytest.raises(Mech2SpiceError, match="expected an assembly source"):
         cli(["cpu", "asm", str(tmp_path / "x.bin"), "-o", str(tmp_path / "y.bin")])
+
+
+@pytest.mark.parametrize("name, content, needle", [
+    ("empty.bin", b"", "is empty"),
+    ("tiny.s", b"halt: JMP_C\n", "is text, not a memory image"),      # ran its letters as opcodes, exit 1
+    ("adder2.v", (ROOT / "verilog" / "adder2.v").read_bytes(), "is text"),
+    ("big.bin", bytes(MEM_SIZE + 1), "at most 256"),
+])
+def test_a_program_that_is_no_memory_image_is_refused(tmp_path, name, content, needle):
+    """Any file not named .asm ran as raw machine code (hostile-input pass, session 21): a source under another
+    name, an empty file."""
+    (tmp_path / name).write_bytes(content)
+    with pytest.raises(Mech2SpiceError, match=needle):
+        cli(["cpu", "run", str(tmp_path / name)])
 
 
 def test_sieve_at_envelope_fidelity_matches_iss_and_resumes_exactly(tmp_path):

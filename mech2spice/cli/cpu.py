@@ -10,15 +10,14 @@ import sys
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import (MAX_CPU_CYCLES, check_output_file, envelope_speed_args, force_arg, head, integer, number,
+from ..inputs import (MAX_CPU_CYCLES, check_output_file, envelope_speed_args, force_arg, integer, number,
                       strict_json, write_bytes, write_text)
 from ..backends import BACKENDS as ENGINES
 from ..cpu.physical import ETD_PROCESSOR_STEP, PHYSICAL, PROCESSOR_STEP, SETTLE_TOL
 from ..cpu.settle_check import PERIODS as SETTLE_CHECK_PERIODS
 from ..cpu.machines import BACKENDS, CIRCUIT
-from ..cpu.isa import MEM_SIZE
 from ..physics.params import params_file
-from ..cpu.run import check_run_outputs, load_program, run_program
+from ..cpu.run import check_run_outputs, is_image, load_program, run_program
 
 MAX_CIRCUIT_CYCLES = 2000    # one VACASK process; the sieve needs 457
 
@@ -170,18 +169,6 @@ def cmd_asm(args) -> int:
         print(prog.listing)
     print(f"wrote {args.output}: {len(prog.image)} bytes", file=sys.stderr if args.listing else sys.stdout)
     return 0
-
-
-def is_image(path) -> bool:
-    """Whether a file may be a memory image `cpu asm` wrote: at most MEM_SIZE bytes, neither an assembly
-    source nor text (an image holds opcodes, not printable characters only)."""
-    data = head(path, MEM_SIZE + 1)
-    if len(data) > MEM_SIZE or Path(path).suffix.lower() == ".asm":
-        return False
-    try:
-        return not all(c.isprintable() or c.isspace() for c in data.decode("utf-8"))
-    except UnicodeDecodeError:
-        return True
 
 
 IMAGE = ("a memory image", is_image)

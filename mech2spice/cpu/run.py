@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import MAX_CYCLES, check_output_file, first_json_line, is_int, read_json, strict_json
+from ..inputs import MAX_CYCLES, check_output_file, first_json_line, head, is_int, read_json, strict_json
 from ..waveform import Waveform, is_vcd, write_vcd
 from .isa import MEM_SIZE, OPCODES
 from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS
@@ -50,7 +50,30 @@ def load_program(source) -> Program:
             raise Mech2SpiceError(f"{path}: {err}") from None
         except UnicodeDecodeError:
             raise Mech2SpiceError(f"{path}: not a text file") from None
+    if not data:
+        raise Mech2SpiceError(f"program {path} is empty: nothing to run")
+    if len(data) > MEM_SIZE:
+        raise Mech2SpiceError(f"program {path} holds {len(data)} bytes: a memory image has at most {MEM_SIZE}")
+    if _is_text(data):     # every byte decodes as an instruction: a source run as code would run its letters
+        raise Mech2SpiceError(f"program {path} is text, not a memory image (`cpu asm` writes one): an assembly "
+                              "source needs the .asm suffix")
     return Program(data, "", {})
+
+
+def _is_text(data: bytes) -> bool:
+    """Printable characters and blanks only, at least one of them not blank (a memory image holds opcodes)."""
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return bool(text.strip()) and all(c.isprintable() or c.isspace() for c in text)
+
+
+def is_image(path) -> bool:
+    """Whether a file may be a memory image `cpu asm` wrote: not an assembly source, at most MEM_SIZE bytes,
+    not text."""
+    data = head(path, MEM_SIZE + 1)
+    return Path(path).suffix.lower() != ".asm" and len(data) <= MEM_SIZE and not _is_text(data)
 
 
 def make_memory(program: Program) -> Memory:

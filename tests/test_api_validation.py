@@ -96,6 +96,14 @@ SIMULATE = [
     ({"params": "no-such-preset"}, "cannot read parameter file no-such-preset"),
     ({"params": m2s.GateParams(q_g="150")}, "gate parameter q_g = '150' is not a finite number"),
     ({"params": m2s.GateParams(m_c=-6.0)}, "gate parameter m_c = -6.0 must be positive"),
+    # wrong types that reached the engines as AttributeError / OverflowError, or ran (hostile-input pass, session 21)
+    ({"params": m2s.GateParams(levels=[1, 2])}, "gate parameter levels = [1, 2] is not a Levels"),
+    ({"params": m2s.GateParams(levels=None)}, "gate parameter levels = None is not a Levels"),
+    ({"params": m2s.GateParams(block=5)}, "gate parameter block = 5 is not a BlockSpec"),
+    ({"params": m2s.GateParams(m_g=10 ** 400)}, "gate parameter m_g = 1000"),
+    ({"params": m2s.GateParams(m_g=True)}, "gate parameter m_g = True is not a finite number"),
+    ({"params": m2s.GateParams(name=5)}, "gate parameter name = 5 is not one line of text"),
+    ({"params": m2s.GateParams(name="a\nb")}, "is not one line of text"),
     # progress
     ({"progress": "yes"}, "progress must be True, False or a callable"),
 ]

@@ -203,8 +203,14 @@ class GateParams:
         """Raise Mech2SpiceError unless every field is finite and masses, Qs, stiffnesses, omega, F_R, u_R > 0."""
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name not in ("name", "block", "levels") and not (isinstance(v, (int, float)) and math.isfinite(v)):
-                raise Mech2SpiceError(f"gate parameter {f.name} = {v!r} is not a finite number")
+            if f.name not in ("name", "block", "levels") and not _finite_number(v):
+                raise Mech2SpiceError(f"gate parameter {f.name} = {v!r:.60} is not a finite number")
+        if not isinstance(self.name, str) or not self.name.isprintable():
+            raise Mech2SpiceError(f"gate parameter name = {self.name!r:.60} is not one line of text")
+        if not isinstance(self.levels, Levels):
+            raise Mech2SpiceError(f"gate parameter levels = {self.levels!r:.60} is not a Levels (or its dict)")
+        if self.block is not None and not isinstance(self.block, BlockSpec):
+            raise Mech2SpiceError(f"gate parameter block = {self.block!r:.60} is not a BlockSpec (or its dict)")
         for name in ("m_g", "m_i", "m_c", "q_g", "q_i", "q_c", "k_g", "k_i", "k_c", "omega", "f_r", "u_r"):
             if getattr(self, name) <= 0:
                 raise Mech2SpiceError(f"gate parameter {name} = {getattr(self, name)} must be positive")
@@ -225,6 +231,16 @@ class GateParams:
         if self.block is not None:
             out["block"] = self.block.to_dict()
         return out
+
+
+def _finite_number(v) -> bool:
+    """An int or float (not a bool) that is finite as a float (10**400 is not)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
 
 
 PRINTED = GateParams(

@@ -278,3 +278,17 @@ def test_a_port_named_like_another_ports_bit_is_that_port(tmp_path, capsys):
             a, b = vectors[k]
             assert cli.main(["simulate", str(src), "--backend", backend, "--json", "--set", f"a={a}", "--set", f"a[0]={b}"]) == 0
             assert json.loads(capsys.readouterr().out)["outputs"] == want[k], (backend, a, b)
+
+
+def test_a_name_outside_ascii_is_refused_and_a_comment_outside_ascii_is_read(tmp_path, capsys):
+    """`input \\café` came out of Yosys as "caf\\uffffFFC3\\uffffFFA9", accepted with exit 0 and then unknown to
+    `--set café=1` (hostile-input pass, session 21). Verilog names are ASCII; comments may be anything."""
+    bad, good = tmp_path / "bad.v", tmp_path / "good.v"
+    bad.write_text("module t(input \\café , output y);\n  assign y = \\café ;\nendmodule\n", encoding="utf-8")
+    good.write_bytes("module t(input a, output y);  // café\n  assign y = ~a;  /* \xe9 */\nendmodule\n".encode("utf-8")
+                     .replace(b"\xc3\xa9 */", b"\xe9 */"))       # a Latin-1 byte in a comment, too
+    assert cli.main(["synth", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "line 1: the character 'é'" in err and "ASCII" in err
+    assert cli.main(["simulate", str(good), "--set", "a=0", "--backend", "logic", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["outputs"] == {"y": 1}

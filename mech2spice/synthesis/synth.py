@@ -187,9 +187,15 @@ _NOT_AN_INITIAL_VALUE = [
 
 
 def _check_source(path: Path, text: str) -> None:
-    """`initial` blocks may only give constant values (power-up values and ROM contents); anything that
-    happens in simulated time is refused with its line."""
+    """Names are ASCII; `initial` blocks may only give constant values (power-up values and ROM contents):
+    anything that happens in simulated time is refused with its line."""
     blanked = _blanked(text)
+    wide = re.search(r"[^\x00-\x7f]", blanked)
+    if wide:
+        line = blanked.count("\n", 0, wide.start()) + 1
+        raise Mech2SpiceError(f"{path}, line {line}: the character {wide.group()!r} outside comments and strings: "
+                              "Verilog names are ASCII (an escaped identifier holds printable ASCII characters, "
+                              "IEEE 1364-2005 3.7.1), and Yosys writes any other character garbled")
     for m in re.finditer(r"\binitial\b", blanked):
         body_start, body_end = m.end(), statement_or_block_end(blanked, m.end())
         body = blanked[body_start:body_end]

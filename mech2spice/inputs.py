@@ -108,14 +108,29 @@ def parse_sets(items: list[str] | None) -> dict[str, int]:
     return values
 
 
+# --------------------------------------------------------------------------- files read
+
+MAX_INPUT_BYTES = 256 << 20      # a user's design, stimulus or parameter file: far above any real one
+
+
+def read_input(path, what: str, limit: int = MAX_INPUT_BYTES) -> bytes:
+    """A user's input file's bytes; one clear error if unreadable or past `limit` (/dev/zero read until the
+    memory ran out, then the design was blamed for its size)."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read(limit + 1)
+    except OSError as err:
+        raise Mech2SpiceError(f"cannot read {what} {path}: {err.strerror or err}") from None
+    if len(data) > limit:
+        raise Mech2SpiceError(f"{what} {path} holds more than {limit >> 20} MiB: not a file this reads")
+    return data
+
+
 # --------------------------------------------------------------------------- JSON files
 
 def read_json(path, what: str):
     """The parsed content of a user's JSON file; one clear error if unreadable, not UTF-8 or not JSON."""
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as err:
-        raise Mech2SpiceError(f"cannot read {what} {path}: {err.strerror or err}") from None
+    raw = read_input(path, what)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
@@ -349,8 +364,8 @@ def design_inputs(design, label: str = "the design") -> list[tuple[str, Path]]:
     while todo and len(found) < MAX_INCLUDES:
         src = todo.pop()
         try:
-            text = src.read_text(encoding="utf-8", errors="replace")
-        except OSError:
+            text = read_input(src, "Verilog file").decode("utf-8", errors="replace")
+        except Mech2SpiceError:
             continue
         for name in INCLUDE.findall(text):
             for cand in (src.parent / name, Path(design).parent / name, Path(name)):

@@ -470,3 +470,13 @@ def test_cpu_run_progress_bar_only_when_asked(capsys):
     assert capsys.readouterr().err == ""
     assert main(["cpu", "run", SIEVE, "--backend", "logic", "--max-cycles", "30"]) == 1
     assert capsys.readouterr().err == ""                               # not a terminal, and quick
+
+
+@pytest.mark.skipif(not Path("/dev/zero").exists(), reason="no /dev/zero")
+@pytest.mark.parametrize("argv", [["synth", "/dev/zero"],
+                                  ["simulate", str(ROOT / "verilog/counter4.v"), "--stimulus", "/dev/zero"],
+                                  ["cpu", "run", "/dev/zero"]], ids=["design", "stimulus", "program"])
+def test_an_endless_input_is_refused_by_its_size(capsys, argv):
+    """/dev/zero was read until the memory ran out, then the design was blamed for its size (hostile-input pass,
+    session 21)."""
+    refused(capsys, *argv, needle="MiB: not a file this reads")

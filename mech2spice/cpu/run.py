@@ -20,7 +20,8 @@ import time
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import MAX_CYCLES, check_output_file, first_json_line, head, is_int, read_json, strict_json
+from ..inputs import (MAX_CYCLES, check_output_file, first_json_line, head, is_int, read_input, read_json,
+                      strict_json)
 from ..waveform import Waveform, is_vcd, write_vcd
 from .isa import MEM_SIZE, OPCODES
 from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS
@@ -39,10 +40,7 @@ def load_program(source) -> Program:
     if isinstance(source, (bytes, bytearray, list)):
         return Program(bytes(source), "", {})
     path = Path(source)
-    try:
-        data = path.read_bytes()
-    except OSError as err:
-        raise Mech2SpiceError(f"cannot read program {path}: {err.strerror or err}") from None
+    data = read_input(path, "program", 16 << 20)
     if path.suffix.lower() == ".asm":
         try:
             return assemble_program(data.decode("utf-8"))

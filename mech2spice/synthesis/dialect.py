@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Iterator
 
 from ..errors import Mech2SpiceError
+from ..inputs import read_input
 from . import memory_guard
 from .verilog_text import blanked as blank
 
@@ -121,10 +122,7 @@ def standard_source(path) -> Iterator[Path]:
     dialect, the rewritten text in a scratch folder under the same file name (removed afterwards).  Messages
     from a tool that read it name the scratch path: replace ``str(that path)`` with ``str(path)``."""
     path = Path(path)
-    try:
-        text = path.read_bytes().decode("utf-8", errors="replace")
-    except OSError as err:
-        raise Mech2SpiceError(f"cannot read Verilog file {path}: {err.strerror or err}") from None
+    text = read_input(path, "Verilog file").decode("utf-8", errors="replace")
     standard = standard_text(path, text)
     if standard == text:
         yield path

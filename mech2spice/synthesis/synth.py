@@ -41,6 +41,7 @@ import networkx as nx
 
 from .. import identifiers
 from ..errors import Mech2SpiceError
+from ..inputs import read_input
 from . import dialect, races, refusals, yosys
 from .verilog_text import blanked as _blanked, statement_or_block_end
 
@@ -163,10 +164,7 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
 # --------------------------------------------------------------------------- running Yosys
 
 def _read_source(path: Path) -> str:
-    try:
-        return path.read_bytes().decode("utf-8", errors="replace")
-    except OSError as err:
-        raise Mech2SpiceError(f"cannot read Verilog file {path}: {err.strerror or err}") from None
+    return read_input(path, "Verilog file").decode("utf-8", errors="replace")
 
 
 # What an `initial` block may not hold: each is an event in simulated time, and a power-up value is the state

@@ -114,7 +114,13 @@ def test_domain_command_refuses_in_one_line(tmp_path):
                           (["gate", "--sweep", "freq=0:1e-3:2", "--sweep", "amp=0:0.1:2", "-o", str(notes)],
                            "not a PNG image"),
                           ([str(REPO / "verilog" / "counter4.v"), "--sweep", "freq=0:1e-3:2", "--sweep", "amp=0:0.1:2"],
-                           "is clocked")):
+                           "is clocked"),
+                          # flags this kind of design has no use for were ignored, exit 0 (hostile-input pass)
+                          (["gate", "--sweep", "freq=0:1e-3:2", "--sweep", "amp=0:0.1:2", "--top", "x"], "--top"),
+                          (["gate", "--sweep", "freq=0:1e-3:2", "--sweep", "amp=0:0.1:2", "--backend", "rk4"],
+                           "--backend applies"),
+                          ([str(REPO / "verilog" / "adder2.v"), "--sweep", "freq=0:1e-3:2", "--sweep", "amp=0:0.1:2",
+                            "--cycles", "5"], "--cycles applies")):
         rc, _, err = cli("domain", *args)
         assert rc == 2 and message in err and "Traceback" not in err, (args, err)
     assert notes.read_text() == "mine"

@@ -158,6 +158,11 @@ def test_engine_flags_belong_to_their_engines():
     adder = str(Path(__file__).resolve().parent.parent / "verilog" / "adder2.v")
     assert cli.main(["simulate", adder, "--backend", "rk4", "--method", "gear"]) == 2
     assert cli.main(["simulate", adder, "--backend", "ngspice", "--steps", "100"]) == 2
+    # the logic oracle has no time: these were ignored with exit 0 (hostile-input pass, session 21)
+    counter = str(Path(__file__).resolve().parent.parent / "verilog" / "counter4.v")
+    for argv in ([adder, "--steps", "5"], [adder, "--periods", "5"], [adder, "--pulse", "5"],
+                 [counter, "--cycles", "2", "--pause", "5"], [counter, "--cycles", "2", "--noise", "1"]):
+        assert cli.main(["simulate", *argv, "--backend", "logic"]) == 2, argv
 
 
 def test_long_runs_say_how_long_they_will_take_before_starting(adder, p):

@@ -12,7 +12,9 @@ from ..errors import Mech2SpiceError
 from ..inputs import MAX_CYCLES
 from ..synthesis.ports import input_bits, output_bits, pack_inputs, port_values
 from ..synthesis.synth import Netlist, latch_inputs
-from ._base import Capabilities, FromFlags, NoOptions
+from ._base import Capabilities, FromFlags, NoOptions, _flag
+
+TIME_FLAGS = ("periods", "steps", "pulse", "pause")     # a physical run's time, in the command line's names
 
 __all__ = ["evaluate", "evaluate_bits", "evaluate_batch", "power_up", "ClockedLogic", "LogicEngine"]
 
@@ -143,6 +145,15 @@ class LogicEngine(FromFlags):
 
     def __init__(self, options=None):
         self.options = options if options is not None else NoOptions()
+
+    @classmethod
+    def flag_changes(cls, flags) -> dict:
+        """No settings: the flags that set a physical run's time are refused, not ignored (it has no time)."""
+        given = [f"--{name}" for name in TIME_FLAGS if _flag(flags, name) is not None]
+        if given:
+            raise Mech2SpiceError(f"{', '.join(given)}: the logic backend evaluates the NOR graph and has no drive "
+                                  "periods, steps or pulses (the physical backends do)")
+        return super().flag_changes(flags)
 
     def describe(self) -> dict:
         """No settings."""

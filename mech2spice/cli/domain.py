@@ -36,9 +36,9 @@ example:
                         "values; NAME=V holds the third at V (default 0)")
     d.add_argument("--params", default="default", help=f"gate parameters: {', '.join(PRESETS)} or a JSON file")
     d.add_argument("--top", help="top module of a Verilog DESIGN")
-    d.add_argument("--backend", default="envelope", choices=["envelope", "rk4", "carrier"],
+    d.add_argument("--backend", default=None, choices=["envelope", "rk4", "carrier"],
                    help="engine of a Verilog or processor DESIGN (default envelope)")
-    d.add_argument("--cycles", type=inputs.integer(1, 10_000), default=30,
+    d.add_argument("--cycles", type=inputs.integer(1, 10_000), default=None,
                    help="processor cycles compared with the ISS at each point (default 30)")
     d.add_argument("--spread", type=inputs.number(0, 1), default=None, metavar="SIGMA",
                    help="also evaluate --samples spread samples at each point (the same samples everywhere)")
@@ -65,18 +65,32 @@ def _evaluator(args, p):
                       trim=mode, residual=residual)
     elif any(v is not None for v in (args.samples, args.trim, args.trim_residual, args.drift)):
         raise Mech2SpiceError("--samples, --trim, --trim-residual and --drift apply to --spread SIGMA")
-    if args.design == GATE:
+    kind = "gate" if args.design == GATE else "program" if Path(args.design).suffix.lower() == ".asm" else "verilog"
+    _refuse_unused(args, kind)
+    backend = args.backend or "envelope"
+    if kind == "gate":
         return domain.GateDomain(p, **spread)
-    if Path(args.design).suffix.lower() == ".asm":
+    if kind == "program":
         from ..cpu.run import load_program
         load_program(args.design)                     # a bad program is one line now, not after a model build
-        return domain.CpuDomain(args.design, args.cycles, p, args.backend, **spread)
+        return domain.CpuDomain(args.design, args.cycles or 30, p, backend, **spread)
     from ..experiments.montecarlo import all_vectors
     from ..synthesis.synth import synthesize
     nl = synthesize(args.design, top=args.top)
     if nl.clock:
         raise Mech2SpiceError(f"{nl.top} is clocked: domain maps the gate, combinational designs and the processor")
-    return domain.DesignDomain(nl, p, all_vectors(nl), args.backend, **spread)
+    return domain.DesignDomain(nl, p, all_vectors(nl), backend, **spread)
+
+
+def _refuse_unused(args, kind: str) -> None:
+    """A flag this kind of DESIGN has no use for is refused, not ignored."""
+    if args.top is not None and kind != "verilog":
+        raise Mech2SpiceError("--top names the top module of a Verilog DESIGN")
+    if args.cycles is not None and kind != "program":
+        raise Mech2SpiceError("--cycles applies to a processor program DESIGN (.asm)")
+    if args.backend is not None and kind == "gate":
+        raise Mech2SpiceError("--backend applies to a Verilog or processor DESIGN (the gate's margin is its own "
+                              "loaded steady state)")
 
 
 def _outputs(args) -> tuple[Path, Path] | None:

@@ -101,10 +101,12 @@ def parse_sets(items: list[str] | None) -> dict[str, int]:
         port, sep, val = item.partition("=")
         if not sep or not port.strip():
             raise Mech2SpiceError(f"--set expects PORT=INT, got {item!r}")
+        if port.strip() in values:
+            raise Mech2SpiceError(f"--set {port.strip()} is given twice: give each input once")
         try:
             values[port.strip()] = int(val.strip(), 0)
         except ValueError:
-            raise Mech2SpiceError(f"--set {port.strip()}: {val!r} is not an integer") from None
+            raise Mech2SpiceError(f"--set {port.strip()}: {val[:40]!r} is not an integer") from None
     return values
 
 
@@ -128,6 +130,16 @@ def read_input(path, what: str, limit: int = MAX_INPUT_BYTES) -> bytes:
 
 # --------------------------------------------------------------------------- JSON files
 
+def _unique_keys(pairs: list) -> dict:
+    """A JSON object whose keys are all different (a repeated key was read as its last value, silently)."""
+    out = dict(pairs)
+    if len(out) < len(pairs):
+        seen = set()
+        twice = next(k for k, _ in pairs if k in seen or seen.add(k))
+        raise ValueError(f"the key {twice[:60]!r} appears twice in one object")
+    return out
+
+
 def read_json(path, what: str):
     """The parsed content of a user's JSON file; one clear error if unreadable, not UTF-8 or not JSON."""
     raw = read_input(path, what)
@@ -136,7 +148,7 @@ def read_json(path, what: str):
     except UnicodeDecodeError as err:
         raise Mech2SpiceError(f"{what} {path} is not UTF-8 text (bad byte at offset {err.start})") from None
     try:
-        return json.loads(text, parse_constant=_no_constant)
+        return json.loads(text, parse_constant=_no_constant, object_pairs_hook=_unique_keys)
     except json.JSONDecodeError as err:
         raise Mech2SpiceError(f"{what} {path} is not valid JSON: {err.msg} (line {err.lineno})") from None
     except (ValueError, RecursionError) as err:     # NaN/Infinity, >4300-digit integers, deep nesting

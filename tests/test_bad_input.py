@@ -480,3 +480,18 @@ def test_an_endless_input_is_refused_by_its_size(capsys, argv):
     """/dev/zero was read until the memory ran out, then the design was blamed for its size (hostile-input pass,
     session 21)."""
     refused(capsys, *argv, needle="MiB: not a file this reads")
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["simulate", str(ROOT / "verilog/adder2.v"), "--set", "a=1", "--set", "a=2", "--backend", "logic"], "given twice"),
+    (["simulate", str(ROOT / "verilog/counter4.v"), "--stimulus", "{dup}", "--backend", "logic"], "appears twice"),
+    (["montecarlo", str(ROOT / "verilog/adder2.v"), "--stimulus", "{cycles}", "--spread", "1e-5", "--samples", "1",
+      "--scheduler", "inline"], "'cycles' applies to clocked designs"),
+], ids=["set-twice", "json-key-twice", "mc-cycles"])
+def test_a_value_given_twice_or_a_field_with_no_use_is_refused(tmp_path, capsys, argv, needle):
+    """The last of two values won, and a combinational montecarlo dropped 'cycles', each with exit 0
+    (hostile-input pass, session 21)."""
+    (tmp_path / "dup.json").write_text('[{"set": {"en": 1, "en": 0}, "cycles": 2}]')
+    (tmp_path / "cycles.json").write_text('[{"set": {"a": 1}, "cycles": 3}]')
+    files = {"{dup}": str(tmp_path / "dup.json"), "{cycles}": str(tmp_path / "cycles.json")}
+    refused(capsys, *[files.get(a, a) for a in argv], needle=needle)

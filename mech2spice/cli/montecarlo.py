@@ -89,8 +89,11 @@ def vectors_of(args, netlist) -> list[dict[str, int]]:
     if args.set and args.stimulus:
         raise Mech2SpiceError("give --set or --stimulus, not both")
     if args.stimulus:
-        engine = engine_class(args.backend)
-        vecs = [step.get("set", {}) for step in inputs.stimulus_steps(args.stimulus, {}, engine)]
+        steps = inputs.stimulus_steps(args.stimulus, {}, engine_class(args.backend))
+        if any(step["cycles"] != 1 for step in steps):    # it was ignored: each step is one vector here
+            raise Mech2SpiceError(f"{netlist.top} is combinational: each step of --stimulus is one input vector, "
+                                  "and 'cycles' applies to clocked designs")
+        vecs = [step.get("set", {}) for step in steps]
     elif args.set:
         vecs = [inputs.parse_sets(args.set)]
     else:

@@ -159,6 +159,10 @@ def test_an_output_left_floating_is_caught_by_icarus(tmp_path, capsys):
     rc, out, _ = run(capsys, "verify", "--json", "--exhaustive", src)
     res = json.loads(out)
     assert rc == 1 and res["cosim"]["undriven_bits"] == 2 and not res["cosim"]["agree"]
+    # and `simulate` says so (it printed y = 1 for en = 0 with nothing on stderr; hostile-input pass, session 21)
+    for _ in range(2):                                   # the second synthesis comes from the cache
+        rc, out, err = run(capsys, "simulate", src, "--set", "a=1", "--set", "en=0", "--backend", "logic")
+        assert rc == 0 and "warning" in err and "output y is driven only through tri-state drivers" in err
 
 
 def test_a_tri_state_beside_a_driver_that_never_releases_is_two_drivers(tmp_path, capsys):

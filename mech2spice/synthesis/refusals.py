@@ -22,15 +22,16 @@ from pathlib import Path
 from ..errors import Mech2SpiceError
 
 #: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
-VERSION = 2
+VERSION = 3
 
 
-def check(tmp: Path, path: Path, source: str, top: str | None) -> None:
-    """Run every check on the files the flow wrote in `tmp` (`source`: the file's text)."""
+def check(tmp: Path, path: Path, source: str, top: str | None) -> dict[str, list[str]]:
+    """Run every check on the files the flow wrote in `tmp` (`source`: the file's text); return each module's
+    output ports that a tri-state driver may release (`check_drivers`)."""
     if top is None:
         check_single_top((tmp / "read.il").read_text(), path)
     check_sensitivity((tmp / "ast.txt").read_text(), path, source)
-    check_drivers((tmp / "drivers.il").read_text(), path, source)
+    return check_drivers((tmp / "drivers.il").read_text(), path, source)
 
 
 def src_line(src: str | None, path: Path) -> int | None:
@@ -287,14 +288,16 @@ def _outputs(ctype: str, modules: dict) -> set[str]:
     return {w for w, info in wires.items() if info[3] == "output"}
 
 
-def check_drivers(rtlil: str, path: Path, source: str) -> None:
+def check_drivers(rtlil: str, path: Path, source: str) -> dict[str, list[str]]:
     """Refuse a net driven from two places: ports, cell outputs and constants each count as a driver.
     A net whose every driver can release it (a tri-state driver: `en ? d : 'bz`, or a submodule's output
-    that is one) is a tri-state bus, not a conflict: the flow resolves it to a multiplexer (`tribuf`)."""
+    that is one) is a tri-state bus, not a conflict: the flow resolves it to a multiplexer (`tribuf`).
+    Returns each module's output ports with such a bit (module name -> port names, sorted)."""
     modules = read_rtlil(rtlil)
     released: dict[str, set] = {}
     for name in _bottom_up(modules):
         released[name] = _check_module_drivers(name, modules, released, path, source)
+    return {name: sorted({_name(wire) for wire, _ in bits}) for name, bits in released.items()}
 
 
 def _bottom_up(modules: dict) -> list[str]:

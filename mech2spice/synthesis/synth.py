@@ -125,10 +125,13 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     _check_source(path, source)
     if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
         raise Mech2SpiceError(f"invalid top module name {top!r}")
-    name, module, found = _run_yosys(path, top, source)
+    name, module, found, released = _run_yosys(path, top, source)
     for race in found:                  # warned, not refused: the network is Yosys's (flip-flop) reading
         _warn(races.warning(race, path))
     netlist = build_netlist(name, module, path)
+    for port in released:               # warned: where Verilog reads z the network reads the bus's multiplexer
+        _warn(f"{path}: output {port} is driven only through tri-state drivers: where none is enabled Verilog "
+              "reads z and the network a 0 or 1 (the bus as a multiplexer); `verify` names such input vectors")
     netlist.races = tuple(found)
     return clean(netlist, max_fanout=max_fanout)
 
@@ -245,16 +248,17 @@ def _flow(source: str, top: str | None, include: str | None = None) -> str:
         "write_json netlist.json", ""])
 
 
-def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict, list]:
-    """(top module name, its Yosys JSON module, the source's races): from the cache when this source went
-    through this flow and this Yosys before, else from a run of the flow in a scratch folder (`_yosys_run`)."""
+def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict, list, list]:
+    """(top module name, its Yosys JSON module, the source's races, the top's output ports a tri-state driver
+    may release): from the cache when this source went through this flow and this Yosys before, else from a
+    run of the flow in a scratch folder (`_yosys_run`)."""
     key = _cache_key(source, top)
     cached = _cache_read(key)
     if cached is not None:
         return cached
-    name, module, found = _yosys_run(path, top, source)
-    _cache_write(key, name, module, found)
-    return name, module, found
+    name, module, found, released = _yosys_run(path, top, source)
+    _cache_write(key, name, module, found, released)
+    return name, module, found, released
 
 
 def _cache_key(source: str, top: str | None) -> str | None:
@@ -271,7 +275,7 @@ def _cache_path(key: str) -> Path:
     return cache_dir() / "yosys" / f"{key}.json"
 
 
-def _cache_read(key: str | None) -> tuple[str, dict, list] | None:
+def _cache_read(key: str | None) -> tuple[str, dict, list, list] | None:
     """The cached (top, module); None (Yosys runs again and replaces the entry) when there is none or it is
     not a Yosys JSON module in the shape build_netlist reads: the cache is rebuildable data, anyone's."""
     if key is None:
@@ -282,8 +286,10 @@ def _cache_read(key: str | None) -> tuple[str, dict, list] | None:
         return None
     if not (isinstance(data, dict) and isinstance(data.get("top"), str) and _is_module(data.get("module"))):
         return None
-    found = _cached_races(data.get("races"))
-    return None if found is None else (data["top"], data["module"], found)
+    found, released = _cached_races(data.get("races")), data.get("released")
+    if found is None or not (isinstance(released, list) and all(isinstance(p, str) for p in released)):
+        return None
+    return data["top"], data["module"], found, released
 
 
 def _cached_races(rows) -> list | None:
@@ -315,7 +321,7 @@ def _is_module(module) -> bool:
         and table("netnames", {"hide_name": lambda v: isinstance(v, int), "bits": bits})
 
 
-def _cache_write(key: str | None, name: str, module: dict, found: list) -> None:
+def _cache_write(key: str | None, name: str, module: dict, found: list, released: list) -> None:
     """Keep a synthesised module (atomically; a cache that cannot be written is skipped)."""
     if key is None:
         return
@@ -323,7 +329,8 @@ def _cache_write(key: str | None, name: str, module: dict, found: list) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps({"top": name, "module": module, "races": [r.as_dict() for r in found]}))
+        tmp.write_text(json.dumps({"top": name, "module": module, "races": [r.as_dict() for r in found],
+                                   "released": released}))
         os.replace(tmp, path)
     except OSError:
         pass
@@ -348,14 +355,16 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
                 raise Mech2SpiceError(init)
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
                                   else f"yosys error: {path}: {msg}")
-        refusals.check(Path(tmp), path, source, top)
+        released = refusals.check(Path(tmp), path, source, top)
         _check_drivers(Path(tmp), path)
         found = races.find((Path(tmp) / "ast.txt").read_text(), path)
         out = Path(tmp) / "netlist.json"
         if not out.exists():
             raise Mech2SpiceError(f"yosys wrote no netlist for {path} (its run stopped early)")
         modules = json.loads(out.read_text())["modules"]
-    return (*_pick_top(modules, top, path), found)
+    name, module = _pick_top(modules, top, path)
+    outputs = {p for p, row in module["ports"].items() if row["direction"] == "output"}
+    return name, module, found, [p for p in released.get(name, []) if p in outputs]
 
 
 _UNDRIVEN = re.compile(r"Wire (?P<mod>[^.\s]+)\.\\?(?P<net>.+?) is used but has no driver")

@@ -42,7 +42,10 @@ def test_list_json_names_every_report(tmp_path):
 
 @pytest.mark.parametrize("args, message", [(("nosuch",), "unknown report nosuch"),
                                            (("adder", "--quick"), "report adder takes no --quick"),
-                                           ((), "name a report")])
+                                           ((), "name a report"),
+                                           # it wrote cpu_physical_failed.md, then exit 2 (hostile-input pass)
+                                           (("cpu_physical", "--cycles", "-1"), "--cycles: must be from 0"),
+                                           (("cpu_physical", "--step", "nan"), "--step: must be a finite")])
 def test_usage_errors_are_one_line_and_exit_2(tmp_path, args, message):
     r = _cli("report", *args, "--out", str(tmp_path / "out"), cwd=tmp_path)
     assert r.returncode == 2

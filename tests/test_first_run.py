@@ -64,6 +64,10 @@ def test_summary_quantiles_skip_diverged_samples_without_warnings():
     assert res["margin_samples"] == 3 and res["margin_quantiles"]["1%"] == pytest.approx(-0.394)
     assert res["margin_quantiles"]["99%"] == pytest.approx(0.194)
     assert none["margin_samples"] == 0 and none["margin_quantiles"] == {} and none["reasons"] == {"diverged": 3}
+    judged = [{**r, "failing_gates": ["g1"] * (r["i"] == 1)} for r in recs if "reason" not in r]
+    res = mc.summary([recs[0], *judged], 3)
+    assert res["gate_samples"] == 3 and res["gate_failure_rate"] == pytest.approx(1 / 9)
+    assert none["gate_failure_rate"] is None and none["gate_samples"] == 0
 
 
 def test_montecarlo_where_every_sample_diverges(tmp_path, capfd):
@@ -77,6 +81,8 @@ def test_montecarlo_where_every_sample_diverges(tmp_path, capfd):
     out, err = capfd.readouterr()
     res = json.loads(out)
     assert res["failures"] == 2 and res["margin_quantiles"] == {} and res["margin_samples"] == 0
+    # no gate was judged: the rate is unknown, not 0 (it read 0.0 beside a yield of 0; hostile-input pass)
+    assert res["gate_failure_rate"] is None and res["gate_samples"] == 0
     assert "Warning" not in err and err == ""
     assert main(argv) == 1
     out, err = capfd.readouterr()

@@ -360,15 +360,16 @@ def summary(records: list[dict], n_gates: int) -> dict:
         for g in r.get("failing_gates", []):
             gates[g] = gates.get(g, 0) + 1
     roots = sum(gates.values())
-    rate = roots / (n * n_gates) if n and n_gates else 0.0
-    lo, hi = wilson(roots, n * n_gates) if n and n_gates else (0.0, 1.0)
+    judged = sum("failing_gates" in r for r in records)   # a sample refused before its run judged no gate
+    rate = roots / (judged * n_gates) if judged and n_gates else None
+    lo, hi = wilson(roots, judged * n_gates) if judged and n_gates else (0.0, 1.0)
     return {"samples": n, "failures": n - passed, "yield": passed / n if n else None,
             "yield_ci95": list(wilson(passed, n)),
             "margin_quantiles": {f"{q}%": float(np.percentile(finite, q)) for q in QUANTILES} if finite.size else {},
             "margin_samples": int(finite.size),   # the samples the quantiles are over (0: none has a margin)
             "failing_bits": dict(sorted(bits.items(), key=lambda kv: -kv[1])),
-            "gate_failure_rate": rate if n_gates else None,          # None: gates not checked (clocked runs)
-            "gate_failure_rate_ci95": [lo, hi], "gates": n_gates,
+            "gate_failure_rate": rate,   # None: no gate judged (clocked runs; every sample refused before its run)
+            "gate_failure_rate_ci95": [lo, hi], "gates": n_gates, "gate_samples": judged if n_gates else 0,
             "failing_gates": dict(sorted(gates.items(), key=lambda kv: -kv[1])[:20]),
             "reasons": _reasons(records)}
 

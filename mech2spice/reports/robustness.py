@@ -115,7 +115,7 @@ def markdown(d: dict) -> str:
             out.append(f"| {r['sigma']:g} | {r['samples']} | {r['failures']} | {_pct(r['yield'])} | "
                        f"{_pct(r['yield_ci95'][0])} - {_pct(r['yield_ci95'][1])} | "
                        f"{q.get('1%', float('nan')):+.3f} / {q.get('50%', float('nan')):+.3f} | "
-                       f"{r['gate_failure_rate']:.2e} | {first} |")
+                       f"{_rate(r['gate_failure_rate'])} | {first} |")
         out.append("")
     out += clocked_section(d)
     out += comparison(d)
@@ -258,6 +258,8 @@ def extrapolation(d: dict) -> list[str]:
     cpu = {r["sigma"]: r for r in d.get("clocked", {}).get("processor", [])}
     for r in d["curves"]["adder"]:
         p, (lo, hi) = r["gate_failure_rate"], r["gate_failure_rate_ci95"]
+        if p is None:                       # no sample at this sigma ran far enough to judge a gate
+            continue
         m = cpu.get(r["sigma"])
         meas = f"{m['samples'] - m['failures']} of {m['samples']} ({_pct(m['yield_ci95'][0])} - {_pct(m['yield_ci95'][1])})" if m else "-"
         out.append(f"| {r['sigma']:g} | {p:.2e} | {lo:.1e} - {hi:.1e} | {_pct((1 - p) ** n)} "
@@ -303,7 +305,7 @@ def throughput(d: dict) -> list[str]:
         lo, hi = big["yield_ci95"]
         out += [f"Large sweep: adder, sigma {big_sigma:g}, {big['samples']} of {big_n} samples in "
                 f"`{s['cache']}/adder_{big_n}.jsonl`: {big['failures']} failures, yield {_pct(big['yield'])} "
-                f"({_pct(lo)} - {_pct(hi)}), root gate failure rate {big['gate_failure_rate']:.2e}."]
+                f"({_pct(lo)} - {_pct(hi)}), root gate failure rate {_rate(big['gate_failure_rate'])}."]
         if "samples_per_s" in big:
             out += [f"The run that completed it: {big['ran']} samples in {big['wall_s']:.0f} s, "
                     f"{big['samples_per_s']:.2f} samples/s on {big['workers']} workers (LocalCluster, machine "
@@ -312,3 +314,8 @@ def throughput(d: dict) -> list[str]:
                     "sample count."]
         out.append("")
     return out
+
+
+def _rate(rate: float | None) -> str:
+    """A gate failure rate, or '-' where no gate was judged (every sample refused before its run)."""
+    return "-" if rate is None else f"{rate:.2e}"

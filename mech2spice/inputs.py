@@ -98,7 +98,7 @@ def parse_sets(items: list[str] | None) -> dict[str, int]:
     """--set PORT=INT ... -> {port: value}; ranges are checked against the design (ports.pack_inputs)."""
     values = {}
     for item in items or []:
-        port, sep, val = item.partition("=")
+        port, sep, val = item.rpartition("=")      # a value holds no "=", an escaped port name may
         if not sep or not port.strip():
             raise Mech2SpiceError(f"--set expects PORT=INT, got {item!r}")
         if port.strip() in values:

@@ -495,3 +495,17 @@ def test_a_value_given_twice_or_a_field_with_no_use_is_refused(tmp_path, capsys,
     (tmp_path / "cycles.json").write_text('[{"set": {"a": 1}, "cycles": 3}]')
     files = {"{dup}": str(tmp_path / "dup.json"), "{cycles}": str(tmp_path / "cycles.json")}
     refused(capsys, *[files.get(a, a) for a in argv], needle=needle)
+
+
+def test_a_port_whose_name_holds_an_equals_sign_can_be_set(tmp_path, capsys):
+    """`--set a=1=1` for `input \\a=1`: the value was read as '1=1' (hostile-input pass, session 21)."""
+    src = tmp_path / "eq.v"
+    src.write_text("module t(input \\a=1 , output y);\n  assign y = ~\\a=1 ;\nendmodule\n")
+    for value, y in ((0, 1), (1, 0)):
+        assert main(["simulate", str(src), "--set", f"a=1={value}", "--backend", "logic", "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["outputs"] == {"y": y}
+
+
+def test_merging_into_a_record_that_does_not_exist_names_it(tmp_path, capsys):
+    refused(capsys, "design", "--merge", tmp_path / "other.json", "--out", tmp_path / "new.json",
+            needle="--merge merges into the search record --out")

@@ -292,3 +292,18 @@ def test_a_name_outside_ascii_is_refused_and_a_comment_outside_ascii_is_read(tmp
     assert err.count("\n") == 1 and "line 1: the character 'é'" in err and "ASCII" in err
     assert cli.main(["simulate", str(good), "--set", "a=0", "--backend", "logic", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["outputs"] == {"y": 1}
+
+
+def test_top_names_a_module_whose_name_is_escaped(tmp_path, capsys):
+    """`--top` took only plain names, so a module named `\\my-top` could not be chosen (hostile-input pass,
+    session 21); a name the Yosys script cannot hold is still refused, one that is no module is not found."""
+    src = tmp_path / "two.v"
+    src.write_text("module \\my-top (input a, output y);\n  assign y = ~a;\nendmodule\n"
+                   "module other(input a, output y);\n  assign y = a;\nendmodule\n")
+    for top, y in (("my-top", 1), ("other", 0)):
+        assert cli.main(["simulate", str(src), "--top", top, "--set", "a=0", "--backend", "logic", "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["outputs"] == {"y": y}
+    for top, needle in (("a;b", "not found"), ("x y", "without blanks"), ("", "invalid top module name")):
+        assert cli.main(["synth", str(src), "--top", top]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and needle in err, (top, err)

@@ -123,8 +123,10 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     identifiers.yosys_path(path.resolve(), "Verilog file")      # quoted in the Yosys script: checked first
     source = dialect.standard_text(path, _read_source(path))    # VIS's dialect as SystemVerilog, lines kept
     _check_source(path, source)
-    if top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
-        raise Mech2SpiceError(f"invalid top module name {top!r}")
+    if top is not None:                 # any Verilog name, escaped ones too; one the script cannot hold is refused
+        if not isinstance(top, str) or not top or top.startswith("$"):
+            raise Mech2SpiceError(f"invalid top module name {top!r}")
+        identifiers.yosys(top)
     name, module, found, released = _run_yosys(path, top, source)
     for race in found:                  # warned, not refused: the network is Yosys's (flip-flop) reading
         _warn(races.warning(race, path))

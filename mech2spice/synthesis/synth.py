@@ -126,7 +126,10 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     if top is not None:                 # any Verilog name, escaped ones too; one the script cannot hold is refused
         if not isinstance(top, str) or not top or top.startswith("$"):
             raise Mech2SpiceError(f"invalid top module name {top!r}")
-        identifiers.yosys(top)
+        try:
+            identifiers.yosys(top)
+        except Mech2SpiceError as err:
+            raise Mech2SpiceError(f"invalid top module name: {err}") from None
     name, module, found, released = _run_yosys(path, top, source)
     for race in found:                  # warned, not refused: the network is Yosys's (flip-flop) reading
         _warn(races.warning(race, path))

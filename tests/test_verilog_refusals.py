@@ -267,3 +267,20 @@ def test_signed_ports_take_the_twos_complement_range(tmp_path, capsys):
     vectors = mc.all_vectors(synthesize(verilog(tmp_path, "module t(input signed [1:0] a, input b, output y);\n"
                                                           "  assign y = a[0] ^ b;\nendmodule\n", "t.v")))
     assert sorted({v["a"] for v in vectors}) == [-2, -1, 0, 1] and len(vectors) == 8
+
+
+# ------------------------------------------------------------------ case equality against x or z
+
+@needs_icarus
+def test_case_equality_against_x_or_z_is_refused_and_against_a_defined_value_agrees(tmp_path, capsys):
+    """`a === 2'bx1` gave e = 1 for a = 1 with exit 0 (Icarus: 0): Yosys reads the x bits as don't-cares
+    (second hostile-input pass, session 21). A net never holds x or z, so the question has no mechanical
+    meaning; `===` against a defined value is `==` and stays."""
+    for op, const in (("===", "2'bx1"), ("!==", "2'b1z")):
+        src = verilog(tmp_path, f"module q(input [1:0] a, output e);\n  assign e = (a {op} {const});\nendmodule\n")
+        refused(capsys, "synth", src, needle=f"{src}, line 2: `{op}` against a value with x or z bits")
+    src = verilog(tmp_path, "module q(input [1:0] a, output e, output n);\n  assign e = (a === 2'b01);\n"
+                            "  assign n = (a !== 2'b10);\nendmodule\n")
+    vectors = [{"a": a} for a in range(4)]
+    want = icarus(tmp_path, src, "q", {"a": 2}, {"e": 1, "n": 1}, vectors)
+    assert [logic(capsys, src, v) for v in vectors] == want

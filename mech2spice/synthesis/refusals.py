@@ -22,7 +22,7 @@ from pathlib import Path
 from ..errors import Mech2SpiceError
 
 #: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
-VERSION = 3
+VERSION = 4
 
 
 def check(tmp: Path, path: Path, source: str, top: str | None) -> dict[str, list[str]]:
@@ -31,7 +31,9 @@ def check(tmp: Path, path: Path, source: str, top: str | None) -> dict[str, list
     if top is None:
         check_single_top((tmp / "read.il").read_text(), path)
     check_sensitivity((tmp / "ast.txt").read_text(), path, source)
-    return check_drivers((tmp / "drivers.il").read_text(), path, source)
+    drivers = (tmp / "drivers.il").read_text()
+    check_case_equality(drivers, path)
+    return check_drivers(drivers, path, source)
 
 
 def src_line(src: str | None, path: Path) -> int | None:
@@ -286,6 +288,23 @@ def _outputs(ctype: str, modules: dict) -> set[str]:
         return {"\\DATA"} if ctype.startswith("$memrd") else {"\\Y", "\\Q", "\\RD_DATA"}
     wires = modules[_name(ctype)].wires if _name(ctype) in modules else {}
     return {w for w, info in wires.items() if info[3] == "output"}
+
+
+def check_case_equality(rtlil: str, path: Path) -> None:
+    """Refuse `===` / `!==` against a value with x or z bits: it asks whether a net holds x or z, which a
+    mechanical net never does (it always carries a 0 or a 1), and Yosys reads the x bits as don't-cares, so
+    the network answered differently from Icarus with exit 0."""
+    for name, mod in read_rtlil(rtlil).items():
+        for ctype, _, conns, src in mod.cells:
+            if ctype not in ("$eqx", "$nex"):
+                continue
+            if any(not wire and value in "xz" for port in ("\\A", "\\B") for wire, value in conns.get(port, [])):
+                line = src_line(src, path)
+                op = "===" if ctype == "$eqx" else "!=="
+                raise Mech2SpiceError(f"{path}{f', line {line}' if line else f' (module {name})'}: `{op}` against a "
+                                      "value with x or z bits asks whether a net holds x or z; a mechanical net "
+                                      "always carries a 0 or a 1, so the answer is a constant: write the "
+                                      "constant, or compare the defined bits with `==`")
 
 
 def check_drivers(rtlil: str, path: Path, source: str) -> dict[str, list[str]]:

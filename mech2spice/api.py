@@ -106,7 +106,7 @@ def emit(design, inputs: dict[str, int] | None = None, *, params="default", peri
     options = engine_options("ngspice", options)
     values, periods, p = check.port_values(inputs), _periods(periods), _params(params)
     if path is not None:                          # the command line's rule, before any work
-        read = [*check.design_inputs(design),
+        read = [*check.design_inputs(getattr(design, "source", None) or design),    # a Netlist names its file
                 ("the params file", params_file(params) if isinstance(params, (str, os.PathLike)) else None)]
         path = check.check_output_file(check.path_value(path, "path"), read, "netlist file", kind=NETLIST,
                                        force=force is True, remedy="force=True replaces it")

@@ -160,6 +160,9 @@ def test_emit_never_overwrites_its_design(tmp_path):
     design = tmp_path / "adder2.v"
     design.write_text(Path(ADDER).read_text())
     refused(lambda: m2s.emit(design, {"a": 1}, path=str(design)), "is the design")
+    # nor given as the Netlist synthesized from it, even with force=True (it replaced the source: a Netlist did
+    # not know its file; second hostile-input pass, session 21)
+    refused(lambda: m2s.emit(m2s.synthesize(design), {"a": 1}, path=str(design), force=True), "is the design")
     assert design.read_text() == Path(ADDER).read_text()
 
 

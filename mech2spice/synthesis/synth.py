@@ -34,7 +34,7 @@ import os
 import re
 import sys
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import networkx as nx
@@ -60,6 +60,7 @@ class Netlist:
     clock: str | None = None  # the flip-flops' clock port, if any
     signed: frozenset = frozenset()   # ports declared signed: their values are two's complement
     races: tuple = ()                 # races.Race: clocked blocks passing a value through `=` on one edge
+    source: str | None = field(default=None, compare=False)   # the Verilog file synthesized: never an output
 
     def gates(self) -> list[str]:
         """NOR gates in topological order (level by level, by gate number within a level); latch
@@ -137,7 +138,7 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     for port in released:               # warned: where Verilog reads z the network reads the bus's multiplexer
         _warn(f"{path}: output {port} is driven only through tri-state drivers: where none is enabled Verilog "
               "reads z and the network a 0 or 1 (the bus as a multiplexer); `verify` names such input vectors")
-    netlist.races = tuple(found)
+    netlist.races, netlist.source = tuple(found), str(path)
     return clean(netlist, max_fanout=max_fanout)
 
 
@@ -166,7 +167,8 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
     remove_dead_gates(g)
     outputs = {p: w for p, w in netlist.outputs.items() if p in ports}
     clock = netlist.clock if any(d["kind"] == "latch" for _, d in g.nodes(data=True)) else None
-    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed, netlist.races)
+    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed, netlist.races,
+                   netlist.source)
 
 
 # --------------------------------------------------------------------------- running Yosys

@@ -750,7 +750,12 @@ def reset_ports(netlist: Netlist, given=None, path=None) -> list[dict]:
     if given:
         if list(given) == ["none"]:
             return []
-        return [_given_reset(netlist, spec) for spec in given]
+        resets = [_given_reset(netlist, spec) for spec in given]
+        ports = [r["port"] for r in resets]
+        twice = next((p for p in ports if ports.count(p) > 1), None)
+        if twice is not None:               # two levels for one port: a start state that cannot happen
+            raise Mech2SpiceError(f"--reset {twice} is given twice: give each reset port once")
+        return resets
     if path is not None:
         found = design_resets(path, netlist)
         if found:

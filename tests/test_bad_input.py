@@ -509,3 +509,13 @@ def test_a_port_whose_name_holds_an_equals_sign_can_be_set(tmp_path, capsys):
 def test_merging_into_a_record_that_does_not_exist_names_it(tmp_path, capsys):
     refused(capsys, "design", "--merge", tmp_path / "other.json", "--out", tmp_path / "new.json",
             needle="--merge merges into the search record --out")
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["verify", str(ROOT / "verilog/sqrt.v"), "--reset", "rst", "--reset", "rst=0", "--cycles", "5"], "given twice"),
+    (["design", "--structures", " , ", "--out", "{out}"], "--structures names none"),
+], ids=["verify-reset-twice", "design-no-structures"])
+def test_a_contradiction_or_an_empty_selection_is_refused(tmp_path, capsys, argv, needle):
+    """Two levels for one reset port were proved as one start state, and an empty --structures searched
+    nothing with exit 0 (second hostile-input pass, session 21)."""
+    refused(capsys, *[a.replace("{out}", str(tmp_path / "d.json")) for a in argv], needle=needle)

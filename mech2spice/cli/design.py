@@ -70,6 +70,8 @@ def cmd_design(args) -> int:
     settings = {"sigma": args.sigma, "samples": args.samples, "seed": args.seed, "maxiter": args.maxiter,
                 "popsize": args.popsize, "budget_s": args.budget_s, "tol_samples": args.tol_samples}
     structures = [s.strip() for s in args.structures.split(",") if s.strip()]
+    if not structures and not args.merge:
+        raise Mech2SpiceError("--structures names none: give at least one structure to search")
     _check_files(args)
     if args.merge:
         state = search.merge(Path(args.out), [Path(f) for f in args.merge], _log(args))

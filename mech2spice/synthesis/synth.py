@@ -356,6 +356,7 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
             (Path(tmp) / rel).write_text(source, encoding="utf-8")
             include = Path(os.path.relpath(path.resolve().parent, Path(tmp).resolve())).as_posix()
         result = yosys.run_script(_flow(rel, top, include), tmp)
+        _refuse_real(result, rel, path)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))
             if (init := _non_constant_init(msg, path)) is not None:
@@ -372,6 +373,24 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
     name, module = _pick_top(modules, top, path)
     outputs = {p for p, row in module["ports"].items() if row["direction"] == "output"}
     return name, module, found, [p for p in released.get(name, []) if p in outputs]
+
+
+_REAL = re.compile(r"^(?P<file>\S+?):(?P<line>\d+): Warning: converting real value (?P<real>\S+) to binary (?P<bin>-?\d+)",
+                   re.M)
+
+
+def _refuse_real(result, rel: str, path: Path) -> None:
+    """Refuse a real number that became logic: Yosys rounds it (`a * 1.5` is `a * 2`, or its cell fails)
+    where Icarus computes with the real value, so the network would answer differently."""
+    for m in _REAL.finditer(result.stdout + "\n" + result.stderr):
+        exact = float(m["real"]) == int(m["bin"])
+        if exact and result.returncode == 0:                 # 8.0 is 8 to both readers
+            continue
+        where = f"{path}, line {m['line']}" if m["file"] == rel else str(path)
+        why = "Yosys cannot build logic from it" if exact else \
+            f"Yosys rounds it to {m['bin']} while a simulator computes with {float(m['real']):g}"
+        raise Mech2SpiceError(f"{where}: the real number {float(m['real']):g} in logic: {why}; the network "
+                              "computes with bits: write an integer (or scale to fixed point)")
 
 
 _UNDRIVEN = re.compile(r"Wire (?P<mod>[^.\s]+)\.\\?(?P<net>.+?) is used but has no driver")

@@ -294,7 +294,7 @@ def test_a_real_number_in_logic_is_refused_and_an_integral_one_agrees(tmp_path, 
     (second hostile-input pass, session 21); 4.0 is 4 to both readers."""
     src = verilog(tmp_path, "module r(input [3:0] a, output [5:0] y);\n  assign y = a * 1.5;\nendmodule\n")
     refused(capsys, "synth", src, needle=f"{src}, line 2: the real number 1.5 in logic: Yosys rounds it to 2")
-    src = verilog(tmp_path, "module r(input [3:0] a, output [7:0] y);\n  localparam W = 4.0;\n"
+    src = verilog(tmp_path, "module r(input [3:0] a, output [7:0] y);\n  localparam integer W = 4.0;\n"
                             "  assign y = a << W;\nendmodule\n")
     vectors = [{"a": a} for a in (0, 3, 15)]
     assert [logic(capsys, src, v) for v in vectors] == icarus(tmp_path, src, "r", {"a": 4}, {"y": 8}, vectors)

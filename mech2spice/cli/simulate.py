@@ -184,9 +184,8 @@ def cmd_simulate_clocked(args, nl) -> int:
                                  "VCD file", kind=("a VCD file", is_vcd), force=args.force)
     cycles = simulation.expand_steps(_clocked_steps(args, nl))
     if not BACKENDS[args.backend].capabilities.physical:       # the logic oracle
-        _engine_options(args)                                   # refuses the flags it has no use for
-        if args.noise:
-            raise Mech2SpiceError("the logic backend has no thermal noise (rk4, envelope and ngspice do)")
+        from ..backends import noisy_engine
+        noisy_engine(args.backend, _engine_options(args), args.noise, args.noise_seed)   # refuses what it cannot use
         res = simulation.run_clocked_logic(nl, cycles)
     else:
         p = load_params(args.params)

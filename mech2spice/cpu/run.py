@@ -282,8 +282,9 @@ def _restore(cpu, state: dict, path) -> None:
         if not addr.isdigit() or int(addr) not in cpu.mem.devices:
             raise Mech2SpiceError(f"checkpoint has a device at {addr} that the program does not map")
         cpu.mem.devices[int(addr)].restore(dev_state)
-    for addr in sorted(set(cpu.mem.devices) - {int(a) for a in devices}):     # its tape would restart blank
-        raise Mech2SpiceError(f"checkpoint {path} holds no state for the device at {addr} that the program "
+    missing = sorted(set(cpu.mem.devices) - {int(a) for a in devices})     # its tape would restart blank
+    if missing:
+        raise Mech2SpiceError(f"checkpoint {path} holds no state for the device at {missing[0]} that the program "
                               "maps: it cannot resume (run again without --resume)")
     cpu.set_registers(state["registers"])
     cpu.cycle, cpu.halted = int(state["cycle"]), bool(state["halted"])

@@ -25,8 +25,9 @@ OPTIONS = [
     ("--render", "render", dict(action="store_true", help="measure nothing: rewrite the report from its stored "
                                                           "results")),
     ("--design", "design", dict(action="append", metavar="NAME", help="accuracy section for these designs only")),
-    ("--cycles", "cycles", dict(type=integer(0, MAX_CYCLES), metavar="N", help="processor cycles to run (cpu_physical: 0 = to the "
-                                                            "halt; fidelity: the first N sieve cycles, default 30)")),
+    ("--cycles", "cycles", dict(type=integer(0, MAX_CYCLES), metavar="N",
+                                help="processor cycles to run (cpu_physical: 0 = to the halt; fidelity: the first N "
+                                     "sieve cycles, default 30)")),
     ("--sqrt-rk4", "sqrt_rk4", dict(action="store_true", help="also run sqrt(2809) on RK4 (~20 min)")),
     ("--sqrt-rk4-full", "sqrt_rk4_full", dict(action="store_true", help="also the whole sqrt schedule on RK4")),
     ("--skip-slow", "skip_slow", dict(action="store_true", help="leave out the slowest runs (cpu: the "
@@ -36,7 +37,8 @@ OPTIONS = [
     ("--program", "program", dict(metavar="FILE", help="program to run (default programs/sieve.asm)")),
     ("--backend", "backend", dict(choices=["envelope", "rk4"], help="oscillator-level backend (default envelope)")),
     ("--step", "step", dict(type=number(0), metavar="PERIODS", help="envelope step in drive periods")),
-    ("--settle", "settle", dict(type=number(0, lo_open=False), metavar="TOL", help="envelope settle tolerance in u_R (0: full pauses)")),
+    ("--settle", "settle", dict(type=number(0, lo_open=False), metavar="TOL",
+                                help="envelope settle tolerance in u_R (0: full pauses)")),
     ("--checkpoint", "checkpoint", dict(metavar="FILE", help="checkpoint file (with --resume: continue from it)")),
     ("--resume", "resume", dict(action="store_true", help="continue from --checkpoint FILE")),
     ("--carrier-trace", "carrier_trace", dict(metavar="FILE", help="carrier `cpu run --trace` of the sieve (default "

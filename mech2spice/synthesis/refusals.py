@@ -31,9 +31,9 @@ def check(tmp: Path, path: Path, source: str, top: str | None) -> dict[str, list
     if top is None:
         check_single_top((tmp / "read.il").read_text(), path)
     check_sensitivity((tmp / "ast.txt").read_text(), path, source)
-    drivers = (tmp / "drivers.il").read_text()
-    check_case_equality(drivers, path)
-    return check_drivers(drivers, path, source)
+    modules = read_rtlil((tmp / "drivers.il").read_text())      # the nets as written, read once for both
+    check_case_equality(modules, path)
+    return check_drivers(modules, path, source)
 
 
 def src_line(src: str | None, path: Path) -> int | None:
@@ -290,11 +290,11 @@ def _outputs(ctype: str, modules: dict) -> set[str]:
     return {w for w, info in wires.items() if info[3] == "output"}
 
 
-def check_case_equality(rtlil: str, path: Path) -> None:
+def check_case_equality(modules: dict, path: Path) -> None:
     """Refuse `===` / `!==` against a value with x or z bits: it asks whether a net holds x or z, which a
     mechanical net never does (it always carries a 0 or a 1), and Yosys reads the x bits as don't-cares, so
     the network answered differently from Icarus with exit 0."""
-    for name, mod in read_rtlil(rtlil).items():
+    for name, mod in modules.items():
         for ctype, _, conns, src in mod.cells:
             if ctype not in ("$eqx", "$nex"):
                 continue
@@ -307,12 +307,12 @@ def check_case_equality(rtlil: str, path: Path) -> None:
                                       "constant, or compare the defined bits with `==`")
 
 
-def check_drivers(rtlil: str, path: Path, source: str) -> dict[str, list[str]]:
+def check_drivers(modules: dict, path: Path, source: str) -> dict[str, list[str]]:
     """Refuse a net driven from two places: ports, cell outputs and constants each count as a driver.
     A net whose every driver can release it (a tri-state driver: `en ? d : 'bz`, or a submodule's output
     that is one) is a tri-state bus, not a conflict: the flow resolves it to a multiplexer (`tribuf`).
-    Returns each module's output ports with such a bit (module name -> port names, sorted)."""
-    modules = read_rtlil(rtlil)
+    `modules`: `read_rtlil` of the design after `proc -noopt`.  Returns each module's output ports with such
+    a bit (module name -> port names, sorted)."""
     released: dict[str, set] = {}
     for name in _bottom_up(modules):
         released[name] = _check_module_drivers(name, modules, released, path, source)

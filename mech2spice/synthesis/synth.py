@@ -375,8 +375,8 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
     return name, module, found, [p for p in released.get(name, []) if p in outputs]
 
 
-_REAL = re.compile(r"^(?P<file>\S+?):(?P<line>\d+): Warning: converting real value (?P<real>\S+) to binary (?P<bin>-?\d+)",
-                   re.M)
+_REAL = re.compile(r"^(?P<file>\S+?):(?P<line>\d+): Warning: "
+                   r"converting real value (?P<real>\S+) to binary (?P<bin>-?\d+)", re.M)
 
 
 def _refuse_real(result, rel: str, path: Path) -> None:

@@ -100,7 +100,7 @@ def emit(design, inputs: dict[str, int] | None = None, *, params="default", peri
     """The carrier-level ngspice netlist of a combinational design with these inputs (also written to `path`:
     never the design or parameter file, nor an existing file that is not a netlist unless `force`).  It reads
     its own result: `ngspice -b FILE` prints each output bit and port (docs/spice.md)."""
-    from .spice import NETLIST
+    from .spice import NETLIST, combinational_only
     from .spice.oscillator_netlist import emit as emit_netlist
     from .spice.readout import about
     options = engine_options("ngspice", options)
@@ -111,6 +111,7 @@ def emit(design, inputs: dict[str, int] | None = None, *, params="default", peri
         path = check.check_output_file(check.path_value(path, "path"), read, "netlist file", kind=NETLIST,
                                        force=force is True, remedy="force=True replaces it")
     nl = _netlist(design)
+    combinational_only(nl)
     pack_inputs(nl, values)
     model = network.build(nl, p)
     stim = network.stimulus(model, nl, p, [(0, [values])])

@@ -166,6 +166,14 @@ def test_emit_never_overwrites_its_design(tmp_path):
     assert design.read_text() == Path(ADDER).read_text()
 
 
+def test_emit_refuses_a_clocked_design(tmp_path):
+    """One input vector and no clock edges would only read the flip-flops' power-up values (it wrote such a
+    netlist with exit 0: hostile-input pass, session 21)."""
+    out = tmp_path / "dff.cir"
+    refused(lambda: m2s.emit(DFF, {"d": 1}, path=str(out)), "is clocked by 'clk'")
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("args, kwargs, needle", [
     ((7,), {}, "design must be a file path"),
     ((None,), {}, "design must be a file path"),

@@ -519,3 +519,12 @@ def test_a_contradiction_or_an_empty_selection_is_refused(tmp_path, capsys, argv
     """Two levels for one reset port were proved as one start state, and an empty --structures searched
     nothing with exit 0 (second hostile-input pass, session 21)."""
     refused(capsys, *[a.replace("{out}", str(tmp_path / "d.json")) for a in argv], needle=needle)
+
+
+def test_emit_refuses_a_clocked_design(tmp_path, capsys):
+    """A netlist of one input vector has no clock edges: a clocked design's flip-flops would only read their
+    power-up values (written with exit 0 before: hostile-input pass, session 21)."""
+    out = tmp_path / "counter.cir"
+    for fmt in ("ngspice", "vacask"):
+        refused(capsys, "emit", COUNTER, "--format", fmt, "-o", str(out), needle="is clocked by 'clk'")
+    assert not out.exists()

@@ -272,6 +272,7 @@ def cmd_emit(args) -> int:
     from ..physics import network
     from ..synthesis.ports import pack_inputs
     from ..physics.params import load_params
+    from ..spice import combinational_only
     p = load_params(args.params)
     if args.format == "veriloga":                  # the device library, defaults from --params
         _check_library_args(args)
@@ -286,6 +287,7 @@ def cmd_emit(args) -> int:
             print(f"wrote {args.output}: Verilog-A, {len(info['modules'])} modules; compile with openvaf-r")
         return 0
     nl = _netlist(args)
+    combinational_only(nl)
     values = _parse_sets(args.set)
     pack_inputs(nl, values)
     model = network.build(nl, p)

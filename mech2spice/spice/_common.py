@@ -143,6 +143,15 @@ def check_samples(model: MechModel, t: np.ndarray, values: np.ndarray, names: li
         raise DivergenceError(names[col], float(t[row]), model.period, float(mag[row, col]))
 
 
+def combinational_only(nl) -> None:
+    """Refuse a clocked design for a one-shot netlist: it holds one input vector and no clock edges, so its
+    flip-flops would only read their power-up values."""
+    if nl.clock:
+        raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': a netlist of one input vector has no clock "
+                              "edges; run it cycle by cycle with `simulate --backend ngspice --cycles N` "
+                              "(or --stimulus FILE.json)")
+
+
 def failure(model: MechModel, err: Mech2SpiceError, probe_values, prefixes: tuple[str, ...]) -> Mech2SpiceError:
     """The error for a failed ngspice run: DivergenceError if the probes blew up (`probe_values(names, data)`
     gives their samples, or None) or ngspice's step collapsed (naming the node's DOF), else `err` itself."""

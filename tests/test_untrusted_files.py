@@ -286,7 +286,7 @@ def test_a_params_name_never_becomes_a_netlist_line(tmp_path, capsys):
     params = tmp_path / "p.json"
     params.write_text(json.dumps({"name": "q\n.control\nshell touch PWNED\n.endc", "q_c": 150}))
     refused(capsys, "emit", ROOT / "verilog/adder2.v", "--params", params, "-o", tmp_path / "a.cir",
-            needle="name must be a string")
+            needle="name must be a string of at most 80 printable characters, not 'q\\n.control")   # which
     params.write_text(json.dumps({"name": 'q" .endc .control shell', "q_c": 150}))
     for fmt, ext in (("ngspice", "cir"), ("vacask", "sim")):
         rc, _, err = run(capsys, "emit", ROOT / "verilog/adder2.v", "--params", params, "-o", tmp_path / f"a.{ext}",

@@ -332,7 +332,8 @@ def load_params(spec: str | None) -> GateParams:
         ok = is_name(value) if name == "name" else is_number(value)
         if not ok:
             want = f"a string of at most {MAX_NAME} printable characters" if name == "name" else "a finite number"
-            raise Mech2SpiceError(f"parameter file {spec}: {name} must be {want}, not {type_name(value)}")
+            got = f"{value!r:.60}" if isinstance(value, str) else type_name(value)   # a string: which one
+            raise Mech2SpiceError(f"parameter file {spec}: {name} must be {want}, not {got}")
     p = replace(DEFAULT, **{"name": Path(spec).stem, **data})
     p.validate()
     return self_driving(p, f"parameter file {spec}") if "levels" in data else p

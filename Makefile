@@ -21,11 +21,14 @@ demo: setup  ## the main job end to end: gate, adder from Verilog on RK4, sqrt(2
 	mech2spice simulate verilog/sqrt.v --stimulus verilog/sqrt_2809.json --backend envelope
 	mech2spice cpu run programs/sieve.asm --backend envelope
 
+# one pytest worker per core, a test file per worker (its module fixtures built once), one BLAS thread each
+PYTEST ?= OMP_NUM_THREADS=1 $(PY) -m pytest -q -n auto --dist loadfile
+
 test: setup  ## the CI suite (long physical runs marked slow are left out)
-	$(PY) -m pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 test-all: setup
-	$(PY) -m pytest -q
+	$(PYTEST)
 
 reports: setup  ## regenerate every report in reports/ (hours; `mech2spice report --list` gives each one's cost)
 	mech2spice report all

@@ -47,8 +47,7 @@ def plot_map(mp: dict, path: Path) -> dict:
     cls[(out >= BAND1[0]) & (out <= BAND1[1])] = 1.0
     cls[nstable != 1] = np.nan
     fig, axs = plt.subplots(1, 2, figsize=(10, 4.3))
-    cmap = matplotlib.colors.ListedColormap(["tab:red", "white", "tab:blue"])
-    cmap.set_bad("0.4")
+    cmap = matplotlib.colors.ListedColormap(["tab:red", "white", "tab:blue"]).with_extremes(bad="0.4")
     axs[0].pcolormesh(xs, xs, cls.T, cmap=cmap, vmin=0, vmax=1, shading="nearest")
     im = axs[1].pcolormesh(xs, xs, out.T, cmap="viridis", shading="nearest")
     fig.colorbar(im, ax=axs[1], label="channel amplitude / $u_R$")

@@ -622,10 +622,17 @@ def _icarus_tools() -> tuple[str, str]:
     return iverilog, vvp
 
 
+# Between a testbench event and the next (ns): a source's own delays shorter than this settle before a read.
+SETTLE_NS = 1000
+
+
 def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False, tag: str = f"{PREFIX}row") -> str:
     """Apply vectors.txt (one line of input bits per vector / cycle, ports in declaration order with the
     first port leftmost) and $display the outputs.  Clocked: the inputs of cycle k are on before edge k;
-    one time unit after it cycle k+1's are applied and the outputs read, as simulation.run_clocked_logic.
+    a while after it cycle k+1's are applied, and a while after that the outputs read, as
+    simulation.run_clocked_logic.  "A while" is `SETTLE_NS`: delays the source writes (`q <= #1 d`, which
+    synthesis ignores) have run out by then; compiled after this file, a source without `timescale reads its
+    delays in its nanoseconds.
     `first_read`: also read once before the first edge (a counterexample's replay: its cycle 0).  Each result
     line starts with `tag` (a fresh random word per run), so a line the design itself prints (`$display`,
     kept on Icarus) is never read as a result.  Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has."""
@@ -634,6 +641,7 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     width = max(1, sum(netlist.inputs.values()))
     mem, k = f"{PREFIX}mem", f"{PREFIX}k"
     lines = ["`timescale 1ns/1ns", f"module {PREFIX}tb;"]
+    wait = f"#{SETTLE_NS}"
     lines += [f"  reg {_decl(w)}{v(p)};" for p, w in netlist.inputs.items()]
     lines += [f"  wire {_decl(w)}{v(p)};" for p, w in netlist.outputs.items()]
     conns = [f".{p}({p})" for p in ins + outs]
@@ -648,14 +656,14 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     show = f'$display("{tag} ' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
     lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if clocked:
-        lines += [f"    {apply('0')}"] + ([f"    #1 {show}"] if first_read else []) + [
+        lines += [f"    {apply('0')}"] + ([f"    {wait} {show}"] if first_read else []) + [
                   f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
-                  f"      #5 {clock} = 1;",
-                  f"      #1 {apply(f'{k} + 1 < {n} ? {k} + 1 : {k}')}",
-                  f"      #1 {show}", f"      #3 {clock} = 0;", "    end"]
+                  f"      {wait} {clock} = 1;",
+                  f"      {wait} {apply(f'{k} + 1 < {n} ? {k} + 1 : {k}')}",
+                  f"      {wait} {show}", f"      {wait} {clock} = 0;", "    end"]
     else:
         lines += [f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
-                  f"      {apply(k)}", f"      #1 {show}", "    end"]
+                  f"      {apply(k)}", f"      {wait} {show}", "    end"]
     return "\n".join(lines + ["    $finish;", "  end", "endmodule", ""])
 
 
@@ -703,7 +711,9 @@ def _compile(iverilog: str, path: Path, tmp: str) -> tuple[subprocess.CompletedP
     generation); a source no generation compiles is refused with the first one's error."""
     first = None
     for gen in generations(path):
-        cmd = [iverilog, gen, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), str(path), "tb.v"]
+        # tb.v first: its `timescale carries on to a source without one (else Icarus reads that source's `#1`
+        # as 1 s, and every output is still x at each read)
+        cmd = [iverilog, gen, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), "tb.v", str(path)]
         try:
             return _run_tool(cmd, tmp, f"iverilog {gen}"), gen
         except Mech2SpiceError as err:

@@ -199,3 +199,25 @@ def test_a_public_register_file_with_tri_state_read_buses_agrees_with_icarus(tmp
                   "--reset", "ctrl_reset", "--cycles", 100)
     assert res["latches"] == 32 * 31 and res["cosim"]["undefined_bits"] == 0
     _agrees(res, compared_at_least=100 * 64)
+
+
+# ------------------------------------------------------------------ delays the source writes
+DELAYED = """module dly(input clk, input rst, input [3:0] d, output reg [3:0] q, output [3:0] n);
+  always @(posedge clk or negedge rst)
+    if (!rst) q <= #1 4'h0;          // OpenCores style: synthesis ignores the delay
+    else      q <= #1 d;
+  assign #2 n = ~q;
+endmodule
+"""
+
+
+@needs_icarus
+@pytest.mark.parametrize("timescale", ["`timescale 1ns / 10ps\n", ""], ids=["ns", "none"])
+def test_delays_the_source_writes_settle_before_each_read(tmp_path, capsys, timescale):
+    """`q <= #1 d` read at the instant an asynchronous reset landed gave mismatches on a correct design; without
+    a `timescale Icarus read `#1` as 1 s and every compared bit was x, a vacuous pass (public-RTL pass, session
+    22: OpenCores simple_spi).  The testbench waits SETTLE_NS between its events and lends its timescale."""
+    res = _verify(capsys, verilog(tmp_path, timescale + DELAYED), "--top", "dly", "--backend", "logic",
+                  "--cycles", "200", "--reset", "rst=0")
+    _agrees(res, compared_at_least=200 * 8)
+    assert res["equivalence"]["status"] == "proved" and res["cosim"]["undefined_bits"] == 0

@@ -221,3 +221,34 @@ def test_delays_the_source_writes_settle_before_each_read(tmp_path, capsys, time
                   "--cycles", "200", "--reset", "rst=0")
     _agrees(res, compared_at_least=200 * 8)
     assert res["equivalence"]["status"] == "proved" and res["cosim"]["undefined_bits"] == 0
+
+
+# ------------------------------------------------------------------ a parameter check in a generate branch
+GUARDED = """module guarded #(parameter STYLE = "{style}") (input [3:0] a, output y);
+generate
+  if (STYLE == "XOR") begin : g
+    assign y = ^a;
+  end else begin : bad
+    initial begin
+      $error("unknown STYLE");
+      $finish;
+    end
+  end
+endgenerate
+endmodule
+"""
+
+
+@needs_icarus
+def test_a_task_in_a_generate_branch_never_built_is_no_refusal(tmp_path, capsys):
+    """alexforencich's LFSR idiom: `$error; $finish` in the branch a bad parameter would build.  It was refused
+    as text although no hardware holds it (public-RTL pass, session 22); built, Yosys refuses it, with the
+    message and line the text check gives."""
+    res = _verify(capsys, verilog(tmp_path, GUARDED.format(style="XOR")), "--top", "guarded", "--backend", "logic")
+    _agrees(res, compared_at_least=16)
+    assert res["verdict"] == "pass" and res["cosim"]["vectors"] == 16
+    refused(capsys, "synth", verilog(tmp_path, GUARDED.format(style="AND"), "bad.v"),
+            needle="bad.v, line 7: a system task (`$error`) in an `initial` block")
+    # a task that is not refused where Yosys builds it is still refused as text, built or not
+    printing = GUARDED.format(style="XOR").replace("$finish;", '$display("bad");')
+    refused(capsys, "synth", verilog(tmp_path, printing, "p.v"), needle="p.v, line 7: a system task in an `initial`")

@@ -194,6 +194,27 @@ _NOT_AN_INITIAL_VALUE = [
 ]
 
 
+# Severity and stopping tasks: Yosys refuses each one in an `initial` block it elaborates (`_yosys_task`), so
+# one that only guards a generate branch never built (alexforencich's `$error; $finish` on a bad parameter)
+# is left to it rather than refused as text.
+_ELABORATION_TASKS = {"$error", "$fatal", "$warning", "$info", "$finish", "$stop"}
+_YOSYS_TASK = re.compile(r"line (?P<line>\d+): (?:Can't resolve task name|System task) `(?P<task>\$\w+)'")
+
+
+def _only_elaboration_tasks(body: str) -> bool:
+    """Every system task in an `initial` block's text is one Yosys refuses where it elaborates the block."""
+    return set(re.findall(r"\$[A-Za-z_]\w*", body)) <= _ELABORATION_TASKS
+
+
+def _yosys_task(msg: str, path: Path) -> str | None:
+    """Yosys's refusal of a severity or stopping task in an elaborated `initial` block, as `_check_source`'s."""
+    m = _YOSYS_TASK.search(msg)
+    if not m or m["task"] not in _ELABORATION_TASKS:
+        return None
+    what, why = next(row[1:] for row in _NOT_AN_INITIAL_VALUE if row[1] == "a system task")
+    return f"{path}, line {m['line']}: {what} (`{m['task']}`) in an `initial` block: {why}"
+
+
 def _check_source(path: Path, text: str) -> None:
     """Names are ASCII; `initial` blocks may only give constant values (power-up values and ROM contents):
     anything that happens in simulated time is refused with its line."""
@@ -208,6 +229,8 @@ def _check_source(path: Path, text: str) -> None:
         body_start, body_end = m.end(), statement_or_block_end(blanked, m.end())
         body = blanked[body_start:body_end]
         for pattern, what, why in _NOT_AN_INITIAL_VALUE:
+            if what == "a system task" and _only_elaboration_tasks(body):
+                continue                    # Yosys decides, where it builds the block
             hit = pattern.search(body)
             if hit:
                 line = blanked.count("\n", 0, body_start + hit.start()) + 1
@@ -359,8 +382,9 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
         _refuse_real(result, rel, path)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))
-            if (init := _non_constant_init(msg, path)) is not None:
-                raise Mech2SpiceError(init)
+            for known in (_non_constant_init(msg, path), _yosys_task(msg, path)):
+                if known is not None:
+                    raise Mech2SpiceError(known)
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
                                   else f"yosys error: {path}: {msg}")
         released = refusals.check(Path(tmp), path, source, top)

@@ -173,8 +173,14 @@ def _wrapper(netlist: Netlist, names: dict[str, str], nregs: int) -> str:
                       f"  {PREFIX}src {PREFIX}u({', '.join(conns)});", "endmodule", ""])
 
 
-def _read_source(path: Path, rel: str, top: str) -> list[str]:
-    read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
+def _read_command(netlist: Netlist) -> str:
+    """Yosys's reading of the source, as synthesis read it (SystemVerilog for a `.v` only that reads)."""
+    return "read_verilog -sv" if netlist.systemverilog or Path(netlist.source or "").suffix == ".sv" \
+        else "read_verilog"
+
+
+def _read_source(netlist: Netlist, rel: str) -> list[str]:
+    read, top = _read_command(netlist), netlist.top
     # `memory`: the source's memories as flip-flops and multiplexers, as synthesis maps them (sat has no
     # model for $mem cells); its memory_dff folds a read register into the port only as synthesis does.
     return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), "proc", yosys.DROP_PRINTS,
@@ -194,7 +200,7 @@ def _script(path: Path, rel: str, netlist: Netlist, regs: list, resets=(), mode:
             steps: int | None = None) -> str:
     """Read source and network, expose the matched registers on both, build the miter and prove it."""
     steps = steps or INDUCTION_STEPS
-    lines = _read_source(path, rel, netlist.top)
+    lines = _read_source(netlist, rel)
     if regs:
         lines.append(f"cd {PREFIX}src")
         for k, (_, wire, bit) in enumerate(regs):
@@ -515,7 +521,7 @@ def _aiger_script(path: Path, rel: str, netlist: Netlist) -> str:
     (async2sync), as for sat."""
     # Tri-state buses as synthesis resolves them (a write_aiger wire has one driver; conflict checks dropped,
     # as synthesis drops them), before setundef makes "no driver enabled" a free value.
-    lines = _read_source(path, rel, netlist.top) + [
+    lines = _read_source(netlist, rel) + [
         "tribuf -formal", "delete n:$tribuf_conflict*", "setundef -undriven -anyseq", "read_verilog wrap.v", "read_verilog gate.v", "read_verilog top.v",
         "proc", "opt_clean", f"miter -equiv -flatten {PREFIX}gold {PREFIX}gate {PREFIX}miter",
         f"hierarchy -top {PREFIX}top", "flatten", "async2sync", "dffunmap", "techmap", "setundef -zero -init",
@@ -799,7 +805,7 @@ def design_resets(path, netlist: Netlist) -> list[dict]:
     path = Path(path)
     with tempfile.TemporaryDirectory(prefix="mech2spice_resets_") as tmp:
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
-        read = "read_verilog -sv" if path.suffix == ".sv" else "read_verilog"
+        read = _read_command(netlist)
         script = "\n".join([f'{read} {ids.yosys_path(rel, "Verilog file")}',
                             _hierarchy(netlist.top), "proc", "flatten", "opt_dff", f"rename -top {PREFIX}src",
                             "write_json resets.json", ""])

@@ -252,3 +252,28 @@ def test_a_task_in_a_generate_branch_never_built_is_no_refusal(tmp_path, capsys)
     # a task that is not refused where Yosys builds it is still refused as text, built or not
     printing = GUARDED.format(style="XOR").replace("$finish;", '$display("bad");')
     refused(capsys, "synth", verilog(tmp_path, printing, "p.v"), needle="p.v, line 7: a system task in an `initial`")
+
+
+# ------------------------------------------------------------------ a .v written in SystemVerilog
+REVERSED = """module rev(input [7:0] in, output reg [7:0] out);
+  always @* begin
+    for (int i = 0; i < $bits(out); i++)    // SystemVerilog: `int` loop variable, `i++`
+      out[i] = in[$bits(out) - i - 1];
+  end
+endmodule
+"""
+
+
+@needs_icarus
+def test_a_v_file_in_systemverilog_is_read_as_icarus_reads_it(tmp_path, capsys):
+    """A `.v` with SystemVerilog constructs was a Yosys syntax error while verify's Icarus took it with
+    -g2012 (HDLBits vector reversal, public-RTL pass, session 22).  Synthesis now reads it as SystemVerilog
+    when the Verilog reading fails on syntax, and the proof reads it the same way."""
+    path = verilog(tmp_path, REVERSED, "rev.v")
+    assert synthesize(path).systemverilog and not synthesize(verilog(tmp_path, DELAYED, "plain.v")).systemverilog
+    res = _verify(capsys, path, "--backend", "logic", "--exhaustive")
+    _agrees(res, compared_at_least=256 * 8)
+    assert res["equivalence"]["status"] == "proved" and res["cosim"]["icarus_generation"] == "-g2012"
+    # a real syntax error keeps the Verilog reading's message
+    refused(capsys, "synth", verilog(tmp_path, "module m(input a, output y);\n  assign y = a +;\nendmodule\n", "bad.v"),
+            needle="bad.v, line 2: syntax error")

@@ -61,6 +61,7 @@ class Netlist:
     signed: frozenset = frozenset()   # ports declared signed: their values are two's complement
     races: tuple = ()                 # races.Race: clocked blocks passing a value through `=` on one edge
     source: str | None = field(default=None, compare=False)   # the Verilog file synthesized: never an output
+    systemverilog: bool = field(default=False, compare=False)  # Yosys read it so (a .sv, or a .v only that reads)
 
     def gates(self) -> list[str]:
         """NOR gates in topological order (level by level, by gate number within a level); latch
@@ -131,14 +132,14 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
             identifiers.yosys(top)
         except Mech2SpiceError as err:
             raise Mech2SpiceError(f"invalid top module name: {err}") from None
-    name, module, found, released = _run_yosys(path, top, source)
+    name, module, found, released, sv = _run_yosys(path, top, source)
     for race in found:                  # warned, not refused: the network is Yosys's (flip-flop) reading
         _warn(races.warning(race, path))
     netlist = build_netlist(name, module, path)
     for port in released:               # warned: where Verilog reads z the network reads the bus's multiplexer
         _warn(f"{path}: output {port} is driven only through tri-state drivers: where none is enabled Verilog "
               "reads z and the network a 0 or 1 (the bus as a multiplexer); `verify` names such input vectors")
-    netlist.races, netlist.source = tuple(found), str(path)
+    netlist.races, netlist.source, netlist.systemverilog = tuple(found), str(path), sv
     return clean(netlist, max_fanout=max_fanout)
 
 
@@ -168,7 +169,7 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
     outputs = {p: w for p, w in netlist.outputs.items() if p in ports}
     clock = netlist.clock if any(d["kind"] == "latch" for _, d in g.nodes(data=True)) else None
     return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed, netlist.races,
-                   netlist.source)
+                   netlist.source, netlist.systemverilog)
 
 
 # --------------------------------------------------------------------------- running Yosys
@@ -253,10 +254,11 @@ def _non_constant_init(msg: str, path: Path) -> str | None:
             "the state the network is prepared in before any input is applied, so it must be a constant")
 
 
-def _flow(source: str, top: str | None, include: str | None = None) -> str:
+def _flow(source: str, top: str | None, include: str | None = None, sv: bool | None = None) -> str:
     """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python).
-    `include`: a folder to search for `include files (the original's, when Yosys reads a rewritten copy)."""
-    read = "read_verilog -sv" if source.endswith(".sv") else "read_verilog"
+    `include`: a folder to search for `include files (the original's, when Yosys reads a rewritten copy);
+    `sv`: read as SystemVerilog (default: a `.sv` file)."""
+    read = "read_verilog -sv" if (source.endswith(".sv") if sv is None else sv) else "read_verilog"
     if include is not None and re.fullmatch(r"[\w./+-]+", include):     # Yosys takes -I's folder unquoted
         read += f" -I {include}"
     return "\n".join([                             # ast.txt, *.il: for refusals.py
@@ -278,25 +280,25 @@ def _flow(source: str, top: str | None, include: str | None = None) -> str:
         "write_json netlist.json", ""])
 
 
-def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict, list, list]:
+def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict, list, list, bool]:
     """(top module name, its Yosys JSON module, the source's races, the top's output ports a tri-state driver
-    may release): from the cache when this source went through this flow and this Yosys before, else from a
+    may release, whether it was read as SystemVerilog): from the cache when this source went through this flow and this Yosys before, else from a
     run of the flow in a scratch folder (`_yosys_run`)."""
-    key = _cache_key(source, top)
+    key = _cache_key(source, top, path.suffix == ".sv")
     cached = _cache_read(key)
     if cached is not None:
         return cached
-    name, module, found, released = _yosys_run(path, top, source)
-    _cache_write(key, name, module, found, released)
-    return name, module, found, released
+    result = _yosys_run(path, top, source)
+    _cache_write(key, *result)
+    return result
 
 
-def _cache_key(source: str, top: str | None) -> str | None:
+def _cache_key(source: str, top: str | None, sv: bool = False) -> str | None:
     """A content key of (flow, source, Yosys build, refusal checks); None for a source with `include (other
     files take part)."""
     if "`include" in source:
         return None
-    text = json.dumps([_flow("SOURCE", top), source, yosys.identity(), refusals.VERSION])
+    text = json.dumps([_flow("SOURCE", top, sv=sv), source, yosys.identity(), refusals.VERSION])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -305,7 +307,7 @@ def _cache_path(key: str) -> Path:
     return cache_dir() / "yosys" / f"{key}.json"
 
 
-def _cache_read(key: str | None) -> tuple[str, dict, list, list] | None:
+def _cache_read(key: str | None) -> tuple[str, dict, list, list, bool] | None:
     """The cached (top, module); None (Yosys runs again and replaces the entry) when there is none or it is
     not a Yosys JSON module in the shape build_netlist reads: the cache is rebuildable data, anyone's."""
     if key is None:
@@ -319,7 +321,9 @@ def _cache_read(key: str | None) -> tuple[str, dict, list, list] | None:
     found, released = _cached_races(data.get("races")), data.get("released")
     if found is None or not (isinstance(released, list) and all(isinstance(p, str) for p in released)):
         return None
-    return data["top"], data["module"], found, released
+    if not isinstance(data.get("sv"), bool):
+        return None
+    return data["top"], data["module"], found, released, data["sv"]
 
 
 def _cached_races(rows) -> list | None:
@@ -351,7 +355,7 @@ def _is_module(module) -> bool:
         and table("netnames", {"hide_name": lambda v: isinstance(v, int), "bits": bits})
 
 
-def _cache_write(key: str | None, name: str, module: dict, found: list, released: list) -> None:
+def _cache_write(key: str | None, name: str, module: dict, found: list, released: list, sv: bool) -> None:
     """Keep a synthesised module (atomically; a cache that cannot be written is skipped)."""
     if key is None:
         return
@@ -360,14 +364,14 @@ def _cache_write(key: str | None, name: str, module: dict, found: list, released
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
         tmp.write_text(json.dumps({"top": name, "module": module, "races": [r.as_dict() for r in found],
-                                   "released": released}))
+                                   "released": released, "sv": sv}))
         os.replace(tmp, path)
     except OSError:
         pass
 
 
-def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, list]:
-    """Run the flow in a scratch folder; return (top module name, its Yosys JSON module, its races).  `source` is the
+def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, list, list, bool]:
+    """Run the flow in a scratch folder; return what `_run_yosys` does.  `source` is the
     text to read: the file's own, or its standard rewriting (dialect.py), which then is read from the folder."""
     with tempfile.TemporaryDirectory(prefix="mech2spice_yosys_") as tmp:
         # A relative path works for both yowasp (which maps /tmp elsewhere) and `include`s.
@@ -378,7 +382,13 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
             (Path(tmp) / "src").mkdir()
             (Path(tmp) / rel).write_text(source, encoding="utf-8")
             include = Path(os.path.relpath(path.resolve().parent, Path(tmp).resolve())).as_posix()
-        result = yosys.run_script(_flow(rel, top, include), tmp)
+        sv = path.suffix == ".sv"
+        result = yosys.run_script(_flow(rel, top, include, sv=sv), tmp)
+        if result.returncode != 0 and not sv and "syntax error" in yosys.error_line(result):
+            # a `.v` written with SystemVerilog constructs (`for (int i = 0; ...; i++)`), as Icarus reads it
+            # in verify (verify.generations): the first reading's error stands if this one fails too
+            retry = yosys.run_script(_flow(rel, top, include, sv=True), tmp)
+            result, sv = (retry, True) if retry.returncode == 0 else (result, False)
         _refuse_real(result, rel, path)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))
@@ -396,7 +406,7 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
         modules = json.loads(out.read_text())["modules"]
     name, module = _pick_top(modules, top, path)
     outputs = {p for p, row in module["ports"].items() if row["direction"] == "output"}
-    return name, module, found, [p for p in released.get(name, []) if p in outputs]
+    return name, module, found, [p for p in released.get(name, []) if p in outputs], sv
 
 
 _REAL = re.compile(r"^(?P<file>\S+?):(?P<line>\d+): Warning: "

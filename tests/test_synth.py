@@ -324,6 +324,12 @@ def test_flip_flops_become_latch_nodes(tmp_path):
     ("module t(input clk, input rst, input a, output reg q = 1);\n always @(posedge clk or posedge rst)\n"
      "  if (rst) q <= 0; else q <= a;\nendmodule", r"line 2: register .q. powers up at 1 but is asynchronously reset to 0"),
     ("module t(input a); wire w = ~a; endmodule", "no output ports"),
+    # ISCAS-89 s298's flip-flop (ispras/hdl-benchmarks): a Yosys syntax error at `trireg` before (session 22)
+    ("module dff(input CK, input D, output Q);\n  wire NM, NCK;\n  trireg NQ, M;\n  nmos N7 (M, D, NCK);\n"
+     "  not P3 (NM, M);\n  nmos N9 (NQ, NM, CK);\n  not P5 (Q, NQ);\n  not P1 (NCK, CK);\nendmodule",
+     r"line 3: `trireg` is a switch-level primitive"),
+    ("module t(input a, input g, output y);\n  tranif1 (y, a, g);\nendmodule", r"line 2: `tranif1` is a switch"),
+    ("module t(input a, output y);\n  pullup (y);\n  assign y = a;\nendmodule", r"line 2: `pullup` is a switch"),
     ("// empty\n", "no Verilog module found"),
 ])
 def test_unsupported_constructs(tmp_path, body, match):
@@ -393,3 +399,10 @@ def test_a_synthesised_source_comes_from_the_cache_the_second_time(tmp_path, mon
     synthesize(src)
     synthesize(src)
     assert runs == [1, 1, 1]
+
+
+def test_a_switch_level_word_in_a_name_or_comment_is_no_primitive(tmp_path):
+    """Only the reserved words themselves are refused: not in an escaped name, a longer name or a comment."""
+    nl = synth_text(tmp_path, "module t(input \\nmos , input nmos_en, output y); // pullup\n"
+                              "  assign y = \\nmos  & nmos_en;\nendmodule")
+    assert set(nl.inputs) == {"nmos", "nmos_en"}

@@ -216,9 +216,14 @@ def _yosys_task(msg: str, path: Path) -> str | None:
     return f"{path}, line {m['line']}: {what} (`{m['task']}`) in an `initial` block: {why}"
 
 
+# Switch-level primitives and the charge-storing net (IEEE 1364-2005 7.7-7.11, 4.6.4): reserved words, so a
+# match outside comments, strings and escaped names is one.
+_SWITCH_LEVEL = re.compile(r"(?<![\w$])(?:r?[npc]mos|r?tran(?:if[01])?|trireg|pullup|pulldown)\b")
+
+
 def _check_source(path: Path, text: str) -> None:
-    """Names are ASCII; `initial` blocks may only give constant values (power-up values and ROM contents):
-    anything that happens in simulated time is refused with its line."""
+    """Names are ASCII; no switch-level primitive; `initial` blocks may only give constant values (power-up
+    values and ROM contents): anything that happens in simulated time is refused with its line."""
     blanked = _blanked(text)
     wide = re.search(r"[^\x00-\x7f]", blanked)
     if wide:
@@ -226,6 +231,14 @@ def _check_source(path: Path, text: str) -> None:
         raise Mech2SpiceError(f"{path}, line {line}: the character {wide.group()!r} outside comments and strings: "
                               "Verilog names are ASCII (an escaped identifier holds printable ASCII characters, "
                               "IEEE 1364-2005 3.7.1), and Yosys writes any other character garbled")
+    switch = _SWITCH_LEVEL.search(re.sub(r"\\\S+", lambda m: " " * len(m.group()), blanked))
+    if switch:
+        line = blanked.count("\n", 0, switch.start()) + 1
+        raise Mech2SpiceError(f"{path}, line {line}: `{switch.group()}` is a switch-level primitive (a transistor, "
+                              "a bidirectional switch, a pull or a charge-storing net): it models conduction, "
+                              "drive strength and stored charge, which a network of logic gates has no "
+                              "counterpart for; write the logic it implements (a flip-flop as `always @(posedge "
+                              "clk)`)")
     for m in re.finditer(r"\binitial\b", blanked):
         body_start, body_end = m.end(), statement_or_block_end(blanked, m.end())
         body = blanked[body_start:body_end]

@@ -295,8 +295,8 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
 
 def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict, list, list, bool]:
     """(top module name, its Yosys JSON module, the source's races, the top's output ports a tri-state driver
-    may release, whether it was read as SystemVerilog): from the cache when this source went through this flow and this Yosys before, else from a
-    run of the flow in a scratch folder (`_yosys_run`)."""
+    may release, whether it was read as SystemVerilog): from the cache when this source went through this flow
+    and this Yosys before, else from a run of the flow in a scratch folder (`_yosys_run`)."""
     key = _cache_key(source, top, path.suffix == ".sv")
     cached = _cache_read(key)
     if cached is not None:

@@ -1112,8 +1112,20 @@ def text(result: dict) -> str:
         lines.append(f"waveform: {w['file']} (co-simulation at times {w['cosim'][0]}-{w['cosim'][1]}"
                      + (f", counterexample at times {cex[0]}-{cex[1]})" if cex else ")"))
     lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)" + _undefined_text(co)
-                 + _race_text(result))
+                 + _race_text(result) + _readings_text(result))
     return "\n".join(lines)
+
+
+def _readings_text(result: dict) -> str:
+    """The verdict line's note where the proof holds and Icarus still disagrees without a race: the two tools
+    read the source differently, and the usual cause is an x that Icarus resolves at an `if`."""
+    if result.get("equivalence", {}).get("status") != "proved" or not result["cosim"]["mismatches"] \
+            or result.get("races"):
+        return ""
+    return ("; the network equals Yosys's reading of the source (proved), so Icarus reads it otherwise: most "
+            "often a register with neither reset nor power-up value, x on Icarus, whose `if (x)` takes the "
+            "else branch, a power-up no circuit need share (give it a reset or an initial value), or a delay "
+            f"in the source longer than the testbench's {SETTLE_NS} ns (docs/verify.md)")
 
 
 def _race_text(result: dict) -> str:

@@ -277,3 +277,28 @@ def test_a_v_file_in_systemverilog_is_read_as_icarus_reads_it(tmp_path, capsys):
     # a real syntax error keeps the Verilog reading's message
     refused(capsys, "synth", verilog(tmp_path, "module m(input a, output y);\n  assign y = a +;\nendmodule\n", "bad.v"),
             needle="bad.v, line 2: syntax error")
+
+
+# ------------------------------------------------------------------ x on Icarus, resolved at an `if`
+X_OPTIMISM = """module xo(input clk, input clr, input d, output reg q = 1'b0);
+  reg r{init};                            // no reset: without a power-up value, x on Icarus and 0 in the network
+  always @(posedge clk) r <= r ^ d;       // x ^ d stays x on Icarus
+  always @(posedge clk)
+    if (clr) q <= 1'b0;
+    else if (!r & d) q <= 1'b1;           // Icarus takes if (x) as false: its q stays 0
+endmodule
+"""
+
+
+@needs_icarus
+def test_an_x_icarus_resolves_at_an_if_is_named_in_the_verdict(tmp_path, capsys):
+    """OpenCores ss_pcm (public-RTL pass, session 22) failed verify with its proof holding: registers without
+    reset are x on Icarus, whose `if (x)` takes the else branch, a power-up no circuit has.  The verdict says
+    so; with a power-up value the same design passes."""
+    rc, out, _ = run(capsys, "verify", verilog(tmp_path, X_OPTIMISM.format(init="")), "--backend", "logic",
+                     "--cycles", "200")
+    assert rc == 1 and "equivalence: proved" in out and "Icarus 0, network 1" in out
+    assert "so Icarus reads it otherwise" in out.splitlines()[-1]
+    res = _verify(capsys, verilog(tmp_path, X_OPTIMISM.format(init=" = 1'b0"), "init.v"), "--backend", "logic",
+                  "--cycles", "200")
+    _agrees(res, compared_at_least=200)

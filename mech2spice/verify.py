@@ -196,7 +196,7 @@ def _hierarchy(top: str) -> str:
         return "hierarchy -check -auto-top"
 
 
-def _script(path: Path, rel: str, netlist: Netlist, regs: list, resets=(), mode: str = "induct",
+def _script(rel: str, netlist: Netlist, regs: list, resets=(), mode: str = "induct",
             steps: int | None = None) -> str:
     """Read source and network, expose the matched registers on both, build the miter and prove it."""
     steps = steps or INDUCTION_STEPS
@@ -408,7 +408,7 @@ def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUD
         names = proof_ports(netlist)
         (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", expose, names))
         (Path(tmp) / "wrap.v").write_text(_wrapper(netlist, names, len(regs)))
-        step, cut = _run_yosys(_script(path, rel, netlist, regs, resets, "induct"), tmp, budget_s)
+        step, cut = _run_yosys(_script(rel, netlist, regs, resets, "induct"), tmp, budget_s)
         closed = not cut and _PROVED.search(step.stdout) is not None
         tried = max(map(int, _TRYING.findall(step.stdout)), default=0)
         if not cut and not closed and not _GAVE_UP.search(step.stdout):
@@ -416,7 +416,7 @@ def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUD
         left = budget_s - (time.time() - t0)
         steps = tried if closed else INDUCTION_STEPS
         steps = max(steps, 1)
-        base, cut = _run_yosys(_script(path, rel, netlist, regs, resets, "base", steps), tmp, left) \
+        base, cut = _run_yosys(_script(rel, netlist, regs, resets, "base", steps), tmp, left) \
             if left > 1 else (yosys.YosysResult(-1, "", ""), True)
     depth = steps if _PROVED.search(base.stdout) else 0
     if cut:
@@ -512,7 +512,7 @@ def _abc_top(netlist: Netlist, names: dict[str, str], resets) -> str:
     return "\n".join(lines)
 
 
-def _aiger_script(path: Path, rel: str, netlist: Netlist) -> str:
+def _aiger_script(rel: str, netlist: Netlist) -> str:
     """The miter of the sat runs as 2-valued AIGER for ABC.  Where sat reads an `x` of the source as "either
     value agrees" (-ignore_gold_x), here every x constant and undriven net of the source is a free input in
     every cycle ($anyseq): the network must agree for every choice, a stronger claim.  Every register without
@@ -599,7 +599,7 @@ def _abc_prove(path: Path, netlist: Netlist, budget_s: float, resets=()) -> dict
         (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", (), names))
         (Path(tmp) / "wrap.v").write_text(_wrapper(netlist, names, 0))
         (Path(tmp) / "top.v").write_text(_abc_top(netlist, names, resets))
-        built, cut = _run_yosys(_aiger_script(path, rel, netlist), tmp, budget_s)
+        built, cut = _run_yosys(_aiger_script(rel, netlist), tmp, budget_s)
         if cut or built.returncode != 0 or not (Path(tmp) / "m.aig").exists():
             why = "the budget ran out writing the miter" if cut else f"yosys: {yosys.error_line(built)}"
             return {"applies": False, "detail": f"ABC not used: {why}"}

@@ -29,7 +29,7 @@ import numpy as np
 
 from . import identifiers as ids
 from .errors import Mech2SpiceError, ToolMissingError
-from .synthesis import yosys
+from .synthesis import maps, yosys
 from .synthesis.ports import input_bits, output_bits
 
 if TYPE_CHECKING:
@@ -184,7 +184,7 @@ def _read_source(netlist: Netlist, rel: str) -> list[str]:
     # `memory`: the source's memories as flip-flops and multiplexers, as synthesis maps them (sat has no
     # model for $mem cells); its memory_dff folds a read register into the port only as synthesis does.
     return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), "proc", yosys.DROP_PRINTS,
-            "flatten", "memory", "opt_clean", f"rename -top {PREFIX}src"]
+            "flatten", maps.MAP_POW, "memory", "opt_clean", f"rename -top {PREFIX}src"]
 
 
 def _hierarchy(top: str) -> str:
@@ -403,6 +403,7 @@ def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUD
     reset would make every step trivially safe."""
     t0 = time.time()
     with tempfile.TemporaryDirectory(prefix="mech2spice_verify_") as tmp:
+        maps.write_maps(tmp)
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
         expose = [(f"{PREFIX}r{k}", q) for k, (q, _, _) in enumerate(regs)]
         names = proof_ports(netlist)
@@ -594,6 +595,7 @@ def _abc_prove(path: Path, netlist: Netlist, budget_s: float, resets=()) -> dict
     `detail`) when Yosys cannot write it as AIGER (e.g. a level-sensitive latch in the source)."""
     t0 = time.time()
     with tempfile.TemporaryDirectory(prefix="mech2spice_abc_") as tmp:
+        maps.write_maps(tmp)
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
         names = proof_ports(netlist)
         (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", (), names))
@@ -632,7 +634,8 @@ def _icarus_tools() -> tuple[str, str]:
 SETTLE_NS = 1000
 
 
-def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False, tag: str = f"{PREFIX}row") -> str:
+def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False, tag: str = f"{PREFIX}row",
+               start: list[str] = ()) -> str:
     """Apply vectors.txt (one line of input bits per vector / cycle, ports in declaration order with the
     first port leftmost) and $display the outputs.  Clocked: the inputs of cycle k are on before edge k;
     a while after it cycle k+1's are applied, and a while after that the outputs read, as
@@ -641,7 +644,8 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     delays in its nanoseconds.
     `first_read`: also read once before the first edge (a counterexample's replay: its cycle 0).  Each result
     line starts with `tag` (a fresh random word per run), so a line the design itself prints (`$display`,
-    kept on Icarus) is never read as a result.  Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has."""
+    kept on Icarus) is never read as a result.  `start`: statements run at time 0 (`power_up_start`'s).
+    Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has."""
     v = ids.verilog
     ins, outs = [v(p) for p in netlist.inputs], [v(p) for p in netlist.outputs]
     width = max(1, sum(netlist.inputs.values()))
@@ -660,6 +664,8 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     def apply(index: str) -> str:                  # a function, not `%`: a name may hold a `%`
         return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
     show = f'$display("{tag} ' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
+    if start:
+        lines += ["  initial begin"] + [f"    {st}" for st in start] + ["  end"]
     lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if clocked:
         lines += [f"    {apply('0')}"] + ([f"    {wait} {show}"] if first_read else []) + [
@@ -675,13 +681,48 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
 
 COERCED = re.compile(r"output port (\S+) is coerced to inout")   # iverilog: the source never drives it
 
+# A generate scope in a register's flattened name (`g[0].r`): written as it is, not escaped.
+_SCOPE = re.compile(r"[A-Za-z_][A-Za-z0-9_$]*(?:\[\d+\])?")
+
+
+def power_up_start(netlist: Netlist) -> list[tuple[list[str], str]]:
+    """Where the network starts the source's registers that have no power-up value (synthesis's `registers`
+    on each latch): one entry per register bit, its candidate testbench statements (the register's
+    hierarchical name read with generate scopes, then as one escaped name: Yosys joins both with a dot) and
+    the value it is set to (the latch's power-up, as the logic backend starts it).  A name Verilog cannot
+    hold is left out, as is a register synthesis re-encoded (an extracted FSM: its latches carry the new
+    code, not the source's bits)."""
+    out = []
+    for q in netlist.latches():
+        value = f"1'b{netlist.graph.nodes[q].get('inverted', 0)}"
+        for path, index in netlist.graph.nodes[q].get("registers", ()):
+            ways = _reg_names(path)
+            if ways:
+                bit = "" if index is None else f"[{int(index)}]"
+                out.append(([f"{PREFIX}dut.{w}{bit} = {value};" for w in ways], value))
+    return out
+
+
+def _reg_names(path) -> list[str]:
+    """A register's hierarchical name below the testbench's instance, in the ways it may be written."""
+    try:
+        instances = [ids.verilog(p) for p in path[:-1]]
+        parts = path[-1].split(".")
+        scoped = ".".join(parts) if len(parts) > 1 and all(
+            _SCOPE.fullmatch(x) and x.split("[")[0] not in ids.VERILOG_KEYWORDS for x in parts) else None
+        whole = ids.verilog(path[-1])
+    except Mech2SpiceError:
+        return []
+    return [".".join(instances + [w]) for w in ([scoped] if scoped else []) + [whole]]
+
 
 def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings: list | None = None,
-           info: dict | None = None, first_read: bool = False) -> list[dict[str, str]]:
+           info: dict | None = None, first_read: bool = False, start=None) -> list[dict[str, str]]:
     """Run the source on Icarus: per vector (or cycle), output bit -> '0', '1', 'x' or 'z'.  `warnings`, if
     given, receives iverilog's lines on output ports it coerced to inout: ports the source never drives
     (an `assign internal = port` written backwards), which read z on Icarus while Yosys joins the two nets;
-    `info`, if given, the generation iverilog compiled with (`generations`)."""
+    `info`, if given, the generation iverilog compiled with (`generations`) and, with `start`
+    (`power_up_start`'s entries), how many register bits were started and how many Icarus could not find."""
     iverilog, vvp = _icarus_tools()
     path = Path(path).resolve()
     order = input_bits(netlist)
@@ -691,6 +732,11 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
         tb.write_text(_testbench(netlist, len(vectors), clocked, first_read, tag))
         (Path(tmp) / "vectors.txt").write_text("".join(_vector_line(netlist, order, v) for v in vectors))
         built, gen = _compile(iverilog, path, tmp)
+        if start:
+            ways = _bind_start(iverilog, gen, path, tmp, start,
+                               lambda st: _testbench(netlist, len(vectors), clocked, first_read, tag, st))
+            if info is not None:
+                info["started"] = {"register_bits": len(ways), "not_found": len(start) - len(ways)}
         out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout
     if info is not None:
         info["icarus_generation"] = gen
@@ -725,6 +771,38 @@ def _compile(iverilog: str, path: Path, tmp: str) -> tuple[subprocess.CompletedP
         except Mech2SpiceError as err:
             first = first or err
     raise first
+
+
+_TB_ERROR = re.compile(r"^tb\.v:(\d+): error", re.M)
+
+
+def _bind_start(iverilog: str, gen: str, path: Path, tmp: str, start, bench) -> list[str]:
+    """Compile the testbench with `start`'s statements (`bench`: statements -> testbench text) into sim.vvp,
+    each register written the first way Icarus finds it by (`power_up_start`); one Icarus cannot find in any
+    way is left out.  The statements kept; none when the testbench still fails (sim.vvp is then rebuilt
+    without them)."""
+    choice = [0] * len(start)
+    for _ in range(3):
+        live = [k for k, c in enumerate(choice) if c < len(start[k][0])]
+        stmts = [start[k][0][choice[k]] for k in live]
+        text = bench(stmts)
+        Path(tmp, "tb.v").write_text(text)
+        cmd = [iverilog, gen, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), "tb.v", str(path)]
+        try:
+            proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True, timeout=ICARUS_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            break
+        if proc.returncode == 0:
+            return stmts
+        first = text.splitlines().index(f"    {stmts[0]}") + 1 if stmts else 0     # tb.v's line of stmts[0]
+        bad = {int(m.group(1)) - first for m in _TB_ERROR.finditer(proc.stderr + proc.stdout)}
+        if not bad or not bad <= set(range(len(stmts))):
+            break
+        for row in bad:
+            choice[live[row]] += 1
+    Path(tmp, "tb.v").write_text(bench([]))
+    _compile(iverilog, path, tmp)
+    return []
 
 
 def _vector_line(netlist: Netlist, order: list[str], v) -> str:
@@ -967,9 +1045,14 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     warnings, info = [], {}
     ref = icarus(path, netlist, x, clocked, warnings, info)
     got = run_backend(netlist, x, clocked, backend, params, progress)
-    mismatches = compare(netlist, x, ref, got, clocked, None if params is None else params.levels)
+    levels = None if params is None else params.levels
+    mismatches = compare(netlist, x, ref, got, clocked, levels)
+    start = power_up_start(netlist) if mismatches and clocked else []
+    compared = None
+    if start:
+        mismatches, compared = _from_power_up(path, netlist, x, got, levels, start, mismatches, info)
     if keep_trace:
-        info["trace"] = cosim_trace(netlist, x, ref, got, clocked)
+        info["trace"] = cosim_trace(netlist, x, compared or ref, got, clocked)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
            "undefined_bits": sum(v in "xX" for r in ref for v in r.values()),
@@ -986,6 +1069,21 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
                    min_margin=min(margins) if margins else None)
         out["agree"] = out["agree"] and out["valid"]
     return out
+
+
+def _from_power_up(path, netlist: Netlist, x, got, levels, start, mismatches, info):
+    """Icarus again, each register the source leaves without a power-up value started where the network
+    starts it (x on Icarus until written, and an `if (x)` takes the else branch: a run from no state any
+    circuit has).  That run is one the source allows, so where it agrees the as-written mismatches were
+    Icarus's reading of x: (mismatches, the Icarus run they are counted on, None for the as-written one).
+    `info["power_up_start"]` says what was done."""
+    sub = {}
+    ref = icarus(path, netlist, x, True, info=sub, start=start)
+    again = compare(netlist, x, ref, got, True, levels)
+    info["power_up_start"] = {**sub["started"], "mismatches": len(again), "as_written_mismatches": len(mismatches)}
+    if sub["started"]["register_bits"] and not again:
+        return again, ref
+    return mismatches, None
 
 
 # --------------------------------------------------------------------------- the command
@@ -1103,6 +1201,8 @@ def text(result: dict) -> str:
                     if "valid" in co and co["min_margin"] is not None else ""))
     lines += [f"  source: {w} (Yosys joins the nets, so the proof is of that reading)"
               for w in co.get("source_warnings", [])]
+    if co.get("power_up_start"):
+        lines.append("  " + _power_up_text(co["power_up_start"]))
     lines += ["  " + _mismatch_text(m) for m in co["mismatches"][:20]]
     if len(co["mismatches"]) > 20:
         lines.append(f"  ... {len(co['mismatches']) - 20} more (--json lists all)")
@@ -1114,6 +1214,20 @@ def text(result: dict) -> str:
     lines.append(f"verdict: {result['verdict']} ({result['wall_s']:.1f} s)" + _undefined_text(co)
                  + _race_text(result) + _readings_text(result))
     return "\n".join(lines)
+
+
+def _power_up_text(st: dict) -> str:
+    """What the second Icarus run, from the network's power-up state (`_from_power_up`), found."""
+    lost = f"; {st['not_found']} Icarus could not find by name (left x)" if st["not_found"] else ""
+    head = (f"Icarus as written: {st['as_written_mismatches']} mismatches; again with the {st['register_bits']} "
+            f"register bits the source gives no power-up value started where the network starts them{lost}: ")
+    if not st["register_bits"]:
+        return head + "none could be set, so the as-written comparison stands"
+    if not st["mismatches"]:
+        return head + ("0 mismatches, so the as-written ones were Icarus's reading of x (an `if (x)` takes the "
+                       "else branch, a start no circuit has), not the network: the mismatches above are that run's, "
+                       "the x counts the source's as written")
+    return head + f"still {st['mismatches']} mismatches, so the as-written comparison stands"
 
 
 def _readings_text(result: dict) -> str:

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from cli_helpers import refused, run, verilog
+from mech2spice import verify as V
 from mech2spice.backends.logic import evaluate
 from mech2spice.synthesis.synth import synthesize
 
@@ -291,14 +292,93 @@ endmodule
 
 
 @needs_icarus
-def test_an_x_icarus_resolves_at_an_if_is_named_in_the_verdict(tmp_path, capsys):
+def test_an_x_icarus_resolves_at_an_if_is_judged_from_the_networks_power_up(tmp_path, capsys):
     """OpenCores ss_pcm (public-RTL pass, session 22) failed verify with its proof holding: registers without
-    reset are x on Icarus, whose `if (x)` takes the else branch, a power-up no circuit has.  The verdict says
-    so; with a power-up value the same design passes."""
-    rc, out, _ = run(capsys, "verify", verilog(tmp_path, X_OPTIMISM.format(init="")), "--backend", "logic",
-                     "--cycles", "200")
-    assert rc == 1 and "equivalence: proved" in out and "Icarus 0, network 1" in out
-    assert "so Icarus reads it otherwise" in out.splitlines()[-1]
+    reset are x on Icarus, whose `if (x)` takes the else branch, a start no circuit has.  Icarus now runs again
+    with those registers started where the network starts them, a run the source allows: it agrees, so the
+    design passes and the text says why.  A wrong network still fails from that start."""
+    src = verilog(tmp_path, X_OPTIMISM.format(init=""))
+    rc, out, _ = run(capsys, "verify", src, "--backend", "logic", "--cycles", "200")
+    assert rc == 0 and "equivalence: proved" in out, out
+    assert "again with the 1 register bits the source gives no power-up value started where the network " \
+           "starts them" in out and "0 mismatches, so the as-written ones were Icarus's reading of x" in out
+    res = _verify(capsys, src, "--backend", "logic", "--cycles", "200")
+    st = res["cosim"]["power_up_start"]
+    assert st["register_bits"] == 1 and st["not_found"] == 0 and st["mismatches"] == 0
+    assert st["as_written_mismatches"] > 0                   # the as-written run disagrees: q stays 0 on Icarus
+    _agrees(res, compared_at_least=200)
     res = _verify(capsys, verilog(tmp_path, X_OPTIMISM.format(init=" = 1'b0"), "init.v"), "--backend", "logic",
                   "--cycles", "200")
     _agrees(res, compared_at_least=200)
+    assert "power_up_start" not in res["cosim"]             # nothing to start: no second run
+    wrong = synthesize(verilog(tmp_path, X_OPTIMISM.format(init="").replace("!r & d", "r & d"), "wrong.v"))
+    co = V.cosim(src, wrong, "logic", 200, False, seed=0)
+    assert co["power_up_start"]["mismatches"] > 0 and not co["agree"]
+    assert len(co["mismatches"]) == co["power_up_start"]["as_written_mismatches"]
+
+
+# Registers without power-up values where names are hard: a generate scope at the top and in an instance, a
+# name holding a dot (escaped), a vector declared [4:2] and one [0:2], two equal registers synthesis merges.
+NAMED_REGISTERS = r"""module leaf(input clk, input d, output [2:0] o);
+  genvar i;
+  generate for (i = 0; i < 2; i = i + 1) begin : gs
+    reg r;
+    always @(posedge clk) r <= r ^ d;
+  end endgenerate
+  reg [4:2] v;
+  always @(posedge clk) v <= v ^ {d, 1'b1, d};
+  assign o = {gs[1].r, v[4], v[3]};
+endmodule
+module top(input clk, input d, output [2:0] o, output [5:0] p);
+  genvar i;
+  generate for (i = 0; i < 1; i = i + 1) begin : g
+    reg r;
+    always @(posedge clk) r <= r ^ ~d;
+  end endgenerate
+  reg \odd.name ;
+  reg [0:2] u;
+  reg twin, twin2;
+  always @(posedge clk) begin \odd.name <= \odd.name ^ d; u <= u + 3'd1; twin <= d; twin2 <= d; end
+  leaf l(.clk(clk), .d(d), .o(o));
+  assign p = {g[0].r, \odd.name , u[0], u[2], twin, twin2};
+endmodule
+"""
+
+
+@needs_icarus
+def test_registers_without_power_up_are_started_by_their_hierarchical_names(tmp_path):
+    """Every register bit the network starts is found on Icarus, whatever its name; started there, Icarus
+    defines every output bit and agrees with the network, where as written they are all x."""
+    src = verilog(tmp_path, NAMED_REGISTERS)
+    nl = synthesize(src, top="top")
+    start = V.power_up_start(nl)
+    x = V.make_cycles(nl, 40, 0, [])
+    info = {}
+    ref = V.icarus(src, nl, x, True, info=info, start=start)
+    assert info["started"] == {"register_bits": len(start), "not_found": 0} and len(start) >= 9
+    merged = [nl.graph.nodes[q]["registers"] for q in nl.latches() if len(nl.graph.nodes[q].get("registers", ())) > 1]
+    assert [(("twin",), None), (("twin2",), None)] in [list(m) for m in merged]   # one latch, two names
+    assert all(v in "01" for row in ref for v in row.values())
+    assert V.compare(nl, x, ref, V.run_backend(nl, x, True, "logic", None, False), True, None) == []
+    written = V.icarus(src, nl, x, True)
+    assert all(row[b] == "x" for row in written for b in ("o[0]", "o[1]", "p[2]", "p[3]", "p[4]", "p[5]"))
+
+
+POWERS = """module powers(input [3:0] a, input [2:0] b, input signed [3:0] sa, input signed [2:0] sb,
+              output [5:0] y1, output signed [5:0] y2, output signed [4:0] y3, output [7:0] y5);
+  assign y1 = a ** b;          // unsigned
+  assign y2 = sa ** sb;        // signed, negative exponents too
+  assign y3 = sa ** b;         // a signed base, an unsigned exponent
+  assign y5 = 4'd2 ** b;       // a constant base (Yosys's operators.v: `4'd2 ** u1`)
+endmodule
+"""
+
+
+@needs_icarus
+def test_a_power_with_a_variable_exponent_is_mapped(tmp_path, capsys):
+    """Yosys leaves `$pow` unmapped when the exponent is not constant (it was refused as "no NOR-gate
+    mapping"); synthesis maps it (synthesis/maps.py).  Every input vector against Icarus, and the proof."""
+    res = _verify(capsys, verilog(tmp_path, POWERS), "--exhaustive")
+    assert res["cosim"]["vectors"] == 1 << 14 and res["equivalence"]["status"] == "proved"
+    _agrees(res, compared_at_least=(1 << 14) * 24 - 3072)     # y2's x: 0 ** negative
+    assert res["cosim"]["undefined_by_port"]["y2"]["x"] == 3072

@@ -42,7 +42,7 @@ import networkx as nx
 from .. import identifiers
 from ..errors import Mech2SpiceError
 from ..inputs import read_input
-from . import dialect, races, refusals, yosys
+from . import dialect, maps, races, refusals, yosys
 from .verilog_text import blanked as _blanked, statement_or_block_end
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
@@ -267,6 +267,10 @@ def _non_constant_init(msg: str, path: Path) -> str | None:
             "the state the network is prepared in before any input is applied, so it must be a constant")
 
 
+# The attribute the flow marks the source's register wires with (`_flow`).
+REGISTER_ATTR = "m2s_register"
+
+
 def _flow(source: str, top: str | None, include: str | None = None, sv: bool | None = None) -> str:
     """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python).
     `include`: a folder to search for `include files (the original's, when Yosys reads a rewritten copy);
@@ -284,6 +288,10 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
         "tee -q -o init.txt select -list a:init",   # declaration initialisers (`reg q = 1`)
         "tee -q -o check.txt check",                # undriven nets, before synth folds them to constants
         "flatten",
+        # the source's registers, marked on their wires (hdlname: the instance path) before synthesis merges
+        # and renames them: verify starts the ones without a power-up value where the network starts them
+        f"setattr -set {REGISTER_ATTR} 1 t:$*dff* %co:+[Q] t:* %d",
+        maps.MAP_POW,                               # `a ** b`, b not constant (synthesis/maps.py)
         "tribuf -formal",                           # tri-state buses -> multiplexers (docs/rtl.md) ...
         "delete n:$tribuf_conflict*",               # ... less its no-two-drivers checks: Icarus co-simulates
         "synth -flatten" + (f" -top {identifiers.yosys(top)}" if top else ""),   # (memories: `memory` + `memory_map` in it)
@@ -311,7 +319,7 @@ def _cache_key(source: str, top: str | None, sv: bool = False) -> str | None:
     files take part)."""
     if "`include" in source:
         return None
-    text = json.dumps([_flow("SOURCE", top, sv=sv), source, yosys.identity(), refusals.VERSION])
+    text = json.dumps([_flow("SOURCE", top, sv=sv), maps.POW_MAP, source, yosys.identity(), refusals.VERSION])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -396,6 +404,7 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
             (Path(tmp) / rel).write_text(source, encoding="utf-8")
             include = Path(os.path.relpath(path.resolve().parent, Path(tmp).resolve())).as_posix()
         sv = path.suffix == ".sv"
+        maps.write_maps(tmp)
         result = yosys.run_script(_flow(rel, top, include, sv=sv), tmp)
         if result.returncode != 0 and not sv and "syntax error" in yosys.error_line(result):
             # a `.v` written with SystemVerilog constructs (`for (int i = 0; ...; i++)`), as Icarus reads it
@@ -539,11 +548,14 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
     names = _net_names(module)
     clock = _clock_port(g, top, module, driver, path)
     power_up = _initial_values(module)
+    registers = _source_registers(module, power_up)
     for node, (pins, out_net) in cells.items():
         g.nodes[node]["net"] = names.get(out_net, f"${out_net}")
         sources = [_source(g, b, driver, top) for b in pins]
         if g.nodes[node]["kind"] == "latch":
             _connect_latch(g, node, sources, power_up.get(out_net))
+            if out_net in registers:
+                g.nodes[node]["registers"] = registers[out_net]
         else:
             _connect_gate(g, node, sources)
     for port, bits in _ports(module, "output"):
@@ -583,6 +595,29 @@ def _initial_values(module: dict) -> dict:
             if v in "01" and not isinstance(bit, str):
                 out[bit] = int(v)
     return out
+
+
+def _source_registers(module: dict, power_up: dict) -> dict:
+    """Net id -> the source register bits it carries that have no power-up value, each as (hierarchical path,
+    bit index or None): the path is the instance names (Yosys's `hdlname`) then the register's name in its
+    module, the index as declared (`reg [8:1] r`: r[1] is the first bit).  Several when synthesis merged equal
+    registers.  Read only from well-formed entries: a cached module is anyone's data."""
+    out = {}
+    for name, info in module["netnames"].items():
+        attrs = info.get("attributes")
+        if not (isinstance(attrs, dict) and REGISTER_ATTR in attrs) or info.get("hide_name"):
+            continue
+        hdl = attrs.get("hdlname")
+        path = tuple(hdl.split(" ")) if isinstance(hdl, str) and hdl.strip() else (name,)
+        bits, offset = info["bits"], info.get("offset", 0)
+        offset = offset if isinstance(offset, int) and not isinstance(offset, bool) else 0
+        for i, bit in enumerate(bits):
+            if isinstance(bit, str) or bit in power_up:
+                continue
+            index = None if len(bits) == 1 and offset == 0 else \
+                offset + (len(bits) - 1 - i if info.get("upto") else i)
+            out.setdefault(bit, []).append((path, index))
+    return {bit: tuple(sorted(regs)) for bit, regs in out.items()}
 
 
 def _connect_latch(g: nx.DiGraph, q: str, sources: list[str], init: int | None) -> None:

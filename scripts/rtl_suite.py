@@ -90,6 +90,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=1, help="designs measured at once (default 1)")
     p.add_argument("--only", action="append", metavar="NAME", help="only this design (repeatable)")
     p.add_argument("--timeout", type=float, default=300, help="seconds per step (default 300)")
+    p.add_argument("--proof-time", type=float, default=240,
+                   help="verify's proof budget in seconds (default 240: ITC'99 b14 takes ~90 s alone, more "
+                        "beside another design)")
     p.add_argument("--envelope-gates", type=int, default=300,
                    help="largest design (NOR gates) given an envelope sample (default 300)")
     p.add_argument("--envelope-cycles", type=int, default=4, help="clock cycles of the envelope sample")
@@ -120,7 +123,7 @@ def _row(design: dict, root: Path, tool: str, args) -> dict:
     path = root / design["file"]
     source = path.read_bytes()
     key = hashlib.sha256(json.dumps([FORMAT, tool, hashlib.sha256(source).hexdigest(), design.get("top"),
-                                     design.get("reset"), args.timeout, args.envelope_gates,
+                                     design.get("reset"), args.timeout, args.proof_time, args.envelope_gates,
                                      args.envelope_cycles]).encode()).hexdigest()[:24]
     cached = args.cache / f"{design['name']}-{key}.json"
     row = None if args.no_cache else _cached_row(cached, design["name"])
@@ -159,7 +162,8 @@ def _measure(design: dict, path: Path, args) -> dict:
     row.update(accepted=True, gates=out["logic_gates"], nor_total=out["gates"], latches=out["latches"],
                oscillators=out["oscillators"], clocked=bool(out.get("clock")))
     reset = _reset_flag(design)
-    verify = _cli(["verify", "--json", "--backend", "logic", *top, *reset, str(path)], args.timeout)
+    verify = _cli(["verify", "--json", "--backend", "logic", "--proof-time", str(args.proof_time), *top, *reset,
+                   str(path)], args.timeout)
     row["verify"] = _verdict(verify)
     if out["gates"] <= args.envelope_gates:
         sample = ["--cycles", str(args.envelope_cycles)] if out.get("clock") else ["--vectors", "4"]
@@ -295,7 +299,7 @@ def _write(rows: list[dict], tool: str, wall: float, args) -> None:
     load = os.getloadavg()
     meta = {"tool": tool, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
             "load_avg": [round(x, 2) for x in load], "cpus": os.cpu_count(), "wall_s": round(wall, 1),
-            "timeout_s": args.timeout, "envelope_gates": args.envelope_gates,
+            "timeout_s": args.timeout, "proof_time_s": args.proof_time, "envelope_gates": args.envelope_gates,
             "envelope_cycles": args.envelope_cycles}
     docs = args.out
     docs.mkdir(parents=True, exist_ok=True)
@@ -323,7 +327,7 @@ def _markdown(rows: list[dict], s: dict, meta: dict) -> str:
            "the design files stay outside git (their licences vary; each row names its source).  "
            f"Tool {meta['tool']}, {meta['date']}, {meta['cpus']} CPUs, load averages {meta['load_avg']}, "
            f"{meta['wall_s']} s for the rows measured in this run (cached rows cost nothing); "
-           f"{meta['timeout_s']:.0f} s budget per step.", "",
+           f"{meta['timeout_s']:.0f} s budget per step, {meta.get('proof_time_s', 120):.0f} s for the proof.", "",
            "Columns: *gates* are the logic NOR gates (before fan-out buffers), *osc.* the oscillators of the "
            "mechanical model; *verify* is `mech2spice verify --backend logic` (formal equivalence with Yosys, "
            "then Icarus co-simulation: pass needs both); *envelope* is `verify --backend envelope "

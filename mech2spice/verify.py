@@ -80,7 +80,7 @@ def check_names(netlist: Netlist) -> None:
 
 def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] = (),
                   rename: dict[str, str] | None = None) -> str:
-    """The netlist as structural Verilog: one `assign` per NOR, one posedge register per latch (initialised
+    """The netlist as structural Verilog: one `assign` per NOR, one register per latch (initialised
     at its power-up value: 0, or 1 for an inverted latch, as the logic backend starts it).  `expose`: (port name,
     latch) pairs made extra 1-bit outputs, for the register-correspondence proof; `rename`: port -> the name
     it gets (the proof's, `proof_ports`).  Every user name is written by ids.verilog (escaped where it is
@@ -110,17 +110,18 @@ def write_verilog(netlist: Netlist, module: str, expose: list[tuple[str, str]] =
 
 
 def _register(netlist: Netlist, q: str, rename: dict[str, str] | None = None) -> str:
-    """A latch as a posedge register: an inverted latch's D pin carries the complement; a forced one is reset
+    """A latch as a register on the source's clock edge: an inverted latch's D pin carries the complement; a forced one is reset
     (or set, when inverted) asynchronously while F is high, as the mechanical latch is."""
     from .synthesis.synth import latch_inputs
     d, f = latch_inputs(netlist.graph, q)
     inverted = netlist.graph.nodes[q].get("inverted", 0)
     reg, clock = _expr(netlist, q, rename), ids.verilog((rename or {}).get(netlist.clock, netlist.clock))
     nxt = f"~{_expr(netlist, d, rename)}" if inverted else _expr(netlist, d, rename)
+    edge = netlist.clock_edge
     if f is None:
-        return f"  always @(posedge {clock}) {reg} <= {nxt};"
+        return f"  always @({edge} {clock}) {reg} <= {nxt};"
     force = _expr(netlist, f, rename)
-    return (f"  always @(posedge {clock} or posedge {force}) if ({force}) {reg} <= "
+    return (f"  always @({edge} {clock} or posedge {force}) if ({force}) {reg} <= "
             f"1'b{inverted}; else {reg} <= {nxt};")
 
 
@@ -506,7 +507,8 @@ def _abc_top(netlist: Netlist, names: dict[str, str], resets) -> str:
     ports = [f"input {_decl(w)}{names[p]}" for p, w in widths.items()] + ["output trigger"]
     lines = [f"module {PREFIX}top({', '.join(ports)});"]
     if level:
-        lines += [f"  reg {PREFIX}first = 1'b1;", f"  always @(posedge {names[netlist.clock]}) {PREFIX}first <= 1'b0;"]
+        lines += [f"  reg {PREFIX}first = 1'b1;",
+                  f"  always @({netlist.clock_edge} {names[netlist.clock]}) {PREFIX}first <= 1'b0;"]
     conns = [f".in_{names[p]}({PREFIX}first ? 1'b{level[p]} : {names[p]})" if p in level else
              f".in_{names[p]}({names[p]})" for p in widths]
     lines += [f"  {PREFIX}miter {PREFIX}m({', '.join(conns + ['.trigger(trigger)'])});", "endmodule", ""]
@@ -656,8 +658,9 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     lines += [f"  wire {_decl(w)}{v(p)};" for p, w in netlist.outputs.items()]
     conns = [f".{p}({p})" for p in ins + outs]
     clock = v(netlist.clock) if clocked else None
+    idle, edge = ("1", "0") if netlist.clock_edge == "negedge" else ("0", "1")    # the capturing edge: idle -> edge
     if clocked:
-        lines.append(f"  reg {clock} = 0;")
+        lines.append(f"  reg {clock} = {idle};")
         conns.insert(0, f".{clock}({clock})")
     lines += [f"  {v(netlist.top)} {PREFIX}dut({', '.join(conns)});",
               f"  reg [{width - 1}:0] {mem} [0:{n - 1}];", f"  integer {k};"]
@@ -670,9 +673,9 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     if clocked:
         lines += [f"    {apply('0')}"] + ([f"    {wait} {show}"] if first_read else []) + [
                   f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
-                  f"      {wait} {clock} = 1;",
+                  f"      {wait} {clock} = {edge};",
                   f"      {wait} {apply(f'{k} + 1 < {n} ? {k} + 1 : {k}')}",
-                  f"      {wait} {show}", f"      {wait} {clock} = 0;", "    end"]
+                  f"      {wait} {show}", f"      {wait} {clock} = {idle};", "    end"]
     else:
         lines += [f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
                   f"      {apply(k)}", f"      {wait} {show}", "    end"]

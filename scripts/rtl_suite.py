@@ -35,7 +35,7 @@ CLASSES = [
     ("`initial` block", r"`initial`"),
     ("tri-state driver", r"tri-state"),
     ("inout port", r"\binout\b"),
-    ("negative-edge flip-flop", r"negative-edge"),
+    ("both clock edges", r"falling clock edge and others on the rising one|negative-edge"),
     ("several or derived clocks", r"clocked by several ports|clocked directly by one input port|clock .* also used as data"),
     ("level-sensitive latch", r"level-sensitive latch"),
     ("memory", r"\$mem|memory"),

@@ -148,7 +148,7 @@ def test_a_cache_entry_with_malformed_races_is_rebuilt(tmp_path, capsys, monkeyp
     from mech2spice.synthesis import synth
     text = _design("t1 = a;", "y <= t1;")
     _races(tmp_path, text)
-    key = synth._cache_key((tmp_path / "t.v").read_text(), None)
+    key = synth._cache_key((tmp_path / "t.v").read_text(), None, name="t.v")
     entry = json.loads(synth._cache_path(key).read_text())
     for bad in (None, [{"variable": 3}], [{**entry["races"][0], "write_line": "5"}]):
         synth._cache_path(key).write_text(json.dumps({**entry, "races": bad}))

@@ -382,3 +382,40 @@ def test_a_power_with_a_variable_exponent_is_mapped(tmp_path, capsys):
     assert res["cosim"]["vectors"] == 1 << 14 and res["equivalence"]["status"] == "proved"
     _agrees(res, compared_at_least=(1 << 14) * 24 - 3072)     # y2's x: 0 ** negative
     assert res["cosim"]["undefined_by_port"]["y2"]["x"] == 3072
+
+
+NEGEDGE = """module negcnt(input clk, input rst_n, input en, input d, output reg [3:0] q, output reg s);
+  always @(negedge clk or negedge rst_n)
+    if (!rst_n) q <= 4'd0;
+    else if (en) q <= q + 4'd1;
+  always @(negedge clk) s <= d ^ q[0];
+endmodule
+"""
+
+
+@needs_icarus
+@pytest.mark.parametrize("engine", ["abc", "sat"])
+def test_a_design_clocked_on_the_falling_edge_is_one_pulse_per_cycle(tmp_path, capsys, engine):
+    """Every flip-flop on negedge is one capture per cycle, as posedge is (it was refused as "a second event
+    per cycle").  The testbench captures on the falling edge: reading a cycle late would mismatch; a network
+    with two outputs swapped fails the proof."""
+    src = verilog(tmp_path, NEGEDGE)
+    assert synthesize(src).clock_edge == "negedge"
+    res = _verify(capsys, src, "--cycles", "300", "--proof-engine", engine)
+    assert res["equivalence"]["status"] == "proved"
+    _agrees(res, compared_at_least=300 * 5)
+    nl = synthesize(src)
+    g = nl.graph
+    (a,), (b,) = g.predecessors("q[0]"), g.predecessors("q[1]")
+    g.remove_edges_from([(a, "q[0]"), (b, "q[1]")])
+    g.add_edges_from([(b, "q[0]"), (a, "q[1]")])
+    bad = V.verify(src, netlist=nl, vectors=100, proof_engine=engine)
+    assert bad["equivalence"]["status"] == "counterexample" and not bad["cosim"]["agree"]
+
+
+def test_flip_flops_on_both_edges_are_refused_with_both_lines(tmp_path, capsys):
+    """Two captures per cycle, with data handed between them: not the one pulse the drive has."""
+    src = verilog(tmp_path, "module mixed(input clk, input d, output reg a, output reg b);\n"
+                            "  always @(posedge clk) a <= d;\n  always @(negedge clk) b <= a;\nendmodule\n")
+    refused(capsys, "synth", src, needle="line 3: module mixed: this flip-flop captures on the falling clock edge "
+                                         "and others on the rising one (line 2)")

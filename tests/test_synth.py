@@ -292,8 +292,9 @@ def test_combinational_loop_names_a_net():
     ("module c(input clk, input l, input a, input d, output reg q);\n"
      "  always @(posedge clk or posedge l) if (l) q <= a; else q <= d; endmodule", "asynchronous load"),
     ("module c(input en, input d, output reg q); always @* if (en) q = d; endmodule", "level-sensitive latch"),
-    ("module c(input clk, input d, output reg q); always @(negedge clk) q <= d; endmodule",
-     r"line 1: module c: a negative-edge flip-flop \(\$_DFF_N_\): the mechanical clock is one pulse per cycle"),
+    ("module c(input clk, input d, output reg q, output reg p);\n  always @(negedge clk) q <= d;\n"
+     "  always @(posedge clk) p <= q; endmodule",
+     r"line 2: module c: this flip-flop captures on the falling clock edge and others on the rising one \(line 3\)"),
     ("module c(input clk, input d, output reg q, output y); always @(posedge clk) q <= d; "
      "assign y = clk & d; endmodule", "clock"),
 ])

@@ -42,7 +42,7 @@ def add_parsers(sub) -> None:
                        description="Apply input values (unset inputs are 0), simulate until the outputs settle "
                                    "(or --periods), and decode each output bit from its amplitude. A bit outside "
                                    "both bands is reported invalid, never rounded; the exit code is 1 then.",
-                       epilog="""clocked designs (posedge flip-flops on one clock port):
+                       epilog="""clocked designs (flip-flops on one edge of one clock port):
   --cycles N holds the --set inputs and pulses the clock N times; --stimulus FILE.json applies
   [{"set": {"PORT": INT, ...}, "cycles": N}, ...] in order (settings persist between steps).
   A cycle is a settle phase (clock 0, 'pause' periods) then an enable pulse ('pulse' periods);

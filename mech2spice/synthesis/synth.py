@@ -6,9 +6,9 @@ Graph conventions (nodes are strings, attribute ``kind``):
 * ``const``  -- exactly ``const0`` / ``const1``, present only while something uses them.
 * ``nor``    -- a 2-input NOR gate ``g<N>``; exactly two in-edges with edge attr ``pin`` 0 and 1.
   A NOT is ``NOR(x, const0)``.  Optional attr ``net``: the Yosys net it drives (for messages).
-* ``latch``  -- a positive-edge flip-flop bit ``q<N>`` (Yosys ``$_DFF_P_``, or ``$_DFF_P[NP][01]_`` with an
-  asynchronous reset/set); in-edge pin ``"D"``, and pin ``"F"`` (the forcing input, active high) when it has
-  an asynchronous reset or set; attr ``inverted`` (1, absent = 0): the mechanical loop stores the complement of the
+* ``latch``  -- a flip-flop bit ``q<N>`` (Yosys ``$_DFF_P_``, or ``$_DFF_P[NP][01]_`` with an asynchronous
+  reset/set; ``$_DFF_N*`` when every flip-flop captures on the falling edge, ``Netlist.clock_edge``); in-edge
+  pin ``"D"``, and pin ``"F"`` (the forcing input, active high) when it has an asynchronous reset or set; attr ``inverted`` (1, absent = 0): the mechanical loop stores the complement of the
   register, so the register powers up at ``inverted`` and ``F`` forces it to ``inverted``.  Clocked by the
   port ``Netlist.clock`` (not an edge of the graph).  Mechanically it is the paper's NOR latch
   (network.py); logically a register (backends/logic.py).  The D-side gates that make the forcing and the
@@ -62,6 +62,7 @@ class Netlist:
     races: tuple = ()                 # races.Race: clocked blocks passing a value through `=` on one edge
     source: str | None = field(default=None, compare=False)   # the Verilog file synthesized: never an output
     systemverilog: bool = field(default=False, compare=False)  # Yosys read it so (a .sv, or a .v only that reads)
+    clock_edge: str = "posedge"       # the edge every flip-flop captures on (the source's; one pulse either way)
 
     def gates(self) -> list[str]:
         """NOR gates in topological order (level by level, by gate number within a level); latch
@@ -169,7 +170,7 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
     outputs = {p: w for p, w in netlist.outputs.items() if p in ports}
     clock = netlist.clock if any(d["kind"] == "latch" for _, d in g.nodes(data=True)) else None
     return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed, netlist.races,
-                   netlist.source, netlist.systemverilog)
+                   netlist.source, netlist.systemverilog, netlist.clock_edge)
 
 
 # --------------------------------------------------------------------------- running Yosys
@@ -305,7 +306,7 @@ def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
     """(top module name, its Yosys JSON module, the source's races, the top's output ports a tri-state driver
     may release, whether it was read as SystemVerilog): from the cache when this source went through this flow
     and this Yosys before, else from a run of the flow in a scratch folder (`_yosys_run`)."""
-    key = _cache_key(source, top, path.suffix == ".sv")
+    key = _cache_key(source, top, path.suffix == ".sv", path.name)
     cached = _cache_read(key)
     if cached is not None:
         return cached
@@ -314,12 +315,14 @@ def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
     return result
 
 
-def _cache_key(source: str, top: str | None, sv: bool = False) -> str | None:
-    """A content key of (flow, source, Yosys build, refusal checks); None for a source with `include (other
-    files take part)."""
+def _cache_key(source: str, top: str | None, sv: bool = False, name: str = "") -> str | None:
+    """A content key of (flow, source, its file name, Yosys build, refusal checks); None for a source with
+    `include (other files take part).  The name: Yosys's src attributes carry it, and messages give a cell's
+    line only where that name is the design's (refusals.src_line)."""
     if "`include" in source:
         return None
-    text = json.dumps([_flow("SOURCE", top, sv=sv), maps.POW_MAP, source, yosys.identity(), refusals.VERSION])
+    text = json.dumps([_flow("SOURCE", top, sv=sv), maps.POW_MAP, source, name, yosys.identity(),
+                       refusals.VERSION])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -485,9 +488,11 @@ _CELLS = {
     "$_NOR_": ("nor", ("A", "B"), "Y"),
     "$_NOT_": ("nor", ("A", None), "Y"),
     "$_DFF_P_": ("latch", ("D",), "Q"),
+    "$_DFF_N_": ("latch", ("D",), "Q"),         # every flip-flop on the falling edge: the same one pulse
 }
-# Positive-edge flip-flops with an asynchronous reset (value 0) or set (value 1), active high (P) or low (N).
-_FORCED = re.compile(r"^\$_DFF_P(?P<polarity>[NP])(?P<value>[01])_$")
+# Flip-flops (on the rising or falling edge) with an asynchronous reset (value 0) or set (value 1), active
+# high (P) or low (N).
+_FORCED = re.compile(r"^\$_DFF_(?P<edge>[PN])(?P<polarity>[NP])(?P<value>[01])_$")
 _SEQUENTIAL = re.compile(r"^\$_?(?:\w*dff\w*|\w*dlatch\w*|sr|ff|mem\w*)(?:_|$)", re.I)
 _NAMED = {"$check": "assert/assume/cover"}
 # Why it is refused rather than dropped: dropping would silently change what the source says it does.
@@ -507,11 +512,6 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
         return "latch", ("D", "R"), "Q"
     if cell_type in ("$scopeinfo", _PRINT):     # flatten's record of the hierarchy; a print (_PRINT): no logic
         return None
-    if re.match(r"^\$_(?:DFF_N|DFFE_N|DFF_N[NP][01]|DFFSRE?_N)\w*_$", cell_type):
-        raise Mech2SpiceError(f"module {top}: a negative-edge flip-flop ({cell_type}): the mechanical clock is "
-                              "one pulse per cycle and every latch captures during it; a falling-edge capture "
-                              "is a second event per cycle that the drive does not have, and a design mixing "
-                              "both edges hands data between them within a cycle; clock it on posedge")
     if re.match(r"^\$_DFFSRE?_\w+_$", cell_type):
         raise Mech2SpiceError(
             f"module {top}: a flip-flop with both an asynchronous set and an asynchronous reset ({cell_type}) "
@@ -577,7 +577,7 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
             g.remove_node(n)
         inputs = {p: w for p, w in inputs.items() if p != clock}
     signed = frozenset(p for p, info in module["ports"].items() if info.get("signed") and p != clock)
-    return Netlist(top, g, inputs, outputs, clock, signed)
+    return Netlist(top, g, inputs, outputs, clock, signed, clock_edge=clock_edge(module) if clock else "posedge")
 
 
 def _initial_values(module: dict) -> dict:
@@ -665,10 +665,11 @@ def _not(g: nx.DiGraph, a: str) -> str:
 
 def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path | None = None) -> str | None:
     """The single 1-bit input port clocking every flip-flop (None for combinational designs)."""
-    flops = [c for c in module["cells"].values() if c["type"] == "$_DFF_P_" or _FORCED.match(c["type"])]
+    flops = [c for c in module["cells"].values() if c["type"] in _EDGE_FLOPS or _FORCED.match(c["type"])]
     clocks = {c["connections"]["C"][0] for c in flops}
     if not clocks:
         return None
+    _one_edge(flops, top, path)
     srcs = {driver.get(c) for c in clocks}
     ports = {g.nodes[s]["port"] for s in srcs if s is not None and g.nodes[s]["kind"] == "input"}
     if len(ports) > 1 and len(ports) == len(srcs):
@@ -693,6 +694,32 @@ def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path 
     if g.nodes[node]["bit"] != 0 or sum(1 for n in g if g.nodes[n].get("port") == port) != 1:
         raise Mech2SpiceError(f"module {top}: the clock port '{port}' must be 1 bit wide")
     return port
+
+
+_EDGE_FLOPS = ("$_DFF_P_", "$_DFF_N_")
+
+
+def clock_edge(module: dict) -> str:
+    """'negedge' when the flip-flops capture on the clock's falling edge (all of them: `_one_edge`), else
+    'posedge'.  Either is the one pulse per cycle of the mechanical clock; only the testbench and the
+    written-back network (verify) read it."""
+    return "negedge" if any(c["type"].startswith("$_DFF_N") for c in module["cells"].values()) else "posedge"
+
+
+def _one_edge(flops: list[dict], top: str, path: Path | None) -> None:
+    """Refuse flip-flops on both edges of the clock, naming where one of each is written."""
+    first = {}
+    for c in flops:
+        first.setdefault(c["type"][6], _where(c, top, path))      # $_DFF_P... / $_DFF_N...
+    if len(first) < 2:
+        return
+    lead = f"{first['N']}: " if ", line " in first["N"] else ""
+    rising = f" ({first['P'].rsplit(', ', 1)[-1]})" if ", line " in first["P"] else ""
+    raise Mech2SpiceError(
+        f"{lead}module {top}: this flip-flop captures on the falling clock edge and others on the "
+        f"rising one{rising}: the mechanical clock is one pulse per cycle and every "
+        "latch captures during it; two edges are two events per cycle, with data handed between them within "
+        "the cycle, which the drive does not have; clock every register on one edge (docs/rtl.md)")
 
 
 def _ports(module: dict, direction: str):

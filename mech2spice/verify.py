@@ -210,10 +210,10 @@ def _script(rel: str, netlist: Netlist, regs: list, resets=(), mode: str = "indu
     lines += ["read_verilog wrap.v", "read_verilog gate.v", "proc", "opt_clean",
               f"miter -equiv -flatten -make_assert -ignore_gold_x {PREFIX}gold {PREFIX}gate {PREFIX}miter",
               f"hierarchy -top {PREFIX}miter", "opt_clean"]
-    if netlist.forced():
-        # sat has no model of an asynchronous flip-flop; async2sync gives both sides the cycle view the logic
-        # backend and co-simulation read: the output forced while the reset is high, the next state too
-        lines.append("async2sync")
+    # sat has no model of an asynchronous flip-flop; async2sync gives both sides the cycle view the logic
+    # backend and co-simulation read: the output forced while the reset is high, the next state too.  Also
+    # where the network has no forced latch: the source's may be one synthesis folded to a constant.
+    lines.append("async2sync")
     # Induction even for a combinational network: the source may keep registers that synthesis folded
     # away (`q <= q` is a constant 0), which a plain SAT proof cannot model.  It closes at step 1 otherwise.
     # -enable_undef: without it sat reads the miter's `x` as 0, so -ignore_gold_x's `gold === x` becomes
@@ -321,7 +321,8 @@ def replay(path, netlist: Netlist, cex: list[dict]) -> dict:
     registers from x, as a simulator starts them), cycle k before clock edge k: {reproduced, cycle (the first
     where a bit the source defines differs, or None), bits (those bits), source, network (every output port
     there, MSB first)}.  Where the source reads x on every differing bit the proof's all-zero start was
-    the difference, not the mapping."""
+    the difference, not the mapping; so too where Icarus started at the network's power-up state
+    (`power_up_start`) shows no difference."""
     from .backends.logic import ClockedLogic, evaluate_bits
     from .synthesis.ports import pack_inputs
     order = input_bits(netlist)
@@ -333,15 +334,26 @@ def replay(path, netlist: Netlist, cex: list[dict]) -> dict:
         net.append(sim.evaluate_bits(step["inputs"]) if clocked else evaluate_bits(netlist, step["inputs"]))
         if clocked:
             sim.tick(step["inputs"])
-    first, bits = None, []
-    for k, (r, g) in enumerate(zip(ref, net)):
-        bits = [b for b in output_bits(netlist) if r[b] in "01" and int(r[b]) != g[b]]
-        if bits:
-            first = k
-            break
+    first, bits = _first_difference(netlist, ref, net)
+    start = power_up_start(netlist) if clocked and first is not None else []
+    if start:
+        # from the network's power-up state too (a start the source allows): Icarus's `if (x)` at an
+        # uninitialised register is no difference of the mapping
+        started = icarus(path, netlist, x, clocked, first_read=True, start=start)
+        if _first_difference(netlist, started, net)[0] is None:
+            ref, (first, bits) = started, (None, [])
     at = first if first is not None else len(cex) - 1
     trace = [{"source": _port_values(netlist, r), "network": _port_values(netlist, g)} for r, g in zip(ref, net)]
     return {"reproduced": first is not None, "cycle": first, "bits": bits, **trace[at], "trace": trace}
+
+
+def _first_difference(netlist: Netlist, ref: list[dict], net: list[dict]) -> tuple[int | None, list[str]]:
+    """The first cycle where a bit the source defines differs from the network, and those bits."""
+    for k, (r, g) in enumerate(zip(ref, net)):
+        bits = [b for b in output_bits(netlist) if r[b] in "01" and int(r[b]) != g[b]]
+        if bits:
+            return k, bits
+    return None, []
 
 
 def _port_values(netlist: Netlist, bits: dict) -> dict[str, str]:
@@ -692,17 +704,16 @@ def power_up_start(netlist: Netlist) -> list[tuple[list[str], str]]:
     """Where the network starts the source's registers that have no power-up value (synthesis's `registers`
     on each latch): one entry per register bit, its candidate testbench statements (the register's
     hierarchical name read with generate scopes, then as one escaped name: Yosys joins both with a dot) and
-    the value it is set to (the latch's power-up, as the logic backend starts it).  A name Verilog cannot
-    hold is left out, as is a register synthesis re-encoded (an extracted FSM: its latches carry the new
-    code, not the source's bits)."""
+    the value it is set to: the latch's power-up, as the logic backend starts it, or the constant synthesis
+    made of the bit (`Netlist.constant_registers`).  A name Verilog cannot hold is left out."""
+    start = [(path, index, netlist.graph.nodes[q].get("inverted", 0))
+             for q in netlist.latches() for path, index in netlist.graph.nodes[q].get("registers", ())]
     out = []
-    for q in netlist.latches():
-        value = f"1'b{netlist.graph.nodes[q].get('inverted', 0)}"
-        for path, index in netlist.graph.nodes[q].get("registers", ()):
-            ways = _reg_names(path)
-            if ways:
-                bit = "" if index is None else f"[{int(index)}]"
-                out.append(([f"{PREFIX}dut.{w}{bit} = {value};" for w in ways], value))
+    for path, index, value in start + list(netlist.constant_registers):
+        ways = _reg_names(path)
+        if ways:
+            bit = "" if index is None else f"[{int(index)}]"
+            out.append(([f"{PREFIX}dut.{w}{bit} = 1'b{int(value)};" for w in ways], f"1'b{int(value)}"))
     return out
 
 

@@ -63,6 +63,9 @@ class Netlist:
     source: str | None = field(default=None, compare=False)   # the Verilog file synthesized: never an output
     systemverilog: bool = field(default=False, compare=False)  # Yosys read it so (a .sv, or a .v only that reads)
     clock_edge: str = "posedge"       # the edge every flip-flop captures on (the source's; one pulse either way)
+    # source register bits without a power-up value that synthesis made 0 or 1: (path, index, value), named
+    # as the latches' `registers` (verify starts them on Icarus)
+    constant_registers: tuple = field(default=(), compare=False)
 
     def gates(self) -> list[str]:
         """NOR gates in topological order (level by level, by gate number within a level); latch
@@ -170,7 +173,7 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
     outputs = {p: w for p, w in netlist.outputs.items() if p in ports}
     clock = netlist.clock if any(d["kind"] == "latch" for _, d in g.nodes(data=True)) else None
     return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed, netlist.races,
-                   netlist.source, netlist.systemverilog, netlist.clock_edge)
+                   netlist.source, netlist.systemverilog, netlist.clock_edge, netlist.constant_registers)
 
 
 # --------------------------------------------------------------------------- running Yosys
@@ -295,7 +298,9 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
         maps.MAP_POW,                               # `a ** b`, b not constant (synthesis/maps.py)
         "tribuf -formal",                           # tri-state buses -> multiplexers (docs/rtl.md) ...
         "delete n:$tribuf_conflict*",               # ... less its no-two-drivers checks: Icarus co-simulates
-        "synth -flatten" + (f" -top {identifiers.yosys(top)}" if top else ""),   # (memories: `memory` + `memory_map` in it)
+        # -nofsm: a state register keeps the source's encoding, so the network powers up in a state the source
+        # has and every register keeps its name (verify starts it on Icarus); docs/rtl.md, "State machines"
+        "synth -flatten -nofsm" + (f" -top {identifiers.yosys(top)}" if top else ""),   # (memories: `memory` + `memory_map` in it)
         "dffunmap",                                 # enables/resets -> plain flip-flops + logic
         "abc -g NOR", "opt_clean",
         "abc -g NOR", "opt_clean",                  # a 2nd pass trims e.g. comparator4 39 -> 36
@@ -548,7 +553,7 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
     names = _net_names(module)
     clock = _clock_port(g, top, module, driver, path)
     power_up = _initial_values(module)
-    registers = _source_registers(module, power_up)
+    registers, constant = _source_registers(module, power_up)
     for node, (pins, out_net) in cells.items():
         g.nodes[node]["net"] = names.get(out_net, f"${out_net}")
         sources = [_source(g, b, driver, top) for b in pins]
@@ -577,7 +582,8 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
             g.remove_node(n)
         inputs = {p: w for p, w in inputs.items() if p != clock}
     signed = frozenset(p for p, info in module["ports"].items() if info.get("signed") and p != clock)
-    return Netlist(top, g, inputs, outputs, clock, signed, clock_edge=clock_edge(module) if clock else "posedge")
+    return Netlist(top, g, inputs, outputs, clock, signed, clock_edge=clock_edge(module) if clock else "posedge",
+                   constant_registers=constant if clock else ())
 
 
 def _initial_values(module: dict) -> dict:
@@ -585,24 +591,30 @@ def _initial_values(module: dict) -> dict:
     initialisers and constant `initial` assignments); x bits and malformed entries are left out."""
     out = {}
     for info in module["netnames"].values():
-        attrs = info.get("attributes")          # a cached module is anyone's data: read only what is well formed
-        init = attrs.get("init") if isinstance(attrs, dict) else None
-        if isinstance(init, int) and not isinstance(init, bool):
-            init = format(init % (1 << len(info["bits"])), f"0{len(info['bits'])}b")
-        if not isinstance(init, str) or len(init) != len(info["bits"]):
-            continue
-        for bit, v in zip(info["bits"], reversed(init)):      # the attribute is written MSB first
+        init = _init_string(info)
+        for bit, v in zip(info["bits"], reversed(init or "")):      # the attribute is written MSB first
             if v in "01" and not isinstance(bit, str):
                 out[bit] = int(v)
     return out
 
 
-def _source_registers(module: dict, power_up: dict) -> dict:
-    """Net id -> the source register bits it carries that have no power-up value, each as (hierarchical path,
-    bit index or None): the path is the instance names (Yosys's `hdlname`) then the register's name in its
-    module, the index as declared (`reg [8:1] r`: r[1] is the first bit).  Several when synthesis merged equal
-    registers.  Read only from well-formed entries: a cached module is anyone's data."""
-    out = {}
+def _init_string(info: dict) -> str | None:
+    """A netname's `init` attribute as one character per bit, MSB first; None when it has none (or a malformed
+    one: a cached module is anyone's data)."""
+    attrs = info.get("attributes")
+    init = attrs.get("init") if isinstance(attrs, dict) else None
+    if isinstance(init, int) and not isinstance(init, bool):
+        init = format(init % (1 << len(info["bits"])), f"0{len(info['bits'])}b")
+    return init if isinstance(init, str) and len(init) == len(info["bits"]) else None
+
+
+def _source_registers(module: dict, power_up: dict) -> tuple[dict, tuple]:
+    """The source register bits that have no power-up value, each as (hierarchical path, bit index or None):
+    the path is the instance names (Yosys's `hdlname`) then the register's name in its module, the index as
+    declared (`reg [8:1] r`: r[1] is the first bit).  Returned: net id -> those it carries (several where
+    synthesis merged equal registers), and (path, index, value) for those synthesis made 0 or 1.  Read only
+    from well-formed entries: a cached module is anyone's data."""
+    out, constant = {}, []
     for name, info in module["netnames"].items():
         attrs = info.get("attributes")
         if not (isinstance(attrs, dict) and REGISTER_ATTR in attrs) or info.get("hide_name"):
@@ -611,13 +623,17 @@ def _source_registers(module: dict, power_up: dict) -> dict:
         path = tuple(hdl.split(" ")) if isinstance(hdl, str) and hdl.strip() else (name,)
         bits, offset = info["bits"], info.get("offset", 0)
         offset = offset if isinstance(offset, int) and not isinstance(offset, bool) else 0
+        init = _init_string(info) or "x" * len(bits)
         for i, bit in enumerate(bits):
-            if isinstance(bit, str) or bit in power_up:
+            if bit in power_up or init[-1 - i] in "01":
                 continue
             index = None if len(bits) == 1 and offset == 0 else \
                 offset + (len(bits) - 1 - i if info.get("upto") else i)
-            out.setdefault(bit, []).append((path, index))
-    return {bit: tuple(sorted(regs)) for bit, regs in out.items()}
+            if bit in ("0", "1"):
+                constant.append((path, index, int(bit)))
+            elif not isinstance(bit, str):      # an x bit is Yosys's don't care, read as it likes per use: no start
+                out.setdefault(bit, []).append((path, index))
+    return {bit: tuple(sorted(regs)) for bit, regs in out.items()}, tuple(sorted(constant, key=repr))
 
 
 def _connect_latch(g: nx.DiGraph, q: str, sources: list[str], init: int | None) -> None:

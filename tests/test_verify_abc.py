@@ -4,7 +4,6 @@ fallback to Yosys sat without berkeley-abc."""
 from __future__ import annotations
 
 import shutil
-from pathlib import Path
 
 import pytest
 

@@ -286,6 +286,9 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
         f'tee -o ast.txt {read} -dump_ast1 {identifiers.yosys_path(source)}',   # not -q: its errors must reach the log
         "write_rtlil read.il",                      # before hierarchy drops the modules the top leaves unused
         f"hierarchy -check -top {identifiers.yosys(top)}" if top else "hierarchy -check -auto-top",
+        # hierarchy has made each wired-OR/AND net (`wor`, `wand`) an OR/AND of its drivers; left on the wire,
+        # the mark would make synth's own `hierarchy` do it again after the mapping, unmapped
+        "setattr -unset wor -unset wand w:*",
         "proc -noopt",                              # `proc` less its opt_expr, which can fold away one of
         "write_rtlil drivers.il",                   # two conflicting drivers: the nets as written
         "opt_expr -keepdc",                         # the rest of `proc`

@@ -696,7 +696,7 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
 
 COERCED = re.compile(r"output port (\S+) is coerced to inout")   # iverilog: the source never drives it
 
-# A generate scope in a register's flattened name (`g[0].r`): written as it is, not escaped.
+# A generate scope in a register's flattened name (`g[0].r`), or a memory word (`mem[5]`): written as it is.
 _SCOPE = re.compile(r"[A-Za-z_][A-Za-z0-9_$]*(?:\[\d+\])?")
 
 
@@ -722,12 +722,12 @@ def _reg_names(path) -> list[str]:
     try:
         instances = [ids.verilog(p) for p in path[:-1]]
         parts = path[-1].split(".")
-        scoped = ".".join(parts) if len(parts) > 1 and all(
+        scoped = ".".join(parts) if all(
             _SCOPE.fullmatch(x) and x.split("[")[0] not in ids.VERILOG_KEYWORDS for x in parts) else None
         whole = ids.verilog(path[-1])
     except Mech2SpiceError:
         return []
-    return [".".join(instances + [w]) for w in ([scoped] if scoped else []) + [whole]]
+    return [".".join(instances + [w]) for w in dict.fromkeys(([scoped] if scoped else []) + [whole])]
 
 
 def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings: list | None = None,

@@ -620,7 +620,8 @@ def _source_registers(module: dict, power_up: dict) -> tuple[dict, tuple]:
     out, constant = {}, []
     for name, info in module["netnames"].items():
         attrs = info.get("attributes")
-        if not (isinstance(attrs, dict) and REGISTER_ATTR in attrs) or info.get("hide_name"):
+        if not isinstance(attrs, dict) or info.get("hide_name") or not (
+                REGISTER_ATTR in attrs or _memory_word(name, attrs)):
             continue
         hdl = attrs.get("hdlname")
         path = tuple(hdl.split(" ")) if isinstance(hdl, str) and hdl.strip() else (name,)
@@ -637,6 +638,13 @@ def _source_registers(module: dict, power_up: dict) -> tuple[dict, tuple]:
             elif not isinstance(bit, str):      # an x bit is Yosys's don't care, read as it likes per use: no start
                 out.setdefault(bit, []).append((path, index))
     return {bit: tuple(sorted(regs)) for bit, regs in out.items()}, tuple(sorted(constant, key=repr))
+
+
+def _memory_word(name: str, attrs: dict) -> bool:
+    """Whether a netname is a word of a source memory as Yosys's memory_map names it (`mem[5]`, `u.mem[5]`): a
+    name ending in an address, and no attribute at all, where every wire of the source has its `src`.  A name
+    taken wrongly for one is tried on Icarus and left out there (verify._bind_start)."""
+    return not attrs and re.fullmatch(r".+\[\d+\]", name) is not None
 
 
 def _connect_latch(g: nx.DiGraph, q: str, sources: list[str], init: int | None) -> None:

@@ -470,8 +470,9 @@ def _check_drivers(tmp: Path, path: Path) -> None:
         m = _UNDRIVEN.search(line)
         if m:
             net = m["net"].replace(" ", "")
-            raise Mech2SpiceError(f"{path}: in module {m['mod']}, '{net}' is used but nothing drives it "
-                                  "(it would silently read as 0): assign it a value")
+            raise Mech2SpiceError(f"{path}: in module {m['mod']}, '{net}' is used but nothing drives it: "
+                                  "Verilog reads it as z (a wire) or x (a reg or memory word never assigned), "
+                                  "which synthesis would fold into a constant no simulator shows; assign it a value")
 
 
 

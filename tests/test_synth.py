@@ -292,6 +292,9 @@ def test_combinational_loop_names_a_net():
     ("module c(input clk, input l, input a, input d, output reg q);\n"
      "  always @(posedge clk or posedge l) if (l) q <= a; else q <= d; endmodule", "asynchronous load"),
     ("module c(input en, input d, output reg q); always @* if (en) q = d; endmodule", "level-sensitive latch"),
+    ("module c(input clk, input a, input b, input d, output reg q);\n  always @(posedge clk or negedge a)\n"
+     "    if (!b) q <= 0; else q <= d;\nendmodule",                 # RTLLM's synchronizer: Yosys gave no line
+     r"line 2: the block's events are `posedge clk or negedge a`, but its first `if` tests none of a, clk"),
     ("module c(input clk, input d, output reg q, output reg p);\n  always @(negedge clk) q <= d;\n"
      "  always @(posedge clk) p <= q; endmodule",
      r"line 2: module c: this flip-flop captures on the falling clock edge and others on the rising one \(line 3\)"),

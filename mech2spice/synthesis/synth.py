@@ -220,6 +220,44 @@ def _yosys_task(msg: str, path: Path) -> str | None:
     return f"{path}, line {m['line']}: {what} (`{m['task']}`) in an `initial` block: {why}"
 
 
+_EVENT_LIST = re.compile(r"\balways\s*@\s*\(([^()]*)\)")
+_EDGE = re.compile(r"\b(posedge|negedge)\s+([A-Za-z_][\w$]*)")
+_FIRST_IF = re.compile(r"\s*(?:begin\b(?:\s*:\s*[A-Za-z_][\w$]*)?\s*)?if\s*\(")
+
+
+def _untested_edge(msg: str, path: Path, source: str) -> str | None:
+    """Yosys's "Multiple edge sensitive events found" (no line, no reason) as the block it means: one whose
+    event list has several edges and whose first `if` tests none of their signals, so no edge reads as an
+    asynchronous reset or set and each is a clock (RTLLM's synchronizer: `negedge arstn`, `if (!brstn)`)."""
+    if "Multiple edge sensitive events found" not in msg:
+        return None
+    text = _blanked(source)
+    for m in _EVENT_LIST.finditer(text):
+        edges = _EDGE.findall(m.group(1))
+        first_if = _FIRST_IF.match(text, m.end())
+        tested = set(re.findall(r"[A-Za-z_][\w$]*", _parenthesised(text, first_if.end() - 1))) if first_if else set()
+        if len(edges) < 2 or any(sig in tested for _, sig in edges):
+            continue
+        line = text.count("\n", 0, m.start()) + 1
+        listed = " or ".join(f"{e} {s}" for e, s in edges)
+        edge, sig = edges[-1]
+        return (f"{path}, line {line}: the block's events are `{listed}`, but its first `if` tests none of "
+                f"{', '.join(sorted({s for _, s in edges}))}: an edge the block does not test is a clock, so this is "
+                "a flip-flop on several clocks; an asynchronous reset or set is tested by its own signal "
+                f"(`if ({'!' if edge == 'negedge' else ''}{sig})` for `{edge} {sig}`)")
+    return None
+
+
+def _parenthesised(text: str, open_at: int) -> str:
+    """What the parenthesis at `open_at` encloses (to the end of the text if it is never closed)."""
+    depth = 0
+    for k in range(open_at, len(text)):
+        depth += {"(": 1, ")": -1}.get(text[k], 0)
+        if depth == 0:
+            return text[open_at + 1:k]
+    return text[open_at + 1:]
+
+
 # Switch-level primitives and the charge-storing net (IEEE 1364-2005 7.7-7.11, 4.6.4): reserved words, so a
 # match outside comments, strings and escaped names is one.
 _SWITCH_LEVEL = re.compile(r"(?<![\w$])(?:r?[npc]mos|r?tran(?:if[01])?|trireg|pullup|pulldown)\b")
@@ -425,7 +463,7 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
         _refuse_real(result, rel, path)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))
-            for known in (_non_constant_init(msg, path), _yosys_task(msg, path)):
+            for known in (_non_constant_init(msg, path), _yosys_task(msg, path), _untested_edge(msg, path, source)):
                 if known is not None:
                     raise Mech2SpiceError(known)
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg

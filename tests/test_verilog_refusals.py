@@ -298,3 +298,15 @@ def test_a_real_number_in_logic_is_refused_and_an_integral_one_agrees(tmp_path, 
                             "  assign y = a << W;\nendmodule\n")
     vectors = [{"a": a} for a in (0, 3, 15)]
     assert [logic(capsys, src, v) for v in vectors] == icarus(tmp_path, src, "r", {"a": 4}, {"y": 8}, vectors)
+
+
+@needs_icarus
+@pytest.mark.parametrize("real", ["2.0", "2.5", "-2.5", "2.5 * 3"])
+def test_a_real_given_to_a_sized_parameter_is_the_languages_conversion(tmp_path, capsys, real):
+    """`localparam [7:0] P = 2.0` was refused as "Yosys rounds it to 8" (the warning's width, `8'00000010`,
+    read as the value; a public-RTL pass): a sized parameter converts the real itself, rounding, on every
+    reader.  The network equals Icarus."""
+    src = verilog(tmp_path, f"module r(input [3:0] a, output [7:0] y);\n  localparam [7:0] P = {real};\n"
+                            "  assign y = a + P;\nendmodule\n")
+    vectors = [{"a": a} for a in (0, 3, 15)]
+    assert [logic(capsys, src, v) for v in vectors] == icarus(tmp_path, src, "r", {"a": 4}, {"y": 8}, vectors)

@@ -481,19 +481,23 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
 
 
 _REAL = re.compile(r"^(?P<file>\S+?):(?P<line>\d+): Warning: "
-                   r"converting real value (?P<real>\S+) to binary (?P<bin>-?\d+)", re.M)
+                   r"converting real value (?P<real>\S+) to binary (?P<bin>-?\d+)(?:'(?P<bits>[01]+))?", re.M)
 
 
 def _refuse_real(result, rel: str, path: Path) -> None:
     """Refuse a real number that became logic: Yosys rounds it (`a * 1.5` is `a * 2`, or its cell fails)
     where Icarus computes with the real value, so the network would answer differently."""
     for m in _REAL.finditer(result.stdout + "\n" + result.stderr):
-        exact = float(m["real"]) == int(m["bin"])
-        if exact and result.returncode == 0:                 # 8.0 is 8 to both readers
+        # width'bits (`8'00000010`): the real given to a sized parameter, which the language itself converts
+        # (rounded, as Icarus does), not a real in arithmetic
+        sized = m["bits"] is not None
+        value = int(m["bits"], 2) if sized else int(m["bin"])
+        exact = sized or float(m["real"]).is_integer()         # 8.0 is 8 to both readers
+        if exact and result.returncode == 0:
             continue
         where = f"{path}, line {m['line']}" if m["file"] == rel else str(path)
         why = "Yosys cannot build logic from it" if exact else \
-            f"Yosys rounds it to {m['bin']} while a simulator computes with {float(m['real']):g}"
+            f"Yosys rounds it to {value} while a simulator computes with {float(m['real']):g}"
         raise Mech2SpiceError(f"{where}: the real number {float(m['real']):g} in logic: {why}; the network "
                               "computes with bits: write an integer (or scale to fixed point)")
 

@@ -291,7 +291,8 @@ def test_combinational_loop_names_a_net():
      "mechanical clock"),
     ("module c(input clk, input l, input a, input d, output reg q);\n"
      "  always @(posedge clk or posedge l) if (l) q <= a; else q <= d; endmodule", "asynchronous load"),
-    ("module c(input en, input d, output reg q); always @* if (en) q = d; endmodule", "level-sensitive latch"),
+    ("module c(input en, input d, output reg q); always @* if (en) q = d; endmodule",
+     "level-sensitive latch on 'q'"),
     ("module c(input clk, input a, input b, input d, output reg q);\n  always @(posedge clk or negedge a)\n"
      "    if (!b) q <= 0; else q <= d;\nendmodule",                 # RTLLM's synchronizer: Yosys gave no line
      r"line 2: the block's events are `posedge clk or negedge a`, but its first `if` tests none of a, clk"),

@@ -836,7 +836,8 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path |
             mapped = map_cell(cell["type"], top)
         except Mech2SpiceError as err:          # say where: the latch, async reset, ... came from
             line = path and refusals.src_line(cell.get("attributes", {}).get("src"), path)
-            raise Mech2SpiceError(f"{path}, line {line}: {err}" if line else str(err)) from None
+            msg = _latch_named(str(err), cell, module)
+            raise Mech2SpiceError(f"{path}, line {line}: {msg}" if line else msg) from None
         if cell["type"] == _PRINT:
             _warn(f"{_where(cell, top, path)}: $display/$write left out: it prints while a simulator runs and "
                   "no output depends on it, so the network computes the same without it")
@@ -851,6 +852,16 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path |
         driver[out_net] = node
         cells[node] = ([cell["connections"][p][0] if p else "0" for p in pins], out_net)
     return cells
+
+
+def _latch_named(msg: str, cell: dict, module: dict) -> str:
+    """An inferred latch's refusal with the variable it holds (`next[1]`): a block assigning several says
+    which one a path leaves unassigned."""
+    q = cell.get("connections", {}).get("Q")
+    name = _net_names(module).get(q[0]) if isinstance(q, list) and q else None
+    if "level-sensitive latch (" not in msg or not name or name.startswith("$"):
+        return msg
+    return msg.replace("level-sensitive latch (", f"level-sensitive latch on '{name}' (", 1)
 
 
 def _warn(message: str) -> None:

@@ -63,8 +63,8 @@ class Netlist:
     source: str | None = field(default=None, compare=False)   # the Verilog file synthesized: never an output
     systemverilog: bool = field(default=False, compare=False)  # Yosys read it so (a .sv, or a .v only that reads)
     clock_edge: str = "posedge"       # the edge every flip-flop captures on (the source's; one pulse either way)
-    # source register bits without a power-up value that synthesis made 0 or 1: (path, index, value), named
-    # as the latches' `registers` (verify starts them on Icarus)
+    # source register bits without a power-up value that synthesis made 0 or 1, or left undriven (read as 0):
+    # (path, index, value), named as the latches' `registers` (verify starts them on Icarus)
     constant_registers: tuple = field(default=(), compare=False)
 
     def gates(self) -> list[str]:
@@ -600,6 +600,8 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
     clock = _clock_port(g, top, module, driver, path)
     power_up = _initial_values(module)
     registers, constant = _source_registers(module, power_up)
+    # a register bit left with no driver at all (its flip-flop dropped) reads as 0 here (`_source`)
+    constant += tuple((path, index, 0) for bit, regs in registers.items() if bit not in driver for path, index in regs)
     for node, (pins, out_net) in cells.items():
         g.nodes[node]["net"] = names.get(out_net, f"${out_net}")
         sources = [_source(g, b, driver, top) for b in pins]

@@ -700,11 +700,11 @@ COERCED = re.compile(r"output port (\S+) is coerced to inout")   # iverilog: the
 _SCOPE = re.compile(r"[A-Za-z_][A-Za-z0-9_$]*(?:\[\d+\])?")
 
 
-def power_up_start(netlist: Netlist) -> list[tuple[list[str], str]]:
+def power_up_start(netlist: Netlist) -> list[list[str]]:
     """Where the network starts the source's registers that have no power-up value (synthesis's `registers`
-    on each latch): one entry per register bit, its candidate testbench statements (the register's
-    hierarchical name read with generate scopes, then as one escaped name: Yosys joins both with a dot) and
-    the value it is set to: the latch's power-up, as the logic backend starts it, or the constant synthesis
+    on each latch): one entry per register bit, the testbench statements that may write it (the register's
+    hierarchical name read with generate scopes, then as one escaped name: Yosys joins both with a dot),
+    each setting it to the latch's power-up, as the logic backend starts it, or the constant synthesis
     made of the bit (`Netlist.constant_registers`).  A name Verilog cannot hold is left out."""
     start = [(path, index, netlist.graph.nodes[q].get("inverted", 0))
              for q in netlist.latches() for path, index in netlist.graph.nodes[q].get("registers", ())]
@@ -713,7 +713,7 @@ def power_up_start(netlist: Netlist) -> list[tuple[list[str], str]]:
         ways = _reg_names(path)
         if ways:
             bit = "" if index is None else f"[{int(index)}]"
-            out.append(([f"{PREFIX}dut.{w}{bit} = 1'b{int(value)};" for w in ways], f"1'b{int(value)}"))
+            out.append([f"{PREFIX}dut.{w}{bit} = 1'b{int(value)};" for w in ways])
     return out
 
 
@@ -797,8 +797,8 @@ def _bind_start(iverilog: str, gen: str, path: Path, tmp: str, start, bench) -> 
     without them)."""
     choice = [0] * len(start)
     for _ in range(3):
-        live = [k for k, c in enumerate(choice) if c < len(start[k][0])]
-        stmts = [start[k][0][choice[k]] for k in live]
+        live = [k for k, c in enumerate(choice) if c < len(start[k])]
+        stmts = [start[k][choice[k]] for k in live]
         text = bench(stmts)
         Path(tmp, "tb.v").write_text(text)
         cmd = [iverilog, gen, "-o", "sim.vvp", "-s", f"{PREFIX}tb", "-I", str(path.parent), "tb.v", str(path)]

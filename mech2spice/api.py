@@ -65,9 +65,9 @@ def simulate(design, inputs: dict[str, int] | None = None, *, backend: str = "rk
     steps = _steps(values, backend, cycles, stimulus)
     p = _params(params)
     nl = _netlist(design)
-    if nl.clock:
+    if nl.clocked:
         if steps is None:
-            raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give cycles=N or a stimulus")
+            raise Mech2SpiceError(f"{nl.top} is clocked by {nl.clock_text()}: give cycles=N or a stimulus")
         cycle_values = simulation.expand_steps(steps)
         timing = clocking.clock_timing(nl, p=p)
         return simulation.run_clocked_physical(nl, p, cycle_values, backend, timing, progress=progress,

@@ -115,8 +115,11 @@ def _register(netlist: Netlist, q: str, rename: dict[str, str] | None = None) ->
     from .synthesis.synth import latch_inputs
     d, f = latch_inputs(netlist.graph, q)
     inverted = netlist.graph.nodes[q].get("inverted", 0)
-    reg, clock = _expr(netlist, q, rename), ids.verilog((rename or {}).get(netlist.clock, netlist.clock))
+    reg = _expr(netlist, q, rename)
     nxt = f"~{_expr(netlist, d, rename)}" if inverted else _expr(netlist, d, rename)
+    if netlist.sampled:                         # a register of the mechanical clock itself: Yosys's $ff
+        return f"  always @($global_clock) {reg} <= {nxt};"
+    clock = ids.verilog((rename or {}).get(netlist.clock, netlist.clock))
     edge = netlist.clock_edge
     if f is None:
         return f"  always @({edge} {clock}) {reg} <= {nxt};"
@@ -132,8 +135,11 @@ def register_names(netlist: Netlist) -> list[tuple[str, str, str]]:
     """(latch, source wire, bit) for every latch whose Q net kept a user name: the source's register it
     implements (a memory word too: `mem[7][0]` is bit 0 of the word `mem[7]` that the proof's `memory`
     pass makes), to be exposed on both sides of the miter so that induction sees the hidden state.  A name
-    a Yosys script cannot hold (ids.yosys) is not matched."""
+    a Yosys script cannot hold (ids.yosys) is not matched; nor is any where clocks are sampled (a latch holds
+    a register's previous sample there, not the register)."""
     out = []
+    if netlist.sampled:
+        return out
     for q in netlist.latches():
         m = _NET.fullmatch(netlist.graph.nodes[q].get("net", "$"))
         if m and _yosys_writable(m.group(1)):
@@ -184,8 +190,10 @@ def _read_source(netlist: Netlist, rel: str) -> list[str]:
     read, top = _read_command(netlist), netlist.top
     # `memory`: the source's memories as flip-flops and multiplexers, as synthesis maps them (sat has no
     # model for $mem cells); its memory_dff folds a read register into the port only as synthesis does.
+    # sampled clocks: the source's flip-flops sampled as synthesis samples them, both sides on one global clock
+    sample = list(yosys.SAMPLE_CLOCKS) if netlist.sampled else []
     return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), "proc", yosys.DROP_PRINTS,
-            "flatten", maps.MAP_POW, "memory", "opt_clean", f"rename -top {PREFIX}src"]
+            "flatten", maps.MAP_POW, "memory", "opt_clean", *sample, f"rename -top {PREFIX}src"]
 
 
 def _hierarchy(top: str) -> str:
@@ -327,7 +335,7 @@ def replay(path, netlist: Netlist, cex: list[dict]) -> dict:
     from .synthesis.ports import pack_inputs
     order = input_bits(netlist)
     x = np.array([[pack_inputs(netlist, step["inputs"])[b] for b in order] for step in cex], bool)
-    clocked = netlist.clock is not None
+    clocked = netlist.clocked
     ref = icarus(path, netlist, x, clocked, first_read=True)
     net, sim = [], ClockedLogic(netlist) if clocked else None
     for step in cex:
@@ -519,8 +527,8 @@ def _abc_top(netlist: Netlist, names: dict[str, str], resets) -> str:
     ports = [f"input {_decl(w)}{names[p]}" for p, w in widths.items()] + ["output trigger"]
     lines = [f"module {PREFIX}top({', '.join(ports)});"]
     if level:
-        lines += [f"  reg {PREFIX}first = 1'b1;",
-                  f"  always @({netlist.clock_edge} {names[netlist.clock]}) {PREFIX}first <= 1'b0;"]
+        event = "$global_clock" if netlist.sampled else f"{netlist.clock_edge} {names[netlist.clock]}"
+        lines += [f"  reg {PREFIX}first = 1'b1;", f"  always @({event}) {PREFIX}first <= 1'b0;"]
     conns = [f".in_{names[p]}({PREFIX}first ? 1'b{level[p]} : {names[p]})" if p in level else
              f".in_{names[p]}({names[p]})" for p in widths]
     lines += [f"  {PREFIX}miter {PREFIX}m({', '.join(conns + ['.trigger(trigger)'])});", "endmodule", ""]
@@ -659,39 +667,57 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     `first_read`: also read once before the first edge (a counterexample's replay: its cycle 0).  Each result
     line starts with `tag` (a fresh random word per run), so a line the design itself prints (`$display`,
     kept on Icarus) is never read as a result.  `start`: statements run at time 0 (`power_up_start`'s).
-    Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has."""
+    Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has.
+    Sampled clocks (`Netlist.sampled`): the testbench has no clock of its own.  Every input starts at 0 (where
+    the network's samples power up), and each cycle's clocks are applied first, the rest a while later: a
+    flip-flop takes the data of the cycle before its edge, as the sampled network does."""
     v = ids.verilog
     ins, outs = [v(p) for p in netlist.inputs], [v(p) for p in netlist.outputs]
     width = max(1, sum(netlist.inputs.values()))
     mem, k = f"{PREFIX}mem", f"{PREFIX}k"
     lines = ["`timescale 1ns/1ns", f"module {PREFIX}tb;"]
     wait = f"#{SETTLE_NS}"
-    lines += [f"  reg {_decl(w)}{v(p)};" for p, w in netlist.inputs.items()]
+    zero = " = 0" if netlist.sampled else ""
+    lines += [f"  reg {_decl(w)}{v(p)}{zero};" for p, w in netlist.inputs.items()]
     lines += [f"  wire {_decl(w)}{v(p)};" for p, w in netlist.outputs.items()]
     conns = [f".{p}({p})" for p in ins + outs]
-    clock = v(netlist.clock) if clocked else None
+    clock = v(netlist.clock) if netlist.clock else None
     idle, edge = ("1", "0") if netlist.clock_edge == "negedge" else ("0", "1")    # the capturing edge: idle -> edge
-    if clocked:
+    if clock:
         lines.append(f"  reg {clock} = {idle};")
         conns.insert(0, f".{clock}({clock})")
     lines += [f"  {v(netlist.top)} {PREFIX}dut({', '.join(conns)});",
               f"  reg [{width - 1}:0] {mem} [0:{n - 1}];", f"  integer {k};"]
     def apply(index: str) -> str:                  # a function, not `%`: a name may hold a `%`
+        if netlist.sampled:
+            return _apply_sampled(netlist, f"{mem}[{index}]", wait)
         return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
     show = f'$display("{tag} ' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
     if start:
         lines += ["  initial begin"] + [f"    {st}" for st in start] + ["  end"]
     lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if clocked:
-        lines += [f"    {apply('0')}"] + ([f"    {wait} {show}"] if first_read else []) + [
-                  f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
-                  f"      {wait} {clock} = {edge};",
-                  f"      {wait} {apply(f'{k} + 1 < {n} ? {k} + 1 : {k}')}",
-                  f"      {wait} {show}", f"      {wait} {clock} = {idle};", "    end"]
+        lines += [f"    {wait} {apply('0')}" if netlist.sampled else f"    {apply('0')}"]
+        lines += ([f"    {wait} {show}"] if first_read else []) + [
+                  f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin"]
+        lines += [] if netlist.sampled else [f"      {wait} {clock} = {edge};"]
+        lines += [f"      {wait} {apply(f'{k} + 1 < {n} ? {k} + 1 : {k}')}", f"      {wait} {show}"]
+        lines += ["    end"] if netlist.sampled else [f"      {wait} {clock} = {idle};", "    end"]
     else:
         lines += [f"    for ({k} = 0; {k} < {n}; {k} = {k} + 1) begin",
                   f"      {apply(k)}", f"      {wait} {show}", "    end"]
     return "\n".join(lines + ["    $finish;", "  end", "endmodule", ""])
+
+
+def _apply_sampled(netlist: Netlist, row: str, wait: str) -> str:
+    """One cycle's inputs where clocks are sampled: the clock ports, then a while later the others (each
+    port its slice of the row, first port leftmost)."""
+    v, top, later = ids.verilog, sum(netlist.inputs.values()), []
+    first = []
+    for p, w in netlist.inputs.items():
+        (first if p in netlist.sampled else later).append(f"{v(p)} = {row}[{top - 1}:{top - w}];")
+        top -= w
+    return " ".join(first + [wait] + later) if later else " ".join(first)
 
 
 COERCED = re.compile(r"output port (\S+) is coerced to inout")   # iverilog: the source never drives it
@@ -1042,7 +1068,7 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches;
     `keep_trace`: also every compared value ("trace", `cosim_trace`)."""
     t0 = time.time()
-    clocked = netlist.clock is not None
+    clocked = netlist.clocked
     physical = _physical(backend)
     n = n or (16 if physical and not clocked else 8 if physical else 2000 if not clocked else 1000)
     rst = reset_ports(netlist, reset, path) if clocked and resets is None else (resets or [])
@@ -1115,10 +1141,10 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
     log = log or (lambda msg: None)
     nl = netlist if netlist is not None else synthesize(path, top=top)
     check_names(nl)
-    out = {"design": str(path), "top": nl.top, "clocked": nl.clock is not None,
+    out = {"design": str(path), "top": nl.top, "clocked": nl.clocked, "sampled_clocks": list(nl.sampled),
            "gates": len(nl.gates()), "latches": len(nl.latches()), "races": [r.as_dict() for r in nl.races]}
     with standard_source(path) as src:        # the text synthesis read (VIS dialect rewritten, docs/rtl.md)
-        resets = reset_ports(nl, reset, src) if nl.clock is not None else []
+        resets = reset_ports(nl, reset, src) if nl.clocked else []
         if equivalence_check:
             log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source ({proof_engine}, at "
                 f"most {proof_time:.0f} s)")

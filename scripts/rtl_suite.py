@@ -36,7 +36,7 @@ CLASSES = [
     ("tri-state driver", r"tri-state"),
     ("inout port", r"\binout\b"),
     ("both clock edges", r"falling clock edge and others on the rising one|negative-edge"),
-    ("several or derived clocks", r"clocked by several ports|clocked directly by one input port|clock .* also used as data"),
+    ("several or derived clocks", r"clocked by several ports|clocked directly by one input port|clock .* also used as data|clocked by logic"),
     ("level-sensitive latch", r"level-sensitive latch"),
     ("memory", r"\$mem|memory"),
     ("other sequential cell", r"sequential cell"),
@@ -160,13 +160,14 @@ def _measure(design: dict, path: Path, args) -> dict:
         return row
     out = synth["json"]
     row.update(accepted=True, gates=out["logic_gates"], nor_total=out["gates"], latches=out["latches"],
-               oscillators=out["oscillators"], clocked=bool(out.get("clock")))
+               oscillators=out["oscillators"], clocked=bool(out.get("clock") or out.get("sampled_clocks")),
+               sampled_clocks=out.get("sampled_clocks") or [])
     reset = _reset_flag(design)
     verify = _cli(["verify", "--json", "--backend", "logic", "--proof-time", str(args.proof_time), *top, *reset,
                    str(path)], args.timeout)
     row["verify"] = _verdict(verify)
     if out["gates"] <= args.envelope_gates:
-        sample = ["--cycles", str(args.envelope_cycles)] if out.get("clock") else ["--vectors", "4"]
+        sample = ["--cycles", str(args.envelope_cycles)] if row["clocked"] else ["--vectors", "4"]
         env = _cli(["verify", "--json", "--backend", "envelope", "--no-equivalence", *sample, *top, *reset,
                     str(path)], args.timeout)
         row["envelope"] = _verdict(env)
@@ -288,6 +289,7 @@ def _summary(rows: list[dict]) -> dict:
             "verify_failure_classes": dict(sorted(failing.items(), key=lambda kv: -len(kv[1]))),
             "verify_pass": sum(r["verify"]["verdict"] == "pass" for r in accepted),
             "single_clock": len(single),
+            "sampled_clocks": sorted(r["name"] for r in accepted if r.get("sampled_clocks")),
             "single_clock_verify_pass": sum(r["accepted"] and r["verify"]["verdict"] == "pass" for r in single),
             "envelope_pass": sum(r["envelope"]["verdict"] == "pass" for r in accepted),
             "envelope_run": sum(r["envelope"]["verdict"] != "skipped" for r in accepted),
@@ -337,7 +339,9 @@ def _markdown(rows: list[dict], s: dict, meta: dict) -> str:
            f"- designs: {s['designs']}; accepted by `synth`: **{s['accepted']}**; refused: {s['refused']}",
            f"- `verify --backend logic` pass: **{s['verify_pass']}** of {s['accepted']} accepted",
            f"- single-clock designs passing verify: **{s['single_clock_verify_pass']} of {s['single_clock']}**",
-           f"- envelope samples passing: {s['envelope_pass']} of {s['envelope_run']} run", "",
+           f"- envelope samples passing: {s['envelope_pass']} of {s['envelope_run']} run",
+           f"- clocks sampled (several clocks, both edges, a clock read as data; docs/rtl.md): "
+           f"{len(s.get('sampled_clocks', []))} ({', '.join(s.get('sampled_clocks', [])) or 'none'})", "",
            "Refusals by class (designs blocked):", "", "| class | designs | names |", "|---|---|---|"]
     for name, names in s["refusal_classes"].items():
         out.append(f"| {_cell(name)} | {len(names)} | {', '.join(names)} |")
@@ -355,7 +359,8 @@ def _markdown(rows: list[dict], s: dict, meta: dict) -> str:
         v, e = r["verify"], r["envelope"]
         ver = v["verdict"] + (f" ({v['equivalence']})" if v.get("equivalence") else "")
         resets = f"reset {', '.join(v['resets'])}" if v.get("resets") else ""
-        detail = "; ".join(x for x in (v.get("detail"), e.get("detail"), resets) if x)
+        sampled = f"clocks sampled: {', '.join(r['sampled_clocks'])}" if r.get("sampled_clocks") else ""
+        detail = "; ".join(x for x in (sampled, v.get("detail"), e.get("detail"), resets) if x)
         out.append(f"| {r['name']} | {_cell(r['kind'])} | accepted | {r['gates']} | {r['latches']} | "
                    f"{r['oscillators']} | {_cell(ver)} | {_cell(e['verdict'])} | {_cell(detail)} |")
     out += ["", "## Sources", "", "| design | repository @ commit: paths | licence |", "|---|---|---|"]

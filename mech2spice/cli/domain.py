@@ -77,7 +77,7 @@ def _evaluator(args, p):
     from ..experiments.montecarlo import all_vectors
     from ..synthesis.synth import synthesize
     nl = synthesize(args.design, top=args.top)
-    if nl.clock:
+    if nl.clocked:
         raise Mech2SpiceError(f"{nl.top} is clocked: domain maps the gate, combinational designs and the processor")
     return domain.DesignDomain(nl, p, all_vectors(nl), backend, **spread)
 

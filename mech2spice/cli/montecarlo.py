@@ -110,7 +110,7 @@ def job_of(args) -> dict:
     from ..experiments import montecarlo as mc
     path = mc.design_path(args.design).resolve()
     nl = synthesize(path, max_fanout=network.MAX_FANOUT)
-    if nl.clock:
+    if nl.clocked:
         return _clocked_job(args, nl, path)
     job = {"design": str(path), "design_sha256": mc.netlist_sha256(nl), "params": args.params,
            "vectors": vectors_of(args, nl), "backend": args.backend,

@@ -139,7 +139,8 @@ def cmd_synth(args) -> int:
     nl = _netlist(args)
     model = network.build(nl, load_params(args.params))
     out = {"top": nl.top, "gates": len(model.design.gates), "latches": len(nl.latches()), **model.counts(),
-           "inputs": nl.inputs, "outputs": nl.outputs, "clock": nl.clock, "logic_gates": len(nl.gates()),
+           "inputs": nl.inputs, "outputs": nl.outputs, "clock": nl.clock, "sampled_clocks": list(nl.sampled),
+           "logic_gates": len(nl.gates()),
            "logic_depth": network.logic_depth(nl),
            "signed": [p for p in {**nl.inputs, **nl.outputs} if p in nl.signed],     # two's complement ports
            "races": [r.as_dict() for r in nl.races]}       # warned on stderr too (synthesis/races.py)
@@ -147,7 +148,10 @@ def cmd_synth(args) -> int:
         _print_json(out)
     else:
         print(f"{out['top']}: {out['gates']} NOR gates ({out['logic_gates']} logic + {out['latches']} latches), "
-              f"logic depth {out['logic_depth']}" + (f", clock '{nl.clock}'" if nl.clock else ""))
+              f"logic depth {out['logic_depth']}" + (f", clock {nl.clock_text()}" if nl.clocked else ""))
+        if nl.sampled:
+            print("  clocks sampled: each is an input given every cycle of the mechanical clock, a flip-flop "
+                  "capturing where its clock's samples change (docs/rtl.md, \"Sampled clocks\")")
         print(f"  {out['oscillators']} oscillators, {out['linear_springs']} linear springs, "
               f"{out['nonlinear_springs']} nonlinear springs, {out['dashpots']} dashpots")
         print(f"  inputs  {out['inputs']}\n  outputs {out['outputs']}"
@@ -166,7 +170,7 @@ def _clocked_steps(args, nl) -> list[dict]:
     if args.stimulus:
         return inputs.stimulus_steps(args.stimulus, _parse_sets(args.set), engine_class(args.backend))
     if not args.cycles:
-        raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N or --stimulus FILE.json")
+        raise Mech2SpiceError(f"{nl.top} is clocked by {nl.clock_text()}: give --cycles N or --stimulus FILE.json")
     inputs.check_cycles(args.cycles, engine_class(args.backend))
     return [{"set": _parse_sets(args.set), "cycles": args.cycles}]
 
@@ -176,7 +180,7 @@ def cmd_simulate_clocked(args, nl) -> int:
     from .. import simulation
     from ..physics.params import load_params
     if args.clock and args.clock != nl.clock:
-        raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by '{nl.clock}'")
+        raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by {nl.clock_text()}")
     if args.vcd is not None:
         from ..waveform import is_vcd
         inputs.check_output_file(args.vcd, {"the design": args.design, "the --stimulus file": args.stimulus,
@@ -225,7 +229,7 @@ def cmd_simulate(args) -> int:
     from .. import simulation
     from ..physics.params import load_params
     nl = _netlist(args)
-    if nl.clock:
+    if nl.clocked:
         return cmd_simulate_clocked(args, nl)
     if args.cycles or args.stimulus or args.clock or args.vcd:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --clock/--cycles/--stimulus/--vcd apply to clocked "

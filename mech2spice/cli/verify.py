@@ -91,13 +91,13 @@ def cmd_verify(args) -> int:
         raise Mech2SpiceError(f"cannot read Verilog file {args.design}: no such file")
     nl = synthesize(args.design, top=args.top)
     check_names(nl)                                # every name the generated Verilog holds, before the work
-    if nl.clock is None and args.cycles:
+    if not nl.clocked and args.cycles:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --cycles applies to clocked designs (use --vectors)")
-    if nl.clock is not None and (args.vectors or args.exhaustive):
-        raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': give --cycles N, not --vectors/--exhaustive")
-    if nl.clock is None and args.reset:
+    if nl.clocked and (args.vectors or args.exhaustive):
+        raise Mech2SpiceError(f"{nl.top} is clocked by {nl.clock_text()}: give --cycles N, not --vectors/--exhaustive")
+    if not nl.clocked and args.reset:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --reset applies to clocked designs")
-    if nl.clock is not None and args.reset:
+    if nl.clocked and args.reset:
         if "none" in args.reset and len(args.reset) > 1:
             raise Mech2SpiceError("--reset none: give it alone (no reset), not beside other --reset ports")
         reset_ports(nl, args.reset)                # checked before the work starts

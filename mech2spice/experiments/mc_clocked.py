@@ -51,7 +51,7 @@ class ClockedMC:
 
     def __init__(self, netlist, p, steps: list[dict], backend: str, spec: SpreadSpec, seed: int,
                  options=None, noise: float = 0.0):
-        if not netlist.clock:
+        if not netlist.clocked:
             raise Mech2SpiceError(f"{netlist.top} is not clocked")
         if backend not in CLOCKED_BACKENDS:
             raise Mech2SpiceError(f"clocked montecarlo runs on {', '.join(CLOCKED_BACKENDS)}, not '{backend}'")

@@ -179,7 +179,7 @@ class DesignMC:
     def __init__(self, netlist: Netlist, p: GateParams, vectors: list[dict[str, int]], backend: str,
                  spec: SpreadSpec, seed: int, periods: int | None = None, options=None, union: int | None = None,
                  noise: float = 0.0):
-        if netlist.clock:
+        if netlist.clocked:
             raise Mech2SpiceError(f"{netlist.top} is clocked: montecarlo runs combinational designs")
         self.netlist, self.p, self.vectors, self.spec, self.seed = netlist, p, vectors, spec, seed
         self.backend, self.options, self.noise = backend, options, check_temperature(noise)
@@ -343,6 +343,7 @@ def netlist_sha256(netlist) -> str:
     g = netlist.graph
     nodes = [(n, {k: v for k, v in a.items() if k != "cell"}) for n, a in g.nodes(data=True)]   # not src lines
     data = [netlist.top, netlist.inputs, netlist.outputs, netlist.clock, sorted(netlist.signed), nodes,
+            *([list(netlist.sampled)] if netlist.sampled else []),      # the same hash as before where none
             [(u, v, a) for u, v, a in g.edges(data=True)]]
     return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()
 

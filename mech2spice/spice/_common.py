@@ -146,8 +146,8 @@ def check_samples(model: MechModel, t: np.ndarray, values: np.ndarray, names: li
 def combinational_only(nl) -> None:
     """Refuse a clocked design for a one-shot netlist: it holds one input vector and no clock edges, so its
     flip-flops would only read their power-up values."""
-    if nl.clock:
-        raise Mech2SpiceError(f"{nl.top} is clocked by '{nl.clock}': a netlist of one input vector has no clock "
+    if nl.clocked:
+        raise Mech2SpiceError(f"{nl.top} is clocked by {nl.clock_text()}: a netlist of one input vector has no clock "
                               "edges; run it cycle by cycle with `simulate --backend ngspice --cycles N` "
                               "(or --stimulus FILE.json)")
 

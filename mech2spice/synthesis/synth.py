@@ -63,9 +63,24 @@ class Netlist:
     source: str | None = field(default=None, compare=False)   # the Verilog file synthesized: never an output
     systemverilog: bool = field(default=False, compare=False)  # Yosys read it so (a .sv, or a .v only that reads)
     clock_edge: str = "posedge"       # the edge every flip-flop captures on (the source's; one pulse either way)
+    # the source's clock ports where its flip-flops use several of them or both edges: each is then an input
+    # sampled once a cycle of the mechanical clock, its edges found between samples (`_flow`, docs/rtl.md,
+    # "Sampled clocks"); `clock` is None and every latch captures on the one pulse
+    sampled: tuple = ()
     # source register bits without a power-up value that synthesis made 0 or 1, or left undriven (read as 0):
     # (path, index, value), named as the latches' `registers` (verify starts them on Icarus)
     constant_registers: tuple = field(default=(), compare=False)
+
+    @property
+    def clocked(self) -> bool:
+        """Whether the network holds state: a clock port, or sampled clocks."""
+        return self.clock is not None or bool(self.sampled)
+
+    def clock_text(self) -> str:
+        """The clock as a message names it: `'clk'`, or `'wclk', 'rclk' (sampled inputs)`."""
+        if self.sampled:
+            return ", ".join(f"'{c}'" for c in self.sampled) + " (sampled inputs)"
+        return f"'{self.clock}'"
 
     def gates(self) -> list[str]:
         """NOR gates in topological order (level by level, by gate number within a level); latch
@@ -137,9 +152,13 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
         except Mech2SpiceError as err:
             raise Mech2SpiceError(f"invalid top module name: {err}") from None
     name, module, found, released, sv = _run_yosys(path, top, source)
+    try:
+        netlist = build_netlist(name, module, path)
+    except _Sampled as need:            # several clocks, both edges, a clock read as data: sample them
+        name, module, found, released, sv = _run_yosys(path, top, source, sampled=True)
+        netlist = build_netlist(name, module, path, sampled=need.clocks)
     for race in found:                  # warned, not refused: the network is Yosys's (flip-flop) reading
         _warn(races.warning(race, path))
-    netlist = build_netlist(name, module, path)
     for port in released:               # warned: where Verilog reads z the network reads the bus's multiplexer
         _warn(f"{path}: output {port} is driven only through tri-state drivers: where none is enabled Verilog "
               "reads z and the network a 0 or 1 (the bus as a multiplexer); `verify` names such input vectors")
@@ -171,9 +190,10 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
     g.remove_nodes_from([n for n, d in g.nodes(data=True) if d["kind"] == "output" and d["port"] not in ports])
     remove_dead_gates(g)
     outputs = {p: w for p, w in netlist.outputs.items() if p in ports}
-    clock = netlist.clock if any(d["kind"] == "latch" for _, d in g.nodes(data=True)) else None
-    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, clock, netlist.signed, netlist.races,
-                   netlist.source, netlist.systemverilog, netlist.clock_edge, netlist.constant_registers)
+    held = any(d["kind"] == "latch" for _, d in g.nodes(data=True))
+    return Netlist(netlist.top, _renumbered(g), dict(netlist.inputs), outputs, netlist.clock if held else None,
+                   netlist.signed, netlist.races, netlist.source, netlist.systemverilog, netlist.clock_edge,
+                   netlist.constant_registers, netlist.sampled if held else ())
 
 
 # --------------------------------------------------------------------------- running Yosys
@@ -313,10 +333,13 @@ def _non_constant_init(msg: str, path: Path) -> str | None:
 REGISTER_ATTR = "m2s_register"
 
 
-def _flow(source: str, top: str | None, include: str | None = None, sv: bool | None = None) -> str:
+
+def _flow(source: str, top: str | None, include: str | None = None, sv: bool | None = None,
+          sampled: bool = False) -> str:
     """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python).
     `include`: a folder to search for `include files (the original's, when Yosys reads a rewritten copy);
-    `sv`: read as SystemVerilog (default: a `.sv` file)."""
+    `sv`: read as SystemVerilog (default: a `.sv` file); `sampled`: every flip-flop sampled once a mechanical
+    cycle (`yosys.SAMPLE_CLOCKS`)."""
     read = "read_verilog -sv" if (source.endswith(".sv") if sv is None else sv) else "read_verilog"
     if include is not None and re.fullmatch(r"[\w./+-]+", include):     # Yosys takes -I's folder unquoted
         read += f" -I {include}"
@@ -339,6 +362,7 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
         maps.MAP_POW,                               # `a ** b`, b not constant (synthesis/maps.py)
         "tribuf -formal",                           # tri-state buses -> multiplexers (docs/rtl.md) ...
         "delete n:$tribuf_conflict*",               # ... less its no-two-drivers checks: Icarus co-simulates
+        *(("memory", "opt_clean", *yosys.SAMPLE_CLOCKS) if sampled else ()),   # sampled clocks
         # -nofsm: a state register keeps the source's encoding, so the network powers up in a state the source
         # has and every register keeps its name (verify starts it on Icarus); docs/rtl.md, "State machines"
         "synth -flatten -nofsm" + (f" -top {identifiers.yosys(top)}" if top else ""),   # (memories: `memory` + `memory_map` in it)
@@ -348,26 +372,26 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
         "write_json netlist.json", ""])
 
 
-def _run_yosys(path: Path, top: str | None, source: str) -> tuple[str, dict, list, list, bool]:
+def _run_yosys(path: Path, top: str | None, source: str, sampled: bool = False) -> tuple[str, dict, list, list, bool]:
     """(top module name, its Yosys JSON module, the source's races, the top's output ports a tri-state driver
     may release, whether it was read as SystemVerilog): from the cache when this source went through this flow
     and this Yosys before, else from a run of the flow in a scratch folder (`_yosys_run`)."""
-    key = _cache_key(source, top, path.suffix == ".sv", path.name)
+    key = _cache_key(source, top, path.suffix == ".sv", path.name, sampled)
     cached = _cache_read(key)
     if cached is not None:
         return cached
-    result = _yosys_run(path, top, source)
+    result = _yosys_run(path, top, source, sampled)
     _cache_write(key, *result)
     return result
 
 
-def _cache_key(source: str, top: str | None, sv: bool = False, name: str = "") -> str | None:
+def _cache_key(source: str, top: str | None, sv: bool = False, name: str = "", sampled: bool = False) -> str | None:
     """A content key of (flow, source, its file name, Yosys build, refusal checks); None for a source with
     `include (other files take part).  The name: Yosys's src attributes carry it, and messages give a cell's
     line only where that name is the design's (refusals.src_line)."""
     if "`include" in source:
         return None
-    text = json.dumps([_flow("SOURCE", top, sv=sv), maps.POW_MAP, source, name, yosys.identity(),
+    text = json.dumps([_flow("SOURCE", top, sv=sv, sampled=sampled), maps.POW_MAP, source, name, yosys.identity(),
                        refusals.VERSION])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
@@ -440,7 +464,7 @@ def _cache_write(key: str | None, name: str, module: dict, found: list, released
         pass
 
 
-def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, list, list, bool]:
+def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) -> tuple[str, dict, list, list, bool]:
     """Run the flow in a scratch folder; return what `_run_yosys` does.  `source` is the
     text to read: the file's own, or its standard rewriting (dialect.py), which then is read from the folder."""
     with tempfile.TemporaryDirectory(prefix="mech2spice_yosys_") as tmp:
@@ -454,11 +478,11 @@ def _yosys_run(path: Path, top: str | None, source: str) -> tuple[str, dict, lis
             include = Path(os.path.relpath(path.resolve().parent, Path(tmp).resolve())).as_posix()
         sv = path.suffix == ".sv"
         maps.write_maps(tmp)
-        result = yosys.run_script(_flow(rel, top, include, sv=sv), tmp)
+        result = yosys.run_script(_flow(rel, top, include, sv=sv, sampled=sampled), tmp)
         if result.returncode != 0 and not sv and "syntax error" in yosys.error_line(result):
             # a `.v` written with SystemVerilog constructs (`for (int i = 0; ...; i++)`), as Icarus reads it
             # in verify (verify.generations): the first reading's error stands if this one fails too
-            retry = yosys.run_script(_flow(rel, top, include, sv=True), tmp)
+            retry = yosys.run_script(_flow(rel, top, include, sv=True, sampled=sampled), tmp)
             result, sv = (retry, True) if retry.returncode == 0 else (result, False)
         _refuse_real(result, rel, path)
         if result.returncode != 0:
@@ -540,6 +564,7 @@ _CELLS = {
     "$_NOT_": ("nor", ("A", None), "Y"),
     "$_DFF_P_": ("latch", ("D",), "Q"),
     "$_DFF_N_": ("latch", ("D",), "Q"),         # every flip-flop on the falling edge: the same one pulse
+    "$_FF_": ("latch", ("D",), "Q"),            # a register of the mechanical clock itself (sampled clocks)
 }
 # Flip-flops (on the rising or falling edge) with an asynchronous reset (value 0) or set (value 1), active
 # high (P) or low (N).
@@ -588,8 +613,9 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
                           "(only logic, posedge flip-flops and their resets reach the mechanical network)")
 
 
-def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
-    """Build the raw (pre-hygiene) graph from a Yosys JSON module (`path`: its Verilog, for messages)."""
+def build_netlist(top: str, module: dict, path: Path | None = None, sampled: tuple = ()) -> Netlist:
+    """Build the raw (pre-hygiene) graph from a Yosys JSON module (`path`: its Verilog, for messages;
+    `sampled`: the source's clock ports, where the flow sampled them)."""
     g = nx.DiGraph()
     _refuse_inout(top, module, path)
     inputs, outputs, driver = _add_inputs(g, top, module)
@@ -606,9 +632,14 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
         g.nodes[node]["net"] = names.get(out_net, f"${out_net}")
         sources = [_source(g, b, driver, top) for b in pins]
         if g.nodes[node]["kind"] == "latch":
-            _connect_latch(g, node, sources, power_up.get(out_net))
-            if out_net in registers:
-                g.nodes[node]["registers"] = registers[out_net]
+            try:
+                _connect_latch(g, node, sources, power_up.get(out_net))
+            except _Sampled as need:
+                raise _Sampled(str(need), (clock,)) from None
+            # sampled: a register's wire is logic of the cycle's samples, and a latch fed from it holds it
+            held = registers.get(out_net) or (registers.get(pins[0]) if sampled else None)
+            if held:
+                g.nodes[node]["registers"] = held
         else:
             _connect_gate(g, node, sources)
     for port, bits in _ports(module, "output"):
@@ -624,14 +655,13 @@ def build_netlist(top: str, module: dict, path: Path | None = None) -> Netlist:
             g.add_edge(_source(g, bit, driver, top), node)
     if clock is not None:
         for n in [f"{clock}[0]"]:
-            if g.out_degree(n):
-                raise Mech2SpiceError(f"module {top}: the clock '{clock}' is also used as data; "
-                                      "the mechanical clock only drives latches")
+            if g.out_degree(n):             # its level matters between edges: sample it as an input
+                raise _Sampled(f"module {top}: the clock '{clock}' is also used as data", (clock,))
             g.remove_node(n)
         inputs = {p: w for p, w in inputs.items() if p != clock}
     signed = frozenset(p for p, info in module["ports"].items() if info.get("signed") and p != clock)
     return Netlist(top, g, inputs, outputs, clock, signed, clock_edge=clock_edge(module) if clock else "posedge",
-                   constant_registers=constant if clock else ())
+                   constant_registers=constant if clock or sampled else (), sampled=tuple(sampled))
 
 
 def _initial_values(module: dict) -> dict:
@@ -696,18 +726,14 @@ def _connect_latch(g: nx.DiGraph, q: str, sources: list[str], init: int | None) 
     """Wire a latch: D, and for an asynchronous reset/set the forcing input F (active high) with the D-side
     gates that keep D low while F holds (docs/rtl.md).  The loop powers up storing 0 and F can only force it
     to 0 (a NOR input forces its output low, never high), so a register that powers up at 1 or is set to 1
-    stores its complement (`inverted`), and one that powers up at 1 but resets to 0 has no latch."""
+    stores its complement (`inverted`).  One that powers up at 1 but resets to 0 (or at 0 and is set) raises
+    `_Sampled`: sampled, its reset is logic before a plain latch that powers up at 1."""
     cell, where = g.nodes[q].pop("cell")
     forced = _FORCED.match(cell)
     inverted = int(forced["value"]) if forced else (init or 0)
     net = g.nodes[q]["net"]
-    if forced and init is not None and init != inverted:
-        what = "set to 1" if inverted else "reset to 0"
-        raise Mech2SpiceError(
-            f"{where}: register '{net}' powers up at {init} but is asynchronously {what}: the mechanical latch "
-            "powers up with its loop storing 0 and its forcing input can only drive the loop to 0, so one latch "
-            f"holds either value {1 - inverted} at power-up or a forcing to {inverted}, never both; drop the "
-            "initial value or make the reset synchronous")
+    if forced and init is not None and init != inverted:     # the loop powers up at 0 and is forced to 0:
+        raise _Sampled(f"{where}: register '{net}' powers up at {init} and is forced to {inverted}", ())
     if inverted:
         g.nodes[q]["inverted"] = 1
     d = sources[0]
@@ -735,36 +761,37 @@ def _not(g: nx.DiGraph, a: str) -> str:
     return made[a]
 
 
+class _Sampled(Mech2SpiceError):
+    """A design one pulse per cycle cannot clock as written, that sampling its clock ports can (`clocks`):
+    several of them, both edges, or a clock also read as data.  `synthesize` synthesizes it again, sampled."""
+
+    def __init__(self, message: str, clocks: tuple):
+        super().__init__(message)
+        self.clocks = clocks
+
+
 def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path | None = None) -> str | None:
-    """The single 1-bit input port clocking every flip-flop (None for combinational designs)."""
+    """The single 1-bit input port clocking every flip-flop on one edge (None for combinational designs).
+    Raises `_Sampled` where input ports clock them otherwise (several ports, both edges, a bit of a bus)."""
     flops = [c for c in module["cells"].values() if c["type"] in _EDGE_FLOPS or _FORCED.match(c["type"])]
-    clocks = {c["connections"]["C"][0] for c in flops}
-    if not clocks:
+    if not flops:
         return None
-    _one_edge(flops, top, path)
-    srcs = {driver.get(c) for c in clocks}
-    ports = {g.nodes[s]["port"] for s in srcs if s is not None and g.nodes[s]["kind"] == "input"}
-    if len(ports) > 1 and len(ports) == len(srcs):
-        first = {}                              # port -> where its first flip-flop is written
-        for c in flops:
-            node = driver.get(c["connections"]["C"][0])
-            first.setdefault(g.nodes[node]["port"], _where(c, top, path))
-        at = {p: w.rsplit(", ", 1)[-1] for p, w in first.items() if ", line " in w}
-        lines = ", ".join(f"{p} at {at[p]}" if p in at else p for p in sorted(ports))
-        lead = next((first[p] + ": " for p in sorted(ports, reverse=True) if p in at), "")
+    source = {id(c): driver.get(c["connections"]["C"][0]) for c in flops}
+    derived = next((c for c in flops if source[id(c)] is None or g.nodes[source[id(c)]]["kind"] != "input"), None)
+    if derived is not None:
+        where = _where(derived, top, path)
         raise Mech2SpiceError(
-            f"{lead}module {top}: the flip-flops are clocked by several ports ({lines}): the "
-            "mechanical clock is one pulsed drive whose pulse and pause come from the latch and logic delays, "
-            "and the source does not say how the edges of different clocks relate; data crossing between "
-            "them is captured at whatever phase it has, which for a NOR latch means while it switches, the "
-            "marginal state the stability verdict rejects (docs/rtl.md, several clocks)")
-    if len(srcs) != 1 or None in srcs or g.nodes[next(iter(srcs))]["kind"] != "input":
-        raise Mech2SpiceError(f"module {top}: every flip-flop must be clocked directly by one input port "
-                              "(no gated or derived clocks)")
-    node = next(iter(srcs))
-    port = g.nodes[node]["port"]
-    if g.nodes[node]["bit"] != 0 or sum(1 for n in g if g.nodes[n].get("port") == port) != 1:
-        raise Mech2SpiceError(f"module {top}: the clock port '{port}' must be 1 bit wide")
+            f"{where + ': ' if ', line ' in where else ''}module {top}: this flip-flop is clocked by logic, not "
+            "by an input port: a clock computed in the circuit changes in the same instant as the registers "
+            "clocked with it, and a flip-flop on it reading them takes their new values on a simulator, their "
+            "old ones wherever that clock lags: the source does not say which; clock it by an input port (a "
+            "divided clock as an enable on the fast one)")
+    nodes = set(source.values())
+    ports = [p for p in module["ports"] if p in {g.nodes[n]["port"] for n in nodes}]
+    (node, *_), port = sorted(nodes), ports[0]
+    wide = g.nodes[node]["bit"] != 0 or sum(1 for n in g if g.nodes[n].get("port") == port) != 1
+    if len(ports) > 1 or len({c["type"][6] for c in flops}) > 1 or wide:    # $_DFF_P... / $_DFF_N...
+        raise _Sampled(f"module {top}: several clocks, both edges or a clock in a bus", tuple(ports))
     return port
 
 
@@ -772,26 +799,10 @@ _EDGE_FLOPS = ("$_DFF_P_", "$_DFF_N_")
 
 
 def clock_edge(module: dict) -> str:
-    """'negedge' when the flip-flops capture on the clock's falling edge (all of them: `_one_edge`), else
+    """'negedge' when the flip-flops capture on the clock's falling edge (all of them: `_clock_port`), else
     'posedge'.  Either is the one pulse per cycle of the mechanical clock; only the testbench and the
     written-back network (verify) read it."""
     return "negedge" if any(c["type"].startswith("$_DFF_N") for c in module["cells"].values()) else "posedge"
-
-
-def _one_edge(flops: list[dict], top: str, path: Path | None) -> None:
-    """Refuse flip-flops on both edges of the clock, naming where one of each is written."""
-    first = {}
-    for c in flops:
-        first.setdefault(c["type"][6], _where(c, top, path))      # $_DFF_P... / $_DFF_N...
-    if len(first) < 2:
-        return
-    lead = f"{first['N']}: " if ", line " in first["N"] else ""
-    rising = f" ({first['P'].rsplit(', ', 1)[-1]})" if ", line " in first["P"] else ""
-    raise Mech2SpiceError(
-        f"{lead}module {top}: this flip-flop captures on the falling clock edge and others on the "
-        f"rising one{rising}: the mechanical clock is one pulse per cycle and every "
-        "latch captures during it; two edges are two events per cycle, with data handed between them within "
-        "the cycle, which the drive does not have; clock every register on one edge (docs/rtl.md)")
 
 
 def _ports(module: dict, direction: str):

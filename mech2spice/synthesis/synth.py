@@ -29,6 +29,7 @@ don't-cares; a top-level inout is refused (docs/rtl.md).
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
 import re
@@ -38,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import networkx as nx
+import numpy as np
 
 from .. import identifiers
 from ..errors import Mech2SpiceError
@@ -565,6 +567,10 @@ _CELLS = {
     "$_DFF_P_": ("latch", ("D",), "Q"),
     "$_DFF_N_": ("latch", ("D",), "Q"),         # every flip-flop on the falling edge: the same one pulse
     "$_FF_": ("latch", ("D",), "Q"),            # a register of the mechanical clock itself (sampled clocks)
+    # a level-sensitive latch: a multiplexer before a latch of the clock (`_connect_dlatch`), where its enable
+    # changes only at clock edges (`_check_dlatches`)
+    "$_DLATCH_P_": ("dlatch", ("E", "D"), "Q"),
+    "$_DLATCH_N_": ("dlatch", ("E", "D"), "Q"),
 }
 # Flip-flops (on the rising or falling edge) with an asynchronous reset (value 0) or set (value 1), active
 # high (P) or low (N).
@@ -600,7 +606,7 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
             f"module {top}: an asynchronous load of a signal ({cell_type}) makes the register transparent to "
             "a second data input whenever the load is asserted, a level-sensitive latch on a data path; "
             "reset or set it to a constant instead")
-    if "DLATCH" in cell_type.upper():
+    if "DLATCH" in cell_type.upper():          # with a reset or set: a latch forced while open
         raise Mech2SpiceError(f"module {top}: Yosys inferred a level-sensitive latch ({cell_type}); "
                               "assign every signal on every path of combinational always blocks")
     if _SEQUENTIAL.match(cell_type):
@@ -640,8 +646,11 @@ def build_netlist(top: str, module: dict, path: Path | None = None, sampled: tup
             held = registers.get(out_net) or (registers.get(pins[0]) if sampled else None)
             if held:
                 g.nodes[node]["registers"] = held
+        elif g.nodes[node]["kind"] == "dlatch":
+            _connect_dlatch(g, node, sources, names.get(out_net, f"${out_net}"))
         else:
             _connect_gate(g, node, sources)
+    _check_dlatches(g, clock)
     for port, bits in _ports(module, "output"):
         for i, bit in enumerate(bits):
             if not isinstance(bit, str) and bit not in driver:      # 'x' is a chosen don't-care: 0
@@ -743,6 +752,89 @@ def _connect_latch(g: nx.DiGraph, q: str, sources: list[str], init: int | None) 
     f = sources[1] if forced["polarity"] == "P" else _not(g, sources[1])
     g.add_edge(_nor(g, d if inverted else _not(g, d), f), q, pin="D")   # !D & !F  /  D & !F
     g.add_edge(f, q, pin="F")
+
+
+def _connect_dlatch(g: nx.DiGraph, node: str, sources: list[str], net: str) -> None:
+    """A level-sensitive latch Q = E ? D : held, `held` a latch of the clock that takes Q at every pulse:
+    while E holds still between edges (`_check_dlatches`), that is the value Q had when E last closed.  The
+    cell's node becomes the multiplexer's output gate; the latch powers up at 0 (the source's x refined)."""
+    cell, what = g.nodes[node].pop("cell")
+    enable, d = sources
+    if cell == "$_DLATCH_N_":
+        enable = _not(g, enable)
+    number = g.graph.get("next_latch")
+    if number is None:
+        number = 1 + max((_gate_key(x)[0] for x in g if _kind(g, x) == "latch"), default=-1)
+    g.graph["next_latch"] = number + 1
+    held = f"q{number}"
+    g.add_node(held, kind="latch", net=f"{net}$held", dlatch=(what, enable))
+    g.add_edge(node, held, pin="D")
+    both = _nor(g, _not(g, enable), _not(g, d))                  # E & D
+    kept = _nor(g, enable, _not(g, held))                        # !E & held
+    g.nodes[node].update(kind="nor")
+    _connect_gate(g, node, [_nor(g, both, kept), _const(g, 0)])  # their OR
+
+
+def _check_dlatches(g: nx.DiGraph, clock: str | None) -> None:
+    """Refuse a level-sensitive latch whose enable can close between clock edges: its held value would be the
+    one at that moment, which no latch of the clock captures.  Between edges only inputs change, and registers
+    an asynchronous reset or set forces: the enable may follow neither, except to open when a reset forces
+    (`_opens_when_forced`)."""
+    plain = nx.subgraph_view(g, filter_edge=lambda u, v: g.nodes[v]["kind"] != "latch")   # cut at every latch
+    warned = set()
+    for q, attrs in list(g.nodes(data=True)):
+        if "dlatch" not in attrs:
+            continue
+        what, enable = attrs.pop("dlatch")
+        cone = nx.ancestors(plain, enable) | {enable}
+        ports = sorted({g.nodes[n]["port"] for n in cone if g.nodes[n]["kind"] == "input"})
+        why = f"its enable follows input {', '.join(ports)}" if ports else "the design has no clock" \
+            if clock is None else _closes_when_forced(g, plain, cone, enable)
+        if why:
+            raise Mech2SpiceError(
+                f"{what}: {why}, so it can close between clock edges and hold what it had at that moment, which "
+                "no latch of the network does (each captures once a cycle, on the pulse); assign every signal on "
+                "every path of combinational always blocks")
+        word = re.sub(r"\[\d+\]' \(", "' (", what)          # one warning per variable, not per bit
+        if word not in warned:
+            warned.add(word)
+            _warn(f"{word}: its enable closes only at clock edges, so the network holds it in a latch of the clock "
+                  "(what it held at the last edge): the source's meaning wherever it holds across edges, as a "
+                  "case without a default in states never reached; `verify` checks it against Icarus")
+
+
+def _closes_when_forced(g: nx.DiGraph, plain, cone: set, enable: str) -> str | None:
+    """Why a latch's enable may close when an asynchronous reset or set forces registers it reads (None: it
+    is open, whatever the registers not forced hold, for each forcing input and each set of them at once)."""
+    regs = sorted(n for n in cone if g.nodes[n]["kind"] == "latch")
+    force = {q: latch_inputs(g, q)[1] for q in regs}
+    sources = sorted({f for f in force.values() if f is not None})
+    ports = sorted({g.nodes[n]["port"] for f in sources for n in nx.ancestors(g, f) | {f}
+                    if g.nodes[n]["kind"] == "input"})
+    for k in range(1, len(sources) + 1):
+        for held in itertools.combinations(sources, k):
+            free = [q for q in regs if force[q] not in held]
+            if len(free) > 12 or len(sources) > 3:
+                return f"its enable reads registers that {', '.join(ports)} force between clock edges"
+            grid = np.array(list(itertools.product((False, True), repeat=len(free))), bool).reshape(2 ** len(free), len(free))
+            values = {q: grid[:, i] for i, q in enumerate(free)}
+            values.update({q: np.full(len(grid), bool(g.nodes[q].get("inverted", 0))) for q in regs if q not in values})
+            if not _evaluate(g, plain, cone, values, len(grid))[enable].all():
+                return f"its enable closes when {', '.join(ports)} forces the registers it reads, between clock edges"
+    return None
+
+
+def _evaluate(g: nx.DiGraph, plain, cone: set, values: dict, width: int) -> dict:
+    """The cone's NOR gates over `width` columns of register values (numpy bool arrays, one per latch)."""
+    out = dict(values)
+    for n in nx.topological_sort(plain.subgraph(cone)):
+        kind = g.nodes[n]["kind"]
+        if kind == "const":
+            out[n] = np.full(width, n == "const1")
+        elif kind == "nor":
+            ins = [out[u] for u, _ in plain.in_edges(n)]
+            out[n] = ~np.logical_or.reduce(ins) if ins else np.full(width, bool(g.nodes[n].get("fixed", 1)))
+    return out
 
 
 def _nor(g: nx.DiGraph, a: str, b: str) -> str:
@@ -861,7 +953,12 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path |
         out_net = cell["connections"][out_pin][0]
         if out_net in driver:
             raise Mech2SpiceError(f"module {top}: net {out_net} has more than one driver")
-        g.add_node(node, kind=kind, **({"cell": (cell["type"], _where(cell, top, path))} if kind == "latch" else {}))
+        if kind == "dlatch":
+            where = _where(cell, top, path)
+            msg = _latch_named(f"module {top}: Yosys inferred a level-sensitive latch ({cell['type']})", cell, module)
+            g.add_node(node, kind=kind, cell=(cell["type"], f"{where}: {msg}" if ", line " in where else msg))
+        else:
+            g.add_node(node, kind=kind, **({"cell": (cell["type"], _where(cell, top, path))} if kind == "latch" else {}))
         driver[out_net] = node
         cells[node] = ([cell["connections"][p][0] if p else "0" for p in pins], out_net)
     return cells
@@ -989,7 +1086,7 @@ def check_loops(g: nx.DiGraph, top: str = "") -> None:
 def _new_gate(g: nx.DiGraph) -> str:
     n = g.graph.get("next_gate")
     if n is None:
-        n = 1 + max((_gate_key(x)[0] for x in g if _kind(g, x) == "nor"), default=-1)
+        n = 1 + max((_gate_key(x)[0] for x in g if str(x).startswith("g")), default=-1)   # a cell still mapping too
     g.graph["next_gate"] = n + 1
     return f"g{n}"
 

@@ -668,17 +668,18 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     line starts with `tag` (a fresh random word per run), so a line the design itself prints (`$display`,
     kept on Icarus) is never read as a result.  `start`: statements run at time 0 (`power_up_start`'s).
     Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has.
-    Sampled clocks (`Netlist.sampled`): the testbench has no clock of its own.  Every input starts at 0 (where
-    the network's samples power up), and each cycle's clocks are applied first, the rest a while later: a
-    flip-flop takes the data of the cycle before its edge, as the sampled network does."""
+    Sampled clocks (`Netlist.sampled`): the testbench has no clock of its own.  Every input goes to 0 (where
+    the network's samples power up) after time 0, the clocks first: in Verilog-2005 an input's first value is
+    an edge (x -> 0 is a falling one), which at time 0 races the source's own processes starting.  The
+    power-up start (`start`) comes after that edge.  Then each cycle's clocks are applied first, the rest a
+    while later: a flip-flop takes the data of the cycle before its edge, as the sampled network does."""
     v = ids.verilog
     ins, outs = [v(p) for p in netlist.inputs], [v(p) for p in netlist.outputs]
     width = max(1, sum(netlist.inputs.values()))
     mem, k = f"{PREFIX}mem", f"{PREFIX}k"
     lines = ["`timescale 1ns/1ns", f"module {PREFIX}tb;"]
     wait = f"#{SETTLE_NS}"
-    zero = " = 0" if netlist.sampled else ""
-    lines += [f"  reg {_decl(w)}{v(p)}{zero};" for p, w in netlist.inputs.items()]
+    lines += [f"  reg {_decl(w)}{v(p)};" for p, w in netlist.inputs.items()]
     lines += [f"  wire {_decl(w)}{v(p)};" for p, w in netlist.outputs.items()]
     conns = [f".{p}({p})" for p in ins + outs]
     clock = v(netlist.clock) if netlist.clock else None
@@ -694,8 +695,10 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
         return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
     show = f'$display("{tag} ' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
     if start:
-        lines += ["  initial begin"] + [f"    {st}" for st in start] + ["  end"]
+        lines += ["  initial begin"] + (["    #3;"] if netlist.sampled else []) + [f"    {st}" for st in start] + ["  end"]
     lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
+    if netlist.sampled:
+        lines.append("    " + _apply_sampled(netlist, None, "#1", first="#1"))
     if clocked:
         lines += [f"    {wait} {apply('0')}" if netlist.sampled else f"    {apply('0')}"]
         lines += ([f"    {wait} {show}"] if first_read else []) + [
@@ -709,15 +712,17 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     return "\n".join(lines + ["    $finish;", "  end", "endmodule", ""])
 
 
-def _apply_sampled(netlist: Netlist, row: str, wait: str) -> str:
+def _apply_sampled(netlist: Netlist, row: str | None, wait: str, first: str = "") -> str:
     """One cycle's inputs where clocks are sampled: the clock ports, then a while later the others (each
-    port its slice of the row, first port leftmost)."""
+    port its slice of the row, first port leftmost; every port 0 where `row` is None); `first`: a delay
+    before it all."""
     v, top, later = ids.verilog, sum(netlist.inputs.values()), []
-    first = []
+    clocks = [first] if first else []
     for p, w in netlist.inputs.items():
-        (first if p in netlist.sampled else later).append(f"{v(p)} = {row}[{top - 1}:{top - w}];")
+        value = "0" if row is None else f"{row}[{top - 1}:{top - w}]"
+        (clocks if p in netlist.sampled else later).append(f"{v(p)} = {value};")
         top -= w
-    return " ".join(first + [wait] + later) if later else " ".join(first)
+    return " ".join(clocks + [wait] + later) if later else " ".join(clocks)
 
 
 COERCED = re.compile(r"output port (\S+) is coerced to inout")   # iverilog: the source never drives it
@@ -964,17 +969,23 @@ def make_vectors(netlist: Netlist, n: int | None, exhaustive: bool, seed: int) -
 
 def make_cycles(netlist: Netlist, n: int, seed: int, resets) -> np.ndarray:
     """(n, input bits) bool: random inputs per cycle; the resets (`reset_ports`' dicts, or one (port, level)
-    pair) asserted together in cycle 0, and now and then later."""
+    pair) asserted together in cycle 0 (cycles 0-2 where clocks are sampled), and now and then later."""
     order = input_bits(netlist)
     rng = np.random.default_rng(seed)
     x = rng.integers(0, 2, (n, len(order))).astype(bool)
     if isinstance(resets, tuple):
         resets = [{"port": resets[0], "level": resets[1]}]
     again = rng.random(n) < RESET_AGAIN
+    # sampled clocks: 0, 1, 0 first, so that no edge falls in cycle 0 (where a flip-flop's previous data
+    # sample is its power-up, not its data) and each edge of each clock sees the resets asserted
+    first = min(n, 3) if netlist.sampled else 1
+    for p in netlist.sampled:
+        for i in range(netlist.inputs[p]):
+            x[:first, order.index(f"{p}[{i}]")] = [False, True, False][:first]
     for r in resets or []:
         j, level = order.index(f"{r['port']}[0]"), r["level"]
         x[:, j] = np.where(again, level, 1 - level).astype(bool)
-        x[0, j] = bool(level)
+        x[:first, j] = bool(level)
     return x
 
 

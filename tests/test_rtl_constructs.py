@@ -463,6 +463,12 @@ def test_both_edges_and_a_clock_read_as_data_are_sampled(tmp_path):
     assert got == [(0, 0, 0), (1, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0)]
 
 
+def test_a_clock_option_for_sampled_clocks_says_to_give_them_per_cycle(tmp_path, capsys):
+    src = verilog(tmp_path, BOTH_EDGES)
+    refused(capsys, "simulate", src, "--clock", "clk", "--cycles", "3", "--backend", "logic",
+            needle="clocks are sampled inputs (clk): give their value in each cycle of --stimulus")
+
+
 @needs_icarus
 @pytest.mark.parametrize("text", [BOTH_EDGES, TWO_CLOCKS, RESET_AGAINST_POWER_UP],
                          ids=["both_edges", "two_clocks", "reset_against_power_up"])

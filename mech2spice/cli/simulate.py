@@ -179,8 +179,11 @@ def cmd_simulate_clocked(args, nl) -> int:
     """`simulate` for a clocked design: run the cycles and print the trace; 0 if every cycle is valid, else 1."""
     from .. import simulation
     from ..physics.params import load_params
+    if args.clock and nl.sampled:
+        raise Mech2SpiceError(f"--clock {args.clock}: {nl.top}'s clocks are sampled inputs "
+                              f"({', '.join(nl.sampled)}): give their value in each cycle of --stimulus")
     if args.clock and args.clock != nl.clock:
-        raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by {nl.clock_text()}")
+        raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by '{nl.clock}'")
     if args.vcd is not None:
         from ..waveform import is_vcd
         inputs.check_output_file(args.vcd, {"the design": args.design, "the --stimulus file": args.stimulus,

@@ -695,7 +695,8 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
         return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
     show = f'$display("{tag} ' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
     if start:
-        lines += ["  initial begin"] + (["    #3;"] if netlist.sampled else []) + [f"    {st}" for st in start] + ["  end"]
+        after = ["    #3;"] if netlist.sampled else []        # sampled: after the inputs' first values
+        lines += ["  initial begin"] + after + [f"    {st}" for st in start] + ["  end"]
     lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if netlist.sampled:
         lines.append("    " + _apply_sampled(netlist, None, "#1", first="#1"))

@@ -158,7 +158,10 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
         netlist = build_netlist(name, module, path)
     except _Sampled as need:            # several clocks, both edges, a clock read as data: sample them
         name, module, found, released, sv = _run_yosys(path, top, source, sampled=True)
-        netlist = build_netlist(name, module, path, sampled=need.clocks)
+        try:
+            netlist = build_netlist(name, module, path, sampled=need.clocks)
+        except _Sampled as again:       # nothing clocked is left to sample: not expected, said plainly
+            raise Mech2SpiceError(f"{path}: {again} even with its clocks sampled") from None
     for race in found:                  # warned, not refused: the network is Yosys's (flip-flop) reading
         _warn(races.warning(race, path))
     for port in released:               # warned: where Verilog reads z the network reads the bus's multiplexer
@@ -333,7 +336,6 @@ def _non_constant_init(msg: str, path: Path) -> str | None:
 
 # The attribute the flow marks the source's register wires with (`_flow`).
 REGISTER_ATTR = "m2s_register"
-
 
 
 def _flow(source: str, top: str | None, include: str | None = None, sv: bool | None = None,
@@ -779,7 +781,7 @@ def _check_dlatches(g: nx.DiGraph, clock: str | None) -> None:
     """Refuse a level-sensitive latch whose enable can close between clock edges: its held value would be the
     one at that moment, which no latch of the clock captures.  Between edges only inputs change, and registers
     an asynchronous reset or set forces: the enable may follow neither, except to open when a reset forces
-    (`_opens_when_forced`)."""
+    (`_closes_when_forced`)."""
     plain = nx.subgraph_view(g, filter_edge=lambda u, v: g.nodes[v]["kind"] != "latch")   # cut at every latch
     warned = set()
     for q, attrs in list(g.nodes(data=True)):
@@ -811,14 +813,19 @@ def _closes_when_forced(g: nx.DiGraph, plain, cone: set, enable: str) -> str | N
     sources = sorted({f for f in force.values() if f is not None})
     ports = sorted({g.nodes[n]["port"] for f in sources for n in nx.ancestors(g, f) | {f}
                     if g.nodes[n]["kind"] == "input"})
+    too_many = f"its enable reads registers that {', '.join(ports)} force between clock edges"
+    if len(sources) > 3:
+        return too_many
     for k in range(1, len(sources) + 1):
         for held in itertools.combinations(sources, k):
             free = [q for q in regs if force[q] not in held]
-            if len(free) > 12 or len(sources) > 3:
-                return f"its enable reads registers that {', '.join(ports)} force between clock edges"
-            grid = np.array(list(itertools.product((False, True), repeat=len(free))), bool).reshape(2 ** len(free), len(free))
+            if len(free) > 12:                  # every value of the free registers is tried: 4096 at most
+                return too_many
+            grid = np.array(list(itertools.product((False, True), repeat=len(free))), bool)
+            grid = grid.reshape(2 ** len(free), len(free))
             values = {q: grid[:, i] for i, q in enumerate(free)}
-            values.update({q: np.full(len(grid), bool(g.nodes[q].get("inverted", 0))) for q in regs if q not in values})
+            values.update({q: np.full(len(grid), bool(g.nodes[q].get("inverted", 0)))        # forced
+                           for q in regs if q not in values})
             if not _evaluate(g, plain, cone, values, len(grid))[enable].all():
                 return f"its enable closes when {', '.join(ports)} forces the registers it reads, between clock edges"
     return None
@@ -958,7 +965,8 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path |
             msg = _latch_named(f"module {top}: Yosys inferred a level-sensitive latch ({cell['type']})", cell, module)
             g.add_node(node, kind=kind, cell=(cell["type"], f"{where}: {msg}" if ", line " in where else msg))
         else:
-            g.add_node(node, kind=kind, **({"cell": (cell["type"], _where(cell, top, path))} if kind == "latch" else {}))
+            cell_of = {"cell": (cell["type"], _where(cell, top, path))} if kind == "latch" else {}
+            g.add_node(node, kind=kind, **cell_of)
         driver[out_net] = node
         cells[node] = ([cell["connections"][p][0] if p else "0" for p in pins], out_net)
     return cells

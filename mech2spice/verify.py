@@ -136,11 +136,14 @@ def register_names(netlist: Netlist) -> list[tuple[str, str, str]]:
     implements (a memory word too: `mem[7][0]` is bit 0 of the word `mem[7]` that the proof's `memory`
     pass makes), to be exposed on both sides of the miter so that induction sees the hidden state.  A name
     a Yosys script cannot hold (ids.yosys) is not matched; nor is any where clocks are sampled (a latch holds
-    a register's previous sample there, not the register)."""
+    a register's previous sample there, not the register), nor a level-sensitive latch's `held` (the value at
+    the last edge, which no source wire carries)."""
     out = []
     if netlist.sampled:
         return out
     for q in netlist.latches():
+        if netlist.graph.nodes[q].get("held"):
+            continue
         m = _NET.fullmatch(netlist.graph.nodes[q].get("net", "$"))
         if m and _yosys_writable(m.group(1)):
             out.append((q, m.group(1), m.group(2) or "0"))

@@ -769,7 +769,7 @@ def _connect_dlatch(g: nx.DiGraph, node: str, sources: list[str], net: str) -> N
         number = 1 + max((_gate_key(x)[0] for x in g if _kind(g, x) == "latch"), default=-1)
     g.graph["next_latch"] = number + 1
     held = f"q{number}"
-    g.add_node(held, kind="latch", net=f"{net}$held", dlatch=(what, enable))
+    g.add_node(held, kind="latch", net=f"{net}$held", held=1, dlatch=(what, enable))
     g.add_edge(node, held, pin="D")
     both = _nor(g, _not(g, enable), _not(g, d))                  # E & D
     kept = _nor(g, enable, _not(g, held))                        # !E & held

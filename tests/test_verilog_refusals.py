@@ -223,6 +223,46 @@ def test_a_complete_sensitivity_list_is_combinational_and_matches_icarus(tmp_pat
     assert [logic(capsys, src, v) for v in vectors] == expected
 
 
+# `assign as = a;` names a listed signal again: Icarus updates it before the block reads it (the first block
+# below); through any operator (`b ^ 1`, a concatenation of slices) it is a process of its own, and Icarus
+# runs the block first and reads the old value (the second).
+ALIASED_LIST = """module al(input [3:0] a, input [3:0] b, input [1:0] op, output reg [4:0] r);
+  always @(a or b or op)
+    case (op)
+      2'd0: r <= as + bs;
+      2'd1: r <= as2 - bs;
+      2'd2: r <= {4'b0, as < bs};
+      default: r <= bs >>> a[1:0];
+    endcase
+  wire signed [3:0] as, bs, as2;
+  assign as = a;
+  assign bs = b;
+  assign as2 = as;
+endmodule
+"""
+
+
+@needs_icarus
+def test_a_block_reading_another_name_of_a_listed_signal_is_accepted_and_matches_icarus(tmp_path, capsys):
+    import random
+    rng = random.Random(38)
+    src = verilog(tmp_path, ALIASED_LIST)
+    widths = {"a": 4, "b": 4, "op": 2}
+    vectors = [{p: rng.randrange(1 << w) for p, w in widths.items()} for _ in range(200)]
+    expected = icarus(tmp_path, src, "al", widths, {"r": 5}, vectors)
+    assert [logic(capsys, src, v) for v in vectors] == expected
+    rc, _, err = run(capsys, "synth", src)
+    assert rc == 0 and f"{src}, line 2: this always block reads 'as' (another name of 'a'), 'as2' (another " \
+        "name of 'a'), 'bs' (another name of 'b') without listing them" in err, err
+    computed = verilog(tmp_path, ALIASED_LIST.replace("assign bs = b;", "assign bs = b ^ 4'd1;"), "computed.v")
+    refused(capsys, "synth", computed, needle=f"{computed}, line 2: this always block reads 'bs' but its "
+                                              "sensitivity list leaves it out")
+    by_icarus = icarus(tmp_path, computed, "al", widths, {"r": 5}, vectors)
+    at_once = [{"r": (((a if a < 8 else a - 16) + ((b ^ 1) if b ^ 1 < 8 else (b ^ 1) - 16)) & 31)}
+               for a, b in ((v["a"], v["b"]) for v in vectors if v["op"] == 0)]
+    assert [e for e, v in zip(by_icarus, vectors) if v["op"] == 0] != at_once     # Icarus read the old bs
+
+
 
 # ------------------------------------------------------------------ signed ports
 

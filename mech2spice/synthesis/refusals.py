@@ -22,18 +22,19 @@ from pathlib import Path
 from ..errors import Mech2SpiceError
 
 #: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
-VERSION = 4
+VERSION = 5
 
 
-def check(tmp: Path, path: Path, source: str, top: str | None) -> dict[str, list[str]]:
+def check(tmp: Path, path: Path, source: str, top: str | None) -> tuple[dict[str, list[str]], list[AliasRead]]:
     """Run every check on the files the flow wrote in `tmp` (`source`: the file's text); return each module's
-    output ports that a tri-state driver may release (`check_drivers`)."""
+    output ports that a tri-state driver may release (`check_drivers`) and the always blocks accepted with an
+    alias left out of their sensitivity lists (`check_sensitivity`)."""
     if top is None:
         check_single_top((tmp / "read.il").read_text(), path)
-    check_sensitivity((tmp / "ast.txt").read_text(), path, source)
+    aliased = check_sensitivity((tmp / "ast.txt").read_text(), path, source)
     modules = read_rtlil((tmp / "drivers.il").read_text())      # the nets as written, read once for both
     check_case_equality(modules, path)
-    return check_drivers(modules, path, source)
+    return check_drivers(modules, path, source), aliased
 
 
 def src_line(src: str | None, path: Path) -> int | None:
@@ -140,11 +141,53 @@ def _lvalue(node: _Ast, reads: set, written: set) -> None:
             _lvalue(child, reads, written)
 
 
-def check_sensitivity(ast_text: str, path: Path, source: str) -> None:
-    """Refuse non-edge always blocks that a simulator runs differently from the gates Yosys builds."""
+@dataclass(frozen=True)
+class AliasRead:
+    """A non-edge always block (at `line`) that reads `names`, each only another name of a listed signal
+    (`assign name = listed;`, whole to whole): accepted, and warned (`alias_warning`)."""
+    line: int | None
+    names: tuple
+    listed: tuple
+
+
+def _aliases(module: _Ast) -> dict[str, str]:
+    """name -> the signal a module-level `assign name = other;` makes it another name of (whole identifiers:
+    no select, no operator; Icarus then updates the name before any process reads it)."""
+    out = {}
+    for node in module.children:
+        if node.kind == "AST_ASSIGN" and len(node.children) == 2 and all(
+                c.kind == "AST_IDENTIFIER" and not c.children for c in node.children):
+            out[node.children[0].name] = node.children[1].name
+    return out
+
+
+def _listed_by_alias(name: str, aliases: dict, listed: set) -> str | None:
+    """The listed signal `name` is another name of, through a chain of aliases (None: not one)."""
+    seen = set()
+    while name in aliases and name not in seen:
+        seen.add(name)
+        name = aliases[name]
+        if name in listed:
+            return name
+    return None
+
+
+def alias_warning(read: AliasRead, path: Path) -> str:
+    where = f"{path}, line {read.line}" if read.line else str(path)
+    pairs = ", ".join(f"'{n}' (another name of '{s}')" for n, s in zip(read.names, read.listed))
+    it = "it" if len(read.names) == 1 else "them"
+    return (f"{where}: this always block reads {pairs} without listing {it}: each changes with its listed "
+            f"signal and Icarus updates it first, but the standard leaves that order open; list {it} or write @*")
+
+
+def check_sensitivity(ast_text: str, path: Path, source: str) -> list[AliasRead]:
+    """Refuse non-edge always blocks that a simulator runs differently from the gates Yosys builds; return
+    the blocks accepted because what they leave out is only another name of a listed signal."""
+    accepted = []
     for module in read_ast(ast_text):
         signals = {n.name for n in _nodes(module, ("AST_FUNCTION", "AST_TASK"))
                    if n.kind in ("AST_WIRE", "AST_MEMORY")}
+        aliases = _aliases(module)
         for block in (n for n in _nodes(module) if n.kind == "AST_ALWAYS"):
             events = [c for c in block.children if c.kind in _EVENTS]
             if any(c.kind != "AST_EDGE" for c in events):
@@ -159,6 +202,11 @@ def check_sensitivity(ast_text: str, path: Path, source: str) -> None:
                 if child.kind not in _EVENTS:
                     _reads(child, reads, written)
             missing = sorted((reads & signals) - written - listed)
+            named = {m: _listed_by_alias(m, aliases, listed) for m in missing}
+            if missing and all(named.values()):
+                accepted.append(AliasRead(src_line(block.src, path), tuple(missing), tuple(named[m] for m in missing)))
+                continue
+            missing = [m for m in missing if not named[m]]
             if missing:
                 names = ", ".join(f"'{m}'" for m in missing)
                 raise Mech2SpiceError(
@@ -166,6 +214,7 @@ def check_sensitivity(ast_text: str, path: Path, source: str) -> None:
                     f"{'it' if len(missing) == 1 else 'them'} out: a simulator runs the block only when a listed "
                     "signal changes, the gates compute it all the time; list every signal it reads (or write "
                     "@*), or write posedge for a register")
+    return accepted
 
 
 def _check_event_control(block: _Ast, where: str, path: Path, source: str) -> None:

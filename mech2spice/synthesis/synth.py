@@ -153,17 +153,19 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
             identifiers.yosys(top)
         except Mech2SpiceError as err:
             raise Mech2SpiceError(f"invalid top module name: {err}") from None
-    name, module, found, released, sv = _run_yosys(path, top, source)
+    name, module, found, released, sv, aliased = _run_yosys(path, top, source)
     try:
         netlist = build_netlist(name, module, path)
     except _Sampled as need:            # several clocks, both edges, a clock read as data: sample them
-        name, module, found, released, sv = _run_yosys(path, top, source, sampled=True)
+        name, module, found, released, sv, aliased = _run_yosys(path, top, source, sampled=True)
         try:
             netlist = build_netlist(name, module, path, sampled=need.clocks)
         except _Sampled as again:       # nothing clocked is left to sample: not expected, said plainly
             raise Mech2SpiceError(f"{path}: {again} even with its clocks sampled") from None
     for race in found:                  # warned, not refused: the network is Yosys's (flip-flop) reading
         _warn(races.warning(race, path))
+    for read in aliased:                # warned: the network computes the block as @*, as Icarus runs it
+        _warn(refusals.alias_warning(read, path))
     for port in released:               # warned: where Verilog reads z the network reads the bus's multiplexer
         _warn(f"{path}: output {port} is driven only through tri-state drivers: where none is enabled Verilog "
               "reads z and the network a 0 or 1 (the bus as a multiplexer); `verify` names such input vectors")
@@ -376,9 +378,10 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
         "write_json netlist.json", ""])
 
 
-def _run_yosys(path: Path, top: str | None, source: str, sampled: bool = False) -> tuple[str, dict, list, list, bool]:
+def _run_yosys(path: Path, top: str | None, source: str, sampled: bool = False) -> tuple[str, dict, list, list, bool, list]:
     """(top module name, its Yosys JSON module, the source's races, the top's output ports a tri-state driver
-    may release, whether it was read as SystemVerilog): from the cache when this source went through this flow
+    may release, whether it was read as SystemVerilog, the always blocks accepted with an alias left out of
+    their sensitivity lists): from the cache when this source went through this flow
     and this Yosys before, else from a run of the flow in a scratch folder (`_yosys_run`)."""
     key = _cache_key(source, top, path.suffix == ".sv", path.name, sampled)
     cached = _cache_read(key)
@@ -405,7 +408,7 @@ def _cache_path(key: str) -> Path:
     return cache_dir() / "yosys" / f"{key}.json"
 
 
-def _cache_read(key: str | None) -> tuple[str, dict, list, list, bool] | None:
+def _cache_read(key: str | None) -> tuple[str, dict, list, list, bool, list] | None:
     """The cached (top, module); None (Yosys runs again and replaces the entry) when there is none or it is
     not a Yosys JSON module in the shape build_netlist reads: the cache is rebuildable data, anyone's."""
     if key is None:
@@ -419,9 +422,21 @@ def _cache_read(key: str | None) -> tuple[str, dict, list, list, bool] | None:
     found, released = _cached_races(data.get("races")), data.get("released")
     if found is None or not (isinstance(released, list) and all(isinstance(p, str) for p in released)):
         return None
-    if not isinstance(data.get("sv"), bool):
+    aliased = _cached_aliases(data.get("aliased"))
+    if not isinstance(data.get("sv"), bool) or aliased is None:
         return None
-    return data["top"], data["module"], found, released, data["sv"]
+    return data["top"], data["module"], found, released, data["sv"], aliased
+
+
+def _cached_aliases(rows) -> list | None:
+    """The alias reads a cache entry lists; None when it is no list of them (the entry is then rebuilt)."""
+    try:
+        found = [refusals.AliasRead(row["line"], tuple(row["names"]), tuple(row["listed"])) for row in rows]
+    except (TypeError, KeyError):
+        return None
+    ok = all((r.line is None or type(r.line) is int) and len(r.names) == len(r.listed)
+             and all(isinstance(v, str) for v in r.names + r.listed) for r in found)
+    return found if ok else None
 
 
 def _cached_races(rows) -> list | None:
@@ -453,7 +468,8 @@ def _is_module(module) -> bool:
         and table("netnames", {"hide_name": lambda v: isinstance(v, int), "bits": bits})
 
 
-def _cache_write(key: str | None, name: str, module: dict, found: list, released: list, sv: bool) -> None:
+def _cache_write(key: str | None, name: str, module: dict, found: list, released: list, sv: bool,
+                 aliased: list) -> None:
     """Keep a synthesised module (atomically; a cache that cannot be written is skipped)."""
     if key is None:
         return
@@ -462,13 +478,15 @@ def _cache_write(key: str | None, name: str, module: dict, found: list, released
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
         tmp.write_text(json.dumps({"top": name, "module": module, "races": [r.as_dict() for r in found],
-                                   "released": released, "sv": sv}))
+                                   "released": released, "sv": sv,
+                                   "aliased": [{"line": a.line, "names": list(a.names), "listed": list(a.listed)}
+                                               for a in aliased]}))
         os.replace(tmp, path)
     except OSError:
         pass
 
 
-def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) -> tuple[str, dict, list, list, bool]:
+def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) -> tuple[str, dict, list, list, bool, list]:
     """Run the flow in a scratch folder; return what `_run_yosys` does.  `source` is the
     text to read: the file's own, or its standard rewriting (dialect.py), which then is read from the folder."""
     with tempfile.TemporaryDirectory(prefix="mech2spice_yosys_") as tmp:
@@ -496,7 +514,7 @@ def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) 
                     raise Mech2SpiceError(known)
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
                                   else f"yosys error: {path}: {msg}")
-        released = refusals.check(Path(tmp), path, source, top)
+        released, aliased = refusals.check(Path(tmp), path, source, top)
         _check_drivers(Path(tmp), path)
         found = races.find((Path(tmp) / "ast.txt").read_text(), path)
         out = Path(tmp) / "netlist.json"
@@ -505,7 +523,7 @@ def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) 
         modules = json.loads(out.read_text())["modules"]
     name, module = _pick_top(modules, top, path)
     outputs = {p for p, row in module["ports"].items() if row["direction"] == "output"}
-    return name, module, found, [p for p in released.get(name, []) if p in outputs], sv
+    return name, module, found, [p for p in released.get(name, []) if p in outputs], sv, aliased
 
 
 _REAL = re.compile(r"^(?P<file>\S+?):(?P<line>\d+): Warning: "

@@ -743,8 +743,20 @@ def power_up_start(netlist: Netlist) -> list[list[str]]:
     made of the bit (`Netlist.constant_registers`).  A name Verilog cannot hold is left out."""
     start = [(path, index, netlist.graph.nodes[q].get("inverted", 0))
              for q in netlist.latches() for path, index in netlist.graph.nodes[q].get("registers", ())]
+    return _start_entries(start + list(netlist.constant_registers))
+
+
+def restart(netlist: Netlist) -> list[list[str]]:
+    """A sampled design's registers that have a power-up value, put back to it after the testbench's first
+    clock values: in Verilog-2005 a clock's first value is an edge (x -> 0 falls), and a flip-flop on it takes
+    data that is still x there, where the network's samples power up at 0 and see no edge."""
+    return _start_entries(netlist.initial_registers) if netlist.sampled else []
+
+
+def _start_entries(rows) -> list[list[str]]:
+    """Per (path, index, value): the testbench statements that may set that register bit (`_reg_names`)."""
     out = []
-    for path, index, value in start + list(netlist.constant_registers):
+    for path, index, value in rows:
         ways = _reg_names(path)
         if ways:
             bit = "" if index is None else f"[{int(index)}]"
@@ -781,11 +793,14 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
         tb.write_text(_testbench(netlist, len(vectors), clocked, first_read, tag))
         (Path(tmp) / "vectors.txt").write_text("".join(_vector_line(netlist, order, v) for v in vectors))
         built, gen = _compile(iverilog, path, tmp)
-        if start:
-            ways = _bind_start(iverilog, gen, path, tmp, start,
+        entries = restart(netlist) + list(start or [])
+        if entries:
+            ways = _bind_start(iverilog, gen, path, tmp, entries,
                                lambda st: _testbench(netlist, len(vectors), clocked, first_read, tag, st))
-            if info is not None:
-                info["started"] = {"register_bits": len(ways), "not_found": len(start) - len(ways)}
+            if info is not None and start:
+                given = {w for entry in start for w in entry}
+                bound = sum(w in given for w in ways)
+                info["started"] = {"register_bits": bound, "not_found": len(start) - bound}
         out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout
     if info is not None:
         info["icarus_generation"] = gen
@@ -1102,7 +1117,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     got = run_backend(netlist, x, clocked, backend, params, progress)
     levels = None if params is None else params.levels
     mismatches = compare(netlist, x, ref, got, clocked, levels)
-    start = power_up_start(netlist) if mismatches and clocked else []
+    # where Icarus disagrees, or agrees only because it reads x: again from where the network powers up
+    start = power_up_start(netlist) if clocked and (mismatches or _mostly_undefined(ref)) else []
     compared = None
     if start:
         mismatches, compared = _from_power_up(path, netlist, x, got, levels, start, mismatches, info)
@@ -1113,8 +1129,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
            "undefined_bits": sum(v in "xX" for r in ref for v in r.values()),
            "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings, **info,
            "undefined_by_port": undefined_by_port(netlist, ref)}
-    compared = sum(len(r) for r in ref)
-    out["mostly_undefined"] = compared > 0 and (out["undefined_bits"] + out["undriven_bits"]) * 2 > compared
+    out["mostly_undefined"] = _mostly_undefined(compared or ref)      # in the run the verdict compared
+    out["compared_run"] = "as_written" if compared is None else "power_up_start"
     if clocked:
         out["reset"] = {k: rst[0][k] for k in ("port", "level")} if rst else None
         out["resets"] = rst
@@ -1126,17 +1142,24 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     return out
 
 
+def _mostly_undefined(ref: list[dict]) -> bool:
+    """Whether x or z is more than half the bits of an Icarus run: agreement there says little."""
+    compared = sum(len(r) for r in ref)
+    return compared > 0 and sum(v in "xXzZ" for r in ref for v in r.values()) * 2 > compared
+
+
 def _from_power_up(path, netlist: Netlist, x, got, levels, start, mismatches, info):
     """Icarus again, each register the source leaves without a power-up value started where the network
     starts it (x on Icarus until written, and an `if (x)` takes the else branch: a run from no state any
-    circuit has).  That run is one the source allows, so where it agrees the as-written mismatches were
-    Icarus's reading of x: (mismatches, the Icarus run they are counted on, None for the as-written one).
+    circuit has).  That run is one the source allows: where it agrees, the as-written mismatches were
+    Icarus's reading of x; where the as-written run agreed only by reading x, its mismatches stand.
+    Returns (mismatches, the Icarus run they are counted on, None for the as-written one).
     `info["power_up_start"]` says what was done."""
     sub = {}
     ref = icarus(path, netlist, x, True, info=sub, start=start)
     again = compare(netlist, x, ref, got, True, levels)
     info["power_up_start"] = {**sub["started"], "mismatches": len(again), "as_written_mismatches": len(mismatches)}
-    if sub["started"]["register_bits"] and not again:
+    if sub["started"]["register_bits"] and (not again or not mismatches):
         return again, ref
     return mismatches, None
 
@@ -1218,7 +1241,9 @@ def _undefined_text(co: dict) -> str:
              if n["x"] + n["z"]]
     if not ports:
         return ""
-    note = "; x/z in the source (per port, of the bits compared): " + ", ".join(ports)
+    started = co.get("compared_run") == "power_up_start"
+    note = (f"; x/z in the source as written (per port, of {'its' if started else 'the'} bits"
+            f"{'; compared from the power-up start above' if started else ' compared'}): " + ", ".join(ports))
     if co.get("mostly_undefined"):
         note += " -- MOST compared bits were undefined in the source: agreement there says little"
     return note
@@ -1278,6 +1303,9 @@ def _power_up_text(st: dict) -> str:
             f"register bits the source gives no power-up value started where the network starts them{lost}: ")
     if not st["register_bits"]:
         return head + "none could be set, so the as-written comparison stands"
+    if not st["as_written_mismatches"]:
+        return head + (f"{st['mismatches']} mismatches; the as-written run agreed only by reading x, so this run "
+                       "is the one compared" + (", and the design fails" if st["mismatches"] else ""))
     if not st["mismatches"]:
         return head + ("0 mismatches, so the as-written ones were Icarus's reading of x (an `if (x)` takes the "
                        "else branch, a start no circuit has), not the network: the mismatches above are that run's, "

@@ -455,16 +455,27 @@ def test_a_counterexample_the_replay_does_not_confirm_is_unknown():
     assert "do not differ" in res["detail"]
 
 
-def test_agreement_on_mostly_undefined_outputs_says_so(tmp_path, capsys):
-    """A register nothing defines (rotated, never reset, never loaded): every q bit is x on Icarus, so any network
-    agrees.  The verdict line and the JSON count the x bits per port and say that most were undefined."""
+def test_agreement_on_mostly_undefined_outputs_says_so(tmp_path, capsys, monkeypatch):
+    """A register nothing defines (rotated, never reset, never loaded): every q bit is x on Icarus as written,
+    so any network agrees there.  The JSON counts the x bits per port; the co-simulation is then run again
+    from where the network powers up, and that run is the one compared: a network rotating the other way
+    fails it.  Where no register can be started, the verdict line says that most bits were undefined."""
     src = tmp_path / "rot.v"
-    src.write_text("module rot(input clk, input d, output reg [3:0] q, output e);\n"
-                   "  assign e = d;\n  always @(posedge clk) q <= {q[2:0], q[3]};\nendmodule\n")
+    rot = "module rot(input clk, input d, output reg [3:0] q, output e);\n  assign e = d;\n" \
+          "  always @(posedge clk) q <= {q[2:0], q[3]};\nendmodule\n"
+    src.write_text(rot)
     code, out, err = _run(capsys, src, "--cycles", 50, "--json", "--no-equivalence")
     co = json.loads(out)["cosim"]
     assert co["undefined_by_port"] == {"q": {"x": 200, "z": 0, "compared": 200}, "e": {"x": 0, "z": 0, "compared": 50}}
-    assert co["mostly_undefined"] and co["agree"]
+    assert co["agree"] and co["compared_run"] == "power_up_start" and not co["mostly_undefined"]
+    other = tmp_path / "other.v"                 # its network powers up at 0 too, then rotates 1s in
+    other.write_text(rot.replace("{q[2:0], q[3]}", "{q[2:0], ~q[3]}"))
+    wrong = V.verify(src, netlist=synthesize(other), vectors=50, equivalence_check=False)["cosim"]
+    assert not wrong["agree"] and wrong["compared_run"] == "power_up_start"
+    monkeypatch.setattr(V, "power_up_start", lambda netlist: [])
+    code, out, err = _run(capsys, src, "--cycles", 50, "--json", "--no-equivalence")
+    co = json.loads(out)["cosim"]
+    assert co["mostly_undefined"] and co["agree"] and co["compared_run"] == "as_written"
     code, out, err = _run(capsys, src, "--cycles", 50, "--no-equivalence")
     verdict = out.strip().splitlines()[-1]
     assert "q 200/200" in verdict and "MOST compared bits were undefined" in verdict

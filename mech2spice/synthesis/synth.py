@@ -72,6 +72,9 @@ class Netlist:
     # source register bits without a power-up value that synthesis made 0 or 1, or left undriven (read as 0):
     # (path, index, value), named as the latches' `registers` (verify starts them on Icarus)
     constant_registers: tuple = field(default=(), compare=False)
+    # source register bits with a power-up value, (path, index, value) as above: where a sampled design's
+    # registers are put back after the testbench's first clock values, an edge the network does not have
+    initial_registers: tuple = field(default=(), compare=False)
 
     @property
     def clocked(self) -> bool:
@@ -157,11 +160,14 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     try:
         netlist = build_netlist(name, module, path)
     except _Sampled as need:            # several clocks, both edges, a clock read as data: sample them
+        # the source's power-up values, as its flip-flops carry them (clk2fflogic moves them to its samples)
+        initial = _source_registers(module, _initial_values(module))[2]
         name, module, found, released, sv, aliased = _run_yosys(path, top, source, sampled=True)
         try:
             netlist = build_netlist(name, module, path, sampled=need.clocks)
         except _Sampled as again:       # nothing clocked is left to sample: not expected, said plainly
             raise Mech2SpiceError(f"{path}: {again} even with its clocks sampled") from None
+        netlist.initial_registers = initial
     for race in found:                  # warned, not refused: the network is Yosys's (flip-flop) reading
         _warn(races.warning(race, path))
     for read in aliased:                # warned: the network computes the block as @*, as Icarus runs it
@@ -651,7 +657,7 @@ def build_netlist(top: str, module: dict, path: Path | None = None, sampled: tup
     names = _net_names(module)
     clock = _clock_port(g, top, module, driver, path)
     power_up = _initial_values(module)
-    registers, constant = _source_registers(module, power_up)
+    registers, constant, initial = _source_registers(module, power_up)
     # a register bit left with no driver at all (its flip-flop dropped) reads as 0 here (`_source`)
     constant += tuple((path, index, 0) for bit, regs in registers.items() if bit not in driver for path, index in regs)
     for node, (pins, out_net) in cells.items():
@@ -690,7 +696,8 @@ def build_netlist(top: str, module: dict, path: Path | None = None, sampled: tup
         inputs = {p: w for p, w in inputs.items() if p != clock}
     signed = frozenset(p for p, info in module["ports"].items() if info.get("signed") and p != clock)
     return Netlist(top, g, inputs, outputs, clock, signed, clock_edge=clock_edge(module) if clock else "posedge",
-                   constant_registers=constant if clock or sampled else (), sampled=tuple(sampled))
+                   constant_registers=constant if clock or sampled else (), sampled=tuple(sampled),
+                   initial_registers=initial if clock or sampled else ())
 
 
 def _initial_values(module: dict) -> dict:
@@ -715,13 +722,14 @@ def _init_string(info: dict) -> str | None:
     return init if isinstance(init, str) and len(init) == len(info["bits"]) else None
 
 
-def _source_registers(module: dict, power_up: dict) -> tuple[dict, tuple]:
+def _source_registers(module: dict, power_up: dict) -> tuple[dict, tuple, tuple]:
     """The source register bits that have no power-up value, each as (hierarchical path, bit index or None):
     the path is the instance names (Yosys's `hdlname`) then the register's name in its module, the index as
     declared (`reg [8:1] r`: r[1] is the first bit).  Returned: net id -> those it carries (several where
-    synthesis merged equal registers), and (path, index, value) for those synthesis made 0 or 1.  Read only
-    from well-formed entries: a cached module is anyone's data."""
-    out, constant = {}, []
+    synthesis merged equal registers), (path, index, value) for those synthesis made 0 or 1, and (path, index,
+    value) for the bits that have a power-up value.  Read only from well-formed entries: a cached module is
+    anyone's data."""
+    out, constant, initial = {}, [], []
     for name, info in module["netnames"].items():
         attrs = info.get("attributes")
         if not isinstance(attrs, dict) or info.get("hide_name") or not (
@@ -733,15 +741,17 @@ def _source_registers(module: dict, power_up: dict) -> tuple[dict, tuple]:
         offset = offset if isinstance(offset, int) and not isinstance(offset, bool) else 0
         init = _init_string(info) or "x" * len(bits)
         for i, bit in enumerate(bits):
-            if bit in power_up or init[-1 - i] in "01":
-                continue
             index = None if len(bits) == 1 and offset == 0 else \
                 offset + (len(bits) - 1 - i if info.get("upto") else i)
+            if bit in power_up or init[-1 - i] in "01":
+                initial.append((path, index, int(init[-1 - i]) if init[-1 - i] in "01" else power_up[bit]))
+                continue
             if bit in ("0", "1"):
                 constant.append((path, index, int(bit)))
             elif not isinstance(bit, str):      # an x bit is Yosys's don't care, read as it likes per use: no start
                 out.setdefault(bit, []).append((path, index))
-    return {bit: tuple(sorted(regs)) for bit, regs in out.items()}, tuple(sorted(constant, key=repr))
+    return ({bit: tuple(sorted(regs)) for bit, regs in out.items()}, tuple(sorted(constant, key=repr)),
+            tuple(sorted(initial, key=repr)))
 
 
 def _memory_word(name: str, attrs: dict) -> bool:

@@ -672,9 +672,11 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
     kept on Icarus) is never read as a result.  `start`: statements run at time 0 (`power_up_start`'s).
     Every user name is written by ids.verilog; the testbench's own names carry the prefix no port has.
     Sampled clocks (`Netlist.sampled`): the testbench has no clock of its own.  Every input goes to 0 (where
-    the network's samples power up) after time 0, the clocks first: in Verilog-2005 an input's first value is
-    an edge (x -> 0 is a falling one), which at time 0 races the source's own processes starting.  The
-    power-up start (`start`) comes after that edge.  Then each cycle's clocks are applied first, the rest a
+    the network's samples power up) after time 0, the clocks first (#1) and the rest later (#3): in
+    Verilog-2005 an input's first value is an edge (x -> 0 is a falling one), which at time 0 races the source's
+    own processes starting.  The starts (`start`: `restart`'s and the power-up start's) come between (#2):
+    after the clocks' first edge, before the data's first values, so an asynchronous reset held from the start
+    acts after them, as in the network.  Then each cycle's clocks are applied first, the rest a
     while later: a flip-flop takes the data of the cycle before its edge, as the sampled network does."""
     v = ids.verilog
     ins, outs = [v(p) for p in netlist.inputs], [v(p) for p in netlist.outputs]
@@ -698,11 +700,11 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
         return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
     show = f'$display("{tag} ' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
     if start:
-        after = ["    #3;"] if netlist.sampled else []        # sampled: after the inputs' first values
+        after = ["    #2;"] if netlist.sampled else []        # sampled: after the clocks' first values
         lines += ["  initial begin"] + after + [f"    {st}" for st in start] + ["  end"]
     lines += ["  initial begin", f'    $readmemb("vectors.txt", {mem});']
     if netlist.sampled:
-        lines.append("    " + _apply_sampled(netlist, None, "#1", first="#1"))
+        lines.append("    " + _apply_sampled(netlist, None, "#2", first="#1"))
     if clocked:
         lines += [f"    {wait} {apply('0')}" if netlist.sampled else f"    {apply('0')}"]
         lines += ([f"    {wait} {show}"] if first_read else []) + [
@@ -741,8 +743,10 @@ def power_up_start(netlist: Netlist) -> list[list[str]]:
     hierarchical name read with generate scopes, then as one escaped name: Yosys joins both with a dot),
     each setting it to the latch's power-up, as the logic backend starts it, or the constant synthesis
     made of the bit (`Netlist.constant_registers`).  A name Verilog cannot hold is left out."""
+    powered = {(path, index) for path, index, _ in netlist.initial_registers}    # restart's, not these
     start = [(path, index, netlist.graph.nodes[q].get("inverted", 0))
-             for q in netlist.latches() for path, index in netlist.graph.nodes[q].get("registers", ())]
+             for q in netlist.latches() for path, index in netlist.graph.nodes[q].get("registers", ())
+             if (path, index) not in powered]
     return _start_entries(start + list(netlist.constant_registers))
 
 
@@ -798,8 +802,7 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
             ways = _bind_start(iverilog, gen, path, tmp, entries,
                                lambda st: _testbench(netlist, len(vectors), clocked, first_read, tag, st))
             if info is not None and start:
-                given = {w for entry in start for w in entry}
-                bound = sum(w in given for w in ways)
+                bound = sum(any(w in ways for w in entry) for entry in start)
                 info["started"] = {"register_bits": bound, "not_found": len(start) - bound}
         out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout
     if info is not None:

@@ -467,6 +467,16 @@ def test_a_clock_option_for_sampled_clocks_says_to_give_them_per_cycle(tmp_path,
     src = verilog(tmp_path, BOTH_EDGES)
     refused(capsys, "simulate", src, "--clock", "clk", "--cycles", "3", "--backend", "logic",
             needle="clocks are sampled inputs (clk): give their value in each cycle of --stimulus")
+    # --cycles alone held every input, the clocks too: no edge came, and it said nothing (a hostile-input pass)
+    refused(capsys, "simulate", src, "--cycles", "3", "--set", "d=1", "--backend", "logic",
+            needle="--cycles 3: ddr's clocks are sampled inputs (clk), and --cycles holds them")
+
+
+def test_the_clock_given_as_an_input_is_named_as_the_clock(tmp_path, capsys):
+    src = verilog(tmp_path, "module one(input clk, input d, output reg q);\n  always @(posedge clk) q <= d;\n"
+                            "endmodule\n")
+    refused(capsys, "simulate", src, "--set", "clk=1", "--cycles", "2", "--backend", "logic",
+            needle="'clk' is the clock: every cycle pulses it; leave it out of the inputs given")
 
 
 @needs_icarus
@@ -516,6 +526,26 @@ def test_registers_with_power_up_values_are_compared_from_the_first_cycle(tmp_pa
     assert before["agree"] and before["undefined_by_port"]["n"]["x"] == 50
 
 
+# A falling-edge register that powers up at 1 under an asynchronous reset held from the start (a hostile-input
+# pass): put back to 1 after the data's first values, it stayed 1 on Icarus while the reset held it at 0.
+NEGEDGE_POWER_UP_RESET = """module nr(input clk, input rst_n, input d, output reg q, output reg p);
+  initial q = 1'b1;
+  initial p = 1'b1;
+  always @(negedge clk or negedge rst_n) if (!rst_n) q <= 1'b0; else q <= d;
+  always @(posedge clk) p <= q;
+endmodule
+"""
+
+
+@needs_icarus
+def test_a_reset_held_from_power_up_acts_after_the_power_up_values(tmp_path, capsys):
+    res = _verify(capsys, verilog(tmp_path, NEGEDGE_POWER_UP_RESET), "--cycles", "300")
+    assert res["sampled_clocks"] == ["clk"] and res["equivalence"]["status"] == "proved"
+    _agrees(res, compared_at_least=300 * 2 - 4)
+    started = res["cosim"].get("power_up_start")
+    assert started is None or started["not_found"] >= 0
+
+
 @needs_icarus
 def test_a_sampled_network_on_the_envelope_agrees_with_icarus(tmp_path, capsys):
     """The physical network of a both-edge design: each cycle's read valid, stable and equal to Icarus."""
@@ -524,12 +554,107 @@ def test_a_sampled_network_on_the_envelope_agrees_with_icarus(tmp_path, capsys):
     assert co["agree"] and co["valid"] and co["stable"] and co["min_margin"] > 0.05, co
 
 
-def test_a_clock_computed_in_the_circuit_is_refused_with_its_line(tmp_path, capsys):
-    """A divided clock changes in the same instant as the registers clocked with it: a flip-flop on it reads
-    their new values on a simulator, their old ones wherever the clock lags."""
-    src = verilog(tmp_path, "module div(input clk, input d, output reg q);\n  reg half;\n"
-                            "  always @(posedge clk) half <= ~half;\n  always @(posedge half) q <= d;\nendmodule\n")
-    refused(capsys, "synth", src, needle="line 4: module div: this flip-flop is clocked by logic, not by an input port")
+# Ripple stages: each flip-flop on a computed clock reads only itself, an input, or a register updated after it
+# (docs/rtl.md, "Clocks computed in the circuit"), so a simulator and the sampled network agree.
+RIPPLE = """module ripple(input clk, input rst, input d, output reg a, output reg b, output reg c, output reg [1:0] n,
+              output reg m);
+  always @(posedge clk) if (rst) a <= 0; else a <= ~a;
+  always @(posedge a or posedge rst) if (rst) b <= 0; else b <= ~b;
+  always @(negedge b or posedge rst) if (rst) c <= 0; else c <= ~c;
+  always @(posedge a or posedge rst) if (rst) n <= 0; else n <= n + {1'b0, d};
+  always @(posedge c or posedge rst) if (rst) m <= 0; else m <= m ^ d;
+endmodule
+"""
+OWN_CLOCK = """module own(input clk, input rst, output reg half, output reg q);
+  always @(posedge clk) if (rst) half <= 0; else half <= ~half;
+  always @(posedge half) q <= half;
+endmodule
+"""
+GATED = "module gated(input clk, input en, input d, output reg q);\n  wire g = clk & en;\n" \
+        "  always @(posedge g) q <= d;\nendmodule\n"
+
+
+@needs_icarus
+def test_a_ripple_counter_is_sampled_and_agrees_with_icarus(tmp_path, capsys):
+    """Refused before (every clock computed in the circuit): proved against the source sampled the same way
+    and equal to Icarus over 400 cycles; a network with two outputs swapped fails both."""
+    src = verilog(tmp_path, RIPPLE)
+    res = _verify(capsys, src, "--cycles", "400")
+    assert res["equivalence"]["status"] == "proved" and res["sampled_clocks"] == ["clk"]
+    _agrees(res, compared_at_least=400 * 6)
+    nl = synthesize(src)
+    g = nl.graph
+    outs = [o for o in g if g.nodes[o]["kind"] == "output" and g.nodes[o]["port"] in ("b", "c")]
+    (x,), (y,) = (g.predecessors(o) for o in outs)
+    g.remove_edges_from([(x, outs[0]), (y, outs[1])])
+    g.add_edges_from([(y, outs[0]), (x, outs[1])])
+    bad = V.verify(src, netlist=nl, vectors=100)
+    assert bad["equivalence"]["status"] == "counterexample" and not bad["cosim"]["agree"]
+
+
+@pytest.mark.parametrize("text, needle", [
+    (RIPPLE.replace("m <= m ^ d", "m <= n[0] ^ b"),
+     "line 7: module ripple: this flip-flop is clocked by logic of 'c' and reads 'b', 'n[0]', which can change in "
+     "the same instant, before that clock's edge"),
+    (OWN_CLOCK, "line 3: module own: this flip-flop is clocked by logic of 'half' and reads 'half', which its "
+                "clock is computed from"),
+    (GATED, "line 3: module gated: this flip-flop is clocked by logic of the input ports 'clk', 'en'")],
+    ids=["reads_an_earlier_register", "reads_its_own_clock", "gated_by_an_input"])
+def test_a_computed_clock_is_refused_where_its_flip_flop_would_read_otherwise(tmp_path, capsys, text, needle):
+    refused(capsys, "synth", verilog(tmp_path, text), needle=needle)
+
+
+@needs_icarus
+def test_the_refused_read_of_an_earlier_register_is_a_real_disagreement(tmp_path, monkeypatch):
+    """Taken anyway, the ripple stage reading b and n (updated in its clock's instant, before it) gets their
+    new values on Icarus and the sampled network's old ones: the proof holds (Yosys samples it too), Icarus
+    disagrees."""
+    from mech2spice.synthesis import derived_clocks
+    src = verilog(tmp_path, RIPPLE.replace("m <= m ^ d", "m <= n[0] ^ b"))
+    monkeypatch.setattr(derived_clocks, "ambiguity", lambda *args: None)
+    res = V.verify(src, vectors=300)
+    assert res["equivalence"]["status"] == "proved" and not res["cosim"]["agree"]
+    assert {m["bit"] for m in res["cosim"]["mismatches"]} == {"m[0]"}
+
+
+# A clock taken as data by a flip-flop (a hostile-input pass): Verilog reads the clock after its edge, the
+# sampled network before it.  Only the data counts: an asynchronous reset is a level either way.
+CLOCK_AS_DATA = "module cd(input clk, input clk2, input d, output reg r, output reg s);\n" \
+                "  always @(posedge clk) r <= clk ^ d;\n  always @(posedge clk2) s <= d;\nendmodule\n"
+OTHER_CLOCK_AS_DATA = "module oc(input clk, input sclk, input d, output reg r, output reg s);\n" \
+                      "  always @(posedge clk) r <= sclk;\n  always @(posedge sclk) s <= d;\nendmodule\n"
+
+
+@pytest.mark.parametrize("text, needle", [
+    (CLOCK_AS_DATA, "line 2: module cd: this flip-flop takes the clock 'clk' as data"),
+    (OTHER_CLOCK_AS_DATA, "line 2: module oc: this flip-flop takes the clock 'sclk' as data")],
+    ids=["its_own_clock", "another_clock"])
+def test_a_flip_flop_taking_a_sampled_clock_as_data_is_refused(tmp_path, capsys, text, needle):
+    refused(capsys, "synth", verilog(tmp_path, text), needle=needle)
+
+
+@needs_icarus
+def test_a_sampled_clock_taken_as_data_is_a_real_disagreement(tmp_path, monkeypatch):
+    """Taken anyway, r reads clk ^ d: Icarus after the rising edge (~d), the network before it (d)."""
+    from mech2spice.synthesis import derived_clocks
+    monkeypatch.setattr(derived_clocks, "clock_read", lambda *args: None)
+    res = V.verify(verilog(tmp_path, CLOCK_AS_DATA), vectors=200)
+    assert res["equivalence"]["status"] == "proved" and not res["cosim"]["agree"]
+    assert {m["bit"] for m in res["cosim"]["mismatches"]} == {"r[0]"}
+
+
+# A register bit that takes a constant 1 in a sampled design: its latch is fed the constant (a NOR gate's 1 input
+# is folded away, a latch's is not), which the network builder refused as an internal error (a hostile-input pass).
+SAMPLED_CONSTANT_ONE = "module k1(input clk, input clk2, input d, output reg [1:0] q, output reg r);\n" \
+                       "  always @(posedge clk) q <= {1'b1, d};\n  always @(posedge clk2) r <= d;\nendmodule\n"
+
+
+@needs_icarus
+def test_a_sampled_register_bit_taking_a_constant_one_runs_on_the_envelope(tmp_path, capsys):
+    res = _verify(capsys, verilog(tmp_path, SAMPLED_CONSTANT_ONE), "--backend", "envelope", "--no-equivalence",
+                  "--cycles", "6")
+    co = res["cosim"]
+    assert co["agree"] and co["valid"] and co["stable"] and co["min_margin"] > 0.05, co
 
 
 CASE_WITHOUT_DEFAULT = """module cwd(input clk, input rst, input a, output [2:0] y);
@@ -562,6 +687,59 @@ def test_a_case_without_default_is_a_latch_of_the_clock(tmp_path, capsys, edge):
     _agrees(res, compared_at_least=400 * 3)
     trace = run_clocked(synthesize(src), [dict(rst=1, a=0)] + [dict(rst=0, a=1)] * 5)
     assert [t["outputs"]["y"] for t in trace] == [0, 1, 2, 3, 3, 3]
+
+
+# A listed branch assigning a constant: Yosys folds it into the latch's reset or set pin ($_DLATCH_NP1_), which
+# was refused with the generic latch message (a hostile-input pass); it is the same latch, open while forced.
+CONSTANT_BRANCH = """module cb(input clk, input rst{port}, input x, output reg o);
+  reg [1:0] st;
+  always @(posedge clk{edge}) if ({test}) st <= 2'd0; else st <= {{st[0], x}};
+  always @* case (st) 2'd0: o = {zero}; 2'd1: o = 1'b1; 2'd2: o = ~x; endcase   // 3: o holds
+endmodule
+"""
+
+
+@needs_icarus
+@pytest.mark.parametrize("fmt", [dict(port="", edge="", test="rst", zero="x"),
+                                 dict(port="_n", edge=" or negedge rst_n", test="!rst_n", zero="1'b0")],
+                         ids=["sync_reset", "async_reset"])
+def test_a_branch_assigning_a_constant_is_the_same_latch_of_the_clock(tmp_path, capsys, fmt):
+    src = verilog(tmp_path, CONSTANT_BRANCH.format(**fmt))
+    rc, _, err = run(capsys, "synth", src)
+    assert rc == 0 and "level-sensitive latch on 'o' ($_DLATCH_" in err, err
+    res = _verify(capsys, src, "--cycles", "400")
+    assert res["equivalence"]["status"] == "proved"
+    _agrees(res, compared_at_least=400 - 4)
+
+
+# The same latches in a sampled design (two clocks): clk2fflogic made them logic, so no check saw them (a
+# hostile-input pass).  The latch of the clock is kept, and the checks read a sampled clock as an edge.
+SAMPLED_LATCH = """module sl(input clk, input clk2, input rst, input x, output reg [1:0] o, output reg p);
+  reg [1:0] st;
+  always @(posedge clk{edge}) if (rst) st <= {reset}; else st <= st + {{1'b0, x}};
+  always @(posedge clk2) if (rst) p <= 0; else p <= o[0];
+  always @* case (st) 2'd0: o = 2'd1; 2'd1: o = 2'd2; 2'd2: o = {{x, x}}; endcase   // 3: o holds
+endmodule
+"""
+
+
+@needs_icarus
+def test_a_latch_of_the_clock_in_a_sampled_design_agrees_with_icarus(tmp_path, capsys):
+    src = verilog(tmp_path, SAMPLED_LATCH.format(edge="", reset="2'd0"))
+    rc, _, err = run(capsys, "synth", src)
+    assert rc == 0 and "level-sensitive latch on 'o" in err, err
+    res = _verify(capsys, src, "--cycles", "400")
+    assert res["sampled_clocks"] == ["clk", "clk2"] and res["equivalence"]["status"] == "proved"
+    _agrees(res, compared_at_least=400 * 3 - 12)
+
+
+@pytest.mark.parametrize("text, needle", [
+    (SAMPLED_LATCH.format(edge=" or posedge rst", reset="2'd3"), "its enable follows input rst"),
+    ("module le(input clk, input clk2, input en, input d, output reg o, output reg q, output reg p);\n"
+     "  always @(posedge clk) q <= d;\n  always @(posedge clk2) p <= q;\n  always @* if (en) o = d;\nendmodule\n",
+     "its enable follows input en")], ids=["forced_into_an_unlisted_code", "enabled_by_an_input"])
+def test_a_latch_that_can_close_between_edges_is_refused_in_a_sampled_design(tmp_path, capsys, text, needle):
+    refused(capsys, "synth", verilog(tmp_path, text), needle=needle)
 
 
 def test_a_latch_that_can_close_between_edges_is_refused(tmp_path, capsys):

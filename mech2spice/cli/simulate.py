@@ -171,6 +171,10 @@ def _clocked_steps(args, nl) -> list[dict]:
         return inputs.stimulus_steps(args.stimulus, _parse_sets(args.set), engine_class(args.backend))
     if not args.cycles:
         raise Mech2SpiceError(f"{nl.top} is clocked by {nl.clock_text()}: give --cycles N or --stimulus FILE.json")
+    if nl.sampled:          # --cycles holds every input, the sampled clocks too: no edge would ever come
+        raise Mech2SpiceError(f"--cycles {args.cycles}: {nl.top}'s clocks are sampled inputs "
+                              f"({', '.join(nl.sampled)}), and --cycles holds them: give their value in each "
+                              "cycle of --stimulus")
     inputs.check_cycles(args.cycles, engine_class(args.backend))
     return [{"set": _parse_sets(args.set), "cycles": args.cycles}]
 

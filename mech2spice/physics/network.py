@@ -57,9 +57,11 @@ def build(netlist: Netlist, p: GateParams, delay_pairs: int = LATCH_DELAY_PAIRS)
             bit_drives[src] += nor.drive_pair(m, p, pair, p.levels.nominal0, f"in.{src}.{sink}")
         elif src == "const0":
             nor.drive_pair(m, p, pair, p.levels.nominal0, f"zero.{sink}")
+        elif src == "const1":       # a latch taking a constant 1 (every NOR gate's 1 input is folded away)
+            nor.drive_pair(m, p, pair, p.levels.nominal1, f"one.{sink}")
         else:
             raise Mech2SpiceError(f"gate {sink} is fed by {src} ({kind}); only gates, latches, inputs "
-                                  "and const0 can drive a gate")
+                                  "and constants can drive a gate")
     clock_drives = [d for pair in clock_pairs for d in nor.drive_pair(m, p, pair, p.levels.nominal0, "clk")]
     const_out = {}
     m.probes.clear()              # a design is observed at its outputs (internal DOFs by name if wanted)

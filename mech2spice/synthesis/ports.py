@@ -25,6 +25,9 @@ def pack_inputs(netlist, values: dict[str, int]) -> dict[str, int]:
     bits = dict.fromkeys(input_bits(netlist), 0)
     for port, value in values.items():
         if port not in netlist.inputs:
+            if port == netlist.clock:
+                raise Mech2SpiceError(f"'{port}' is the clock: every cycle pulses it; leave it out of the inputs "
+                                      "given")
             known = ", ".join(netlist.inputs) or "none"
             raise Mech2SpiceError(f"unknown input port '{port}' (inputs: {known})")
         width, span = netlist.inputs[port], port_range(netlist, port)

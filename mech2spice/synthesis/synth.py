@@ -44,7 +44,7 @@ import numpy as np
 from .. import identifiers
 from ..errors import Mech2SpiceError
 from ..inputs import read_input
-from . import dialect, maps, races, refusals, yosys
+from . import derived_clocks, dialect, maps, races, refusals, yosys
 from .verilog_text import blanked as _blanked, statement_or_block_end
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
@@ -160,6 +160,7 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     try:
         netlist = build_netlist(name, module, path)
     except _Sampled as need:            # several clocks, both edges, a clock read as data: sample them
+        _refuse_clock_reads(name, module, need.clocks, path)
         # the source's power-up values, as its flip-flops carry them (clk2fflogic moves them to its samples)
         initial = _source_registers(module, _initial_values(module))[2]
         name, module, found, released, sv, aliased = _run_yosys(path, top, source, sampled=True)
@@ -374,7 +375,8 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
         maps.MAP_POW,                               # `a ** b`, b not constant (synthesis/maps.py)
         "tribuf -formal",                           # tri-state buses -> multiplexers (docs/rtl.md) ...
         "delete n:$tribuf_conflict*",               # ... less its no-two-drivers checks: Icarus co-simulates
-        *(("memory", "opt_clean", *yosys.SAMPLE_CLOCKS) if sampled else ()),   # sampled clocks
+        # sampled clocks: the flip-flops only; a level-sensitive latch stays one, for `_check_dlatches`
+        *(("memory", "opt_clean", "clk2fflogic t:$*dff*", *yosys.SAMPLE_CLOCKS[1:]) if sampled else ()),
         # -nofsm: a state register keeps the source's encoding, so the network powers up in a state the source
         # has and every register keeps its name (verify starts it on Icarus); docs/rtl.md, "State machines"
         "synth -flatten -nofsm" + (f" -top {identifiers.yosys(top)}" if top else ""),   # (memories: `memory` + `memory_map` in it)
@@ -601,6 +603,9 @@ _CELLS = {
 # Flip-flops (on the rising or falling edge) with an asynchronous reset (value 0) or set (value 1), active
 # high (P) or low (N).
 _FORCED = re.compile(r"^\$_DFF_(?P<edge>[PN])(?P<polarity>[NP])(?P<value>[01])_$")
+# A level-sensitive latch with a reset or set (E polarity, R polarity, value): Yosys's reading of a branch
+# that assigns a constant, Q = R ? value : (E ? D : Q).
+_FORCED_DLATCH = re.compile(r"^\$_DLATCH_(?P<enable>[NP])(?P<polarity>[NP])(?P<value>[01])_$")
 _SEQUENTIAL = re.compile(r"^\$_?(?:\w*dff\w*|\w*dlatch\w*|sr|ff|mem\w*)(?:_|$)", re.I)
 _NAMED = {"$check": "assert/assume/cover"}
 # Why it is refused rather than dropped: dropping would silently change what the source says it does.
@@ -632,7 +637,9 @@ def map_cell(cell_type: str, top: str) -> tuple[str, tuple, str] | None:
             f"module {top}: an asynchronous load of a signal ({cell_type}) makes the register transparent to "
             "a second data input whenever the load is asserted, a level-sensitive latch on a data path; "
             "reset or set it to a constant instead")
-    if "DLATCH" in cell_type.upper():          # with a reset or set: a latch forced while open
+    if _FORCED_DLATCH.match(cell_type):        # a listed branch's constant, folded into a reset or set pin
+        return "dlatch", ("E", "D", "R"), "Q"
+    if "DLATCH" in cell_type.upper():          # both a reset and a set
         raise Mech2SpiceError(f"module {top}: Yosys inferred a level-sensitive latch ({cell_type}); "
                               "assign every signal on every path of combinational always blocks")
     if _SEQUENTIAL.match(cell_type):
@@ -676,7 +683,7 @@ def build_netlist(top: str, module: dict, path: Path | None = None, sampled: tup
             _connect_dlatch(g, node, sources, names.get(out_net, f"${out_net}"))
         else:
             _connect_gate(g, node, sources)
-    _check_dlatches(g, clock)
+    _check_dlatches(g, clock, tuple(sampled))
     for port, bits in _ports(module, "output"):
         for i, bit in enumerate(bits):
             if not isinstance(bit, str) and bit not in driver:      # 'x' is a chosen don't-care: 0
@@ -789,9 +796,14 @@ def _connect_dlatch(g: nx.DiGraph, node: str, sources: list[str], net: str) -> N
     while E holds still between edges (`_check_dlatches`), that is the value Q had when E last closed.  The
     cell's node becomes the multiplexer's output gate; the latch powers up at 0 (the source's x refined)."""
     cell, what = g.nodes[node].pop("cell")
-    enable, d = sources
-    if cell == "$_DLATCH_N_":
+    enable, d = sources[:2]
+    if cell[9] == "N":                                           # $_DLATCH_N_, $_DLATCH_N?V_
         enable = _not(g, enable)
+    forced = _FORCED_DLATCH.match(cell)
+    if forced:      # open while forced, taking the value: E' = E | R, D' = R ? value : D
+        r = sources[2] if forced["polarity"] == "P" else _not(g, sources[2])
+        enable = _not(g, _nor(g, enable, r))
+        d = _not(g, _nor(g, r, d)) if forced["value"] == "1" else _nor(g, r, _not(g, d))
     number = g.graph.get("next_latch")
     if number is None:
         number = 1 + max((_gate_key(x)[0] for x in g if _kind(g, x) == "latch"), default=-1)
@@ -805,11 +817,11 @@ def _connect_dlatch(g: nx.DiGraph, node: str, sources: list[str], net: str) -> N
     _connect_gate(g, node, [_nor(g, both, kept), _const(g, 0)])  # their OR
 
 
-def _check_dlatches(g: nx.DiGraph, clock: str | None) -> None:
+def _check_dlatches(g: nx.DiGraph, clock: str | None, sampled: tuple = ()) -> None:
     """Refuse a level-sensitive latch whose enable can close between clock edges: its held value would be the
     one at that moment, which no latch of the clock captures.  Between edges only inputs change, and registers
     an asynchronous reset or set forces: the enable may follow neither, except to open when a reset forces
-    (`_closes_when_forced`)."""
+    (`_closes_when_forced`).  Sampled clocks (`sampled`) change only at edges: an enable may follow them."""
     plain = nx.subgraph_view(g, filter_edge=lambda u, v: g.nodes[v]["kind"] != "latch")   # cut at every latch
     warned = set()
     for q, attrs in list(g.nodes(data=True)):
@@ -817,9 +829,9 @@ def _check_dlatches(g: nx.DiGraph, clock: str | None) -> None:
             continue
         what, enable = attrs.pop("dlatch")
         cone = nx.ancestors(plain, enable) | {enable}
-        ports = sorted({g.nodes[n]["port"] for n in cone if g.nodes[n]["kind"] == "input"})
+        ports = sorted({g.nodes[n]["port"] for n in cone if g.nodes[n]["kind"] == "input"} - set(sampled))
         why = f"its enable follows input {', '.join(ports)}" if ports else "the design has no clock" \
-            if clock is None else _closes_when_forced(g, plain, cone, enable)
+            if clock is None and not sampled else _closes_when_forced(g, plain, cone, enable)
         if why:
             raise Mech2SpiceError(
                 f"{what}: {why}, so it can close between clock edges and hold what it had at that moment, which "
@@ -888,6 +900,23 @@ def _not(g: nx.DiGraph, a: str) -> str:
     return made[a]
 
 
+def _refuse_clock_reads(top: str, module: dict, clocks: tuple, path: Path) -> None:
+    """Refuse a flip-flop (or latch) that takes a clock to be sampled as data (`derived_clocks.clock_read`)."""
+    flops = [c for c in module["cells"].values() if c["type"] in _EDGE_FLOPS or _FORCED.match(c["type"])]
+    latches = [c for c in module["cells"].values() if "DLATCH" in c["type"].upper()]
+    found = derived_clocks.clock_read(module, flops, latches, clocks)
+    if found:
+        cell, clock = found
+        where = _where(cell, top, path)
+        what = "latch" if cell in latches else "flip-flop"
+        raise Mech2SpiceError(
+            f"{where + ': ' if ', line ' in where else ''}module {top}: this {what} takes the clock '{clock}' as "
+            f"data: at an edge a simulator gives it the clock's value after the edge (or either value where logic "
+            "stands between, by the order of its events), the network, its clocks sampled, the value before; "
+            "write the value the edge implies (1 after a rising edge of that clock), or read the clock through a "
+            "register")
+
+
 class _Sampled(Mech2SpiceError):
     """A design one pulse per cycle cannot clock as written, that sampling its clock ports can (`clocks`):
     several of them, both edges, or a clock also read as data.  `synthesize` synthesizes it again, sampled."""
@@ -904,7 +933,16 @@ def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path 
     if not flops:
         return None
     source = {id(c): driver.get(c["connections"]["C"][0]) for c in flops}
-    derived = next((c for c in flops if source[id(c)] is None or g.nodes[source[id(c)]]["kind"] != "input"), None)
+    by_port = {id(c) for c in flops if source[id(c)] is not None and g.nodes[source[id(c)]]["kind"] == "input"}
+    derived = next((c for c in flops if id(c) not in by_port), None)
+    found = derived and derived_clocks.ambiguity(module, flops, _net_names(module))
+    if found:
+        cell, why = found
+        where = _where(cell, top, path)
+        raise Mech2SpiceError(f"{where + ': ' if ', line ' in where else ''}module {top}: {why}")
+    ports = [p for p in module["ports"] if p in {g.nodes[source[k]]["port"] for k in by_port}]
+    if derived is not None and ports:   # one meaning (derived_clocks): sampled, edges found between samples
+        raise _Sampled(f"module {top}: a clock computed in the circuit", tuple(ports))
     if derived is not None:
         where = _where(derived, top, path)
         raise Mech2SpiceError(

@@ -36,11 +36,12 @@ CLASSES = [
     ("tri-state driver", r"tri-state"),
     ("inout port", r"\binout\b"),
     ("both clock edges", r"falling clock edge and others on the rising one|negative-edge"),
-    ("several or derived clocks", r"clocked by several ports|clocked directly by one input port|clock .* also used as data|clocked by logic"),
+    ("several or derived clocks", r"clocked by several ports|clocked directly by one input port|clock .* also used as data|clocked by logic|takes the clock .* as data"),
+    ("a block testing none of its listed edges (a flip-flop on several clocks)", r"tests none of"),
     ("level-sensitive latch", r"level-sensitive latch"),
+    ("undriven net", r"nothing drives it|not driven by anything"),      # before memory: its line names memory words
     ("memory", r"\$mem|memory"),
     ("other sequential cell", r"sequential cell"),
-    ("undriven net", r"nothing drives it|not driven by anything"),
     ("several top modules", r"several top-level modules"),
     ("combinational loop", r"combinational loop"),
     ("$display/$write in the design", r"\$display"),
@@ -132,6 +133,8 @@ def _row(design: dict, root: Path, tool: str, args) -> dict:
         row["tool"] = tool
         args.cache.mkdir(parents=True, exist_ok=True)
         cached.write_text(json.dumps(row, indent=1))
+    # what the manifest says of the design (not measured) is read from it now: a corrected note needs no rerun
+    row.update(kind=design.get("kind", ""), source=_source(design), licence=design.get("licence", "not stated"))
     print(_line(row), flush=True)
     return row
 

@@ -62,6 +62,8 @@ _PATH = re.compile(
     r"(?<![A-Za-z0-9_./\-])"
     r"((?:\.\./shared/|/work/|/home/|/root/|/tmp/|(?:" + "|".join(re.escape(d) for d in TOP_DIRS + SUBPACKAGES)
     + r")/)" + _CHAR + r"*)")
+# a path in another repository, as rtl_suite.md's sources name it: `owner/repo @ commit: path, path`
+_FOREIGN = re.compile(r"[\w.-]+/[\w.-]+ @ [0-9a-f]{7,40}: (?:[^|,\s]+, )*$")
 _BARE = re.compile(r"(?<![A-Za-z0-9_./\-])([A-Za-z0-9_\-]+\.py)(?![A-Za-z0-9_/\-]|:\d+\()")
 _LINK = re.compile(r"\]\(([^()\s]+)\)")
 _COMMAND = re.compile(r"(?:^|[;&|(]|\$ |python3? -m )\s*(?:[A-Z_]+=\S*\s+)*"   # where a command starts
@@ -257,7 +259,7 @@ def find_stale():
             text = _drop_urls(text)
             for m in _PATH.finditer(text):
                 token = m.group(1)
-                if _placeholder(token):
+                if _placeholder(token) or _FOREIGN.search(text[:m.start()]):
                     continue
                 why = _check_path(token)
                 if why:

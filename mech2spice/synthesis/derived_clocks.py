@@ -25,10 +25,7 @@ _OUTPUT_PINS = ("Y", "Q")
 def ambiguity(module: dict, flops: list[dict], names: dict) -> tuple[dict, str] | None:
     """The first flip-flop of `flops` (Yosys cells with a C pin) on a computed clock that has no one meaning,
     with the reason (register and port names from `names`, net id -> name); None when each has one."""
-    inputs = {bit: port for port, info in module["ports"].items() if info.get("direction") == "input"
-              for bit in info["bits"]}
-    out_of = {bits[0]: cell for cell in module["cells"].values()
-              for pin, bits in cell["connections"].items() if pin in _OUTPUT_PINS and bits}
+    inputs, out_of = _index(module)
     is_flop = {id(c) for c in flops}.__contains__
     cone = _Cone(inputs, out_of, lambda cell: is_flop(id(cell)))
     depth = _depths(flops, inputs, cone)
@@ -69,6 +66,15 @@ def _clash(regs: list[dict], clashing: list[dict], names: dict) -> str:
             "a simulator gives it the value after the clock's edge, the network (its clocks sampled) the value "
             "before; clock it by an input port (a divided clock as an enable on the fast one)")
     return None
+
+
+def _index(module: dict) -> tuple[dict, dict]:
+    """(input bit -> its port, net bit -> the cell driving it) of a Yosys JSON module."""
+    inputs = {bit: port for port, info in module["ports"].items() if info.get("direction") == "input"
+              for bit in info["bits"]}
+    out_of = {bits[0]: cell for cell in module["cells"].values()
+              for pin, bits in cell["connections"].items() if pin in _OUTPUT_PINS and bits}
+    return inputs, out_of
 
 
 class _Cone:
@@ -125,10 +131,7 @@ def clock_read(module: dict, flops: list[dict], latches: list[dict], clocks: tup
     clock's name; None when none does.  At an edge a simulator has already changed every clock the testbench
     changed, so the block reads their new values (either value, where logic stands between, by the order of
     its events); the network, its clocks sampled, takes the data sampled before the edge."""
-    inputs = {bit: port for port, info in module["ports"].items() if info.get("direction") == "input"
-              for bit in info["bits"]}
-    out_of = {bits[0]: cell for cell in module["cells"].values()
-              for pin, bits in cell["connections"].items() if pin in _OUTPUT_PINS and bits}
+    inputs, out_of = _index(module)
     held = {id(c) for c in flops + latches}
     cone = _Cone(inputs, out_of, lambda cell: id(cell) in held)
     for cell in flops + latches:        # the data only: an asynchronous reset or set is a level either way

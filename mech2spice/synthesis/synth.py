@@ -900,9 +900,14 @@ def _not(g: nx.DiGraph, a: str) -> str:
     return made[a]
 
 
+def _edge_flops(module: dict) -> list[dict]:
+    """The module's flip-flop cells (a clock pin), plain or with an asynchronous reset or set."""
+    return [c for c in module["cells"].values() if c["type"] in _EDGE_FLOPS or _FORCED.match(c["type"])]
+
+
 def _refuse_clock_reads(top: str, module: dict, clocks: tuple, path: Path) -> None:
     """Refuse a flip-flop (or latch) that takes a clock to be sampled as data (`derived_clocks.clock_read`)."""
-    flops = [c for c in module["cells"].values() if c["type"] in _EDGE_FLOPS or _FORCED.match(c["type"])]
+    flops = _edge_flops(module)
     latches = [c for c in module["cells"].values() if "DLATCH" in c["type"].upper()]
     found = derived_clocks.clock_read(module, flops, latches, clocks)
     if found:
@@ -929,7 +934,7 @@ class _Sampled(Mech2SpiceError):
 def _clock_port(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path | None = None) -> str | None:
     """The single 1-bit input port clocking every flip-flop on one edge (None for combinational designs).
     Raises `_Sampled` where input ports clock them otherwise (several ports, both edges, a bit of a bus)."""
-    flops = [c for c in module["cells"].values() if c["type"] in _EDGE_FLOPS or _FORCED.match(c["type"])]
+    flops = _edge_flops(module)
     if not flops:
         return None
     source = {id(c): driver.get(c["connections"]["C"][0]) for c in flops}

@@ -1008,7 +1008,24 @@ def make_cycles(netlist: Netlist, n: int, seed: int, resets) -> np.ndarray:
         j, level = order.index(f"{r['port']}[0]"), r["level"]
         x[:, j] = np.where(again, level, 1 - level).astype(bool)
         x[:first, j] = bool(level)
+    _hold_clocks_at_releases(netlist, x, order, resets or [])
     return x
+
+
+def _hold_clocks_at_releases(netlist: Netlist, x: np.ndarray, order: list[str], resets) -> None:
+    """Where a reset is itself a sampled clock it changes in the clocks' instant, so its release could fall in
+    the instant of another clock's edge: an edge inside the reset's recovery time, which the source leaves
+    undefined (Icarus runs the flip-flop once both changed and takes D; Yosys's clk2fflogic, and so the
+    network, keeps the reset value).  The other clocks hold their value in each such cycle: no edge there."""
+    for r in resets:
+        if r["port"] not in netlist.sampled:
+            continue
+        j = order.index(f"{r['port']}[0]")
+        released = np.flatnonzero((x[:-1, j] == bool(r["level"])) & (x[1:, j] != bool(r["level"]))) + 1
+        others = [order.index(f"{p}[{i}]") for p in netlist.sampled if p != r["port"]
+                  for i in range(netlist.inputs[p])]
+        for c in others:
+            x[released, c] = x[released - 1, c]
 
 
 def _as_ports(netlist: Netlist, v) -> dict[str, int]:

@@ -195,7 +195,7 @@ def _read_source(netlist: Netlist, rel: str) -> list[str]:
     # model for $mem cells); its memory_dff folds a read register into the port only as synthesis does.
     # sampled clocks: the source's flip-flops sampled as synthesis samples them, both sides on one global clock
     sample = list(yosys.SAMPLE_CLOCKS) if netlist.sampled else []
-    return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), "proc", yosys.DROP_PRINTS,
+    return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), yosys.COMB_AS_STAR, "proc", yosys.DROP_PRINTS,
             "flatten", maps.MAP_POW, "memory", "opt_clean", *sample, f"rename -top {PREFIX}src"]
 
 
@@ -747,7 +747,7 @@ def power_up_start(netlist: Netlist) -> list[list[str]]:
     start = [(path, index, netlist.graph.nodes[q].get("inverted", 0))
              for q in netlist.latches() for path, index in netlist.graph.nodes[q].get("registers", ())
              if (path, index) not in powered]
-    return _start_entries(start + list(netlist.constant_registers))
+    return _start_entries(start + list(netlist.constant_registers), only_x=True)
 
 
 def restart(netlist: Netlist) -> list[list[str]]:
@@ -757,14 +757,18 @@ def restart(netlist: Netlist) -> list[list[str]]:
     return _start_entries(netlist.initial_registers) if netlist.sampled else []
 
 
-def _start_entries(rows) -> list[list[str]]:
-    """Per (path, index, value): the testbench statements that may set that register bit (`_reg_names`)."""
+def _start_entries(rows, only_x: bool = False) -> list[list[str]]:
+    """Per (path, index, value): the testbench statements that may set that register bit (`_reg_names`);
+    `only_x`: each sets the bit only where Icarus holds it at x, so a value the source gives that synthesis
+    did not see (an `initial` in a `translate_off` region) is kept, and its difference from the network shows."""
     out = []
     for path, index, value in rows:
         ways = _reg_names(path)
         if ways:
             bit = "" if index is None else f"[{int(index)}]"
-            out.append([f"{PREFIX}dut.{w}{bit} = 1'b{int(value)};" for w in ways])
+            names = [f"{PREFIX}dut.{w}{bit}" for w in ways]
+            out.append([f"if ({r} === 1'bx) {r} = 1'b{int(value)};" if only_x else f"{r} = 1'b{int(value)};"
+                        for r in names])
     return out
 
 
@@ -952,7 +956,7 @@ def design_resets(path, netlist: Netlist) -> list[dict]:
         rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
         read = _read_command(netlist)
         script = "\n".join([f'{read} {ids.yosys_path(rel, "Verilog file")}',
-                            _hierarchy(netlist.top), "proc", "flatten", "opt_dff", f"rename -top {PREFIX}src",
+                            _hierarchy(netlist.top), yosys.COMB_AS_STAR, "proc", "flatten", "opt_dff", f"rename -top {PREFIX}src",
                             "write_json resets.json", ""])
         result, cut = _run_yosys(script, tmp, 60)
         if cut or result.returncode != 0:
@@ -1200,7 +1204,8 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
     nl = netlist if netlist is not None else synthesize(path, top=top)
     check_names(nl)
     out = {"design": str(path), "top": nl.top, "clocked": nl.clocked, "sampled_clocks": list(nl.sampled),
-           "gates": len(nl.gates()), "latches": len(nl.latches()), "races": [r.as_dict() for r in nl.races]}
+           "gates": len(nl.gates()), "latches": len(nl.latches()), "races": [r.as_dict() for r in nl.races],
+           "translate_off": [list(r) for r in nl.translate_off]}
     with standard_source(path) as src:        # the text synthesis read (VIS dialect rewritten, docs/rtl.md)
         resets = reset_ports(nl, reset, src) if nl.clocked else []
         if equivalence_check:
@@ -1339,6 +1344,12 @@ def _readings_text(result: dict) -> str:
     if result.get("equivalence", {}).get("status") != "proved" or not result["cosim"]["mismatches"] \
             or result.get("races"):
         return ""
+    skipped = ", ".join(f"{a}-{b}" for a, b in result.get("translate_off") or [])
+    if skipped:
+        return ("; the network equals Yosys's reading of the source (proved), so Icarus reads it otherwise: first "
+                f"suspect the source's `translate_off` text (lines {skipped}), which Icarus runs and synthesis "
+                "leaves out (a power-up value there is one the network does not have), then a register with "
+                "neither reset nor power-up value (docs/verify.md)")
     return ("; the network equals Yosys's reading of the source (proved), so Icarus reads it otherwise: most "
             "often a register with neither reset nor power-up value, x on Icarus, whose `if (x)` takes the "
             "else branch, a power-up no circuit need share (give it a reset or an initial value), or a delay "

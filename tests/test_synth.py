@@ -345,6 +345,18 @@ def test_initial_in_a_comment_is_fine(tmp_path):
     assert evaluate(n, {"a": 0}) == {"y": 1}
 
 
+@pytest.mark.parametrize("off, on", [("// synopsys translate_off", "// synopsys translate_on"),
+                                     ("/* synthesis translate_off */", "/* synthesis translate_on */")])
+def test_a_translate_off_region_is_left_out_as_synthesis_leaves_it_and_said(tmp_path, capsys, off, on):
+    """What Yosys skips is not checked as hardware (a delay and a print were refused there) and is named on
+    stderr with its lines: a simulator runs it, the network does not have it."""
+    n = synth_text(tmp_path, f"module t(input a, output y);\n assign y = ~a;\n {off}\n"
+                             f" initial begin #5 $display(\"sim only\"); end\n wire w = 1 +;\n {on}\nendmodule")
+    assert evaluate(n, {"a": 0}) == {"y": 1} and n.translate_off == ((3, 6),)
+    err = capsys.readouterr().err
+    assert "lines 3-6: a `translate_off` region" in err and "Icarus" in err
+
+
 def test_tool_missing(monkeypatch):
     monkeypatch.delenv("MECH2SPICE_YOSYS", raising=False)
     monkeypatch.setattr(yosys.importlib.util, "find_spec", lambda name: None)

@@ -45,7 +45,7 @@ from .. import identifiers
 from ..errors import Mech2SpiceError
 from ..inputs import read_input
 from . import derived_clocks, dialect, maps, races, refusals, yosys
-from .verilog_text import blanked as _blanked, statement_or_block_end
+from .verilog_text import blanked as _blanked, line_of, statement_or_block_end, translate_off_regions
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
@@ -75,6 +75,8 @@ class Netlist:
     # source register bits with a power-up value, (path, index, value) as above: where a sampled design's
     # registers are put back after the testbench's first clock values, an edge the network does not have
     initial_registers: tuple = field(default=(), compare=False)
+    # the source's `translate_off` regions, (first line, last line): text a simulator runs and synthesis not
+    translate_off: tuple = field(default=(), compare=False)
 
     @property
     def clocked(self) -> bool:
@@ -149,6 +151,7 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     identifiers.yosys_path(path.resolve(), "Verilog file")      # quoted in the Yosys script: checked first
     source = dialect.standard_text(path, _read_source(path))    # VIS's dialect as SystemVerilog, lines kept
     _check_source(path, source)
+    skipped = _warn_translate_off(path, source)
     if top is not None:                 # any Verilog name, escaped ones too; one the script cannot hold is refused
         if not isinstance(top, str) or not top or top.startswith("$"):
             raise Mech2SpiceError(f"invalid top module name {top!r}")
@@ -177,6 +180,7 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
         _warn(f"{path}: output {port} is driven only through tri-state drivers: where none is enabled Verilog "
               "reads z and the network a 0 or 1 (the bus as a multiplexer); `verify` names such input vectors")
     netlist.races, netlist.source, netlist.systemverilog = tuple(found), str(path), sv
+    netlist.translate_off = skipped
     return clean(netlist, max_fanout=max_fanout)
 
 
@@ -211,6 +215,18 @@ def observe(netlist: Netlist, ports: list[str]) -> Netlist:
 
 
 # --------------------------------------------------------------------------- running Yosys
+
+def _warn_translate_off(path: Path, text: str) -> tuple[tuple[int, int], ...]:
+    """Say where synthesis and a simulator read different text: a `translate_off` region (often a power-up
+    value or a check meant for simulation only) is in Icarus's run of the source and not in the network.
+    Its (first line, last line) each."""
+    lines = tuple((line_of(text, a), line_of(text, b)) for a, b in translate_off_regions(text))
+    for first, last in lines:
+        _warn(f"{path}, lines {first}-{last}: a `translate_off` region: synthesis, and so the network, leaves "
+              "it out, while a simulator (Icarus, in `verify`) runs it; a value it gives a register shows in "
+              "verify as a difference")
+    return lines
+
 
 def _read_source(path: Path) -> str:
     return read_input(path, "Verilog file").decode("utf-8", errors="replace")
@@ -299,8 +315,11 @@ _SWITCH_LEVEL = re.compile(r"(?<![\w$])(?:r?[npc]mos|r?tran(?:if[01])?|trireg|pu
 
 def _check_source(path: Path, text: str) -> None:
     """Names are ASCII; no switch-level primitive; `initial` blocks may only give constant values (power-up
-    values and ROM contents): anything that happens in simulated time is refused with its line."""
+    values and ROM contents): anything that happens in simulated time is refused with its line.  A
+    `translate_off` region is left out, as synthesis leaves it out (`_warn_translate_off` says so)."""
     blanked = _blanked(text)
+    for a, b in translate_off_regions(text):
+        blanked = blanked[:a] + re.sub(r"[^\n]", " ", blanked[a:b]) + blanked[b:]
     wide = re.search(r"[^\x00-\x7f]", blanked)
     if wide:
         line = blanked.count("\n", 0, wide.start()) + 1
@@ -363,6 +382,7 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
         # hierarchy has made each wired-OR/AND net (`wor`, `wand`) an OR/AND of its drivers; left on the wire,
         # the mark would make synth's own `hierarchy` do it again after the mapping, unmapped
         "setattr -unset wor -unset wand w:*",
+        yosys.COMB_AS_STAR,
         "proc -noopt",                              # `proc` less its opt_expr, which can fold away one of
         "write_rtlil drivers.il",                   # two conflicting drivers: the nets as written
         "opt_expr -keepdc",                         # the rest of `proc`

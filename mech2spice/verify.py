@@ -14,6 +14,7 @@ Two independent checks of one synthesised design:
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import secrets
@@ -22,7 +23,7 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Iterator
 from xml.sax.saxutils import quoteattr, escape
 
 import numpy as np
@@ -1206,7 +1207,7 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
     out = {"design": str(path), "top": nl.top, "clocked": nl.clocked, "sampled_clocks": list(nl.sampled),
            "gates": len(nl.gates()), "latches": len(nl.latches()), "races": [r.as_dict() for r in nl.races],
            "translate_off": [list(r) for r in nl.translate_off]}
-    with standard_source(path) as src:        # the text synthesis read (VIS dialect rewritten, docs/rtl.md)
+    with standard_source(path) as src, _named_as(src, path):   # the text synthesis read (docs/rtl.md)
         resets = reset_ports(nl, reset, src) if nl.clocked else []
         if equivalence_check:
             log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source ({proof_engine}, at "
@@ -1221,6 +1222,18 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
         "fail" if eq == "counterexample" or not out["cosim"]["agree"] else "unknown"
     out["wall_s"] = time.time() - t0
     return out
+
+
+@contextlib.contextmanager
+def _named_as(src: Path, path) -> Iterator[None]:
+    """A tool's refusal of the rewritten copy (`standard_source`'s scratch file, gone when it is read) names
+    the user's file: the copy keeps every line, so the line numbers stand."""
+    try:
+        yield
+    except Mech2SpiceError as err:
+        if Path(src) == Path(path):
+            raise
+        raise Mech2SpiceError(str(err).replace(str(src), str(path))) from None
 
 
 def exit_code(result: dict) -> int:

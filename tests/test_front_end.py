@@ -128,14 +128,42 @@ def test_display_in_always_blocks_is_left_out_with_a_warning_per_line(tmp_path, 
     nl = synthesize(path)
     err = capsys.readouterr().err
     for line in (5, 6, 8):
-        assert f"{path}, line {line}: $display/$write left out" in err
+        assert f"{path}, line {line}: a print ($display, $write" in err
     assert err.count("\n") == 3
     res = verify.verify(path, equivalence_check=False, vectors=300)
     assert res["cosim"]["agree"] and nl.outputs == {"q": 1, "y": 1}
 
 
+SEVERITY = """module t(input clk, input rst, input rd, output reg [1:0] cnt);
+  always @(posedge clk) begin
+    if (rst) cnt <= 0; else if (rd) cnt <= cnt - 1;
+    if (rd && cnt == 0) $error("Reading an empty FIFO");   // nandland's FIFO check
+    if (cnt == 2'd3) $warning;
+  end
+  always @* if (cnt == 2'd2) $info("two");
+  initial begin : never_built
+    if (0) $error("elaboration check, left to Yosys");
+  end
+endmodule
+"""
+
+
+@needs_icarus
+def test_severity_tasks_in_always_blocks_only_print_and_are_left_out(tmp_path, capsys):
+    """`$error`/`$warning`/`$info` in an always block print and carry on (IEEE 1800 20.10, Icarus): they were
+    refused as being "in an `initial` block", which the file did not have."""
+    path = _file(tmp_path, SEVERITY, "t.sv")
+    nl = synthesize(path)
+    err = capsys.readouterr().err
+    assert [f"line {n}: a print" in err for n in (4, 5, 7)] == [True] * 3 and err.count("\n") == 3
+    res = verify.verify(path, vectors=300)
+    assert res["verdict"] == "pass" and nl.latches()
+
+
 @pytest.mark.parametrize("body, match", [
-    ("  always @(posedge clk) begin q <= a; $finish; end", r"line 2: .*\$finish"),
+    ("  always @(posedge clk) begin q <= a; $finish; end", r"line 2: a system task \(`\$finish`\) in an `always` "
+                                                           r"block: it stops the simulation"),
+    ("  always @(posedge clk) begin q <= a;\n if (a) $fatal(1, \"bad\"); end", r"line 3: .*`\$fatal`\) in an `always`"),
     ("  initial begin q = 0; $display(\"x\"); end\n  always @(posedge clk) q <= a;", r"line 2: a system task"),
 ])
 def test_finish_and_initial_block_tasks_are_still_refused(tmp_path, body, match):

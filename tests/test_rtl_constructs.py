@@ -394,6 +394,17 @@ def test_a_power_up_value_only_a_simulator_reads_is_a_difference_not_a_pass(tmp_
     assert "translate_off` text (lines 3-5)" in out
 
 
+@needs_icarus
+def test_icarus_refusing_a_rewritten_source_names_the_users_file(tmp_path, capsys):
+    """A memory makes verify hand Icarus a rewritten copy (memory_guard) in a scratch folder, gone by the time
+    the message is read; its refusal named that copy (mcj_hamming, public RTL pass, session 26)."""
+    src = verilog(tmp_path, "module m(input clk, input [1:0] a, input d, output q);\n  reg mem [0:3];\n"
+                            "  always @(posedge clk) mem[a] <= d;\n  wire [32:0] w;\n"
+                            "  assign w = {2**a, 1'b0};\n  assign q = mem[a] ^ w[1];\nendmodule\n")
+    rc, _, err = run(capsys, "verify", "--cycles", "10", src)
+    assert rc == 2 and f"{src}:5: error" in err and "mech2spice_dialect" not in err
+
+
 POWERS = """module powers(input [3:0] a, input [2:0] b, input signed [3:0] sa, input signed [2:0] sb,
               output [5:0] y1, output signed [5:0] y2, output signed [4:0] y3, output [7:0] y5);
   assign y1 = a ** b;          // unsigned

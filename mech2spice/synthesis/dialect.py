@@ -35,7 +35,7 @@ from typing import Iterator
 from ..errors import Mech2SpiceError
 from ..inputs import read_input
 from . import memory_guard
-from .verilog_text import blanked as blank
+from .verilog_text import blanked as blank, processes
 
 __all__ = ["standard_text", "standard_source", "is_vis", "mirror_siblings"]
 
@@ -76,7 +76,23 @@ def standard_text(path, text: str) -> str:
     """The text every tool reads (synthesis, the proof, Icarus), line numbers kept: the VIS dialect as
     SystemVerilog (module docstring), then memory writes guarded by their address range
     (memory_guard.py: a no-op under Verilog's rules that Yosys needs); refuses `$ND` naming the file and line."""
-    return memory_guard.guarded(_vis_as_standard(path, text))
+    return memory_guard.guarded(_severity_as_print(_vis_as_standard(path, text)))
+
+
+_SEVERITY = re.compile(r"\$(?:error|warning|info)\b")
+
+
+def _severity_as_print(text: str) -> str:
+    """`$error`, `$warning` and `$info` inside an `always` block as `$display`, lines kept: in a running
+    simulation each only prints (IEEE 1800 20.10; Icarus prints and carries on), which Yosys cannot read
+    there ("Can't resolve task name") and reads as a print, which synthesis leaves out with a warning.  In an
+    `initial` block they stay elaboration checks, for Yosys to decide (synth._ELABORATION_TASKS)."""
+    blanked = blank(text)
+    spans = [(a, b) for kind, a, b in processes(blanked) if kind.startswith("always")]
+    hits = [m for m in _SEVERITY.finditer(blanked) if any(a <= m.start() < b for a, b in spans)]
+    for m in reversed(hits):
+        text = text[:m.start()] + "$display" + text[m.end():]
+    return text
 
 
 def _vis_as_standard(path, text: str) -> str:

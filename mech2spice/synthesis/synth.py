@@ -45,7 +45,7 @@ from .. import identifiers
 from ..errors import Mech2SpiceError
 from ..inputs import read_input
 from . import derived_clocks, dialect, maps, races, refusals, yosys
-from .verilog_text import blanked as _blanked, line_of, statement_or_block_end, translate_off_regions
+from .verilog_text import blanked as _blanked, line_of, process_at, statement_or_block_end, translate_off_regions
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
@@ -261,11 +261,20 @@ def _only_elaboration_tasks(body: str) -> bool:
     return set(re.findall(r"\$[A-Za-z_]\w*", body)) <= _ELABORATION_TASKS
 
 
-def _yosys_task(msg: str, path: Path) -> str | None:
-    """Yosys's refusal of a severity or stopping task in an elaborated `initial` block, as `_check_source`'s."""
+def _yosys_task(msg: str, path: Path, source: str) -> str | None:
+    """Yosys's refusal of a severity or stopping task: in an elaborated `initial` block as `_check_source`'s;
+    in an `always` block (only the stopping ones reach Yosys there: dialect._severity_as_print) as a stop."""
     m = _YOSYS_TASK.search(msg)
     if not m or m["task"] not in _ELABORATION_TASKS:
         return None
+    blanked = _blanked(source)
+    line_start = sum(len(t) + 1 for t in blanked.split("\n")[:int(m["line"]) - 1])
+    at = blanked.find(m["task"], line_start)
+    kind = process_at(blanked, at if at >= 0 else line_start)
+    if kind and kind.startswith("always"):
+        return (f"{path}, line {m['line']}: a system task (`{m['task']}`) in an `{kind}` block: it stops the "
+                "simulation, which a network of gates cannot do (it has no end); remove it or guard it with "
+                "`ifndef SYNTHESIS`")
     what, why = next(row[1:] for row in _NOT_AN_INITIAL_VALUE if row[1] == "a system task")
     return f"{path}, line {m['line']}: {what} (`{m['task']}`) in an `initial` block: {why}"
 
@@ -537,7 +546,7 @@ def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) 
         _refuse_real(result, rel, path)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))
-            for known in (_non_constant_init(msg, path), _yosys_task(msg, path), _untested_edge(msg, path, source)):
+            for known in (_non_constant_init(msg, path), _yosys_task(msg, path, source), _untested_edge(msg, path, source)):
                 if known is not None:
                     raise Mech2SpiceError(known)
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
@@ -1042,7 +1051,8 @@ def _add_cells(g: nx.DiGraph, top: str, module: dict, driver: dict, path: Path |
             msg = _latch_named(str(err), cell, module)
             raise Mech2SpiceError(f"{path}, line {line}: {msg}" if line else msg) from None
         if cell["type"] == _PRINT:
-            _warn(f"{_where(cell, top, path)}: $display/$write left out: it prints while a simulator runs and "
+            _warn(f"{_where(cell, top, path)}: a print ($display, $write, or $error/$warning/$info, which in an "
+                  "always block only print) left out: it prints while a simulator runs and "
                   "no output depends on it, so the network computes the same without it")
         if mapped is None:
             continue

@@ -56,3 +56,23 @@ def statement_or_block_end(text: str, at: int) -> int:
         elif t == ";" and parens == 0 and blocks == 0:
             return at + tok.end()
     return len(text)
+
+
+_PROCESS = re.compile(r"\b(always(?:_ff|_comb|_latch)?|initial)\b")
+
+
+def processes(blanked_text: str) -> list[tuple[str, int, int]]:
+    """(keyword, start, end) of each `always*` and `initial` process in comment-blanked text: its event control
+    and its statement or block."""
+    out = []
+    for m in _PROCESS.finditer(blanked_text):
+        at = m.end()
+        event = re.match(r"\s*@\s*(?:\*|\(\s*\*\s*\)|\([^()]*(?:\([^()]*\)[^()]*)*\)|[\w$.]+)", blanked_text[at:])
+        at += event.end() if event else 0
+        out.append((m.group(1), m.start(), statement_or_block_end(blanked_text, at)))
+    return out
+
+
+def process_at(blanked_text: str, offset: int) -> str | None:
+    """The keyword of the process holding `offset` (`always`, `always_ff`, ..., `initial`), None outside one."""
+    return next((kind for kind, a, b in processes(blanked_text) if a <= offset < b), None)

@@ -1194,18 +1194,21 @@ def _from_power_up(path, netlist: Netlist, x, got, levels, start, mismatches, in
 def verify(path, top: str | None = None, backend: str = "logic", vectors: int | None = None,
            exhaustive: bool = False, seed: int = 0, params=None, progress=False, log=None,
            netlist: Netlist | None = None, reset=None, equivalence_check: bool = True,
-           proof_time: float = PROOF_BUDGET_S, keep_trace: bool = False, proof_engine: str = "auto") -> dict:
-    """Equivalence and co-simulation of one design; `netlist` replaces the synthesised one (tests);
+           proof_time: float = PROOF_BUDGET_S, keep_trace: bool = False, proof_engine: str = "auto",
+           max_fanout: int | None = None) -> dict:
+    """Equivalence and co-simulation of one design; `netlist` replaces the synthesised one (tests), which
+    is otherwise built with `simulate`'s buffer trees (`max_fanout`, default network.MAX_FANOUT);
     `keep_trace`: the co-simulation's compared values too (cosim.trace, for --vcd); `proof_engine`: auto, abc
     or sat (`equivalence`)."""
     t0 = time.time()
     from .synthesis.dialect import standard_source
     from .synthesis.synth import synthesize
     log = log or (lambda msg: None)
-    nl = netlist if netlist is not None else synthesize(path, top=top)
+    from .physics.network import MAX_FANOUT
+    nl = netlist if netlist is not None else synthesize(path, top=top, max_fanout=max_fanout or MAX_FANOUT)
     check_names(nl)
     out = {"design": str(path), "top": nl.top, "clocked": nl.clocked, "sampled_clocks": list(nl.sampled),
-           "gates": len(nl.gates()), "latches": len(nl.latches()), "races": [r.as_dict() for r in nl.races],
+           "gates": len(nl.gates()), "logic_gates": len(nl.gates()), "latches": len(nl.latches()), "races": [r.as_dict() for r in nl.races],
            "translate_off": [list(r) for r in nl.translate_off]}
     with standard_source(path) as src, _named_as(src, path):   # the text synthesis read (docs/rtl.md)
         resets = reset_ports(nl, reset, src) if nl.clocked else []

@@ -6,6 +6,7 @@ from pathlib import Path
 from .. import inputs
 from ..backends import BACKENDS
 from ..errors import Mech2SpiceError
+from ..physics.network import MAX_FANOUT
 from ..verify import PROOF_BUDGET_S, check_names, exit_code, junit_xml, reset_ports, text, verify
 
 
@@ -42,6 +43,9 @@ def add_parser(subparsers) -> None:
                         "the budget when berkeley-abc is installed, then Yosys sat), abc, or sat (docs/verify.md)")
     s.add_argument("--seed", type=inputs.integer(0, 2 ** 32 - 1), default=0, help="random seed (default 0)")
     s.add_argument("--params", default="default", help="gate parameters of a physical backend")
+    s.add_argument("--max-fanout", type=inputs.integer(2, inputs.MAX_FANOUT_LIMIT), default=MAX_FANOUT,
+                   help=f"buffer trees as `simulate` builds them, so the network proved and co-simulated is the "
+                        f"one it runs (default {MAX_FANOUT})")
     s.add_argument("--no-equivalence", action="store_true", help="co-simulation only")
     s.add_argument("--junit", metavar="FILE", help="also write a JUnit XML report")
     s.add_argument("--vcd", metavar="FILE",
@@ -89,7 +93,7 @@ def cmd_verify(args) -> int:
         _check_vcd(args)
     if not Path(args.design).is_file():
         raise Mech2SpiceError(f"cannot read Verilog file {args.design}: no such file")
-    nl = synthesize(args.design, top=args.top)
+    nl = synthesize(args.design, top=args.top, max_fanout=args.max_fanout)
     check_names(nl)                                # every name the generated Verilog holds, before the work
     if not nl.clocked and args.cycles:
         raise Mech2SpiceError(f"{nl.top} has no flip-flops: --cycles applies to clocked designs (use --vectors)")

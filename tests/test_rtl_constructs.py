@@ -405,6 +405,42 @@ def test_icarus_refusing_a_rewritten_source_names_the_users_file(tmp_path, capsy
     assert rc == 2 and f"{src}:5: error" in err and "mech2spice_dialect" not in err
 
 
+RESETS_IN_AN_OR = {
+    "two_resets": """module pc4(input clock, input clear, input reset, input enable, output reg [3:0] counter);
+  always @(posedge clock or posedge clear or posedge reset)
+    if (reset || clear)     // two asynchronous resets in one test
+      counter <= 4'h0;
+    else if (enable)
+      counter <= counter + 1;
+endmodule
+""",
+    "reset_and_sync_clear": """module cnt5(input clock, input reset_n, input clr, output reg [2:0] count);
+  always @(negedge clock or negedge reset_n) begin
+    if (clr || count == 3'd4 || (!reset_n))
+      begin count <= 3'b0; /* wrap */ end
+    else
+      count <= count + 1;
+  end
+endmodule
+"""}
+
+
+@needs_icarus
+@pytest.mark.parametrize("name", list(RESETS_IN_AN_OR))
+def test_asynchronous_resets_tested_in_an_or_are_one_if_each(tmp_path, capsys, name):
+    """CtrlAltLeo's 8-bit computer tests its resets in an OR (`if (reset || clear)`, `if (count_clear || count
+    == 4 || reset)`), where Yosys stopped with "Multiple edge sensitive events found" and no line.  The same
+    logic, one `if` per reset then the rest (dialect._split_reset_ors, lines kept), is proved and equal to
+    Icarus running the source as written."""
+    from mech2spice.synthesis.dialect import standard_text
+    text = RESETS_IN_AN_OR[name]
+    src = verilog(tmp_path, text)
+    assert standard_text(Path(src), text).count("\n") == text.count("\n")
+    res = _verify(capsys, src, "--cycles", "500")
+    assert res["equivalence"]["status"] == "proved" and res["cosim"]["resets"]
+    _agrees(res, compared_at_least=500 * 3)
+
+
 POWERS = """module powers(input [3:0] a, input [2:0] b, input signed [3:0] sa, input signed [2:0] sb,
               output [5:0] y1, output signed [5:0] y2, output signed [4:0] y3, output [7:0] y5);
   assign y1 = a ** b;          // unsigned

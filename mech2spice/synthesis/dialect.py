@@ -35,7 +35,7 @@ from typing import Iterator
 from ..errors import Mech2SpiceError
 from ..inputs import read_input
 from . import memory_guard
-from .verilog_text import blanked as blank, processes
+from .verilog_text import blanked as blank, processes, statement_or_block_end
 
 __all__ = ["standard_text", "standard_source", "is_vis", "mirror_siblings"]
 
@@ -76,7 +76,7 @@ def standard_text(path, text: str) -> str:
     """The text every tool reads (synthesis, the proof, Icarus), line numbers kept: the VIS dialect as
     SystemVerilog (module docstring), then memory writes guarded by their address range
     (memory_guard.py: a no-op under Verilog's rules that Yosys needs); refuses `$ND` naming the file and line."""
-    return memory_guard.guarded(_severity_as_print(_vis_as_standard(path, text)))
+    return memory_guard.guarded(_split_reset_ors(_severity_as_print(_vis_as_standard(path, text))))
 
 
 _SEVERITY = re.compile(r"\$(?:error|warning|info)\b")
@@ -148,3 +148,79 @@ def standard_source(path) -> Iterator[Path]:
         out = Path(tmp) / path.name
         out.write_text(standard, encoding="utf-8")
         yield out
+
+
+_EDGE_BLOCK = re.compile(r"\balways(?:_ff)?\s*@\s*\(")
+_EDGE = re.compile(r"\b(posedge|negedge)\s+([A-Za-z_][\w$]*)")
+_FIRST_IF = re.compile(r"\s*(?:begin\b(?:\s*:\s*[A-Za-z_][\w$]*)?\s*)?if\s*\(")
+_COMMENT = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
+
+
+def _closing(text: str, open_at: int) -> int:
+    """The offset of the `)` closing the `(` at `open_at` (len(text) when none does)."""
+    depth = 0
+    for k in range(open_at, len(text)):
+        depth += {"(": 1, ")": -1}.get(text[k], 0)
+        if depth == 0:
+            return k
+    return len(text)
+
+
+def _or_terms(cond: str) -> list[tuple[int, int]]:
+    """(start, end) of each top-level `||` operand of `cond`."""
+    terms, depth, start, k = [], 0, 0, 0
+    while k < len(cond):
+        c = cond[k]
+        depth += {"(": 1, ")": -1, "[": 1, "]": -1, "{": 1, "}": -1}.get(c, 0)
+        if depth == 0 and cond.startswith("||", k):
+            terms.append((start, k))
+            start, k = k + 2, k + 2
+            continue
+        k += 1
+    return terms + [(start, len(cond))]
+
+
+def _edge_test(term: str, edges: dict[str, str]) -> str | None:
+    """The listed signal `term` tests as an asynchronous reset (`x` for posedge x, `!x`/`~x` for negedge)."""
+    t = term.strip()
+    while t.startswith("(") and _closing(t, 0) == len(t) - 1:
+        t = t[1:-1].strip()
+    m = re.fullmatch(r"([!~]?)\s*([A-Za-z_][\w$]*)", t)
+    if m and edges.get(m[2]) == ("negedge" if m[1] else "posedge"):
+        return m[2]
+    return None
+
+
+def _split_reset_ors(text: str) -> str:
+    """An edge block whose first `if` ORs its asynchronous resets (`if (reset || clear)` under `posedge reset
+    or posedge clear`, or `if (sync_clear || reset)`) as one `if` per reset, then the rest, each taking the
+    same branch: the same logic (an OR without side effects), in the form Yosys reads (it stops at the OR:
+    "Multiple edge sensitive events found for this signal").  Lines kept: the copies of the branch go on its
+    last line, their comments blanked and newlines joined."""
+    blanked = blank(text)
+    edits = []
+    for m in _EDGE_BLOCK.finditer(blanked):
+        close = _closing(blanked, m.end() - 1)
+        edges = {name: kind for kind, name in _EDGE.findall(blanked[m.end():close])}
+        first = _FIRST_IF.match(blanked, close + 1)
+        if len(edges) < 2 or not first:
+            continue
+        c0 = first.end()
+        c1 = _closing(blanked, c0 - 1)
+        spans = _or_terms(blanked[c0:c1])
+        resets = [k for k, (a, b) in enumerate(spans) if _edge_test(blanked[c0 + a:c0 + b], edges)]
+        if len(spans) < 2 or not resets:
+            continue
+        order = resets + [k for k in range(len(spans)) if k not in resets]
+        conds = [text[c0 + spans[k][0]:c0 + spans[k][1]].strip() for k in order]
+        rest = [c for k, c in zip(order, conds) if k not in resets]
+        conds = conds[:len(resets)] + ([" || ".join(rest)] if rest else [])
+        b0, b1 = c1 + 1, statement_or_block_end(blanked, c1 + 1)
+        branch = _COMMENT.sub(lambda x: x.group() if x.group().startswith('"') else " " * len(x.group()),
+                              text[b0:b1]).replace("\n", " ").strip()
+        flat = [" ".join(c.split()) for c in conds]
+        edits.append((c0, c1, flat[0] + "\n" * blanked[c0:c1].count("\n")))
+        edits.append((b1, b1, "".join(f" else if ({c}) {branch}" for c in flat[1:])))
+    for a, b, new in sorted(edits, reverse=True):
+        text = text[:a] + new + text[b:]
+    return text

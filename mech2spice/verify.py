@@ -31,7 +31,9 @@ import numpy as np
 from . import identifiers as ids
 from .errors import Mech2SpiceError, ToolMissingError
 from .synthesis import maps, yosys
+from .inputs import read_input
 from .synthesis.ports import input_bits, output_bits
+from .synthesis.verilog_text import link_readmem_files
 
 if TYPE_CHECKING:
     from .synthesis.synth import Netlist
@@ -801,6 +803,7 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
         tag = f"{PREFIX}{secrets.token_hex(8)}"
         tb.write_text(_testbench(netlist, len(vectors), clocked, first_read, tag))
         (Path(tmp) / "vectors.txt").write_text("".join(_vector_line(netlist, order, v) for v in vectors))
+        link_readmem_files(read_input(path, "Verilog file").decode("utf-8", "replace"), path.parent, tmp)
         built, gen = _compile(iverilog, path, tmp)
         entries = restart(netlist) + list(start or [])
         if entries:

@@ -220,7 +220,7 @@ def test_a_reset_synchroniser_and_buffered_reset_nets(tmp_path, max_fanout):
     ("always @(posedge clk or posedge rst or posedge set) if (rst) q <= 0; else if (set) q <= 1; else q <= d;",
      "both an asynchronous set and"),
     ("initial #5 q = 1;\n  always @(posedge clk) q <= d;", "line 2: a delay"),
-    ("initial begin q = 0; $display(\"q\"); end\n  always @(posedge clk) q <= d;", "line 2: a system task"),
+    ("initial begin q = 0; $monitor(\"q\"); end\n  always @(posedge clk) q <= d;", "line 2: a system task"),
     ("initial $readmemh(\"rom.hex\", q);\n  always @(posedge clk) q <= d;", r"line 2: `\$readmemh`/`\$readmemb`"),
     ("initial q = d;\n  always @(posedge clk) q <= d;", "line 2: the power-up value of 'q' is given as 'd'"),
 ])

@@ -164,7 +164,7 @@ def test_severity_tasks_in_always_blocks_only_print_and_are_left_out(tmp_path, c
     ("  always @(posedge clk) begin q <= a; $finish; end", r"line 2: a system task \(`\$finish`\) in an `always` "
                                                            r"block: it stops the simulation"),
     ("  always @(posedge clk) begin q <= a;\n if (a) $fatal(1, \"bad\"); end", r"line 3: .*`\$fatal`\) in an `always`"),
-    ("  initial begin q = 0; $display(\"x\"); end\n  always @(posedge clk) q <= a;", r"line 2: a system task"),
+    ("  initial begin q = 0; $monitor(\"x\"); end\n  always @(posedge clk) q <= a;", r"line 2: a system task"),
 ])
 def test_finish_and_initial_block_tasks_are_still_refused(tmp_path, body, match):
     path = _file(tmp_path, f"module t(input clk, input a, output reg q);\n{body}\nendmodule\n", "t.v")

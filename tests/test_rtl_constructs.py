@@ -257,7 +257,7 @@ def test_a_task_in_a_generate_branch_never_built_is_no_refusal(tmp_path, capsys)
     refused(capsys, "synth", verilog(tmp_path, GUARDED.format(style="AND"), "bad.v"),
             needle="bad.v, line 7: a system task (`$error`) in an `initial` block")
     # a task that is not refused where Yosys builds it is still refused as text, built or not
-    printing = GUARDED.format(style="XOR").replace("$finish;", '$display("bad");')
+    printing = GUARDED.format(style="XOR").replace("$finish;", '$monitor("bad");')
     refused(capsys, "synth", verilog(tmp_path, printing, "p.v"), needle="p.v, line 7: a system task in an `initial`")
 
 
@@ -439,6 +439,63 @@ def test_asynchronous_resets_tested_in_an_or_are_one_if_each(tmp_path, capsys, n
     res = _verify(capsys, src, "--cycles", "500")
     assert res["equivalence"]["status"] == "proved" and res["cosim"]["resets"]
     _agrees(res, compared_at_least=500 * 3)
+
+
+READMEM_ROM = """module rom(input clk, input [2:0] a, output [7:0] q, output reg [3:0] r);
+  reg [7:0] mem [0:7];
+  reg [3:0] nib [0:3];
+  initial begin
+    $display("loading the ROM");        // a print: left out
+    $readmemh("rom.hex", mem);
+    $readmemb("data/nib.bin", nib, 1, 3);
+  end
+  assign q = mem[a];
+  always @(posedge clk) begin r <= nib[a[1:0]]; {extra} end
+endmodule
+"""
+
+
+def _rom(tmp_path, extra=""):
+    (tmp_path / "rom.hex").write_text("// words 0-3, then from 6\n12 34 5_6 78\n@6 9a /* six */ bc\n")
+    (tmp_path / "data").mkdir(exist_ok=True)
+    (tmp_path / "data" / "nib.bin").write_text("1010\n0x01\n1111\n")
+    return verilog(tmp_path, READMEM_ROM.replace("{extra}", extra))
+
+
+@needs_icarus
+@pytest.mark.parametrize("extra", ["", "if (a == 3'd7) $error(\"seven\");"], ids=["as_written", "rewritten"])
+def test_a_rom_read_by_readmem_is_constant_logic_equal_to_icarus(tmp_path, capsys, extra):
+    """`initial $readmemh("rom.hex", mem)`, the common ROM, was refused (its words in another file).  The file
+    is read as data (the format checked), by Yosys beside the source and by Icarus in verify's folder, where it
+    is linked; with the source rewritten (`rewritten`: a severity task) Yosys reads a copy beside which it is
+    linked too.  Words and addresses as the file gives them; unlisted words are x on Icarus."""
+    src = _rom(tmp_path, extra)
+    nl = synthesize(src)
+    assert [evaluate(nl, {"a": k})["q"] for k in (0, 1, 2, 3, 6, 7)] == [0x12, 0x34, 0x56, 0x78, 0x9A, 0xBC]
+    assert "line 5: a print" in capsys.readouterr().err
+    res = _verify(capsys, src, "--cycles", "200")
+    assert res["equivalence"]["status"] == "proved"
+    _agrees(res, compared_at_least=200 * 8)
+    (tmp_path / "rom.hex").write_text("ff 34 56 78\n")              # the cache key holds the file's bytes
+    assert evaluate(synthesize(src), {"a": 0})["q"] == 0xFF
+
+
+@pytest.mark.parametrize("literal, needle", [
+    ('"nope.hex"', "which is not a file in the design's folder"),
+    ('"../rom.hex"', "is not a plain relative path inside the design's folder"),
+    ("name", "its file name is not a string literal"),
+    ('"bad.hex"', "'bad.hex', line 2: 'g4' is not a hex word"),
+    ('"float.hex"', "a ROM word has no z"),
+    ('"bytes.hex"', "is not text"),
+])
+def test_a_readmem_file_no_tool_reads_the_same_way_is_refused_with_its_line(tmp_path, capsys, literal, needle):
+    (tmp_path / "bad.hex").write_text("12\n34 g4\n")
+    (tmp_path / "float.hex").write_text("12 zz\n")
+    (tmp_path / "bytes.hex").write_bytes(bytes(range(256)))
+    src = verilog(tmp_path, "module m(input [1:0] a, output [7:0] q);\n  reg [7:0] mem [0:3];\n"
+                            f"  initial $readmemh({literal}, mem);\n  assign q = mem[a];\nendmodule\n")
+    assert refused(capsys, "synth", src, needle=f"line 3: `$readmemh`/`$readmemb` in an `initial` block: ")
+    assert refused(capsys, "synth", src, needle=needle)
 
 
 POWERS = """module powers(input [3:0] a, input [2:0] b, input signed [3:0] sa, input signed [2:0] sb,

@@ -318,7 +318,7 @@ def test_flip_flops_become_latch_nodes(tmp_path):
     ("module t(input a, inout b, output y); assign y = a & b; endmodule", r"line 1: inout port 'b'"),
     ("module t(input a, output y);\n reg r;\n initial #1 r = 1;\n assign y = a & r;\nendmodule",
      r"line 3: a delay \(`#`\) in an `initial` block: a delay is an event after time zero"),
-    ("module t(input a, output y);\n assign y = a;\n initial begin\n  $display(\"hi\");\n end\nendmodule",
+    ("module t(input a, output y);\n assign y = a;\n initial begin\n  $monitor(\"hi\");\n end\nendmodule",
      r"line 4: a system task in an `initial` block"),
     ("module t(input clk, input a, output reg q);\n initial q = a;\n always @(posedge clk) q <= ~q;\nendmodule",
      r"line 2: the power-up value of 'q' is given as 'a', not a constant"),

@@ -35,7 +35,7 @@ from typing import Iterator
 from ..errors import Mech2SpiceError
 from ..inputs import read_input
 from . import memory_guard
-from .verilog_text import blanked as blank, processes, statement_or_block_end
+from .verilog_text import blanked as blank, link_readmem_files, processes, statement_or_block_end
 
 __all__ = ["standard_text", "standard_source", "is_vis", "mirror_siblings"]
 
@@ -125,10 +125,11 @@ def _vis_as_standard(path, text: str) -> str:
 def mirror_siblings(path: Path, folder: Path, text: str) -> None:
     """Links in `folder` to the other files beside `path`, when `text` includes files: an `include resolves
     beside the rewritten copy as it did beside the original (Yosys and Icarus look in the file's folder)."""
+    link_readmem_files(text, Path(path).resolve().parent, folder)
     if "`include" not in text:
         return
     for entry in Path(path).resolve().parent.iterdir():
-        if entry.name != Path(path).name:
+        if entry.name != Path(path).name and not (folder / entry.name).exists():   # a $readmem file: copied
             (folder / entry.name).symlink_to(entry)
 
 

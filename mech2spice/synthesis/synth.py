@@ -45,7 +45,8 @@ from .. import identifiers
 from ..errors import Mech2SpiceError
 from ..inputs import read_input
 from . import derived_clocks, dialect, maps, races, refusals, yosys
-from .verilog_text import blanked as _blanked, line_of, process_at, statement_or_block_end, translate_off_regions
+from .verilog_text import (blanked as _blanked, line_of, link_readmem_files, process_at, readmem_calls,
+                           readmem_problem, statement_or_block_end, translate_off_regions)
 
 __all__ = ["Netlist", "synthesize", "build_netlist", "clean", "observe", "propagate_constants", "latch_inputs",
            "remove_dead_gates", "check_loops", "buffer_feedthroughs", "limit_fanout"]
@@ -238,9 +239,6 @@ _NOT_AN_INITIAL_VALUE = [
     (re.compile(r"#"), "a delay (`#`)", "a delay is an event after time zero, not a power-up value"),
     (re.compile(r"@|\bwait\b"), "an event control (`@`, `wait`)",
      "waiting for an event is behaviour over time, not a power-up value"),
-    (re.compile(r"\$readmem[hb]\b"), "`$readmemh`/`$readmemb`",
-     "the values live in another file, outside the source synthesis reads (and its cache key); write them "
-     "as constant assignments"),
     (re.compile(r"\$[A-Za-z_]\w*"), "a system task", "it acts while a simulation runs (printing, stopping, "
      "reading time) and builds no hardware"),
     (re.compile(r"\b(?:forever|while|repeat|fork|disable)\b|->"), "a loop or process over time",
@@ -345,7 +343,7 @@ def _check_source(path: Path, text: str) -> None:
                               "clk)`)")
     for m in re.finditer(r"\binitial\b", blanked):
         body_start, body_end = m.end(), statement_or_block_end(blanked, m.end())
-        body = blanked[body_start:body_end]
+        body = _data_reads_and_prints_blanked(path, text, blanked, body_start, body_end)
         for pattern, what, why in _NOT_AN_INITIAL_VALUE:
             if what == "a system task" and _only_elaboration_tasks(body):
                 continue                    # Yosys decides, where it builds the block
@@ -353,6 +351,25 @@ def _check_source(path: Path, text: str) -> None:
             if hit:
                 line = blanked.count("\n", 0, body_start + hit.start()) + 1
                 raise Mech2SpiceError(f"{path}, line {line}: {what} in an `initial` block: {why}")
+
+
+_PRINT_CALL = re.compile(r"\$(?:display|write)\b\s*(?:\([^;]*\))?\s*;")
+
+
+def _data_reads_and_prints_blanked(path: Path, text: str, blanked: str, start: int, end: int) -> str:
+    """An `initial` body with what it may hold besides constants blanked: `$readmemh`/`$readmemb` of a file in
+    the design's folder (the ROM's contents, read as data by every tool), refused with its line and reason
+    otherwise; and `$display`/`$write`, a print, left out as in an always block (build_netlist warns)."""
+    body = blanked[start:end]
+    for a, b, name in readmem_calls(text):
+        if not start <= a < end:
+            continue
+        problem = readmem_problem(name, path.parent, hexadecimal=text[a + 8] == "h")
+        if problem:
+            raise Mech2SpiceError(f"{path}, line {line_of(text, a)}: `$readmemh`/`$readmemb` in an `initial` "
+                                  f"block: {problem}")
+        body = body[:a - start] + " " * (b - a) + body[b - start:]
+    return _PRINT_CALL.sub(lambda x: " " * len(x.group()), body)
 
 
 _NON_CONSTANT_INIT = re.compile(r"Failed to get a constant init value for \\?(\S+?): \\?(\S+)")
@@ -420,7 +437,7 @@ def _run_yosys(path: Path, top: str | None, source: str, sampled: bool = False) 
     may release, whether it was read as SystemVerilog, the always blocks accepted with an alias left out of
     their sensitivity lists): from the cache when this source went through this flow
     and this Yosys before, else from a run of the flow in a scratch folder (`_yosys_run`)."""
-    key = _cache_key(source, top, path.suffix == ".sv", path.name, sampled)
+    key = _cache_key(source, top, path.suffix == ".sv", path.name, sampled, _data_digest(source, path))
     cached = _cache_read(key)
     if cached is not None:
         return cached
@@ -429,14 +446,24 @@ def _run_yosys(path: Path, top: str | None, source: str, sampled: bool = False) 
     return result
 
 
-def _cache_key(source: str, top: str | None, sv: bool = False, name: str = "", sampled: bool = False) -> str | None:
+def _data_digest(source: str, path: Path) -> str:
+    """A digest of the files the source's `$readmem` calls read (its ROMs' contents are part of the design)."""
+    h = hashlib.sha256()
+    for _, _, name in readmem_calls(source):
+        if name is not None and readmem_problem(name, path.parent, hexadecimal=None) is None:
+            h.update(name.encode() + b"\0" + read_input(path.parent / name, "$readmem file") + b"\0")
+    return h.hexdigest()
+
+
+def _cache_key(source: str, top: str | None, sv: bool = False, name: str = "", sampled: bool = False,
+               data: str = "") -> str | None:
     """A content key of (flow, source, its file name, Yosys build, refusal checks); None for a source with
     `include (other files take part).  The name: Yosys's src attributes carry it, and messages give a cell's
     line only where that name is the design's (refusals.src_line)."""
     if "`include" in source:
         return None
     text = json.dumps([_flow("SOURCE", top, sv=sv, sampled=sampled), maps.POW_MAP, source, name, yosys.identity(),
-                       refusals.VERSION])
+                       refusals.VERSION, data])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -534,6 +561,7 @@ def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) 
             rel = f"src/{path.name}"
             (Path(tmp) / "src").mkdir()
             (Path(tmp) / rel).write_text(source, encoding="utf-8")
+            link_readmem_files(source, path.resolve().parent, Path(tmp) / "src")
             include = Path(os.path.relpath(path.resolve().parent, Path(tmp).resolve())).as_posix()
         sv = path.suffix == ".sv"
         maps.write_maps(tmp)

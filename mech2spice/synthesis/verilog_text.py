@@ -76,3 +76,89 @@ def processes(blanked_text: str) -> list[tuple[str, int, int]]:
 def process_at(blanked_text: str, offset: int) -> str | None:
     """The keyword of the process holding `offset` (`always`, `always_ff`, ..., `initial`), None outside one."""
     return next((kind for kind, a, b in processes(blanked_text) if a <= offset < b), None)
+
+
+_READMEM = re.compile(r"\$readmem[hb]\b")
+_LITERAL = re.compile(r'\s*\(\s*"((?:\\.|[^"\\\n])*)"')
+
+
+def comments_blanked(text: str) -> str:
+    """The text with comments blanked and strings kept (offsets and lines kept)."""
+    return _COMMENT_OR_STRING.sub(lambda m: m.group() if m.group().startswith('"')
+                                  else re.sub(r"[^\n]", " ", m.group()), text)
+
+
+def readmem_calls(text: str) -> list[tuple[int, int, str | None]]:
+    """Each `$readmemh`/`$readmemb` outside comments: (offset, offset after its `)`, the file name when it is
+    a string literal, else None).  `text[offset + 8] == "h"`: hexadecimal."""
+    kept = comments_blanked(text)
+    out = []
+    for m in _READMEM.finditer(kept):
+        lit = _LITERAL.match(kept, m.end())
+        depth, end = 0, len(kept)
+        for k in range(m.end(), len(kept)):
+            depth += {"(": 1, ")": -1}.get(kept[k], 0)
+            if kept[k] == ")" and depth == 0:
+                end = k + 1
+                break
+        out.append((m.start(), end, lit.group(1) if lit else None))
+    return out
+
+
+def readmem_problem(name: str | None, folder, hexadecimal: bool | None = True) -> str | None:
+    """Why a `$readmem` file name cannot be read the same way by every tool (None: it can; its format is
+    checked unless `hexadecimal` is None).  Each tool runs in
+    a scratch folder (Yosys in a sandbox that sees no absolute path), where the file is linked at the same
+    relative path (`link_readmem_files`): so a path inside the design's folder."""
+    from pathlib import Path, PurePosixPath
+    if name is None:
+        return "its file name is not a string literal (a tool reads the name when it builds the design)"
+    rel = PurePosixPath(name)
+    if not name or rel.is_absolute() or ".." in rel.parts or "\\" in name or not name.isprintable():
+        return (f"the file name {name!r} is not a plain relative path inside the design's folder, which is "
+                "where every tool finds it")
+    target = Path(folder) / rel
+    if not target.is_file():
+        return f"it reads {name!r}, which is not a file in the design's folder ({target})"
+    return None if hexadecimal is None else _readmem_format_problem(target, name, hexadecimal)
+
+
+# x is a don't-care, as in the source; z (a floating word) is not a value a ROM bit can hold, and Icarus keeps it
+_WORD = {True: re.compile(r"[0-9a-fA-FxX_]+"), False: re.compile(r"[01xX_]+")}
+
+
+def _readmem_format_problem(target, name: str, hexadecimal: bool) -> str | None:
+    """Why the file is not in `$readmemh`'s (or `$readmemb`'s) format (IEEE 1364-2005 17.2.9: words in hex or
+    binary digits, `@address` in hex, white space and comments), None when it is: Yosys and Icarus read a
+    malformed one differently (Yosys took 3 kB of random bytes without a word)."""
+    from ..inputs import read_input
+    raw = read_input(target, "$readmem file")
+    try:
+        text = raw.decode("ascii")
+    except UnicodeDecodeError:
+        return f"{name!r} is not text (a byte outside ASCII)"
+    kept = _COMMENT_OR_STRING.sub(lambda m: re.sub(r"[^\n]", " ", m.group()), text)
+    for k, line in enumerate(kept.splitlines(), 1):
+        for token in line.split():
+            word = token[1:] if token.startswith("@") else token
+            pattern = _WORD[True] if token.startswith("@") else _WORD[hexadecimal]
+            if not pattern.fullmatch(word) or (token.startswith("@") and not re.fullmatch(r"[0-9a-fA-F]+", word)):
+                kind = "an address" if token.startswith("@") else \
+                    f"a {'hex' if hexadecimal else 'binary'} word (digits, `_`, x for a don't-care; a ROM word has no z)"
+                return f"{name!r}, line {k}: {token[:40]!r} is not {kind} ($readmem{'h' if hexadecimal else 'b'} format)"
+    return None
+
+
+def link_readmem_files(text: str, folder_of_source, folder) -> None:
+    """Copies in `folder` of each file `text`'s `$readmem` calls name, at the same relative path, so a copy of
+    the source (or a simulator run) in `folder` reads what the original reads beside `folder_of_source`.
+    Copies, not links: Yosys runs in a sandbox (yowasp) that follows no link out of its folder."""
+    from pathlib import Path
+    from ..inputs import read_input
+    for _, _, name in readmem_calls(text):
+        if name is None or readmem_problem(name, folder_of_source, hexadecimal=None) is not None:
+            continue
+        copy = Path(folder) / name
+        if not copy.exists():
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            copy.write_bytes(read_input(Path(folder_of_source) / name, "$readmem file"))

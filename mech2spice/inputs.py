@@ -13,6 +13,7 @@ import math
 import numbers
 import os
 import re
+import stat
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -118,6 +119,9 @@ MAX_INPUT_BYTES = 256 << 20      # a user's design, stimulus or parameter file: 
 def read_input(path, what: str, limit: int = MAX_INPUT_BYTES) -> bytes:
     """A user's input file's bytes; one clear error if unreadable or past `limit` (/dev/zero read until the
     memory ran out, then the design was blamed for its size)."""
+    if _named_pipe(path):
+        raise Mech2SpiceError(f"cannot read {what} {path}: a named pipe, not a file (reading it waits for a "
+                              "writer that may never come)")
     try:
         with open(path, "rb") as f:
             data = f.read(limit + 1)
@@ -126,6 +130,15 @@ def read_input(path, what: str, limit: int = MAX_INPUT_BYTES) -> bytes:
     if len(data) > limit:
         raise Mech2SpiceError(f"{what} {path} holds more than {limit >> 20} MiB: not a file this reads")
     return data
+
+
+def _named_pipe(path) -> bool:
+    """Whether `path` is a FIFO in the file system (standard input, piped, is left to be read)."""
+    try:
+        return stat.S_ISFIFO(os.stat(path).st_mode) and str(path) not in ("-", "/dev/stdin") \
+            and not os.path.samefile(path, "/proc/self/fd/0")
+    except (OSError, ValueError, TypeError):
+        return False
 
 
 # --------------------------------------------------------------------------- JSON files
@@ -323,12 +336,14 @@ def check_fields(options) -> None:
 # input of the same command, never an existing file of another kind unless forced, in a folder we can write.
 
 def check_output_file(path, inputs=(), what: str = "output file", *, kind=None, force: bool = False,
-                      remedy: str = "give --force to replace it", parents: bool = False) -> Path:
+                      remedy: str = "give --force to replace it", parents: bool = False,
+                      regular: bool = False) -> Path:
     """A file we may write.  `inputs`: {label: path} (or paths) the same command reads or also writes,
     compared through links, never written whatever `force`; `kind`: (name, test) telling a file this command
     writes (replaced or resumed): an existing non-empty file that fails it is refused unless `force` (`remedy`
     says how to give it); kind None: any file may be replaced (for the package's own files).  `parents`: the
-    writer creates missing folders, so the nearest existing one must take files."""
+    writer creates missing folders, so the nearest existing one must take files.  `regular`: a device or a
+    pipe is refused (a checkpoint, replaced by a rename and read back), where others are written in place."""
     p = Path(path)
     if not str(path):
         raise Mech2SpiceError(f"the {what} name is empty")
@@ -338,8 +353,12 @@ def check_output_file(path, inputs=(), what: str = "output file", *, kind=None, 
         if _same_file(p, Path(src)):
             raise Mech2SpiceError(f"{what} {path} is {label} {src}: refusing to overwrite it")
     if p.exists() and not p.is_file():            # a device or pipe (/dev/null, /dev/stdout): written in place
+        if regular:
+            raise Mech2SpiceError(f"{what} {path} is not a regular file (a device or a pipe): a {what} is "
+                                  "replaced whole and read back, so give a file name")
         if not os.access(p, os.W_OK):
             raise Mech2SpiceError(f"{what} {path} is not writable")
+        _check_reader(p, path, what)
         return p
     folder = p.parent
     while parents and not folder.exists() and folder != folder.parent:
@@ -351,6 +370,17 @@ def check_output_file(path, inputs=(), what: str = "output file", *, kind=None, 
         if kind is not None and not force and p.stat().st_size and not kind[1](p):
             raise Mech2SpiceError(f"{what} {path} exists and is not {kind[0]}: refusing to overwrite it ({remedy})")
     return p
+
+
+def _check_reader(p: Path, path, what: str) -> None:
+    """A named pipe is written only when something reads it (else the write waits forever)."""
+    if not stat.S_ISFIFO(p.stat().st_mode):
+        return
+    try:
+        os.close(os.open(p, os.O_WRONLY | os.O_NONBLOCK))
+    except OSError:
+        raise Mech2SpiceError(f"{what} {path} is a named pipe that nothing reads: the write would wait "
+                              "forever") from None
 
 
 def check_inside(path, folder, what: str) -> Path:
@@ -384,7 +414,16 @@ def design_inputs(design, label: str = "the design") -> list[tuple[str, Path]]:
                 if cand.is_file() and not any(_same_file(cand, f) for _, f in found):
                     found.append((f"`include \"{name}\" of {src},", cand))
                     todo.append(cand)
+        for name in _readmem_names(text):            # a ROM's words (docs/rtl.md, "ROMs read from a file")
+            cand = src.parent / name
+            if cand.is_file() and not any(_same_file(cand, f) for _, f in found):
+                found.append((f"the $readmem file \"{name}\" of {src},", cand))
     return found
+
+
+def _readmem_names(text: str) -> list[str]:
+    from .synthesis.verilog_text import readmem_calls
+    return [name for _, _, name in readmem_calls(text) if name]
 
 
 def force_arg(parser, option: str) -> None:
@@ -441,20 +480,49 @@ def write_text(path, text: str, encoding: str = "utf-8") -> None:
 
 
 def write_bytes(path, data: bytes) -> None:
-    """Write an output file whole or not at all (a temporary file renamed over it; devices and pipes
-    are written directly); an OS failure such as a full disk becomes one clear error."""
+    """Write an output file whole or not at all (`replace_file`; devices and pipes are written directly); an
+    OS failure such as a full disk becomes one clear error."""
     p = Path(path)
-    direct = p.exists() and not p.is_file()
-    tmp = p if direct else p.with_name(f".{p.name}.{os.getpid()}.tmp")
+    if p.exists() and not p.is_file():
+        try:
+            with open(p, "wb") as f:
+                f.write(data)
+        except OSError as err:
+            raise Mech2SpiceError(f"cannot write {path}: {err.strerror or err}") from None
+        return
+    replace_file(p, data)
+
+
+def replace_file(path, data: bytes, *, durable: bool = False) -> None:
+    """Replace a regular file whole or not at all: a temporary file beside it, under a fresh name created
+    exclusively (never an existing file, nor a link someone left under a predictable name), fsynced when
+    `durable` (a checkpoint: on disk before the rename makes it the file), then renamed over it.  A device
+    or a pipe at `path` is refused: a rename would put a file in its place (as root, /dev/null's)."""
+    p = Path(path)
+    if p.exists() and not p.is_file():
+        raise Mech2SpiceError(f"cannot write {path}: not a regular file (a device or a pipe); this file is "
+                              "replaced whole, so give a file name")
     try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-        if not direct:
-            os.replace(tmp, p)
+        fd, tmp = tempfile.mkstemp(dir=str(p.parent) or ".", prefix=f".{p.name}.", suffix=".tmp")
     except OSError as err:
-        if not direct:
-            tmp.unlink(missing_ok=True)
         raise Mech2SpiceError(f"cannot write {path}: {err.strerror or err}") from None
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            if durable:
+                f.flush()
+                os.fsync(f.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())         # mkstemp's 0600 would hide an output from its owner's group
+        os.replace(tmp, p)
+    except OSError as err:
+        Path(tmp).unlink(missing_ok=True)
+        raise Mech2SpiceError(f"cannot write {path}: {err.strerror or err}") from None
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def _check_folder(folder: Path, path, what: str) -> None:

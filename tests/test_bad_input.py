@@ -184,11 +184,11 @@ def test_full_disk_is_one_line(tmp_path, capsys, monkeypatch):
     ck = tmp_path / "ck.json"
     assert main(["cpu", "run", SIEVE, "--checkpoint", str(ck), "--max-cycles", "20", "--json"]) == 1
     capsys.readouterr()
-    from mech2spice.cpu import run as cpu_run
+    from mech2spice import inputs as inputs_module
 
     def full(fd):
         raise OSError(28, "No space left on device")
-    monkeypatch.setattr(cpu_run.os, "fsync", full)
+    monkeypatch.setattr(inputs_module.os, "fsync", full)     # the checkpoint's writer (inputs.replace_file)
     refused(capsys, "cpu", "run", SIEVE, "--checkpoint", ck, "--resume", needle="No space left on device")
     assert json.loads(ck.read_text())["cycle"] == 20                 # the previous checkpoint is intact
 

@@ -100,7 +100,8 @@ def _outputs(args) -> tuple[Path, Path] | None:
     if png.suffix.lower() != ".png":
         raise Mech2SpiceError(f"-o {args.output}: expected a .png name (the JSON goes beside it)")
     out = png.with_suffix(".json")
-    reads = {"the design": None if args.design == GATE else args.design, "the --params file": params_file(args.params)}
+    reads = [*([] if args.design == GATE else inputs.design_inputs(args.design)),
+             ("the --params file", params_file(args.params))]
     inputs.check_output_file(png, reads, "figure", kind=("a PNG image", _is_png), force=args.force)
     inputs.check_output_file(out, reads, "map JSON", kind=("a domain map", _is_map), force=args.force)
     return png, out

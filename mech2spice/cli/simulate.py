@@ -190,8 +190,8 @@ def cmd_simulate_clocked(args, nl) -> int:
         raise Mech2SpiceError(f"--clock {args.clock}: the design's flip-flops are clocked by '{nl.clock}'")
     if args.vcd is not None:
         from ..waveform import is_vcd
-        inputs.check_output_file(args.vcd, {"the design": args.design, "the --stimulus file": args.stimulus,
-                                            "the --params file": params_file(args.params)},
+        inputs.check_output_file(args.vcd, [*inputs.design_inputs(args.design), ("the --stimulus file", args.stimulus),
+                                            ("the --params file", params_file(args.params))],
                                  "VCD file", kind=("a VCD file", is_vcd), force=args.force)
     cycles = simulation.expand_steps(_clocked_steps(args, nl))
     if not BACKENDS[args.backend].capabilities.physical:       # the logic oracle

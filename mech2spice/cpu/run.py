@@ -12,7 +12,6 @@ import dataclasses
 import glob
 import hashlib
 import json
-import os
 import re
 import secrets
 import sys
@@ -20,7 +19,7 @@ import time
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
-from ..inputs import (MAX_CYCLES, check_output_file, first_json_line, head, is_int, read_input, read_json,
+from ..inputs import (MAX_CYCLES, check_output_file, replace_file, first_json_line, head, is_int, read_input, read_json,
                       strict_json)
 from ..waveform import Waveform, is_vcd, write_vcd
 from .isa import MEM_SIZE, OPCODES
@@ -185,13 +184,7 @@ def save_checkpoint(cpu, path, program: Program, backend: str, cost: dict | None
 
 def write_checkpoint(path, state: dict) -> None:
     """Replace the JSON checkpoint atomically (a crash mid-write leaves the previous one intact)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write(strict_json(state))
-        f.flush()
-        os.fsync(f.fileno())             # the data is on disk before the rename makes it the checkpoint
-    os.replace(tmp, path)
+    replace_file(path, strict_json(state).encode("utf-8"), durable=True)
 
 
 def is_checkpoint(path) -> bool:
@@ -310,10 +303,10 @@ def check_run_outputs(checkpoint, trace, program_source, resume: bool = False, f
                           kind=VCD_KIND, force=force)
     if checkpoint is not None:            # resuming, read_checkpoint says what else the file is
         check_output_file(checkpoint, {**read, "the --trace file": trace}, "checkpoint",
-                          kind=None if resume else CHECKPOINT_KIND, force=force)
+                          kind=None if resume else CHECKPOINT_KIND, force=force, regular=True)
     if trace is not None:
         check_output_file(trace, {**read, "the --checkpoint file": checkpoint}, "trace",
-                          kind=None if resume else TRACE_KIND, force=force)
+                          kind=None if resume else TRACE_KIND, force=force, regular=resume)
         if resume:
             trace_lines(trace)
 
@@ -383,9 +376,7 @@ class TraceFile:
             self.file = open(self.path, "w", encoding="utf-8")
             return
         kept = [line for line in trace_lines(self.path) if json.loads(line)["cycle"] < resume_cycle]
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        tmp.write_text("".join(kept), encoding="utf-8")
-        os.replace(tmp, self.path)
+        replace_file(self.path, "".join(kept).encode("utf-8"))
         self.file = open(self.path, "a", encoding="utf-8")
 
     def __call__(self, rec, cpu) -> None:

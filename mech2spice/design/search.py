@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import Mech2SpiceError
 from ..experiments import tolerance as tol
-from ..inputs import is_int, is_number, strict_json
+from ..inputs import is_int, is_number, replace_file, strict_json
 from . import grammar
 
 SEARCH_GRID = {"per_band": 6, "n_grid": 1000}     # coarse: 144 input points, 1000 s points
@@ -196,9 +196,7 @@ def block_file(p, record: dict) -> dict:
 def write_atomic(path: Path, data) -> None:
     """Write JSON to path through a temporary file and os.replace (an interrupted write leaves the old file)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(strict_json(data, indent=1) + "\n")
-    os.replace(tmp, path)
+    replace_file(path, (strict_json(data, indent=1) + "\n").encode("utf-8"), durable=True)
 
 
 # What summary(), best(), merge() and --install-robust read from each structure's entry: checked when a

@@ -60,6 +60,9 @@ class Envelope:
         Mf = sp.diags(a["mass"][self.fast])
         self.Z0 = (Kff - w * w * Mf + 1j * w * Cff).tocsc()
         self.Bop = (2j * w * Mf + Cff).tocsc()
+        if not (np.isfinite(self.Z0.data).all() and np.isfinite(self.Bop.data).all()):
+            raise Mech2SpiceError(f"the envelope equations are not finite at omega = {w:g} rad/s: a gate parameter "
+                                  "is too large or too small for this model (omega^2 times a mass overflows)")
         self.solve_rate = spla.factorized(self.Bop)     # A' from a residual r: (2 i omega M + C) A' = r
         self.z0_diag = self.Z0.diagonal()
         self.diagonal = self.Z0.nnz == self.fast.size      # no fast-fast couplings

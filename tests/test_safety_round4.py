@@ -1,0 +1,117 @@
+"""Safe with anyone's files, round 4: what the hostile-input pass of session 26 found (its reproducers were
+outside the repository; each test below fails on the code before its fix)."""
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+import pytest
+
+from test_output_paths import intact, keep, refused, write
+
+from mech2spice import api
+from mech2spice.errors import Mech2SpiceError
+
+PROGRAM = Path(__file__).resolve().parents[1] / "programs" / "tm_increment.asm"
+INVERTER = "module inv(input a, output y);\n  assign y = ~a;\nendmodule\n"
+
+
+# ------------------------------------------------------------------ a checkpoint replaced whole, never a device
+
+def test_a_checkpoint_is_never_put_in_place_of_a_pipe(capsys, tmp_path):
+    """`cpu run --checkpoint /dev/null` replaced the system's /dev/null with a file (the pass ran as root): a
+    rename puts a file where the device was.  A named pipe stands in for the device here."""
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    refused(capsys, {}, "cpu", "run", PROGRAM, "--backend", "iss", "--checkpoint", fifo,
+            needle="is not a regular file (a device or a pipe)")
+    assert stat.S_ISFIFO(fifo.stat().st_mode)
+
+
+def test_a_link_left_under_the_temporary_name_is_never_written_through(capsys, tmp_path):
+    """The temporary file had a fixed name (PATH.tmp), opened through any link found there."""
+    precious = write(tmp_path / "keep.txt", "precious\n")
+    kept = keep(precious)
+    (tmp_path / "ck.json.tmp").symlink_to(precious)
+    from mech2spice.cli import main
+    assert main(["cpu", "run", str(PROGRAM), "--backend", "iss", "--checkpoint", str(tmp_path / "ck.json")]) == 0
+    capsys.readouterr()
+    intact(kept)
+    assert (tmp_path / "ck.json").is_file() and not (tmp_path / "ck.json").is_symlink()
+
+
+def test_a_resumed_trace_is_never_put_in_place_of_a_pipe(capsys, tmp_path):
+    from mech2spice.cli import main
+    ck = tmp_path / "ck.json"
+    assert main(["cpu", "run", str(PROGRAM), "--backend", "iss", "--checkpoint", str(ck), "--checkpoint-every", "5",
+                 "--max-cycles", "20"]) in (0, 1)
+    capsys.readouterr()
+    fifo = tmp_path / "trace"
+    os.mkfifo(fifo)
+    refused(capsys, {}, "cpu", "run", PROGRAM, "--backend", "iss", "--checkpoint", ck, "--resume", "--trace", fifo,
+            needle="trace")
+    assert stat.S_ISFIFO(fifo.stat().st_mode)
+
+
+# ------------------------------------------------------------------ --force never replaces a file the design reads
+
+@pytest.fixture
+def including(tmp_path):
+    design = write(tmp_path / "ci.v", '`include "inc.vh"\nmodule ci(input clk, input rst, output reg q);\n'
+                                      " always @(posedge clk) q <= `V;\nendmodule\n")
+    inc = write(tmp_path / "inc.vh", "`define V ~rst\n")
+    return design, inc
+
+
+def test_simulate_vcd_with_force_never_writes_over_an_included_file(capsys, tmp_path, including):
+    design, inc = including
+    stim = write(tmp_path / "st.json", '[{"set": {"rst": 1}, "cycles": 2}]')
+    refused(capsys, keep(design, inc, stim), "simulate", design, "--backend", "logic", "--stimulus", stim,
+            "--vcd", inc, "--force", needle='is `include "inc.vh" of')
+
+
+def test_domain_map_with_force_never_writes_over_an_included_file(capsys, tmp_path):
+    design = write(tmp_path / "aj.v", '`include "m.json"\nmodule aj(input [1:0] a, output [1:0] y);\n'
+                                      "  assign y = `W;\nendmodule\n")
+    inc = write(tmp_path / "m.json", "`define W ~a\n")
+    refused(capsys, keep(design, inc), "domain", design, "--sweep", "freq=0:1e-3:2", "--sweep", "amp=0:0.1:2",
+            "-o", tmp_path / "m.png", "--force", needle='is `include "m.json" of')
+
+
+def test_no_output_writes_over_a_rom_the_design_reads(capsys, tmp_path):
+    design = write(tmp_path / "rom.v", "module rom(input [1:0] a, output [7:0] q);\n  reg [7:0] mem [0:3];\n"
+                                       '  initial $readmemh("rom.hex", mem);\n  assign q = mem[a];\nendmodule\n')
+    rom = write(tmp_path / "rom.hex", "12 34 56 78\n")
+    refused(capsys, keep(design, rom), "verify", design, "--junit", rom, "--force",
+            needle='the $readmem file "rom.hex" of')
+
+
+# ------------------------------------------------------------------ named pipes: never a wait for ever
+
+def test_a_named_pipe_given_as_an_input_is_refused_at_once(capsys, tmp_path):
+    design = write(tmp_path / "inv.v", INVERTER)
+    fifo = tmp_path / "params.json"
+    os.mkfifo(fifo)
+    refused(capsys, keep(design), "synth", design, "--params", fifo, needle="a named pipe, not a file")
+
+
+def test_a_named_pipe_nothing_reads_is_refused_as_an_output(capsys, tmp_path, including):
+    design, inc = including
+    stim = write(tmp_path / "st.json", '[{"set": {"rst": 1}, "cycles": 2}]')
+    fifo = tmp_path / "wave.vcd"
+    os.mkfifo(fifo)
+    refused(capsys, keep(design, stim), "simulate", design, "--backend", "logic", "--stimulus", stim,
+            "--vcd", fifo, needle="a named pipe that nothing reads")
+
+
+# ------------------------------------------------------------------ parameters the envelope cannot hold
+
+def test_an_omega_whose_square_overflows_is_one_line_and_the_apis_error(capsys, tmp_path):
+    """{"omega": 1e300}: numpy's LinAlgError from ARPACK, a traceback (exit 3), and the same error from the API."""
+    design = write(tmp_path / "inv.v", INVERTER)
+    params = write(tmp_path / "huge.json", '{"omega": 1e300}')
+    refused(capsys, keep(design, params), "simulate", design, "--backend", "envelope", "--set", "a=1",
+            "--params", params, needle="the envelope equations are not finite")
+    with pytest.raises(Mech2SpiceError, match="not finite"):
+        api.simulate(str(design), {"a": 1}, backend="envelope", params=str(params))

@@ -115,3 +115,10 @@ def test_an_omega_whose_square_overflows_is_one_line_and_the_apis_error(capsys, 
             "--params", params, needle="the envelope equations are not finite")
     with pytest.raises(Mech2SpiceError, match="not finite"):
         api.simulate(str(design), {"a": 1}, backend="envelope", params=str(params))
+
+
+def test_a_port_named_with_a_leading_dollar_is_refused_in_one_line(capsys, tmp_path):
+    """`input \\$a `: Yosys keeps its backslash (its own names start with `$`), so `--set '$a=1'` was an unknown
+    port and verify's testbench named a port the design does not have (an Icarus error about it)."""
+    design = write(tmp_path / "d.v", "module t(input \\$a , output y);\n  assign y = ~\\$a ;\nendmodule\n")
+    refused(capsys, keep(design), "synth", design, needle="port '$a' (written `\\$a `) begins with `$`")

@@ -1056,8 +1056,20 @@ def _port_where(module: dict, port: str, path: Path | None, top: str) -> str:
     return f"{path}, line {line}" if line else str(path or f"module {top}")
 
 
+def _refuse_dollar_ports(top: str, module: dict) -> None:
+    """A port whose Verilog name begins with `$` (`\\$a `): Yosys keeps such names apart as its own (`\\$a` in
+    its JSON, where any other escaped name loses the backslash), so every tool downstream would name the port
+    otherwise than the source does (--set, the testbench, the waveform)."""
+    bad = next((p for p in module["ports"] if p.startswith("\\$")), None)
+    if bad is not None:
+        raise Mech2SpiceError(f"module {top}: port '{bad[1:]}' (written `{bad} `) begins with `$`, the prefix "
+                              "Yosys keeps for its own names, so the tools that read the network would each "
+                              "name it differently: rename the port")
+
+
 def _add_inputs(g: nx.DiGraph, top: str, module: dict):
     """Input nodes; port widths in declaration order; net id -> driving node."""
+    _refuse_dollar_ports(top, module)
     driver: dict[int, str] = {}
     for port, bits in _ports(module, "input"):
         for i, bit in enumerate(bits):

@@ -333,7 +333,7 @@ def _markdown(rows: list[dict], s: dict, meta: dict) -> str:
            f"Tool {meta['tool']}, {meta['date']}, {meta['cpus']} CPUs, load averages {meta['load_avg']}, "
            f"{meta['wall_s']} s for the rows measured in this run (cached rows cost nothing); "
            f"{meta['timeout_s']:.0f} s budget per step, {meta.get('proof_time_s', 120):.0f} s for the proof.", "",
-           "Columns: *gates* are the logic NOR gates (before fan-out buffers), *osc.* the oscillators of the "
+           "Columns: *gates* are the logic NOR gates (with the fan-out buffers `synth` inserts by default), *osc.* the oscillators of the "
            "mechanical model; *verify* is `mech2spice verify --backend logic` (formal equivalence with Yosys, "
            "then Icarus co-simulation: pass needs both); *envelope* is `verify --backend envelope "
            f"--no-equivalence` on {meta['envelope_cycles']} clock cycles (4 vectors when combinational) for "

@@ -283,3 +283,11 @@ def test_a_design_that_prints_rows_of_bits_is_co_simulated_on_its_results_only(t
     code = cli.main(["verify", str(src), "--cycles", "40", "--json"])
     res = json.loads(capsys.readouterr().out)
     assert code == 0 and res["cosim"]["agree"] and res["equivalence"]["status"] == "proved", res
+
+
+def test_a_v_file_with_a_keywordless_parameter_list_is_read_as_systemverilog(tmp_path):
+    """nandland's `module Count_And_Toggle #(COUNT_LIMIT = 10)`: Yosys refuses it in Verilog mode with its own
+    message ("In pure Verilog (not SystemVerilog) ..."), not a syntax error, so the SystemVerilog retry never ran."""
+    path = _file(tmp_path, "module m #(W = 3) (input [W-1:0] a, output y);\n  assign y = &a;\nendmodule\n", "m.v")
+    nl = synthesize(path)
+    assert nl.inputs == {"a": 3} and nl.systemverilog

@@ -550,6 +550,12 @@ def _cache_write(key: str | None, name: str, module: dict, found: list, released
         pass
 
 
+# Yosys's errors on a `.v` that holds SystemVerilog (then read again as SystemVerilog, as Icarus reads it): a
+# syntax error, or its own word for a construct only SystemVerilog has (nandland's `localparam` list whose
+# later names have no keyword).
+_SV_ONLY = ("syntax error", "In pure Verilog (not SystemVerilog)")
+
+
 def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) -> tuple[str, dict, list, list, bool, list]:
     """Run the flow in a scratch folder; return what `_run_yosys` does.  `source` is the
     text to read: the file's own, or its standard rewriting (dialect.py), which then is read from the folder."""
@@ -566,7 +572,7 @@ def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) 
         sv = path.suffix == ".sv"
         maps.write_maps(tmp)
         result = yosys.run_script(_flow(rel, top, include, sv=sv, sampled=sampled), tmp)
-        if result.returncode != 0 and not sv and "syntax error" in yosys.error_line(result):
+        if result.returncode != 0 and not sv and any(m in yosys.error_line(result) for m in _SV_ONLY):
             # a `.v` written with SystemVerilog constructs (`for (int i = 0; ...; i++)`), as Icarus reads it
             # in verify (verify.generations): the first reading's error stands if this one fails too
             retry = yosys.run_script(_flow(rel, top, include, sv=True, sampled=sampled), tmp)

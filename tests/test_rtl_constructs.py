@@ -408,8 +408,9 @@ def test_icarus_refusing_a_rewritten_source_names_the_users_file(tmp_path, capsy
 RESETS_IN_AN_OR = {
     "two_resets": """module pc4(input clock, input clear, input reset, input enable, output reg [3:0] counter);
   always @(posedge clock or posedge clear or posedge reset)
-    if (reset || clear)     // two asynchronous resets in one test
-      counter <= 4'h0;
+    if (reset ||            // two asynchronous resets in one test,
+        clear)              /* a comment in the condition: not joined onto the copy's line */
+      counter <= 4'h0;      // the branch's comment
     else if (enable)
       counter <= counter + 1;
 endmodule

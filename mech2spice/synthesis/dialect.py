@@ -35,7 +35,8 @@ from typing import Iterator
 from ..errors import Mech2SpiceError
 from ..inputs import read_input
 from . import memory_guard
-from .verilog_text import blanked as blank, link_readmem_files, processes, statement_or_block_end
+from .verilog_text import (blanked as blank, closing_paren, comments_blanked, link_readmem_files, processes,
+                           statement_or_block_end)
 
 __all__ = ["standard_text", "standard_source", "is_vis", "mirror_siblings"]
 
@@ -154,17 +155,6 @@ def standard_source(path) -> Iterator[Path]:
 _EDGE_BLOCK = re.compile(r"\balways(?:_ff)?\s*@\s*\(")
 _EDGE = re.compile(r"\b(posedge|negedge)\s+([A-Za-z_][\w$]*)")
 _FIRST_IF = re.compile(r"\s*(?:begin\b(?:\s*:\s*[A-Za-z_][\w$]*)?\s*)?if\s*\(")
-_COMMENT = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\\n])*"', re.S)
-
-
-def _closing(text: str, open_at: int) -> int:
-    """The offset of the `)` closing the `(` at `open_at` (len(text) when none does)."""
-    depth = 0
-    for k in range(open_at, len(text)):
-        depth += {"(": 1, ")": -1}.get(text[k], 0)
-        if depth == 0:
-            return k
-    return len(text)
 
 
 def _or_terms(cond: str) -> list[tuple[int, int]]:
@@ -184,7 +174,7 @@ def _or_terms(cond: str) -> list[tuple[int, int]]:
 def _edge_test(term: str, edges: dict[str, str]) -> str | None:
     """The listed signal `term` tests as an asynchronous reset (`x` for posedge x, `!x`/`~x` for negedge)."""
     t = term.strip()
-    while t.startswith("(") and _closing(t, 0) == len(t) - 1:
+    while t.startswith("(") and closing_paren(t, 0) == len(t) - 1:
         t = t[1:-1].strip()
     m = re.fullmatch(r"([!~]?)\s*([A-Za-z_][\w$]*)", t)
     if m and edges.get(m[2]) == ("negedge" if m[1] else "posedge"):
@@ -201,24 +191,24 @@ def _split_reset_ors(text: str) -> str:
     blanked = blank(text)
     edits = []
     for m in _EDGE_BLOCK.finditer(blanked):
-        close = _closing(blanked, m.end() - 1)
+        close = closing_paren(blanked, m.end() - 1)
         edges = {name: kind for kind, name in _EDGE.findall(blanked[m.end():close])}
         first = _FIRST_IF.match(blanked, close + 1)
         if len(edges) < 2 or not first:
             continue
         c0 = first.end()
-        c1 = _closing(blanked, c0 - 1)
+        c1 = closing_paren(blanked, c0 - 1)
         spans = _or_terms(blanked[c0:c1])
         resets = [k for k, (a, b) in enumerate(spans) if _edge_test(blanked[c0 + a:c0 + b], edges)]
         if len(spans) < 2 or not resets:
             continue
         order = resets + [k for k in range(len(spans)) if k not in resets]
-        conds = [text[c0 + spans[k][0]:c0 + spans[k][1]].strip() for k in order]
+        bare = comments_blanked(text)          # a comment joined onto one line would end it there
+        conds = [bare[c0 + spans[k][0]:c0 + spans[k][1]].strip() for k in order]
         rest = [c for k, c in zip(order, conds) if k not in resets]
         conds = conds[:len(resets)] + ([" || ".join(rest)] if rest else [])
         b0, b1 = c1 + 1, statement_or_block_end(blanked, c1 + 1)
-        branch = _COMMENT.sub(lambda x: x.group() if x.group().startswith('"') else " " * len(x.group()),
-                              text[b0:b1]).replace("\n", " ").strip()
+        branch = bare[b0:b1].replace("\n", " ").strip()
         flat = [" ".join(c.split()) for c in conds]
         edits.append((c0, c1, flat[0] + "\n" * blanked[c0:c1].count("\n")))
         edits.append((b1, b1, "".join(f" else if ({c}) {branch}" for c in flat[1:])))

@@ -82,6 +82,16 @@ _READMEM = re.compile(r"\$readmem[hb]\b")
 _LITERAL = re.compile(r'\s*\(\s*"((?:\\.|[^"\\\n])*)"')
 
 
+def closing_paren(text: str, open_at: int) -> int:
+    """The offset of the `)` closing the `(` at `open_at` (len(text) when none does)."""
+    depth = 0
+    for k in range(open_at, len(text)):
+        depth += {"(": 1, ")": -1}.get(text[k], 0)
+        if depth == 0:
+            return k
+    return len(text)
+
+
 def comments_blanked(text: str) -> str:
     """The text with comments blanked and strings kept (offsets and lines kept)."""
     return _COMMENT_OR_STRING.sub(lambda m: m.group() if m.group().startswith('"')
@@ -95,12 +105,8 @@ def readmem_calls(text: str) -> list[tuple[int, int, str | None]]:
     out = []
     for m in _READMEM.finditer(kept):
         lit = _LITERAL.match(kept, m.end())
-        depth, end = 0, len(kept)
-        for k in range(m.end(), len(kept)):
-            depth += {"(": 1, ")": -1}.get(kept[k], 0)
-            if kept[k] == ")" and depth == 0:
-                end = k + 1
-                break
+        paren = kept.find("(", m.end())
+        end = min(len(kept), closing_paren(kept, paren) + 1) if paren >= 0 else m.end()
         out.append((m.start(), end, lit.group(1) if lit else None))
     return out
 

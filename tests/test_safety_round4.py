@@ -122,3 +122,30 @@ def test_a_port_named_with_a_leading_dollar_is_refused_in_one_line(capsys, tmp_p
     port and verify's testbench named a port the design does not have (an Icarus error about it)."""
     design = write(tmp_path / "d.v", "module t(input \\$a , output y);\n  assign y = ~\\$a ;\nendmodule\n")
     refused(capsys, keep(design), "synth", design, needle="port '$a' (written `\\$a `) begins with `$`")
+
+
+@pytest.mark.parametrize("text", ["", "; only a comment\n\n"], ids=["empty", "comment_only"])
+def test_an_assembly_file_with_nothing_in_it_is_refused_not_run(capsys, tmp_path, text):
+    """It ran an all-zero memory and said "did not halt" (exit 1); `cpu asm` wrote a 0-byte image."""
+    src = write(tmp_path / "empty.asm", text)
+    refused(capsys, keep(src), "cpu", "run", src, "--backend", "iss", "--max-cycles", "100",
+            needle="assembles to no bytes")
+    refused(capsys, keep(src), "cpu", "asm", src, "-o", tmp_path / "out.bin", needle="assembles to no bytes")
+    assert not (tmp_path / "out.bin").exists()
+
+
+@pytest.mark.parametrize("sweep, needle", [("freq=0:inf:2", "HI is 'inf': a finite number is needed"),
+                                           ("freq=nan", "VALUE is 'nan'"),
+                                           ("freq=0:1e-3:2.5", "N is '2.5': a whole number of points")])
+def test_a_sweep_bound_that_is_no_finite_number_is_named(capsys, sweep, needle):
+    """`freq=0:inf:2` made numpy warn and read the axis as nan; `N = 2.5` got Python's int() wording."""
+    refused(capsys, {}, "domain", "gate", "--sweep", sweep, "--sweep", "amp=0:0.1:2", needle=needle)
+
+
+def test_control_characters_from_a_file_are_escaped_in_the_message(capsys, tmp_path):
+    """A NUL hid the rest of a port's name on a terminal, and an ESC sequence reached it (turning it red)."""
+    stim = write(tmp_path / "st.json", '[{"set": {"r\\u001b[31mst\\u0000": 1}, "cycles": 1}]')
+    counter = Path(__file__).resolve().parents[1] / "verilog" / "counter4.v"
+    err = refused(capsys, keep(stim), "simulate", counter, "--backend", "logic", "--stimulus", stim,
+                  needle="'r\\x1b[31mst\\x00'")
+    assert "\x1b" not in err and "\x00" not in err

@@ -104,8 +104,14 @@ def _run(args) -> int:
 
 
 def _fail(msg: str) -> int:
-    print("mech2spice: error: " + " ".join(msg.split()), file=sys.stderr)
+    print("mech2spice: error: " + _visible(" ".join(msg.split())), file=sys.stderr)
     return 2
+
+
+def _visible(text: str) -> str:
+    """A message with each control character escaped: a NUL or an ESC taken from a user's file (a port name)
+    hid part of the line or reached the terminal as a command (an ESC [31m turned it red)."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 def _drop_stdout() -> None:

@@ -21,6 +21,7 @@ drawn at every point, so the map's yield differences are the operating point's a
 from __future__ import annotations
 
 import math
+import re
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -58,6 +59,17 @@ class Point:
 
 
 # --------------------------------------------------------------------------- parsing
+def _finite(text: str, what: str) -> float:
+    """A sweep bound as a finite number (inf and nan made numpy warn and the axis read nan)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{what} is {text.strip()!r}, not a number") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{what} is {text.strip()!r}: a finite number is needed")
+    return value
+
+
 def parse_sweep(text: str) -> tuple[str, list[float]]:
     """`NAME=LO:HI:N` (N evenly spaced values from LO to HI) or `NAME=V` (one value): (name, values)."""
     name, eq, spec = str(text).partition("=")
@@ -68,11 +80,12 @@ def parse_sweep(text: str) -> tuple[str, list[float]]:
     parts = spec.split(":")
     try:
         if len(parts) == 1:
-            values = [float(parts[0])]
+            values = [_finite(parts[0], "VALUE")]
         elif len(parts) == 3:
-            lo, hi, n = float(parts[0]), float(parts[1]), int(parts[2])
-            if not 1 <= n <= 101:
-                raise ValueError("N must be 1 to 101")
+            lo, hi = _finite(parts[0], "LO"), _finite(parts[1], "HI")
+            if not re.fullmatch(r"\s*\d{1,3}\s*", parts[2]) or not 1 <= int(parts[2]) <= 101:
+                raise ValueError(f"N is {parts[2].strip()!r}: a whole number of points, 1 to 101")
+            n = int(parts[2])
             values = [lo] if n == 1 else [float(v) for v in np.linspace(lo, hi, n)]
         else:
             raise ValueError("expected LO:HI:N or one value")

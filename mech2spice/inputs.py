@@ -379,8 +379,8 @@ def _check_reader(p: Path, path, what: str) -> None:
     try:
         os.close(os.open(p, os.O_WRONLY | os.O_NONBLOCK))
     except OSError:
-        raise Mech2SpiceError(f"{what} {path} is a named pipe that nothing reads: the write would wait "
-                              "forever") from None
+        raise Mech2SpiceError(f"{what} {path} is not a regular file but a named pipe that nothing reads: the "
+                              "write would wait forever") from None
 
 
 def check_inside(path, folder, what: str) -> Path:
@@ -421,9 +421,12 @@ def design_inputs(design, label: str = "the design") -> list[tuple[str, Path]]:
     return found
 
 
+_READMEM_NAME = re.compile(r'\$readmem[hb]\s*\(\s*"((?:\\.|[^"\\\n])*)"')
+
+
 def _readmem_names(text: str) -> list[str]:
-    from .synthesis.verilog_text import readmem_calls
-    return [name for _, _, name in readmem_calls(text) if name]
+    """The file names `$readmemh`/`$readmemb` read (one in a comment counts too: kept safe all the same)."""
+    return [name for name in _READMEM_NAME.findall(text) if name]
 
 
 def force_arg(parser, option: str) -> None:

@@ -75,6 +75,14 @@ def assemble(text: str) -> tuple[bytes, str, dict[str, int]]:
     return p.image, p.listing, p.symbols
 
 
+def check_not_empty(program: Program) -> Program:
+    """A program file that assembles to no bytes (empty, or only comments) ran an all-zero memory and was
+    reported "did not halt"; `cpu asm` wrote a 0-byte image: refused instead."""
+    if not program.image:
+        raise Mech2SpiceError("no instruction and no data: the program assembles to no bytes, nothing to run")
+    return program
+
+
 def assemble_program(text: str) -> Program:
     """Assemble source text into a Program (image, listing, symbols, tape, rows)."""
     statements = _parse(text)
@@ -88,8 +96,6 @@ def assemble_program(text: str) -> Program:
         image[st.addr:st.addr + len(data)] = data
         end = max(end, st.addr + len(data))
         rows.append((st.addr, data, st.source))
-    if end == 0:        # an empty or comment-only file ran an all-zero memory and was reported "did not halt"
-        raise Mech2SpiceError("no instruction and no data: the program assembles to no bytes, nothing to run")
     tape = _tape(statements, symbols, rows)
     results = [_result(st, symbols) for st in statements if st.result is not None]
     listing = "\n".join(f"{addr:3d}  {' '.join(f'{b:02X}' for b in data):<6} {src}" if data

@@ -24,7 +24,7 @@ from ..inputs import (MAX_CYCLES, check_output_file, replace_file, first_json_li
 from ..waveform import Waveform, is_vcd, write_vcd
 from .isa import MEM_SIZE, OPCODES
 from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS
-from .asm import Program, assemble_program
+from .asm import Program, assemble_program, check_not_empty
 from .machines import CIRCUIT, PHYSICAL, make_cpu
 from .memory import Memory
 from .tm import Tape
@@ -42,7 +42,7 @@ def load_program(source) -> Program:
     data = read_input(path, "program", 16 << 20)
     if path.suffix.lower() == ".asm":
         try:
-            return assemble_program(data.decode("utf-8"))
+            return check_not_empty(assemble_program(data.decode("utf-8")))
         except Mech2SpiceError as err:
             raise Mech2SpiceError(f"{path}: {err}") from None
         except UnicodeDecodeError:

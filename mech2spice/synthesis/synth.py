@@ -448,10 +448,12 @@ def _run_yosys(path: Path, top: str | None, source: str, sampled: bool = False) 
 
 def _data_digest(source: str, path: Path) -> str:
     """A digest of the files the source's `$readmem` calls read (its ROMs' contents are part of the design)."""
+    names = [n for _, _, n in readmem_calls(source) if n is not None and readmem_problem(n, path.parent, None) is None]
+    if not names:
+        return ""                       # the key of a design without ROM files is what it was
     h = hashlib.sha256()
-    for _, _, name in readmem_calls(source):
-        if name is not None and readmem_problem(name, path.parent, hexadecimal=None) is None:
-            h.update(name.encode() + b"\0" + read_input(path.parent / name, "$readmem file") + b"\0")
+    for name in names:
+        h.update(name.encode() + b"\0" + read_input(path.parent / name, "$readmem file") + b"\0")
     return h.hexdigest()
 
 

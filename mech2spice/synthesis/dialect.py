@@ -189,6 +189,7 @@ def _split_reset_ors(text: str) -> str:
     "Multiple edge sensitive events found for this signal").  Lines kept: the copies of the branch go on its
     last line, their comments blanked and newlines joined."""
     blanked = blank(text)
+    bare = comments_blanked(text)              # a comment joined onto one line would end it there
     edits = []
     for m in _EDGE_BLOCK.finditer(blanked):
         close = closing_paren(blanked, m.end() - 1)
@@ -203,7 +204,6 @@ def _split_reset_ors(text: str) -> str:
         if len(spans) < 2 or not resets:
             continue
         order = resets + [k for k in range(len(spans)) if k not in resets]
-        bare = comments_blanked(text)          # a comment joined onto one line would end it there
         conds = [bare[c0 + spans[k][0]:c0 + spans[k][1]].strip() for k in order]
         rest = [c for k, c in zip(order, conds) if k not in resets]
         conds = conds[:len(resets)] + ([" || ".join(rest)] if rest else [])

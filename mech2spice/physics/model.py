@@ -212,3 +212,21 @@ class MechModel:
             raise Mech2SpiceError(
                 f"DOF '{self.names[neg[0]]}': total damping {a['c_total'][neg[0]]:g} is negative "
                 "(the oscillator would grow without bound)")
+        self._check_time_scales()
+
+    FREQUENCY_SPAN = 1e5     # an oscillator this many times faster or slower than the drive is no gate of this model
+
+    def _check_time_scales(self) -> None:
+        """Refuse a drive frequency no engine can step together with the oscillators' own frequencies: every
+        engine steps a fixed fraction of the drive period, so an own frequency 1e5 times the drive's (or its
+        1e-5) overflows the phasors or needs ~1e5 times the steps (omega = 1e-300 decoded NaN as 0.0)."""
+        a = self.arrays
+        with np.errstate(all="ignore"):
+            ratio = np.sqrt(np.abs(a["k_total"]) / (a["mass"] * np.float64(self.omega) ** 2))
+        span = self.FREQUENCY_SPAN
+        bad = np.flatnonzero(~np.isfinite(ratio) | ((a["k_total"] != 0) & ((ratio > span) | (ratio < 1 / span))))
+        if bad.size:
+            raise Mech2SpiceError(
+                f"DOF '{self.names[bad[0]]}': its own frequency sqrt(k/m) is {ratio[bad[0]]:.3g} times the drive's "
+                f"(omega = {float(self.omega):.4g} rad/s); outside 1e-5..1e5 no engine can step both: is omega in "
+                "rad/s, and the masses and stiffnesses in one unit system?")

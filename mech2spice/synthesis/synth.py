@@ -78,6 +78,8 @@ class Netlist:
     initial_registers: tuple = field(default=(), compare=False)
     # the source's `translate_off` regions, (first line, last line): text a simulator runs and synthesis not
     translate_off: tuple = field(default=(), compare=False)
+    # output bits nothing drives in the source (`port[i]`): Verilog reads z there, the network a constant 0
+    undriven: tuple = field(default=(), compare=False)
 
     @property
     def clocked(self) -> bool:
@@ -180,9 +182,21 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     for port in released:               # warned: where Verilog reads z the network reads the bus's multiplexer
         _warn(f"{path}: output {port} is driven only through tri-state drivers: where none is enabled Verilog "
               "reads z and the network a 0 or 1 (the bus as a multiplexer); `verify` names such input vectors")
+    undriven = _undriven_outputs(module)
+    for port in dict.fromkeys(b.split("[")[0] for b in undriven):
+        _warn(f"{path}: output {port} is driven by nothing (or set to x), in part or whole: Verilog reads z (or "
+              "x) there and the network a constant 0; `verify` leaves those bits out of its comparison")
+    netlist.undriven = undriven
     netlist.races, netlist.source, netlist.systemverilog = tuple(found), str(path), sv
     netlist.translate_off = skipped
     return clean(netlist, max_fanout=max_fanout)
+
+
+def _undriven_outputs(module: dict) -> tuple[str, ...]:
+    """The top's output bits (`port[i]`) nothing drives (an x in Yosys's netlist: `_check_drivers` let through
+    only outputs nothing inside reads) or the source sets to x."""
+    return tuple(f"{p}[{i}]" for p, row in module["ports"].items() if row["direction"] == "output"
+                 for i, b in enumerate(row["bits"]) if b == "x")
 
 
 def clean(netlist: Netlist, *, max_fanout: int | None = None) -> Netlist:
@@ -580,6 +594,7 @@ def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) 
             retry = yosys.run_script(_flow(rel, top, include, sv=True, sampled=sampled), tmp)
             result, sv = (retry, True) if retry.returncode == 0 else (result, False)
         _refuse_real(result, rel, path)
+        _refuse_net_in_block(result, rel, path)
         if result.returncode != 0:
             msg = yosys.error_line(result).replace(rel, str(path))
             for known in (_non_constant_init(msg, path), _yosys_task(msg, path, source), _untested_edge(msg, path, source)):
@@ -588,13 +603,13 @@ def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) 
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
                                   else f"yosys error: {path}: {msg}")
         released, aliased = refusals.check(Path(tmp), path, source, top)
-        _check_drivers(Path(tmp), path)
         found = races.find((Path(tmp) / "ast.txt").read_text(), path)
         out = Path(tmp) / "netlist.json"
         if not out.exists():
             raise Mech2SpiceError(f"yosys wrote no netlist for {path} (its run stopped early)")
         modules = json.loads(out.read_text())["modules"]
-    name, module = _pick_top(modules, top, path)
+        name, module = _pick_top(modules, top, path)
+        _check_drivers(Path(tmp), path, name, module)
     outputs = {p for p, row in module["ports"].items() if row["direction"] == "output"}
     return name, module, found, [p for p in released.get(name, []) if p in outputs], sv, aliased
 
@@ -621,21 +636,59 @@ def _refuse_real(result, rel: str, path: Path) -> None:
                               "computes with bits: write an integer (or scale to fixed point)")
 
 
+_NET_IN_BLOCK = re.compile(r"Warning: wire '\\?(?P<net>[^']+)' is assigned in a block at (?P<file>\S+?):(?P<line>\d+)\.")
+
+
+def _refuse_net_in_block(result, rel: str, path: Path) -> None:
+    """Refuse a procedural assignment to a net (`output out; always @(posedge clk) out <= d;`, VTR's
+    multiclock_reader_writer.v): IEEE 1364 10.2 and 1800 10.4 allow it to variables only, Icarus and every
+    simulator refuse the file, and Yosys alone builds logic from it (with a warning), so the network would
+    stand for a source nothing can check it against."""
+    m = _NET_IN_BLOCK.search(result.stdout + "\n" + result.stderr)
+    if m:
+        where = f"{path}, line {m['line']}" if m["file"] == rel else str(path)
+        raise Mech2SpiceError(f"{where}: '{m['net']}' is a net (a wire or a port without `reg`) assigned in an "
+                              "always block, which Verilog allows only for variables and no simulator accepts: "
+                              f"declare it `reg` (`output reg {m['net']}`) or `logic`")
+
+
 _UNDRIVEN = re.compile(r"Wire (?P<mod>[^.\s]+)\.\\?(?P<net>.+?) is used but has no driver")
 
 
-def _check_drivers(tmp: Path, path: Path) -> None:
+def _check_drivers(tmp: Path, path: Path, top: str, module: dict) -> None:
     """Refuse nets nothing drives (Yosys reads them as x, and synthesis would silently fold x into a
-    constant).  Declaration initialisers are power-up values (build_netlist reads them)."""
-    for line in (tmp / "check.txt").read_text().splitlines():
-        m = _UNDRIVEN.search(line)
-        if m:
+    constant), except the top's output ports that nothing inside reads: there z stays where Verilog puts it,
+    on the output (`undriven_outputs` names them).  Declaration initialisers are power-up values
+    (build_netlist reads them)."""
+    undriven = [m for m in map(_UNDRIVEN.search, (tmp / "check.txt").read_text().splitlines()) if m]
+    outputs = {p for p, row in module["ports"].items() if row["direction"] == "output"}
+    alone = {m["net"].split(" [")[0] for m in undriven if m["mod"] == top} & outputs
+    alone -= _read_inside(tmp, top, alone)
+    for m in undriven:
+        if m["mod"] != top or m["net"].split(" [")[0] not in alone:
             net = m["net"].replace(" ", "")
             raise Mech2SpiceError(f"{path}: in module {m['mod']}, '{net}' is used but nothing drives it: "
                                   "Verilog reads it as z (a wire) or x (a reg or memory word never assigned), "
                                   "which synthesis would fold into a constant no simulator shows; assign it a value")
 
 
+_PLAIN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_$]*")
+
+
+def _read_inside(tmp: Path, top: str, ports: set[str]) -> set[str]:
+    """The output ports among `ports` that a cell of the top module reads, directly or through wires joined to
+    them (Yosys's output cone of the wire, every step, before flattening: any cell in it reads the port).
+    A name a Yosys pattern cannot hold plainly counts as read (the refusal stands)."""
+    plain = sorted(p for p in ports if _PLAIN_NAME.fullmatch(p)) if _PLAIN_NAME.fullmatch(top) else []
+    if not plain:
+        return set(ports)
+    script = ["read_rtlil drivers.il"] + [f"tee -q -o readers{k}.txt select -list {top}/w:{p} %co* {top}/t:* %i"
+                                          for k, p in enumerate(plain)]
+    result = yosys.run_script("\n".join(script) + "\n", tmp)
+    if result.returncode != 0:
+        return set(ports)
+    read = {p for k, p in enumerate(plain) if (tmp / f"readers{k}.txt").read_text().strip()}
+    return read | (ports - set(plain))
 
 
 def _pick_top(modules: dict, top: str | None, path: Path) -> tuple[str, dict]:

@@ -1080,7 +1080,8 @@ def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], c
     """Every output bit where Icarus and the backend differ (an invalid bit included); margins in the block's
     `levels` (default: the default block's).  Where Icarus reads x (a register the source never defines, e.g.
     without a reset) any valid bit agrees, as `-ignore_gold_x` in the proof: the source allows either value.
-    A z, or an invalid bit against an x, is a mismatch."""
+    A z, or an invalid bit against an x, is a mismatch, except on an output bit the source drives with nothing
+    (`netlist.undriven`): neither reading has a value there, and it is not compared."""
     from .physics.params import DEFAULT_LEVELS
     levels = levels or DEFAULT_LEVELS
     mismatches = []
@@ -1088,6 +1089,8 @@ def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], c
         for bit in output_bits(netlist):
             want, have = r[bit], g["bits"].get(bit)
             if have is not None and (want in "xX" or (want in "01" and int(want) == have)):
+                continue
+            if want in "xXzZ" and bit in netlist.undriven:
                 continue
             amp = g.get("amplitudes", {}).get(bit)
             m = {("cycle" if clocked else "vector"): k, "inputs": _as_ports(netlist, x[k]), "bit": bit,
@@ -1116,7 +1119,7 @@ def undefined_by_port(netlist: Netlist, ref: list[dict]) -> dict:
     """Per output port, of the bits compared: how many the source left x and z (Icarus), and how many in all."""
     out = {}
     for port, w in netlist.outputs.items():
-        vals = [r[f"{port}[{i}]"] for r in ref for i in range(w)]
+        vals = [r[b] for r in ref for i in range(w) if (b := f"{port}[{i}]") not in netlist.undriven]
         out[port] = {"x": sum(v in "xX" for v in vals), "z": sum(v in "zZ" for v in vals), "compared": len(vals)}
     return out
 
@@ -1146,7 +1149,7 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     levels = None if params is None else params.levels
     mismatches = compare(netlist, x, ref, got, clocked, levels)
     # where Icarus disagrees, or agrees only because it reads x: again from where the network powers up
-    start = power_up_start(netlist) if clocked and (mismatches or _mostly_undefined(ref)) else []
+    start = power_up_start(netlist) if clocked and (mismatches or _mostly_undefined(_driven(netlist, ref))) else []
     compared = None
     if start:
         mismatches, compared = _from_power_up(path, netlist, x, got, levels, start, mismatches, info)
@@ -1154,10 +1157,11 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
         info["trace"] = cosim_trace(netlist, x, compared or ref, got, clocked)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
-           "undefined_bits": sum(v in "xX" for r in ref for v in r.values()),
-           "undriven_bits": sum(v in "zZ" for r in ref for v in r.values()), "source_warnings": warnings, **info,
+           "undefined_bits": sum(v in "xX" for r in _driven(netlist, ref) for v in r.values()),
+           "undriven_bits": sum(v in "zZ" for r in _driven(netlist, ref) for v in r.values()),
+           "driven_by_nothing": list(netlist.undriven), "source_warnings": warnings, **info,
            "undefined_by_port": undefined_by_port(netlist, ref)}
-    out["mostly_undefined"] = _mostly_undefined(compared or ref)      # in the run the verdict compared
+    out["mostly_undefined"] = _mostly_undefined(_driven(netlist, compared or ref))   # in the run the verdict compared
     out["compared_run"] = "as_written" if compared is None else "power_up_start"
     if clocked:
         out["reset"] = {k: rst[0][k] for k in ("port", "level")} if rst else None
@@ -1168,6 +1172,13 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
                    min_margin=min(margins) if margins else None)
         out["agree"] = out["agree"] and out["valid"]
     return out
+
+
+def _driven(netlist: Netlist, ref: list[dict]) -> list[dict]:
+    """Icarus's values less the output bits the source drives with nothing (not compared)."""
+    if not netlist.undriven:
+        return ref
+    return [{b: v for b, v in r.items() if b not in netlist.undriven} for r in ref]
 
 
 def _mostly_undefined(ref: list[dict]) -> bool:
@@ -1279,6 +1290,15 @@ def _mismatch_text(m: dict) -> str:
     return f"{where} {m['inputs']}: {m['bit']} Icarus {m['icarus']}, network {got}{amp}"
 
 
+def _bits_text(bits: list[str]) -> str:
+    """Output bits named per port: `carry, o[2:1]`-like, whole ports by name."""
+    by_port: dict[str, list[int]] = {}
+    for b in bits:
+        port, index = b.rsplit("[", 1)
+        by_port.setdefault(port, []).append(int(index.rstrip("]")))
+    return ", ".join(f"{p}[{','.join(map(str, sorted(ix, reverse=True)))}]" for p, ix in by_port.items())
+
+
 def _undefined_text(co: dict) -> str:
     """The verdict line's note on bits the source left undefined: per port, and a warning when most were."""
     ports = [f"{p} {n['x'] + n['z']}/{n['compared']}" for p, n in co.get("undefined_by_port", {}).items()
@@ -1321,6 +1341,8 @@ def text(result: dict) -> str:
                     if co.get("undefined_bits") else "")
                  + (f"; {co['undriven_bits']} bits the source does not drive (z on Icarus: a mismatch)"
                     if co.get("undriven_bits") else "")
+                 + (f"; not compared: {_bits_text(co['driven_by_nothing'])}, which the source drives with nothing"
+                    if co.get("driven_by_nothing") else "")
                  + (f"; valid {co['valid']}, stable {co['stable']}, min margin {co['min_margin']:+.3f}"
                     if "valid" in co and co["min_margin"] is not None else ""))
     lines += [f"  source: {w} (Yosys joins the nets, so the proof is of that reading)"

@@ -22,7 +22,7 @@ from ..errors import Mech2SpiceError
 from ..inputs import (MAX_CYCLES, check_output_file, replace_file, first_json_line, head, is_int, read_input, read_json,
                       strict_json)
 from ..waveform import Waveform, is_vcd, write_vcd
-from .isa import MEM_SIZE, OPCODES
+from .isa import MEM_SIZE, OPCODE_MASK, OPCODES
 from .iss import FETCH, ISS, LDNX, LOAD, REGISTERS
 from .asm import Program, assemble_program, check_not_empty
 from .machines import CIRCUIT, PHYSICAL, make_cpu
@@ -253,14 +253,41 @@ def _check_fields(state: dict, path) -> None:
     if not isinstance(mem, list) or len(mem) != MEM_SIZE or not all(is_int(v) and 0 <= v <= 255 for v in mem):
         bad(f"'memory' must be a list of {MEM_SIZE} bytes")
     devices = state.get("devices", {})
-    if not isinstance(devices, dict) or not all(_valid_device(d) for d in devices.values()):
+    if not isinstance(devices, dict):
         bad("'devices' must map addresses to tape states")
+    for addr, dev in devices.items():
+        problem = _device_problem(dev)
+        if problem:
+            bad(f"the tape at {addr!r}: {problem}")
+    if state["halted"] and not _halts(regs, mem):
+        bad(f"'halted' is true but the machine is not at a halt (a JMP_C to itself, fetched with C = pc = "
+            f"{regs['pc']}): C = {regs['c']}, memory[pc] = {mem[regs['pc']]:#04x}, phase {regs['phase']}")
 
 
-def _valid_device(dev) -> bool:
-    return (isinstance(dev, dict) and isinstance(dev.get("cells"), dict)
-            and all(k.lstrip("-").isdigit() and is_int(v) for k, v in dev["cells"].items())
-            and all(is_int(dev.get(k)) for k in ("head", "steps", "idle")))
+_CELL = re.compile(r"-?[0-9]+")      # ASCII digits only: str.isdigit() takes '٣' and int() makes it 3
+
+
+def _device_problem(dev) -> str | None:
+    """Why a tape state cannot be restored (None: it can): cells keyed by whole numbers, holding symbols 0..7
+    (what a tape command writes), the head a whole number, the step and idle counts whole and >= 0."""
+    if not isinstance(dev, dict) or not isinstance(dev.get("cells"), dict):
+        return "not a tape state ({'cells': {...}, 'head': N, 'steps': N, 'idle': N})"
+    for k, v in dev["cells"].items():
+        if not _CELL.fullmatch(k):
+            return f"cell key {k!r} is not a whole number in ASCII digits"
+        if not (is_int(v) and 0 <= v <= 7):
+            return f"cell {k} holds {v!r}; a tape symbol is 0..7"
+    if not is_int(dev.get("head")):
+        return "'head' must be a whole number"
+    for key in ("steps", "idle"):
+        if not (is_int(dev.get(key)) and dev[key] >= 0):
+            return f"'{key}' must be a whole number >= 0"
+    return None
+
+
+def _halts(regs: dict, mem: list) -> bool:
+    """Whether these registers and memory are the ISS's halt: a JMP_C fetched at pc with C = pc."""
+    return regs["phase"] == FETCH and regs["c"] == regs["pc"] and mem[regs["pc"]] & OPCODE_MASK == OPCODES["JMP_C"]
 
 
 def _restore(cpu, state: dict, path) -> None:

@@ -86,15 +86,23 @@ def read_results(path: Path, job: dict) -> dict[int, dict]:
     if first_json_line(path)["key"] != mc.job_key(job):
         raise Mech2SpiceError(f"{path} holds results of another job (design or its source, spread, seed, backend or "
                               "inputs differ): give another --out")
-    done, torn = {}, False
+    done, torn, design = {}, False, None
     with open(path, "rb") as fh:
         for n, raw in enumerate(fh, 1):
             if not raw.endswith(b"\n"):
                 torn = True                 # the last line, cut off below
             elif n > 1:
                 rec = _record(raw, n, path)
-                if rec.get("type") == "sample":
-                    done.setdefault(rec["i"], rec)
+                if rec.get("type") != "sample":
+                    continue
+                design = design or design_for(job)
+                problem = _inconsistent(rec, design) or (
+                    "sample {i} is given again with other values".format(**rec)
+                    if done.get(rec["i"], rec) != rec else None)
+                if problem:
+                    raise Mech2SpiceError(f"{path}, line {n}: {problem}; the tool writes no such record: give "
+                                          "another --out")
+                done.setdefault(rec["i"], rec)
     if torn:
         _cut_torn_line(path)
     return done
@@ -105,6 +113,26 @@ def read_results(path: Path, job: dict) -> dict[int, dict]:
 SAMPLE = {"i": COUNT, "pass": BOOL, "stable?": BOOL, "margin?": Opt(NUMBER), "gate_margin?": Opt(NUMBER),
           "failing_bits?": Map(COUNT), "failing_gates?": [STR], "worst_gate?": Opt(STR), "periods?": COUNT,
           "reason?": STR}
+
+
+def _inconsistent(rec: dict, design) -> str | None:
+    """Why a sample record cannot be one this design's run wrote (None: it can): its bits and gates are the
+    design's, no bit fails more often than there are input vectors, and `pass` agrees with the rest (a pass
+    has every bit right, a stable network and no negative margin; a failure has a wrong bit, a growing mode or
+    a reason)."""
+    bits, gates = rec.get("failing_bits") or {}, rec.get("failing_gates") or []
+    unknown = sorted(set(bits) - set(design.outs)) + sorted(set(gates) - set(design.gates)) + (
+        [rec["worst_gate"]] if rec.get("worst_gate") not in (None, *design.gates) else [])
+    if unknown:
+        return f"sample {rec['i']} names {unknown[0]!r}, which is no output bit or gate of this design"
+    if any(c > len(design.vectors) for c in bits.values()):
+        return f"sample {rec['i']} has a bit failing more often than the {len(design.vectors)} input vectors run"
+    failed = bool(bits) or rec.get("stable") is False or "reason" in rec
+    if rec["pass"] and (failed or (rec.get("margin") or 0) < 0):
+        return f"sample {rec['i']} passes with a wrong bit, a growing mode, a reason or a negative margin"
+    if not rec["pass"] and not failed:
+        return f"sample {rec['i']} fails with every bit right, the network stable and no reason"
+    return None
 
 
 def _cut_torn_line(path: Path) -> None:

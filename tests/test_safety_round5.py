@@ -24,3 +24,187 @@ def test_a_drive_frequency_far_from_every_oscillator_is_refused_not_decoded(tmp_
     params.write_text(json.dumps({"omega": omega}))
     with pytest.raises(Mech2SpiceError, match="own frequency sqrt"):
         api.simulate(str(design), {"a": 1}, backend=backend, params=str(params))
+
+
+# ------------------------------------------------------------------ a source no simulator accepts is not built
+
+def test_a_net_assigned_in_an_always_block_is_refused_with_its_line(tmp_path):
+    """VTR's multiclock_reader_writer.v assigns `output out` (a net) in an always block: Icarus and every
+    simulator refuse the file, Yosys warned and synth built a network from it without a word."""
+    from mech2spice.synthesis.synth import synthesize
+    bad = tmp_path / "t.v"
+    bad.write_text("module t(input clk, input d, output out);\n  always @(posedge clk) out <= d;\nendmodule\n")
+    with pytest.raises(Mech2SpiceError, match=r"t\.v, line 2: 'out' is a net .* declare it `reg`"):
+        synthesize(bad)
+    good = tmp_path / "g.v"
+    good.write_text("module t(input clk, input d, output reg out);\n  always @(posedge clk) out <= d;\nendmodule\n")
+    assert synthesize(good).outputs == {"out": 1}
+
+
+# ------------------------------------------------------------------ an output port nothing drives
+
+UNUSED_FLAGS = """module alu(input [1:0] a, input [1:0] b, output [2:0] s, output carry, output [1:0] flags);
+  assign s[1:0] = a ^ b;
+  assign flags[0] = a[0] & b[0];
+endmodule
+"""
+
+
+def test_an_output_nothing_drives_is_built_warned_and_left_out_of_verify(tmp_path, capsys):
+    """RTLLM's RISC-V ALU declares `carry`, `negative` and `overflow` and never assigns them: synth refused the
+    whole design.  Verilog reads z there; the network has a constant 0; verify compares the other bits
+    (exhaustively here) and says which it left out."""
+    import json
+
+    from mech2spice.cli import main
+    from mech2spice.synthesis.synth import synthesize
+    src = tmp_path / "alu.v"
+    src.write_text(UNUSED_FLAGS)
+    nl = synthesize(src)
+    err = capsys.readouterr().err
+    assert nl.undriven == ("s[2]", "carry[0]", "flags[1]")
+    assert all(f"output {p} is driven by nothing" in err for p in ("s", "carry", "flags"))
+    assert main(["verify", str(src), "--exhaustive", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    co = res["cosim"]
+    assert res["verdict"] == "pass" and res["equivalence"]["status"] == "proved"
+    assert co["driven_by_nothing"] == ["s[2]", "carry[0]", "flags[1]"] and co["undriven_bits"] == 0
+    assert co["undefined_by_port"]["s"] == {"x": 0, "z": 0, "compared": 2 * 16}
+    # a wrong network still fails on the bits that are compared
+    from mech2spice import verify as v
+    x = v.make_vectors(nl, 16, True, 0)[0]
+    ref = v.icarus(str(src), nl, x, False, [], {})
+    got = [{"bits": {**{b: int(r[b]) for b in r if r[b] in "01"}, "s[0]": 1 - int(r["s[0]"])}} for r in ref]
+    assert {m["bit"] for m in v.compare(nl, x, ref, got, False)} == {"s[0]"}
+
+
+def test_an_undriven_output_of_a_submodule_read_by_its_parent_is_still_refused(tmp_path):
+    from mech2spice.synthesis.synth import synthesize
+    src = tmp_path / "h.v"
+    src.write_text("module sub(input a, output s, output t);\n  assign s = ~a;\nendmodule\n"
+                   "module top(input a, output y, output w);\n  wire tt;\n  sub i(.a(a), .s(y), .t(tt));\n"
+                   "  assign w = tt;\nendmodule\n")
+    with pytest.raises(Mech2SpiceError, match="in module sub, 't' is used but nothing drives it"):
+        synthesize(src, top="top")
+
+
+# ------------------------------------------------------------------ a hand-edited checkpoint is not resumed
+
+def _edited_checkpoint(tmp_path, edit):
+    from pathlib import Path
+
+    from mech2spice.cli import main
+    program = Path(__file__).resolve().parents[1] / "programs" / "tm_increment.asm"
+    ck = tmp_path / "ck.json"
+    assert main(["cpu", "run", str(program), "--backend", "iss", "--checkpoint", str(ck), "--checkpoint-every", "5",
+                 "--max-cycles", "50"]) == 1                  # not halted yet: exit 1
+    state = json.loads(ck.read_text())
+    edit(state)
+    ck.write_text(json.dumps(state))
+    return program, ck
+
+
+def _tape(state):
+    return state["devices"]["255"]
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda s: _tape(s)["cells"].__setitem__(str(_tape(s)["head"]), 999), "holds 999; a tape symbol is 0..7"),
+    (lambda s: _tape(s)["cells"].__setitem__("1", 10 ** 30), "a tape symbol is 0..7"),
+    (lambda s: _tape(s)["cells"].__setitem__("\u0663", 1), "is not a whole number in ASCII digits"),
+    (lambda s: _tape(s).__setitem__("steps", -7), "'steps' must be a whole number >= 0"),
+    (lambda s: s.__setitem__("halted", True), "'halted' is true but the machine is not at a halt"),
+])
+def test_a_checkpoint_edited_to_an_impossible_state_is_refused(tmp_path, capsys, edit, needle):
+    """Tape cells of 999, 256 or 10**30, a cell keyed by an Arabic-Indic digit, negative counts and `halted`
+    at a state that has not halted all resumed and exited 0 on wrong state."""
+    from mech2spice.cli import main
+    program, ck = _edited_checkpoint(tmp_path, edit)
+    capsys.readouterr()
+    assert main(["cpu", "run", str(program), "--backend", "iss", "--checkpoint", str(ck), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1
+
+
+def test_a_checkpoint_written_at_the_halt_resumes_as_halted(tmp_path, capsys):
+    from pathlib import Path
+
+    from mech2spice.cli import main
+    program = Path(__file__).resolve().parents[1] / "programs" / "tm_increment.asm"
+    ck = tmp_path / "ck.json"
+    assert main(["cpu", "run", str(program), "--backend", "iss", "--checkpoint", str(ck)]) == 0
+    assert json.loads(ck.read_text())["halted"] is True
+    assert main(["cpu", "run", str(program), "--backend", "iss", "--checkpoint", str(ck), "--resume"]) == 0
+
+
+# ------------------------------------------------------------------ a Monte-Carlo record the run could not write
+
+@pytest.fixture(scope="module")
+def mc_results(tmp_path_factory):
+    """A genuine 2-sample results file of the inverter (envelope, 0.1 % spread), written once."""
+    from mech2spice.cli import main
+    folder = tmp_path_factory.mktemp("mc")
+    design = folder / "inv.v"
+    design.write_text(INVERTER)
+    out = folder / "r.jsonl"
+    assert main(["montecarlo", str(design), "--samples", "2", "--spread", "0.001", "--scheduler", "inline",
+                 "--out", str(out), "--json"]) in (0, 1)
+    return design, out.read_text().splitlines()
+
+
+def _resumed(capsys, tmp_path, mc_results, edit):
+    from mech2spice.cli import main
+    design, lines = mc_results
+    records = [json.loads(line) for line in lines]
+    edit(records)
+    out = tmp_path / "w.jsonl"
+    out.write_text("".join(json.dumps(r) + "\n" for r in records))
+    capsys.readouterr()
+    code = main(["montecarlo", str(design), "--samples", "2", "--spread", "0.001", "--scheduler", "inline",
+                 "--out", str(out), "--json"])
+    return code, capsys.readouterr().err
+
+
+def _flip(records):
+    records[1].update({"pass": not records[1]["pass"]})
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (_flip, "sample 0 "),
+    (lambda r: r[1].update(failing_gates=["nonexistent"]), "names 'nonexistent', which is no output bit or gate"),
+    (lambda r: r[1].update(failing_bits={"y[0]": 3}, **{"pass": False}), "failing more often than the 2 input"),
+    (lambda r: r.append({**r[1], "margin": -5.0, "pass": False, "failing_bits": {"y[0]": 1}}),
+     "sample 0 is given again with other values"),
+])
+def test_a_results_record_the_run_could_not_have_written_is_refused(capsys, tmp_path, mc_results, edit, needle):
+    """A sample flipped to `pass: true` with a wrong bit and a negative margin counted as passing (yield 1.0,
+    exit 0); a gate the design does not have was reported failing; a sample given twice was read silently."""
+    code, err = _resumed(capsys, tmp_path, mc_results, edit)
+    assert code == 2 and needle in err and err.count("\n") == 1, err
+
+
+def test_a_genuine_results_file_resumes(capsys, tmp_path, mc_results):
+    code, err = _resumed(capsys, tmp_path, mc_results, lambda r: None)
+    assert code in (0, 1) and "error" not in err
+
+
+# ------------------------------------------------------------------ a report refused before it writes anything
+
+def test_a_report_refused_for_its_options_leaves_no_folder_and_no_file(tmp_path, capsys):
+    """`report gate --render` created an empty --out folder before finding no gate.json in it, and `report
+    cpu_physical --checkpoint PROGRAM` wrote cpu_physical_failed.md before refusing to overwrite the program."""
+    from pathlib import Path
+
+    from mech2spice.cli import main
+    out = tmp_path / "r1"
+    assert main(["report", "gate", "--render", "--out", str(out)]) == 2
+    assert "does not exist: --render draws from the JSON" in capsys.readouterr().err and not out.exists()
+    program = tmp_path / "p.asm"
+    program.write_text((Path(__file__).resolve().parents[1] / "programs" / "tm_increment.asm").read_text())
+    kept = program.read_text()
+    out.mkdir()
+    assert main(["report", "cpu_physical", "--program", str(program), "--checkpoint", str(program),
+                 "--out", str(out), "--cycles", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "is the --program file" in err and err.count("\n") == 1
+    assert list(out.iterdir()) == [] and program.read_text() == kept

@@ -388,6 +388,12 @@ def _replayed(path, netlist: Netlist, res: dict, resets=()) -> dict:
         return {**res, "cex": cex, "replay": rep, "depth": len(cex),
                 "detail": f"the outputs differ on this input{edges}; replayed: Icarus and the network (logic "
                           f"backend) differ on {', '.join(rep['bits'])}"}
+    if not netlist.clocked:             # no start state: the source's own x or z was the difference
+        return {**res, "status": "unknown", "replay": rep,
+                "detail": f"the proof found inputs on which the outputs differ, but replayed, the source (Icarus) "
+                          f"and the network (logic backend) do not differ on any bit the source defines (source "
+                          f"{rep['source']}, network {rep['network']}): the source reads x or z where they differ "
+                          "(a released tri-state output, an x it assigns), where the network computes a 0 or 1"}
     return {**res, "status": "unknown", "replay": rep,
             "detail": f"the proof found inputs on which the outputs differ from its all-zero start, but replayed "
                       f"from power-up the source (Icarus) and the network (logic backend) do not differ on any "
@@ -936,7 +942,9 @@ def reset_ports(netlist: Netlist, given=None, path=None) -> list[dict]:
 
 
 def _given_reset(netlist: Netlist, spec: str) -> dict:
-    name, _, level = spec.partition("=")
+    name, sep, level = spec.partition("=")
+    if sep and not level:               # `rst=` was read as `rst`, its level from the name
+        raise Mech2SpiceError(f"--reset {spec}: nothing after '=': give the level, 0 or 1 (or the port alone)")
     if netlist.inputs.get(name) != 1 or name == netlist.clock:
         raise Mech2SpiceError(f"--reset {spec}: {netlist.top} has no 1-bit input '{name}' "
                               f"(inputs: {', '.join(netlist.inputs) or 'none'})")

@@ -104,11 +104,30 @@ def parse_sets(items: list[str] | None) -> dict[str, int]:
             raise Mech2SpiceError(f"--set expects PORT=INT, got {item!r}")
         if port.strip() in values:
             raise Mech2SpiceError(f"--set {port.strip()} is given twice: give each input once")
-        try:
-            values[port.strip()] = int(val.strip(), 0)
-        except ValueError:
-            raise Mech2SpiceError(f"--set {port.strip()}: {val[:40]!r} is not an integer") from None
+        values[port.strip()] = integer_text(val, f"--set {port.strip()}")
     return values
+
+
+_INTEGER = re.compile(r"[+-]?(?:0[xX][0-9a-fA-F_]+|0[bB][01_]+|0[oO][0-7_]+|[0-9][0-9_]*)")
+MAX_DIGITS = 1000        # far above any port's width in digits; Python itself stops at 4300
+
+
+def integer_text(text: str, what: str) -> int:
+    """A whole number written in ASCII: decimal (leading zeros allowed: 09 is 9), 0x, 0b or 0o, `_` between
+    digits.  int() alone took '٣' (an Arabic-Indic three) as 3 and refused 09."""
+    t = text.strip()
+    if len(t) > MAX_DIGITS:
+        raise Mech2SpiceError(f"{what}: a number of {len(t):,} characters (at most {MAX_DIGITS:,} are read)")
+    if not _INTEGER.fullmatch(t) or "__" in t or t.endswith("_"):
+        raise Mech2SpiceError(f"{what}: {_shown_text(text)} is not a whole number (decimal, 0x, 0b or 0o)")
+    body = t.lstrip("+-")
+    value = int(body, 0) if body[:2].lower() in ("0x", "0b", "0o") else int(body, 10)
+    return -value if t.startswith("-") else value
+
+
+def _shown_text(text: str) -> str:
+    """A user's text in a message: quoted, control characters escaped, at most 40 characters."""
+    return repr(text[:40]) + ("…" if len(text) > 40 else "")
 
 
 # --------------------------------------------------------------------------- files read
@@ -156,6 +175,9 @@ def _unique_keys(pairs: list) -> dict:
 def read_json(path, what: str):
     """The parsed content of a user's JSON file; one clear error if unreadable, not UTF-8 or not JSON."""
     raw = read_input(path, what)
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raise Mech2SpiceError(f"{what} {path} begins with a UTF-8 byte-order mark, which JSON does not allow: "
+                              "save it without one")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
@@ -165,7 +187,10 @@ def read_json(path, what: str):
     except json.JSONDecodeError as err:
         raise Mech2SpiceError(f"{what} {path} is not valid JSON: {err.msg} (line {err.lineno})") from None
     except (ValueError, RecursionError) as err:     # NaN/Infinity, >4300-digit integers, deep nesting
-        raise Mech2SpiceError(f"{what} {path} is not usable JSON: {str(err) or type(err).__name__}") from None
+        why = str(err) or type(err).__name__
+        if "Exceeds the limit" in why:               # Python's advice (sys.set_int_max_str_digits) is not ours
+            why = "an integer of more than 4,300 digits, which no field takes"
+        raise Mech2SpiceError(f"{what} {path} is not usable JSON: {why}") from None
 
 
 def finite(o, default=None):
@@ -246,9 +271,13 @@ def check_steps(data, base: dict[str, int], engine, where: str = "stimulus") -> 
         if extra:
             raise Mech2SpiceError(f"{where}, step {k}: unknown field(s) {', '.join(map(repr, extra))} "
                                   "(a step has 'set' and 'cycles')")
+        if "set" in step and not isinstance(step["set"], Mapping):     # null too: the API's None is its own
+            raise Mech2SpiceError(f"{where}, step {k}: 'set' must map port names to integers, not "
+                                  f"{type_name(step['set'])}")
         sets, cycles = port_values(step.get("set", {}), f"{where}, step {k}: 'set'"), step.get("cycles", 1)
         if not is_integral(cycles) or cycles < 0:
-            raise Mech2SpiceError(f"{where}, step {k}: 'cycles' must be a whole number >= 0, got {cycles!r}")
+            raise Mech2SpiceError(f"{where}, step {k}: 'cycles' must be a whole number >= 0, not "
+                                  f"{json_shown(cycles)}")
         steps.append({"set": {**base, **sets}, "cycles": int(cycles)})
     check_cycles(sum(s["cycles"] for s in steps), engine, f"{where} asks for")
     return steps
@@ -271,6 +300,15 @@ def check_cycles(total: int, engine, what: str = "--cycles asks for") -> None:
 def is_integral(value) -> bool:
     """A Python or numpy integer (true/false are not numbers here)."""
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def json_shown(value) -> str:
+    """A value read from a JSON file, spelled as JSON (true, null, 2.0), at most 40 characters."""
+    try:
+        text = json.dumps(value, allow_nan=False)
+    except (TypeError, ValueError):
+        text = repr(value)
+    return text if len(text) <= 40 else text[:40] + "…"
 
 
 def value_kind(value) -> str:

@@ -98,6 +98,15 @@ def kind_of(value) -> str:
             float: "a number", type(None): "null"}.get(type(value), type(value).__name__)
 
 
+def _named(value, spec) -> str:
+    """kind_of, or the number itself where its kind is the one the spec asks for (-1, not 'a whole number
+    >= 0'; "a whole number, not a whole number >= 0" read as a contradiction)."""
+    kind = kind_of(value)
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and spec.what.startswith(kind):
+        return f"{value:g}" if isinstance(value, float) else (str(value) if abs(value) < 10 ** 40 else kind)
+    return kind
+
+
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 
@@ -120,7 +129,7 @@ def check(value, spec, path: str = "$") -> None:
     """Raise SchemaError at the first place `value` does not fit `spec`."""
     if isinstance(spec, Leaf):
         if not spec.test(value):
-            raise SchemaError(path, f"{kind_of(value)}, not {spec.what}")
+            raise SchemaError(path, f"{_named(value, spec)}, not {spec.what}")
     elif isinstance(spec, Opt):
         if value is not None:
             check(value, spec.spec, path)

@@ -149,7 +149,13 @@ def _err(lineno: int, msg: str) -> Mech2SpiceError:
     return Mech2SpiceError(f"line {lineno}: {msg}")
 
 
+def _shown(text: str) -> str:
+    """A piece of the user's source in a message: at most 40 characters (a 5000-digit number made a 5 KB line)."""
+    return text if len(text) <= 40 else text[:40] + "…"
+
+
 def _parse(text: str) -> list[_Statement]:
+    text = text.removeprefix("\ufeff")      # an editor's byte-order mark: invisible, it read as part of a mnemonic
     out = []
     for lineno, raw in enumerate(text.splitlines(), 1):
         code = raw.split(";", 1)[0].strip()
@@ -241,14 +247,14 @@ def _value(expr: str, symbols: dict[str, int], lineno: int, limit: int = 256) ->
     while pos < len(expr):
         m = _TERM.match(expr, pos)
         if not m or (pos > 0 and not m.group(1)):
-            raise _err(lineno, f"cannot read the value '{expr}'")
+            raise _err(lineno, f"cannot read the value '{_shown(expr)}'")
         sign = -1 if m.group(1) == "-" else 1
         total += sign * _term(m.group(2), symbols, lineno)
         pos = m.end()
     if not expr:
         raise _err(lineno, "missing value")
     if not 0 <= total < limit:
-        raise _err(lineno, f"value {expr} = {total} is out of range (0..{limit - 1})")
+        raise _err(lineno, f"value {_shown(expr)} = {_shown(str(total))} is out of range (0..{limit - 1})")
     return total
 
 
@@ -260,12 +266,12 @@ def _term(tok: str, symbols: dict[str, int], lineno: int) -> int:
             return int(tok, 2)
         if re.fullmatch(r"[0-9]+", tok):
             return int(tok, 10)
-    except ValueError:
-        pass
+    except ValueError:                  # beyond Python's 4300 digits: a number, far out of range
+        raise _err(lineno, f"the number '{_shown(tok)}' ({len(tok):,} digits) is out of range") from None
     if _NAME.match(tok):
         if tok in symbols:
             return symbols[tok]
         if tok.upper() in OPCODES:      # an opcode's value, e.g. to build code as data
             return opcode(tok)
         raise _err(lineno, f"undefined label '{tok}'")
-    raise _err(lineno, f"cannot read the number '{tok}'")
+    raise _err(lineno, f"cannot read the number '{_shown(tok)}'")

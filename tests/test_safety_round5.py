@@ -208,3 +208,81 @@ def test_a_report_refused_for_its_options_leaves_no_folder_and_no_file(tmp_path,
     err = capsys.readouterr().err
     assert "is the --program file" in err and err.count("\n") == 1
     assert list(out.iterdir()) == [] and program.read_text() == kept
+
+
+def test_an_unreproduced_counterexample_of_a_combinational_design_names_x_or_z_not_a_start_state(tmp_path, capsys):
+    """RTLLM's ALU (a `reg` set to `'bz` in a case default, a tri-state flag): the proof's counterexample did not
+    replay, and verify blamed "the start state" of a design that has none."""
+    from mech2spice.cli import main
+    src = tmp_path / "tri.v"
+    src.write_text("module f(input [1:0] op, input a, output reg r, output flag);\n"
+                   "  assign flag = (op == 2'd0) ? a : 1'bz;\n"
+                   "  always @(op or a)\n    case (op)\n      2'd0: r <= a;\n      2'd1: r <= ~a;\n"
+                   "      default: r <= 1'bz;\n    endcase\nendmodule\n")
+    assert main(["verify", str(src), "--exhaustive", "--json"]) == 1
+    eq = json.loads(capsys.readouterr().out)["equivalence"]
+    assert eq["status"] == "unknown" and "the source reads x or z where they differ" in eq["detail"]
+    assert "start state" not in eq["detail"]
+
+
+# ------------------------------------------------------------------ messages that say what is wrong, in our words
+
+ADDER = "module add(input [1:0] a, input [1:0] b, output [2:0] s);\n  assign s = a + b;\nendmodule\n"
+
+
+@pytest.mark.parametrize("value, code, needle", [
+    ("09", 2, "value 9 does not fit input 'a'"),   # a leading zero: decimal 9 (was "'09' is not an integer")
+    ("0x2", 0, None),
+    ("\u0663", 2, "is not a whole number (decimal, 0x, 0b or 0o)"),     # Arabic-Indic 3 was read as 3
+    ("9" * 5000, 2, "a number of 5,000 characters (at most 1,000 are read)"),
+])
+def test_a_set_value_is_an_ascii_whole_number(tmp_path, capsys, value, code, needle):
+    from mech2spice.cli import main
+    src = tmp_path / "add.v"
+    src.write_text(ADDER)
+    assert main(["simulate", str(src), "--backend", "logic", "--set", f"a={value}", "--set", "b=1"]) == code
+    err = capsys.readouterr().err
+    assert (needle in err and len(err) < 300) if needle else err == ""
+
+
+@pytest.mark.parametrize("content, needle", [
+    (b"\xef\xbb\xbf[]", "begins with a UTF-8 byte-order mark"),
+    (b'[{"cycles": ' + b"9" * 5000 + b"}]", "an integer of more than 4,300 digits"),
+    (b'[{"cycles": true}]', "'cycles' must be a whole number >= 0, not true"),
+    (b'[{"set": null, "cycles": 1}]', "'set' must map port names to integers, not null"),
+])
+def test_a_stimulus_file_is_described_in_json_terms(tmp_path, capsys, content, needle):
+    """Python's advice ("use sys.set_int_max_str_digits()", "decode using utf-8-sig") and spellings ("got True")
+    reached the user; `"set": null` was read as no inputs."""
+    from mech2spice.cli import main
+    src = tmp_path / "c.v"
+    src.write_text("module c(input clk, input en, output reg q);\n  always @(posedge clk) if (en) q <= ~q;\n"
+                   "endmodule\n")
+    stim = tmp_path / "s.json"
+    stim.write_bytes(content)
+    assert main(["simulate", str(src), "--backend", "logic", "--stimulus", str(stim)]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1 and "sys.set_int" not in err and "utf-8-sig" not in err
+
+
+def test_a_reset_with_an_empty_level_is_refused(tmp_path, capsys):
+    """`--reset rst=` was read as `--reset rst` (its level from the name)."""
+    from mech2spice.cli import main
+    src = tmp_path / "c.v"
+    src.write_text("module c(input clk, input rst, output reg q);\n  always @(posedge clk) q <= rst ? 1'b0 : ~q;\n"
+                   "endmodule\n")
+    assert main(["verify", str(src), "--reset", "rst=", "--cycles", "4"]) == 2
+    assert "nothing after '=': give the level" in capsys.readouterr().err
+
+
+def test_an_assembly_number_too_long_is_one_short_line_and_a_bom_is_no_mnemonic(tmp_path, capsys):
+    from mech2spice.cli import main
+    src = tmp_path / "d.asm"
+    src.write_text("LDNX_AB " + "9" * 5000 + "\n")
+    assert main(["cpu", "asm", str(src), "-o", str(tmp_path / "d.img")]) == 2
+    err = capsys.readouterr().err
+    assert "(5,000 digits) is out of range" in err and len(err) < 300
+    bom = tmp_path / "b.asm"
+    bom.write_bytes(b"\xef\xbb\xbfstart: JMP_C\n")
+    assert main(["cpu", "asm", str(bom), "-o", str(tmp_path / "b.img")]) == 0
+    assert (tmp_path / "b.img").read_bytes() == bytes([0x09])

@@ -1299,7 +1299,7 @@ def _mismatch_text(m: dict) -> str:
 
 
 def _bits_text(bits: list[str]) -> str:
-    """Output bits named per port: `carry, o[2:1]`-like, whole ports by name."""
+    """Output bits named per port, highest first: `o[2,1], carry[0]`."""
     by_port: dict[str, list[int]] = {}
     for b in bits:
         port, index = b.rsplit("[", 1)

@@ -658,7 +658,7 @@ _UNDRIVEN = re.compile(r"Wire (?P<mod>[^.\s]+)\.\\?(?P<net>.+?) is used but has 
 def _check_drivers(tmp: Path, path: Path, top: str, module: dict) -> None:
     """Refuse nets nothing drives (Yosys reads them as x, and synthesis would silently fold x into a
     constant), except the top's output ports that nothing inside reads: there z stays where Verilog puts it,
-    on the output (`undriven_outputs` names them).  Declaration initialisers are power-up values
+    on the output (`_undriven_outputs` names them).  Declaration initialisers are power-up values
     (build_netlist reads them)."""
     undriven = [m for m in map(_UNDRIVEN.search, (tmp / "check.txt").read_text().splitlines()) if m]
     outputs = {p for p, row in module["ports"].items() if row["direction"] == "output"}

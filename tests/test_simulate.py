@@ -108,7 +108,7 @@ def test_cli_simulate_logic_json():
     (["synth", str(REPO / "verilog" / "loop.v")], "combinational loop"),
     (["simulate", str(REPO / "verilog" / "adder2.v"), "--set", "c=1", "--backend", "logic"], "unknown input port 'c'"),
     (["simulate", str(REPO / "verilog" / "adder2.v"), "--set", "a=4", "--backend", "logic"], "does not fit"),
-    (["simulate", str(REPO / "verilog" / "adder2.v"), "--set", "a=x", "--backend", "logic"], "not an integer"),
+    (["simulate", str(REPO / "verilog" / "adder2.v"), "--set", "a=x", "--backend", "logic"], "is not a whole number"),
 ])
 def test_cli_errors_are_one_line(args, needle):
     rc, out, err = cli(*args)

@@ -258,7 +258,7 @@ def _check_fields(state: dict, path) -> None:
     for addr, dev in devices.items():
         problem = _device_problem(dev)
         if problem:
-            bad(f"the tape at {addr!r}: {problem}")
+            bad(f"'devices': the tape at {addr!r}: {problem}")
     if state["halted"] and not _halts(regs, mem):
         bad(f"'halted' is true but the machine is not at a halt (a JMP_C to itself, fetched with C = pc = "
             f"{regs['pc']}): C = {regs['c']}, memory[pc] = {mem[regs['pc']]:#04x}, phase {regs['phase']}")
@@ -321,16 +321,17 @@ VCD_KIND = ("a VCD file", is_vcd)
 
 
 def check_run_outputs(checkpoint, trace, program_source, resume: bool = False, force: bool = False,
-                      params=None, vcd=None) -> None:
+                      params=None, vcd=None, remedy: str = "give --force to replace it") -> None:
     """--checkpoint, --trace and --vcd, before any work: neither the program, the --params file nor each
-    other; a file of another kind only with `force`; a resumed trace must be one, whole."""
+    other; a file of another kind only with `force` (`remedy` says how to give it); a resumed trace must be
+    one, whole."""
     read = {"the program": program_source, "the --params file": params}
     if vcd is not None:
         check_output_file(vcd, {**read, "the --checkpoint file": checkpoint, "the --trace file": trace}, "VCD file",
                           kind=VCD_KIND, force=force)
     if checkpoint is not None:            # resuming, read_checkpoint says what else the file is
         check_output_file(checkpoint, {**read, "the --trace file": trace}, "checkpoint",
-                          kind=None if resume else CHECKPOINT_KIND, force=force, regular=True)
+                          kind=None if resume else CHECKPOINT_KIND, force=force, regular=True, remedy=remedy)
     if trace is not None:
         check_output_file(trace, {**read, "the --checkpoint file": checkpoint}, "trace",
                           kind=None if resume else TRACE_KIND, force=force, regular=resume)

@@ -75,9 +75,11 @@ def is_results(path) -> bool:
 RESULTS_KIND = ("a montecarlo results file", is_results)
 
 
-def read_results(path: Path, job: dict) -> dict[int, dict]:
-    """Records already in `path` by sample index (first one kept).  The whole file is checked first (a
-    header of this job, then whole records); only then is a torn last line (a killed run) cut off."""
+def read_results(path: Path, job: dict, design=None) -> dict[int, dict]:
+    """Records already in `path` by sample index.  The whole file is checked first (a header of this job,
+    then whole records, each consistent in itself and, given the job's `design`, with its bits, gates and
+    vectors; a sample given twice only with the same values); only then is a torn last line (a killed run)
+    cut off."""
     if not path.exists() or path.stat().st_size == 0:
         return {}
     if not is_results(path):
@@ -86,7 +88,7 @@ def read_results(path: Path, job: dict) -> dict[int, dict]:
     if first_json_line(path)["key"] != mc.job_key(job):
         raise Mech2SpiceError(f"{path} holds results of another job (design or its source, spread, seed, backend or "
                               "inputs differ): give another --out")
-    done, torn, design = {}, False, None
+    done, torn = {}, False
     with open(path, "rb") as fh:
         for n, raw in enumerate(fh, 1):
             if not raw.endswith(b"\n"):
@@ -95,7 +97,6 @@ def read_results(path: Path, job: dict) -> dict[int, dict]:
                 rec = _record(raw, n, path)
                 if rec.get("type") != "sample":
                     continue
-                design = design or design_for(job)
                 problem = _inconsistent(rec, design) or (
                     "sample {i} is given again with other values".format(**rec)
                     if done.get(rec["i"], rec) != rec else None)
@@ -116,17 +117,19 @@ SAMPLE = {"i": COUNT, "pass": BOOL, "stable?": BOOL, "margin?": Opt(NUMBER), "ga
 
 
 def _inconsistent(rec: dict, design) -> str | None:
-    """Why a sample record cannot be one this design's run wrote (None: it can): its bits and gates are the
-    design's, no bit fails more often than there are input vectors, and `pass` agrees with the rest (a pass
-    has every bit right, a stable network and no negative margin; a failure has a wrong bit, a growing mode or
-    a reason)."""
+    """Why a sample record cannot be one this design's run wrote (None: it can): given the `design`, its bits
+    and gates are the design's and no bit fails more often than there are input vectors; and `pass` agrees
+    with the rest (a pass has every bit right, a stable network and no negative margin; a failure has a
+    wrong bit, a growing mode or a reason)."""
     bits, gates = rec.get("failing_bits") or {}, rec.get("failing_gates") or []
-    unknown = sorted(set(bits) - set(design.outs)) + sorted(set(gates) - set(design.gates)) + (
-        [rec["worst_gate"]] if rec.get("worst_gate") not in (None, *design.gates) else [])
-    if unknown:
-        return f"sample {rec['i']} names {unknown[0]!r}, which is no output bit or gate of this design"
-    if any(c > len(design.vectors) for c in bits.values()):
-        return f"sample {rec['i']} has a bit failing more often than the {len(design.vectors)} input vectors run"
+    if design is not None:
+        unknown = sorted(set(bits) - set(design.outs)) + sorted(set(gates) - set(design.gates)) + (
+            [rec["worst_gate"]] if rec.get("worst_gate") not in (None, *design.gates) else [])
+        if unknown:
+            return f"sample {rec['i']} names {unknown[0]!r}, which is no output bit or gate of this design"
+        if any(c > len(design.vectors) for c in bits.values()):
+            return (f"sample {rec['i']} has a bit failing more often than the {len(design.vectors)} input "
+                    "vectors run")
     failed = bool(bits) or rec.get("stable") is False or "reason" in rec
     if rec["pass"] and (failed or (rec.get("margin") or 0) < 0):
         return f"sample {rec['i']} passes with a wrong bit, a growing mode, a reason or a negative margin"
@@ -195,7 +198,7 @@ def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: i
     check_scheduler(scheduler)
     t0 = time.time()
     out = Path(out)
-    done = read_results(out, job)
+    done = read_results(out, job, design_for(job))
     if not out.exists() or out.stat().st_size == 0:
         out.write_text(strict_json({"type": "header", "key": mc.job_key(job), "job": job}) + "\n", encoding="utf-8")
     todo = [i for i in range(samples) if i not in done]

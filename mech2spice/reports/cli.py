@@ -116,10 +116,6 @@ def _check_outputs(names: list[str], directory: str, options: dict) -> None:
     check_output_dir(directory, "report directory", parents=True)
     read = [(f"the {flag} file", options[dest]) for flag, dest, kw in OPTIONS
             if kw.get("metavar") == "FILE" and dest != "checkpoint" and options.get(dest)]
-    if options.get("checkpoint"):          # written by the run, so never one of the files read (the program)
-        from ..cpu.run import CHECKPOINT_KIND
-        check_output_file(options["checkpoint"], read, "--checkpoint", kind=CHECKPOINT_KIND, regular=True,
-                          remedy="give another --checkpoint")
     for name in names:
         for written in _files(name, options.get("name")):
             path = check_inside(written, directory, f"report {name}'s file")

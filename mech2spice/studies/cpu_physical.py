@@ -92,6 +92,8 @@ class Options:
 
 def measure(out: Path, a: Options) -> dict:
     """Run `a.program` on the oscillators, compare every cycle with the ISS; the JSON the report renders."""
+    R.check_run_outputs(a.checkpoint, None, a.path, resume=a.resume,      # before any row is measured or written
+                        remedy="give another --checkpoint")
     tracker = Tracker(R.load_program(a.path))
     if a.resume:
         tracker.fast_forward(read_json(a.checkpoint)["cycle"])

@@ -52,7 +52,8 @@ def _check_files(args) -> None:
     out = inputs.check_output_file(args.out, merges, "search record", kind=search.RECORD_KIND,
                                    remedy="give another --out", parents=True)      # write_atomic makes folders
     if args.merge and not out.is_file():
-        raise Mech2SpiceError(f"--merge merges into the search record --out {args.out}, which does not exist")
+        raise Mech2SpiceError(f"--merge merges into the search record --out {args.out}, which "
+                              + ("is not a regular file (a device or a pipe)" if out.exists() else "does not exist"))
     if args.merge or (out.is_file() and out.stat().st_size):
         search.read_record(out)
     for _, f in merges:

@@ -993,6 +993,23 @@ def design_resets(path, netlist: Netlist) -> list[dict]:
     return [found[p] for p in netlist.inputs if p in found]
 
 
+def reset_notes(given: list[dict], found: list[dict]) -> list[str]:
+    """Where the resets a user stated contradict the source's own flip-flops (`design_resets`): a level that
+    does not reset them, or a reset port of theirs left out.  The run goes ahead as stated (the user may mean
+    it); the notes say what cycle 0 then does."""
+    level = {r["port"]: r["level"] for r in given}
+    notes = []
+    for r in found:
+        kind = "asynchronously" if "asynchronous" in r["rule"] else "synchronously"
+        if r["port"] not in level:
+            notes.append(f"the source's flip-flops reset {kind} on {r['port']}={r['level']}, which --reset leaves "
+                         f"out: {r['port']} is random from cycle 0, so they start where the network powers up")
+        elif level[r["port"]] != r["level"]:
+            notes.append(f"--reset {r['port']}={level[r['port']]}, but the source's flip-flops reset {kind} on "
+                         f"{r['port']}={r['level']}: cycle 0 holds them out of reset")
+    return notes
+
+
 def make_vectors(netlist: Netlist, n: int | None, exhaustive: bool, seed: int) -> tuple[np.ndarray, bool]:
     """(B, input bits) bool: every vector when asked or when there are no more than n, else n random ones."""
     nbits = len(input_bits(netlist))
@@ -1234,6 +1251,8 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
            "translate_off": [list(r) for r in nl.translate_off]}
     with standard_source(path) as src, _named_as(src, path):   # the text synthesis read (docs/rtl.md)
         resets = reset_ports(nl, reset, src) if nl.clocked else []
+        if nl.clocked and reset:
+            out["reset_notes"] = reset_notes(resets, design_resets(src, nl))
         if equivalence_check:
             log(f"{nl.top}: proving the {len(nl.gates())}-gate network equal to the source ({proof_engine}, at "
                 f"most {proof_time:.0f} s)")
@@ -1324,6 +1343,7 @@ def _undefined_text(co: dict) -> str:
 def text(result: dict) -> str:
     """The human-readable report."""
     lines = [f"{result['top']}: {result['gates']} NOR gates, {result['latches']} latches"]
+    lines += [f"  reset: {n}" for n in result.get("reset_notes", [])]
     eq = result.get("equivalence")
     if eq is not None:
         lines.append(f"equivalence: {eq['status']} ({eq['method']}, {eq['wall_s']:.1f} s)")

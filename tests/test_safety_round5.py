@@ -286,3 +286,27 @@ def test_an_assembly_number_too_long_is_one_short_line_and_a_bom_is_no_mnemonic(
     bom.write_bytes(b"\xef\xbb\xbfstart: JMP_C\n")
     assert main(["cpu", "asm", str(bom), "-o", str(tmp_path / "b.img")]) == 0
     assert (tmp_path / "b.img").read_bytes() == bytes([0x09])
+
+
+# ------------------------------------------------------------------ a stated reset the design contradicts
+
+@pytest.mark.parametrize("reset, note", [
+    ("rst=0", "--reset rst=0, but the source's flip-flops reset synchronously on rst=1"),
+    ("en=1", "reset synchronously on rst=1, which --reset leaves out"),
+    ("rst=1", None),
+])
+def test_a_stated_reset_that_contradicts_the_design_is_named(tmp_path, capsys, reset, note):
+    """`verify counter4.v --reset rst=0` (its flip-flops reset on rst=1) passed without a word."""
+    from pathlib import Path
+
+    from mech2spice.cli import main
+    src = Path(__file__).resolve().parents[1] / "verilog" / "counter4.v"
+    main(["verify", str(src), "--reset", reset, "--cycles", "20", "--json"])
+    res = json.loads(capsys.readouterr().out)
+    assert len(res["reset_notes"]) == (0 if note is None else 1) and res["verdict"] == "pass"
+    main(["verify", str(src), "--reset", reset, "--cycles", "20"])
+    out = capsys.readouterr().out
+    if note:
+        assert note in res["reset_notes"][0] and f"  reset: {res['reset_notes'][0]}" in out
+    else:
+        assert "  reset:" not in out

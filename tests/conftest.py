@@ -32,3 +32,19 @@ def generic_model():
     m.add_drive(a, 1.0)
     m.add_probe("a", a)
     return m
+
+
+def run_main(*args) -> tuple[int, str, str]:
+    """`mech2spice ARGS` in this process: (exit code, stdout, stderr).  The same handler as the command's (one
+    line and exit 2 for bad input), without the 3 s an interpreter takes to import the engines."""
+    import contextlib
+    import io
+
+    from mech2spice.cli import main
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as stop:              # argparse's --help and usage errors
+            code = stop.code if isinstance(stop.code, int) else 1
+    return code, out.getvalue(), err.getvalue()

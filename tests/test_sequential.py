@@ -2,10 +2,10 @@
 backends, and refusal of clocking the mechanical latch cannot honour."""
 import json
 from pathlib import Path
-import subprocess
-import sys
 
 import pytest
+
+from conftest import run_main
 
 from mech2spice import simulation
 from mech2spice.experiments import characterise, clocking
@@ -18,8 +18,7 @@ COUNTER_STEPS = [{"set": {"rst": 1}, "cycles": 1}, {"set": {"rst": 0, "en": 1}, 
 
 
 def cli(*args):
-    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *args], capture_output=True, text=True)
-    return r.returncode, r.stdout, r.stderr
+    return run_main(*args)        # in this process (conftest.run_main): the command's own handler, no new interpreter
 
 
 def test_latch_pulse_sequence_rk4(p):

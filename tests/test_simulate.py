@@ -1,11 +1,12 @@
 """Verilog -> mechanical network -> RK4, decoded and compared with the logic-level oracle; the CLI contract."""
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from conftest import run_main
 
 from mech2spice import simulation
 from mech2spice.errors import Mech2SpiceError
@@ -19,8 +20,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def cli(*args):
-    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *args], capture_output=True, text=True)
-    return r.returncode, r.stdout, r.stderr
+    return run_main(*args)        # in this process (conftest.run_main): the command's own handler, no new interpreter
 
 
 @pytest.fixture(scope="module")

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from conftest import run_main
 
 from mech2spice import identifiers as ids, simulation
 from mech2spice.cpu.isa import OPCODES
@@ -24,8 +24,7 @@ SIEVE = REPO / "programs" / "sieve.asm"
 
 
 def cli(*args):
-    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *args], capture_output=True, text=True)
-    return r.returncode, r.stdout, r.stderr
+    return run_main(*args)        # in this process (conftest.run_main): the command's own handler, no new interpreter
 
 
 def _wire(v, name: str, width: int, t: int) -> str:

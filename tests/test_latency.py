@@ -1,11 +1,10 @@
 """The envelope's speed-ups (issue 18, docs/latency.md): per-gate latency and the exponential step agree
 with the plain envelope within their stated tolerances and decode the same bits; bad settings are one-line
 errors.  Measured numbers per option on the processor and the clocked designs: reports/fidelity.md."""
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from conftest import run_main
 
 from mech2spice import simulation
 from mech2spice.backends import envelope
@@ -98,9 +97,9 @@ def test_bad_options(opts, msg):
     (["cpu", "run", "programs/sieve.asm", "--backend", "iss", "--exponential", "on"], "envelope backend only"),
 ])
 def test_cli_refuses(args, msg):
-    r = subprocess.run([sys.executable, "-m", "mech2spice.cli", *args], capture_output=True, text=True)
-    assert r.returncode == 2
-    assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    code, _, err = run_main(*args)
+    assert code == 2
+    assert msg in err and len(err.strip().splitlines()) == 1, err
 
 
 def test_exponential_default_step_and_prepare():

@@ -75,11 +75,11 @@ def is_results(path) -> bool:
 RESULTS_KIND = ("a montecarlo results file", is_results)
 
 
-def read_results(path: Path, job: dict, design=None) -> dict[int, dict]:
+def read_results(path: Path, job: dict, design_of=None) -> dict[int, dict]:
     """Records already in `path` by sample index.  The whole file is checked first (a header of this job,
-    then whole records, each consistent in itself and, given the job's `design`, with its bits, gates and
-    vectors; a sample given twice only with the same values); only then is a torn last line (a killed run)
-    cut off."""
+    then whole records, each consistent in itself and, given `design_of` (called at the first record: the
+    header is checked before any design is built), with the design's bits, gates and vectors; a sample given
+    twice only with the same values); only then is a torn last line (a killed run) cut off."""
     if not path.exists() or path.stat().st_size == 0:
         return {}
     if not is_results(path):
@@ -88,7 +88,7 @@ def read_results(path: Path, job: dict, design=None) -> dict[int, dict]:
     if first_json_line(path)["key"] != mc.job_key(job):
         raise Mech2SpiceError(f"{path} holds results of another job (design or its source, spread, seed, backend or "
                               "inputs differ): give another --out")
-    done, torn = {}, False
+    done, torn, design = {}, False, None
     with open(path, "rb") as fh:
         for n, raw in enumerate(fh, 1):
             if not raw.endswith(b"\n"):
@@ -97,6 +97,7 @@ def read_results(path: Path, job: dict, design=None) -> dict[int, dict]:
                 rec = _record(raw, n, path)
                 if rec.get("type") != "sample":
                     continue
+                design = design or (design_of() if design_of else None)
                 problem = _inconsistent(rec, design) or (
                     "sample {i} is given again with other values".format(**rec)
                     if done.get(rec["i"], rec) != rec else None)
@@ -198,7 +199,7 @@ def run(job: dict, samples: int, out: Path, scheduler: str = "local", workers: i
     check_scheduler(scheduler)
     t0 = time.time()
     out = Path(out)
-    done = read_results(out, job, design_for(job))
+    done = read_results(out, job, lambda: design_for(job))
     if not out.exists() or out.stat().st_size == 0:
         out.write_text(strict_json({"type": "header", "key": mc.job_key(job), "job": job}) + "\n", encoding="utf-8")
     todo = [i for i in range(samples) if i not in done]

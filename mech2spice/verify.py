@@ -1173,8 +1173,9 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     got = run_backend(netlist, x, clocked, backend, params, progress)
     levels = None if params is None else params.levels
     mismatches = compare(netlist, x, ref, got, clocked, levels)
+    driven = _driven(netlist, ref)
     # where Icarus disagrees, or agrees only because it reads x: again from where the network powers up
-    start = power_up_start(netlist) if clocked and (mismatches or _mostly_undefined(_driven(netlist, ref))) else []
+    start = power_up_start(netlist) if clocked and (mismatches or _mostly_undefined(driven)) else []
     compared = None
     if start:
         mismatches, compared = _from_power_up(path, netlist, x, got, levels, start, mismatches, info)
@@ -1182,8 +1183,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
         info["trace"] = cosim_trace(netlist, x, compared or ref, got, clocked)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
-           "undefined_bits": sum(v in "xX" for r in _driven(netlist, ref) for v in r.values()),
-           "undriven_bits": sum(v in "zZ" for r in _driven(netlist, ref) for v in r.values()),
+           "undefined_bits": sum(v in "xX" for r in driven for v in r.values()),
+           "undriven_bits": sum(v in "zZ" for r in driven for v in r.values()),
            "driven_by_nothing": list(netlist.undriven), "source_warnings": warnings, **info,
            "undefined_by_port": undefined_by_port(netlist, ref)}
     out["mostly_undefined"] = _mostly_undefined(_driven(netlist, compared or ref))   # in the run the verdict compared

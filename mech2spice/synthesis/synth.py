@@ -682,8 +682,9 @@ def _read_inside(tmp: Path, top: str, ports: set[str]) -> set[str]:
     plain = sorted(p for p in ports if _PLAIN_NAME.fullmatch(p)) if _PLAIN_NAME.fullmatch(top) else []
     if not plain:
         return set(ports)
-    script = ["read_rtlil drivers.il"] + [f"tee -q -o readers{k}.txt select -list {top}/w:{p} %co* {top}/t:* %i"
-                                          for k, p in enumerate(plain)]
+    mod = identifiers.yosys(top)
+    script = ["read_rtlil drivers.il"] + [f"tee -q -o readers{k}.txt select -list {mod}/w:{identifiers.yosys(p)} %co* "
+                                          f"{mod}/t:* %i" for k, p in enumerate(plain)]
     result = yosys.run_script("\n".join(script) + "\n", tmp)
     if result.returncode != 0:
         return set(ports)

@@ -401,7 +401,8 @@ def test_a_synthesised_source_comes_from_the_cache_the_second_time(tmp_path, mon
     first = synthesize(src)
     runs = []
     real = yosys.run_script
-    monkeypatch.setattr(yosys, "run_script", lambda *a: runs.append(1) or real(*a))
+    # the synthesis flow's runs (a source that includes files also has its top found by a reading first)
+    monkeypatch.setattr(yosys, "run_script", lambda *a: ("write_json" in a[0] and runs.append(1)) or real(*a))
     again = synthesize(src)
     assert runs == [] and evaluate(again, {"a": 0, "b": 0}) == evaluate(first, {"a": 0, "b": 0}) == {"y": 1}
     assert sorted(again.graph.nodes) == sorted(first.graph.nodes)
@@ -419,3 +420,71 @@ def test_a_switch_level_word_in_a_name_or_comment_is_no_primitive(tmp_path):
     nl = synth_text(tmp_path, "module t(input \\nmos , input nmos_en, output y); // pullup\n"
                               "  assign y = \\nmos  & nmos_en;\nendmodule")
     assert set(nl.inputs) == {"nmos", "nmos_en"}
+
+
+# A library module whose default parameters its own constant function cannot take (an infinite loop at an odd
+# N), instantiated at a parameter it can: a simulator elaborates only the instance, and so must synthesis.
+# Read without -defer, Yosys elaborated every module at its defaults first and never finished (verilog-lfsr's
+# lfsr_mask at its default width 31 took over 10 minutes; public RTL pass 8).
+LIBRARY_AT_DEFAULTS_LOOPS = """\
+module lib #(parameter N = 3) (input [7:0] a, output [7:0] y);
+  function integer half(input integer n);
+    integer i;
+    begin
+      half = 0;
+      for (i = 0; i != n; i = i + 2) half = half + 1;
+    end
+  endfunction
+  localparam H = half(N);
+  assign y = a + H;
+endmodule
+module top(input [7:0] a, output [7:0] y);
+  lib #(.N(4)) u(.a(a), .y(y));
+endmodule
+"""
+
+
+def test_a_module_is_elaborated_only_at_its_instances_parameters(tmp_path, monkeypatch):
+    monkeypatch.setattr(yosys, "TIMEOUT_S", 120)       # the old reading looped until this
+    src = tmp_path / "lib.v"
+    src.write_text(LIBRARY_AT_DEFAULTS_LOOPS)
+    nl = synthesize(src)
+    assert nl.top == "top"
+    for a in (0, 7, 200, 254, 255):
+        assert evaluate(nl, {"a": a})["y"] == (a + 2) % 256      # half(4) = 2
+
+
+def test_verify_reads_a_library_module_at_its_instances_parameters(tmp_path):
+    """The proof reads the source as synthesis does (its gold side looped at the defaults until its budget)."""
+    import json
+    from conftest import run_main
+    src = tmp_path / "lib.v"
+    src.write_text(LIBRARY_AT_DEFAULTS_LOOPS)
+    rc, out, err = run_main("verify", src, "--proof-time", "60", "--json")
+    data = json.loads(out)
+    assert rc == 0 and data["verdict"] == "pass" and data["equivalence"]["status"] == "proved", err
+
+
+def test_a_long_yosys_run_says_where_it_is(tmp_path, monkeypatch, capsys):
+    """Every NOTICE_EVERY_S a line on stderr names Yosys's step; past TIMEOUT_S the error names it too."""
+    monkeypatch.setattr(yosys, "NOTICE_EVERY_S", 3)
+    src = tmp_path / "lib.v"
+    src.write_text(LIBRARY_AT_DEFAULTS_LOOPS.replace(".N(4)", ".N(5)"))     # loops at the instance too
+    monkeypatch.setattr(yosys, "TIMEOUT_S", 10)
+    with pytest.raises(Mech2SpiceError, match=r"did not finish within 10 s; it was at its HIERARCHY step, "
+                                              r"elaborating module 'lib'"):
+        synthesize(src)
+    err = capsys.readouterr().err
+    assert "mech2spice: yosys is still running after 3 s: at its HIERARCHY step, elaborating module 'lib'" in err
+
+
+def test_yosys_stage_names_the_step_and_the_module():
+    log = ("1. Executing Verilog-2005 frontend: lib.v\n2. Executing HIERARCHY pass (managing design hierarchy).\n"
+           "3. Executing AST frontend in derive mode using pre-parsed AST for module `\\top'.\n"
+           "Generating RTLIL representation for module `\\top'.\n"
+           "3.2. Executing AST frontend in derive mode using pre-parsed AST for module `\\lib'.\n")
+    assert yosys.stage(log).startswith("at its HIERARCHY step, elaborating module 'lib'")
+    assert yosys.stage(log + "4. Executing SYNTH pass.\n4.1. Executing HIERARCHY pass.\n") == "at its SYNTH step"
+    assert yosys.stage(log + "Generating RTLIL representation for module `$paramod\\lib\\N=s32'101'.\n") \
+        == yosys.stage(log)
+    assert yosys.stage("") == "starting"

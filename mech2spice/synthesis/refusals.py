@@ -30,7 +30,7 @@ def check(tmp: Path, path: Path, source: str, top: str | None) -> tuple[dict[str
     output ports that a tri-state driver may release (`check_drivers`) and the always blocks accepted with an
     alias left out of their sensitivity lists (`check_sensitivity`)."""
     if top is None:
-        check_single_top((tmp / "read.il").read_text(), path)
+        single_top(tmp, path)
     aliased = check_sensitivity((tmp / "ast.txt").read_text(), path, source)
     modules = read_rtlil((tmp / "drivers.il").read_text())      # the nets as written, read once for both
     check_case_equality(modules, path)
@@ -43,32 +43,42 @@ def src_line(src: str | None, path: Path) -> int | None:
     return int(m[2]) if m and Path(m[1]).name == path.name else None
 
 
+_DEFERRED = "$abstract\\"       # `read_verilog -defer` keeps each module under this name until `hierarchy`
+
+
 def _name(rtlil_id: str) -> str:
-    """RTLIL '\\foo' -> 'foo' (generated '$...' names stay as they are)."""
+    """RTLIL '\\foo' (or a deferred module's '$abstract\\foo') -> 'foo' (generated '$...' names stay)."""
+    if rtlil_id.startswith(_DEFERRED):
+        rtlil_id = rtlil_id[len(_DEFERRED) - 1:]
     return rtlil_id[1:] if rtlil_id.startswith("\\") else rtlil_id
 
 
 # --------------------------------------------------------------------------- several top modules
 
-def check_single_top(rtlil: str, path: Path) -> None:
-    """Without --top, the file must hold one module that no other instantiates (or mark one (* top *))."""
-    modules, used, marked, attrs, current = {}, set(), False, {}, None
-    for line in rtlil.splitlines():
+def single_top(tmp: Path, path: Path) -> str | None:
+    """The top module of a source read without --top (read.il and ast.txt in `tmp`): the one marked (* top *),
+    else the one module no other instantiates; several such are refused (Yosys would pick one by itself).
+    None where there is no candidate (every module instantiated: Yosys's -auto-top decides)."""
+    used = instantiated((tmp / "ast.txt").read_text())
+    modules, marked, attrs = {}, [], {}
+    for line in (tmp / "read.il").read_text().splitlines():
         if m := re.match(r"attribute \\(\w+) (.*)$", line):
             attrs[m[1]] = m[2]
         elif m := re.match(r"module (\S+)$", line):
-            current = _name(m[1])
+            name = _name(m[1])
             if attrs.get("blackbox", "0") == "0":
-                modules[current] = src_line(attrs.get("src", "").strip('"'), path)
-            marked |= attrs.get("top", "0") != "0"
+                modules[name] = src_line(attrs.get("src", "").strip('"'), path)
+            if attrs.get("top", "0") != "0":
+                marked.append(name)
             attrs = {}
-        elif m := re.match(r"  cell (\\\S+) ", line):
-            used.add(_name(m[1]))
     roots = [name for name in modules if name not in used]
-    if len(roots) > 1 and not marked:
+    if marked:
+        return marked[0]
+    if len(roots) > 1:
         listed = ", ".join(f"{r} (line {modules[r]})" if modules[r] else r for r in roots)
         raise Mech2SpiceError(f"{path}: several top-level modules: {listed}; choose one with --top "
                               "(synthesize(top=...) in the API)")
+    return roots[0] if roots else None
 
 
 # --------------------------------------------------------------------------- sensitivity lists
@@ -100,6 +110,11 @@ def read_ast(text: str) -> list[_Ast]:
         (stack[-1][1].children if stack else roots).append(node)
         stack.append((depth, node))
     return [n for n in roots if n.kind == "AST_MODULE"]
+
+
+def instantiated(ast_text: str) -> set[str]:
+    """The module names the source instantiates anywhere (its AST_CELLTYPE nodes)."""
+    return {n.name for module in read_ast(ast_text) for n in _nodes(module) if n.kind == "AST_CELLTYPE"}
 
 
 def _nodes(node: _Ast, skip=()):

@@ -406,18 +406,46 @@ def _non_constant_init(msg: str, path: Path) -> str | None:
 REGISTER_ATTR = "m2s_register"
 
 
+def _read_flow(source: str, include: str | None, sv: bool | None) -> list[str]:
+    """The Yosys commands that read the source: its parse in ast.txt, every module as read in read.il.
+    -defer: each module is elaborated by `hierarchy`, once, at the parameters its instance gives; read without
+    it, every module was first elaborated at its defaults, where a library module's constant functions can
+    take Yosys minutes or never end (verilog-lfsr's lfsr_mask at its default width 31, public RTL pass 8)."""
+    read = "read_verilog -sv" if (source.endswith(".sv") if sv is None else sv) else "read_verilog"
+    if include is not None and re.fullmatch(r"[\w./+-]+", include):     # Yosys takes -I's folder unquoted
+        read += f" -I {include}"
+    return [f'tee -o ast.txt {read} -defer -dump_ast1 {identifiers.yosys_path(source)}',   # not -q: its errors must reach the log
+            "write_rtlil read.il"]
+
+
+def _one_module(source: str) -> bool:
+    """Whether the source declares one module and includes no file (its top needs no search)."""
+    return "`include" not in source and len(re.findall(r"(?<![\w$`])(?:macro)?module\b", _blanked(source))) == 1
+
+
+def _find_top(tmp: str, rel: str, include: str | None, sv: bool, path: Path) -> str | None:
+    """The top module of a source given without --top, from its parse alone (refusals.single_top: several
+    candidates are refused), so that `hierarchy` elaborates only what that top instantiates: its -auto-top
+    elaborates every module at its defaults first.  None where the source does not read here (the flow then
+    reads it again and reports the error as it does) or where the top is a name a script cannot hold."""
+    for reading in (sv, True) if not sv else (True,):
+        if yosys.run_script("\n".join(_read_flow(rel, include, reading) + [""]), tmp).returncode == 0:
+            top = refusals.single_top(Path(tmp), path)
+            try:
+                return top if top is None else (identifiers.yosys(top) and top)
+            except Mech2SpiceError:
+                return None
+    return None
+
+
 def _flow(source: str, top: str | None, include: str | None = None, sv: bool | None = None,
           sampled: bool = False) -> str:
     """The Yosys script: NOR/NOT mapping per the toolchain notes (NOT -> NOR(A,0) is done in Python).
     `include`: a folder to search for `include files (the original's, when Yosys reads a rewritten copy);
     `sv`: read as SystemVerilog (default: a `.sv` file); `sampled`: every flip-flop sampled once a mechanical
     cycle (`yosys.SAMPLE_CLOCKS`)."""
-    read = "read_verilog -sv" if (source.endswith(".sv") if sv is None else sv) else "read_verilog"
-    if include is not None and re.fullmatch(r"[\w./+-]+", include):     # Yosys takes -I's folder unquoted
-        read += f" -I {include}"
     return "\n".join([                             # ast.txt, *.il: for refusals.py
-        f'tee -o ast.txt {read} -dump_ast1 {identifiers.yosys_path(source)}',   # not -q: its errors must reach the log
-        "write_rtlil read.il",                      # before hierarchy drops the modules the top leaves unused
+        *_read_flow(source, include, sv),
         f"hierarchy -check -top {identifiers.yosys(top)}" if top else "hierarchy -check -auto-top",
         # hierarchy has made each wired-OR/AND net (`wor`, `wand`) an OR/AND of its drivers; left on the wire,
         # the mark would make synth's own `hierarchy` do it again after the mapping, unmapped
@@ -587,6 +615,8 @@ def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) 
             include = Path(os.path.relpath(path.resolve().parent, Path(tmp).resolve())).as_posix()
         sv = path.suffix == ".sv"
         maps.write_maps(tmp)
+        if top is None and not _one_module(source):
+            top = _find_top(tmp, rel, include, sv, path)
         result = yosys.run_script(_flow(rel, top, include, sv=sv, sampled=sampled), tmp)
         if result.returncode != 0 and not sv and any(m in yosys.error_line(result) for m in _SV_ONLY):
             # a `.v` written with SystemVerilog constructs (`for (int i = 0; ...; i++)`), as Icarus reads it
@@ -949,6 +979,12 @@ def _check_dlatches(g: nx.DiGraph, clock: str | None, sampled: tuple = ()) -> No
         what, enable = attrs.pop("dlatch")
         cone = nx.ancestors(plain, enable) | {enable}
         ports = sorted({g.nodes[n]["port"] for n in cone if g.nodes[n]["kind"] == "input"} - set(sampled))
+        if clock is not None and clock in ports:     # verilog-eval's `always @(*) if (clock) p = a;`
+            raise Mech2SpiceError(
+                f"{what}: its enable follows the clock '{clock}' itself, so it is transparent for a whole phase of "
+                "the clock and its output follows its input within the cycle, which no latch of the network does "
+                "(each captures once a cycle, on the pulse, and holds that to the next); where the value is read "
+                "only once the latch has closed, a flip-flop on the clock edge that closes it holds the same value")
         why = f"its enable follows input {', '.join(ports)}" if ports else "the design has no clock" \
             if clock is None and not sampled else _closes_when_forced(g, plain, cone, enable)
         if why:

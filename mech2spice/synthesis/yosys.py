@@ -78,18 +78,68 @@ def run_script(script: str, workdir: Path | str) -> YosysResult:
     """Run a Yosys script inside ``workdir`` (log captured); file names in it must be relative.
 
     Relative paths matter: the WebAssembly build maps its own scratch folder over ``/tmp``,
-    so absolute paths under ``/tmp`` would not be the files we wrote.
+    so absolute paths under ``/tmp`` would not be the files we wrote.  A run that takes long says
+    so on stderr every NOTICE_EVERY_S, naming the step Yosys is at (`stage`).
     """
     workdir = Path(workdir)
     (workdir / "flow.ys").write_text(script)
+    out, err = workdir / "yosys.out", workdir / "yosys.err"
     try:
-        proc = subprocess.run([*yosys_command(), "-s", "flow.ys"], cwd=workdir,
-                              capture_output=True, text=True, timeout=TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        raise Mech2SpiceError(f"yosys did not finish within {TIMEOUT_S} s") from None
-    except OSError as err:
-        raise ToolMissingError(f"cannot start yosys: {err}") from None
-    return YosysResult(proc.returncode, proc.stdout, proc.stderr)
+        with open(out, "wb") as o, open(err, "wb") as e:
+            proc = subprocess.Popen([*yosys_command(), "-s", "flow.ys"], cwd=workdir, stdout=o, stderr=e)
+    except OSError as error:
+        raise ToolMissingError(f"cannot start yosys: {error}") from None
+    try:
+        _wait(proc, out)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return YosysResult(proc.returncode, _read_log(out), _read_log(err))
+
+
+#: How often a long Yosys run says where it is.
+NOTICE_EVERY_S = 60
+
+
+def _wait(proc: subprocess.Popen, log: Path) -> None:
+    """Wait for Yosys, up to TIMEOUT_S, with a notice on stderr every NOTICE_EVERY_S."""
+    waited = 0
+    while True:
+        try:
+            proc.wait(timeout=min(NOTICE_EVERY_S, TIMEOUT_S - waited))
+            return
+        except subprocess.TimeoutExpired:
+            waited += min(NOTICE_EVERY_S, TIMEOUT_S - waited)
+        if waited >= TIMEOUT_S:
+            raise Mech2SpiceError(f"yosys did not finish within {TIMEOUT_S:g} s; it was {stage(_read_log(log))}")
+        print(f"mech2spice: yosys is still running after {waited:g} s: {stage(_read_log(log))}",
+              file=sys.stderr, flush=True)
+
+
+def _read_log(path: Path) -> str:
+    return path.read_bytes().decode(errors="replace")
+
+
+_PASS = re.compile(r"^\d+\. Executing (.+?)(?: pass\b.*|: .*|\.)?$", re.M)     # top-level steps only
+_ELABORATING = re.compile(r"^(?:Generating RTLIL representation|[\d.]+\. Executing AST frontend in derive mode "
+                          r"using pre-parsed AST) for module `(.+?)'", re.M)
+
+
+def stage(log: str) -> str:
+    """Where a Yosys log stops, in words: the last step it started, and the module it was elaborating when
+    that step reads the design (a parameterised module's constant functions are evaluated there)."""
+    passes, modules = list(_PASS.finditer(log)), list(_ELABORATING.finditer(log))
+    if not passes:
+        return "starting"
+    step = "HIERARCHY" if passes[-1][1].startswith("AST frontend") else passes[-1][1]   # deferred modules
+    where = f"at its {step} step"
+    if modules and modules[-1].start() > passes[-1].start():
+        name = modules[-1][1]
+        module = name.split("\\")[1] if name.startswith("$paramod\\") else name.lstrip("\\")
+        where += (f", elaborating module '{module}' (Yosys evaluates its constant functions and parameters "
+                  "there, which can take minutes at large widths)")
+    return where
 
 
 _LINE_ERROR = re.compile(r"^(?P<file>\S+?):(?P<line>\d+)(?:\.\d+(?:-\d+\.\d+)?)?: ERROR: ?(?P<msg>.*)$")

@@ -747,14 +747,31 @@ def test_a_ripple_counter_is_sampled_and_agrees_with_icarus(tmp_path, capsys):
     assert bad["equivalence"]["status"] == "counterexample" and not bad["cosim"]["agree"]
 
 
+CLOCK_MUX = """\
+module clock_mux(input clk, input en_in, input [1:0] d, output reg [1:0] q);
+  reg en = 1'b0, div = 1'b0;
+  always @(posedge clk) begin
+    en <= en_in;
+    div <= ~div;
+  end
+  wire lo_clk = en ? div : clk;
+  always @(posedge lo_clk) q[0] <= d[0];
+  always @(posedge lo_clk) q[1] <= d[1];
+endmodule
+"""
+
+
 @pytest.mark.parametrize("text, needle", [
     (RIPPLE.replace("m <= m ^ d", "m <= n[0] ^ b"),
      "line 7: module ripple: this flip-flop is clocked by logic of 'c' and reads 'b', 'n[0]', which can change in "
      "the same instant, before that clock's edge"),
     (OWN_CLOCK, "line 3: module own: this flip-flop is clocked by logic of 'half' and reads 'half', which its "
                 "clock is computed from"),
-    (GATED, "line 3: module gated: this flip-flop is clocked by logic of the input ports 'clk', 'en'")],
-    ids=["reads_an_earlier_register", "reads_its_own_clock", "gated_by_an_input"])
+    (GATED, "line 3: module gated: this flip-flop is clocked by logic of the input ports 'clk', 'en'"),
+    # oc_rtc's clock multiplexer (QUIP, public RTL pass 8): the first flip-flop on it is named (it was the last)
+    (CLOCK_MUX, "line 8: module clock_mux: this flip-flop's clock is computed from the input port 'clk' and the "
+                "registers 'div', 'en', which change in the same instant as that port's edge")],
+    ids=["reads_an_earlier_register", "reads_its_own_clock", "gated_by_an_input", "a_clock_multiplexer"])
 def test_a_computed_clock_is_refused_where_its_flip_flop_would_read_otherwise(tmp_path, capsys, text, needle):
     refused(capsys, "synth", verilog(tmp_path, text), needle=needle)
 
@@ -910,6 +927,17 @@ def test_a_latch_of_the_clock_in_a_sampled_design_agrees_with_icarus(tmp_path, c
      "its enable follows input en")], ids=["forced_into_an_unlisted_code", "enabled_by_an_input"])
 def test_a_latch_that_can_close_between_edges_is_refused_in_a_sampled_design(tmp_path, capsys, text, needle):
     refused(capsys, "synth", verilog(tmp_path, text), needle=needle)
+
+
+def test_a_latch_enabled_by_the_clock_itself_is_refused_for_that_reason(tmp_path, capsys):
+    """verilog-eval's Prob145 (circuit8, MIT): `if (clock) p = a` closes on the clock's own edge, never between
+    edges; what the network cannot do is pass `a` through during the clock's high phase.  The refusal said it
+    "can close between clock edges" and gave the accidental latch's advice (public RTL pass 8)."""
+    src = verilog(tmp_path, "module RefModule(input clock, input a, output reg p, output reg q);\n"
+                            "  always @(negedge clock) q <= a;\n  always @(*) if (clock) p = a;\nendmodule\n")
+    rc, _, err = run(capsys, "synth", src)
+    assert rc == 2 and "its enable follows the clock 'clock' itself, so it is transparent for a whole phase" in err
+    assert "between clock edges" not in err and "assign every signal" not in err
 
 
 def test_a_latch_that_can_close_between_edges_is_refused(tmp_path, capsys):

@@ -17,6 +17,7 @@ data does).
 """
 from __future__ import annotations
 
+import re
 from typing import Callable
 
 _OUTPUT_PINS = ("Y", "Q")
@@ -26,6 +27,7 @@ def ambiguity(module: dict, flops: list[dict], names: dict) -> tuple[dict, str] 
     """The first flip-flop of `flops` (Yosys cells with a C pin) on a computed clock that has no one meaning,
     with the reason (register and port names from `names`, net id -> name); None when each has one."""
     inputs, out_of = _index(module)
+    flops = sorted(flops, key=_source_order)        # the first one the source writes is the one named
     is_flop = {id(c) for c in flops}.__contains__
     cone = _Cone(inputs, out_of, lambda cell: is_flop(id(cell)))
     depth = _depths(flops, inputs, cone)
@@ -35,11 +37,7 @@ def ambiguity(module: dict, flops: list[dict], names: dict) -> tuple[dict, str] 
             continue
         regs, ports = cone.of([clock])
         if ports:
-            listed = ", ".join(f"'{p}'" for p in sorted(ports))
-            return flop, (f"this flip-flop is clocked by logic of the input port{'s' * (len(ports) > 1)} {listed}: "
-                          "that clock has an edge when such an input changes, in the same instant as the data the "
-                          "flip-flop takes, and the source does not say which value it takes; clock it by an "
-                          "input port and use the other as an enable")
+            return flop, _follows_ports(sorted(ports), regs, names)
         if depth[id(flop)] is None:
             return flop, ("this flip-flop's clock is computed from its own value: each edge it takes makes the "
                           "next, in the same instant; clock it by an input port")
@@ -48,6 +46,22 @@ def ambiguity(module: dict, flops: list[dict], names: dict) -> tuple[dict, str] 
         if clashing:
             return flop, _clash(regs, clashing, names)
     return None
+
+
+def _follows_ports(ports: list[str], regs: list[dict], names: dict) -> str:
+    """Why a flip-flop on a clock computed from input ports (and maybe registers) has no one meaning."""
+    listed = ", ".join(f"'{p}'" for p in ports)
+    if regs:        # a clock multiplexer (oc_rtc's `lo_clk = EN ? div_clk : wb_clk_i`) or a gated clock
+        held = ", ".join(f"'{n}'" for n in sorted({names.get(r["connections"]["Q"][0], "?") for r in regs}))
+        return (f"this flip-flop's clock is computed from the input port{'s' * (len(ports) > 1)} {listed} and the "
+                f"registers {held}, which change in the same instant as that port's edge: whether the computed "
+                "clock then takes an edge (or a glitch) depends on the order of the simulator's events, which the "
+                f"source leaves open; clock the flip-flop by {listed if len(ports) == 1 else 'one input port'} and "
+                "use the registers as an enable")
+    return (f"this flip-flop is clocked by logic of the input port{'s' * (len(ports) > 1)} {listed}: that clock "
+            "has an edge when such an input changes, in the same instant as the data the flip-flop takes, and the "
+            "source does not say which value it takes; clock it by one input port and use the "
+            + ("others" if len(ports) > 1 else "logic on it") + " as an enable")
 
 
 def _clash(regs: list[dict], clashing: list[dict], names: dict) -> str:
@@ -66,6 +80,14 @@ def _clash(regs: list[dict], clashing: list[dict], names: dict) -> str:
             "a simulator gives it the value after the clock's edge, the network (its clocks sampled) the value "
             "before; clock it by an input port (a divided clock as an enable on the fast one)")
     return None
+
+
+def _source_order(cell: dict) -> tuple:
+    """A cell's place in the source (line, column of its src attribute 'FILE:L.C-L.C'); cells without one last."""
+    attrs = cell.get("attributes")
+    m = re.search(r":(\d+)\.(\d+)", attrs.get("src", "") if isinstance(attrs, dict) and isinstance(
+        attrs.get("src"), str) else "")
+    return (0, int(m[1]), int(m[2])) if m else (1, 0, 0)
 
 
 def _index(module: dict) -> tuple[dict, dict]:

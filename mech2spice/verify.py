@@ -198,7 +198,8 @@ def _read_source(netlist: Netlist, rel: str) -> list[str]:
     # model for $mem cells); its memory_dff folds a read register into the port only as synthesis does.
     # sampled clocks: the source's flip-flops sampled as synthesis samples them, both sides on one global clock
     sample = list(yosys.SAMPLE_CLOCKS) if netlist.sampled else []
-    return [f'{read} {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), yosys.COMB_AS_STAR, "proc", yosys.DROP_PRINTS,
+    # -defer: as synthesis reads it (each module elaborated once, at its instance's parameters)
+    return [f'{read} -defer {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), yosys.COMB_AS_STAR, "proc", yosys.DROP_PRINTS,
             "flatten", maps.MAP_POW, "memory", "opt_clean", *sample, f"rename -top {PREFIX}src"]
 
 
@@ -397,16 +398,24 @@ def _replayed(path, netlist: Netlist, res: dict, resets=()) -> dict:
     return {**res, "status": "unknown", "replay": rep,
             "detail": f"the proof found inputs on which the outputs differ from its all-zero start, but replayed "
                       f"from power-up the source (Icarus) and the network (logic backend) do not differ on any "
-                      f"bit the source defines (source {rep['source']}, network {rep['network']}): the start "
-                      f"state, not the mapping, made the difference; " + _start_hint(netlist, resets)}
+                      f"bit the source defines (source {rep['source']}, network {rep['network']}): "
+                      + _start_hint(netlist, resets)}
 
 
 def _start_hint(netlist: Netlist, resets) -> str:
-    """What would fix the start: a reset verify did not find, or, with none to give, the source's own
-    power-up values (a register it never initialises is x, and synthesis may pick any value for it)."""
-    if resets or any(w == 1 for w in netlist.inputs.values()):
-        return "give the reset with --reset PORT=LEVEL"
-    return ("the source has no 1-bit input to reset it with: its registers that are never initialised power up "
+    """Why an unconfirmed counterexample differed, and what would fix it: a reset verify did not find, or,
+    with none to give, the source's own power-up values (a register it never initialises is x, and synthesis
+    may pick any value for it).  With a reset already applied, the source's own x is what is left: one the
+    reset does not reach, or one it assigns, which the proof may take as either value (ABC: a free input)."""
+    if resets:
+        given = ", ".join(f"{r['port']}={r['level']}" for r in resets)
+        return (f"the reset ({given}) was applied in cycle 0 of both, so what made the difference is the source's "
+                "own x (a register or memory the reset does not reach, or an x it assigns), which the proof starts "
+                "at 0 or takes as either value and Icarus reads as x, not the mapping")
+    prefix = "the start state, not the mapping, made the difference; "
+    if any(w == 1 for w in netlist.inputs.values()):
+        return prefix + "give the reset with --reset PORT=LEVEL"
+    return prefix + ("the source has no 1-bit input to reset it with: its registers that are never initialised power up "
             "x, and synthesis may choose their value (a register only ever loaded with a constant becomes that "
             "constant); give them power-up values (`reg q = 0;`) to make the start defined")
 
@@ -1175,7 +1184,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
     mismatches = compare(netlist, x, ref, got, clocked, levels)
     driven = _driven(netlist, ref)
     # where Icarus disagrees, or agrees only because it reads x: again from where the network powers up
-    start = power_up_start(netlist) if clocked and (mismatches or _mostly_undefined(driven)) else []
+    start = power_up_start(netlist) if clocked and (mismatches or _mostly_undefined(driven)
+                                                    or _undefined_ports(netlist, ref)) else []
     compared = None
     if start:
         mismatches, compared = _from_power_up(path, netlist, x, got, levels, start, mismatches, info)
@@ -1188,6 +1198,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
            "driven_by_nothing": list(netlist.undriven), "source_warnings": warnings, **info,
            "undefined_by_port": undefined_by_port(netlist, ref)}
     out["mostly_undefined"] = _mostly_undefined(_driven(netlist, compared or ref))   # in the run the verdict compared
+    out["ports_mostly_undefined"] = _undefined_ports(netlist, compared or ref)
+    out["ports_never_compared"] = _undefined_ports(netlist, compared or ref, every=True)
     out["compared_run"] = "as_written" if compared is None else "power_up_start"
     if clocked:
         out["reset"] = {k: rst[0][k] for k in ("port", "level")} if rst else None
@@ -1211,6 +1223,18 @@ def _mostly_undefined(ref: list[dict]) -> bool:
     """Whether x or z is more than half the bits of an Icarus run: agreement there says little."""
     compared = sum(len(r) for r in ref)
     return compared > 0 and sum(v in "xXzZ" for r in ref for v in r.values()) * 2 > compared
+
+
+def _undefined_ports(netlist: Netlist, ref: list[dict], every: bool = False) -> list[str]:
+    """The output ports more than half of whose bits an Icarus run left x or z (`every`: all of them, so
+    that Icarus never checked the port): the whole run may be mostly defined while one port never is
+    (oc_usb_phy's DataIn_o, public RTL pass 8)."""
+    found = []
+    for port, n in undefined_by_port(netlist, ref).items():
+        undefined = n["x"] + n["z"]
+        if n["compared"] and (undefined == n["compared"] if every else 2 * undefined > n["compared"]):
+            found.append(port)
+    return found
 
 
 def _from_power_up(path, netlist: Netlist, x, got, levels, start, mismatches, info):
@@ -1338,6 +1362,9 @@ def _undefined_text(co: dict) -> str:
             f"{'; compared from the power-up start above' if started else ' compared'}): " + ", ".join(ports))
     if co.get("mostly_undefined"):
         note += " -- MOST compared bits were undefined in the source: agreement there says little"
+    if co.get("ports_never_compared"):
+        names = ", ".join(co["ports_never_compared"])
+        note += f" -- {names}: undefined in every compared bit, so never checked against Icarus"
     return note
 
 

@@ -56,6 +56,8 @@ VERIFY_CLASSES = [
     ("memory in the equivalence proof", r"\$memrd|\$memwr|\$mem\b|No SAT model available for cell .*mem"),
     # an unreproduced counterexample: its detail also says "outputs differ", so it is matched first
     ("start state: a counterexample the replay from power-up does not reproduce", r"the start state, not the mapping"),
+    ("x in the source past its reset: a counterexample the replay from power-up does not reproduce",
+     r"what made the difference is the source's own x"),
     ("x or z in the source: a counterexample on bits the source leaves undefined (a released tri-state output)",
      r"the source reads x or z where they differ"),
     ("equivalence counterexample", r"outputs differ"),

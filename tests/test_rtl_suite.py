@@ -102,6 +102,10 @@ def test_the_reset_and_its_level_come_from_the_design_not_the_manifest_name(tmp_
      "source (Icarus) and the network (logic backend) do not differ on any bit the source defines (...): the start "
      "state, not the mapping, made the difference; give the reset with --reset PORT=LEVEL",
      "start state: a counterexample the replay from power-up does not reproduce"),
+    ("the proof found inputs on which the outputs differ from its all-zero start, but replayed from power-up the "
+     "source (Icarus) and the network (logic backend) do not differ on any bit the source defines (...): the reset "
+     "(rst=0) was applied in cycle 0 of both, so what made the difference is the source's own x (...)",
+     "x in the source past its reset: a counterexample the replay from power-up does not reproduce"),
     ("the outputs differ on this input (sequence), read after 3 clock edges; replayed: Icarus and the network "
      "(logic backend) differ on done[0]", "equivalence counterexample"),
     ("the proof's time budget (120 s) ran out: the bounded check of 20 cycles from the start was not finished, "

@@ -466,7 +466,11 @@ def test_a_counterexample_the_replay_does_not_confirm_is_unknown():
     res = V._replayed(VERILOG / "counter4.v", nl, {"status": "counterexample", "cex": cex, "depth": 4, "detail": ""})
     assert res["status"] == "unknown" and not res["replay"]["reproduced"]
     assert res["replay"]["source"] == res["replay"]["network"] == {"q": "0010"}   # reset at edge 0, counted at edges 1 and 2
-    assert "do not differ" in res["detail"]
+    assert "do not differ" in res["detail"] and "give the reset with --reset" in res["detail"]
+    given = V._replayed(VERILOG / "counter4.v", nl, {"status": "counterexample", "cex": cex, "depth": 4, "detail": ""},
+                        [{"port": "rst", "level": 1}])
+    # the reset was given: not sent after it again (OpenCores' sasc, public RTL pass 8)
+    assert "--reset" not in given["detail"] and "the reset (rst=1) was applied in cycle 0" in given["detail"]
 
 
 def test_agreement_on_mostly_undefined_outputs_says_so(tmp_path, capsys, monkeypatch):
@@ -493,6 +497,44 @@ def test_agreement_on_mostly_undefined_outputs_says_so(tmp_path, capsys, monkeyp
     code, out, err = _run(capsys, src, "--cycles", 50, "--no-equivalence")
     verdict = out.strip().splitlines()[-1]
     assert "q 200/200" in verdict and "MOST compared bits were undefined" in verdict
+
+
+COUNT_BESIDE_REGISTER = """\
+module pnc(input clk, input rst, input en, input [15:0] d, output reg [15:0] q, output reg [3:0] cnt);
+  always @(posedge clk) q <= rst ? 16'd0 : d;
+  always @(posedge clk) if (en) cnt <= cnt + 4'd1;
+endmodule
+"""
+
+
+def test_a_port_undefined_in_every_cycle_is_compared_from_the_power_up(tmp_path, capsys, monkeypatch):
+    """One port x in every cycle beside a defined 16-bit one (the run is not mostly undefined, so it was never
+    run again from the power-up): Icarus never checked the port, and a network counting by 3 passed the
+    co-simulation (oc_usb_phy's DataIn_o and oc_sasc's dout_o, public RTL pass 8).  Now a port mostly
+    undefined starts the power-up run, and a port still undefined there is named in the verdict."""
+    src = tmp_path / "pnc.v"
+    src.write_text(COUNT_BESIDE_REGISTER)
+    bad = tmp_path / "bad.v"
+    bad.write_text(COUNT_BESIDE_REGISTER.replace("cnt + 4'd1", "cnt + 4'd3"))
+    wrong = V.verify(src, netlist=synthesize(bad), vectors=40, equivalence_check=False)["cosim"]
+    assert not wrong["agree"] and wrong["compared_run"] == "power_up_start"
+    assert {m["bit"].split("[")[0] for m in wrong["mismatches"]} == {"cnt"}
+    code, out, err = _run(capsys, src, "--cycles", 40, "--json", "--no-equivalence")
+    co = json.loads(out)["cosim"]
+    assert code == 0 and co["agree"] and co["compared_run"] == "power_up_start"
+    assert co["undefined_by_port"]["cnt"] == {"x": 160, "z": 0, "compared": 160}     # as written
+    assert co["ports_mostly_undefined"] == co["ports_never_compared"] == []            # in the run compared
+    mostly_x = tmp_path / "mx.v"                 # x whatever the start: division by zero (rst is mostly 0)
+    mostly_x.write_text(COUNT_BESIDE_REGISTER.replace("if (en) cnt <= cnt + 4'd1", "cnt <= d[3:0] / {3'd0, rst}"))
+    code, out, err = _run(capsys, mostly_x, "--cycles", 40, "--json", "--no-equivalence")
+    co = json.loads(out)["cosim"]
+    assert co["ports_mostly_undefined"] == ["cnt"] and co["ports_never_compared"] == [] and co["agree"]
+    monkeypatch.setattr(V, "power_up_start", lambda netlist: [])      # where no register can be started
+    code, out, err = _run(capsys, src, "--cycles", 40, "--json", "--no-equivalence")
+    co = json.loads(out)["cosim"]
+    assert co["ports_never_compared"] == ["cnt"] and co["compared_run"] == "as_written" and not co["mostly_undefined"]
+    code, out, err = _run(capsys, src, "--cycles", 40, "--no-equivalence")
+    assert "cnt: undefined in every compared bit, so never checked against Icarus" in out.strip().splitlines()[-1]
 
 
 @pytest.mark.parametrize("body", ["module noin(output y);\n  assign y = 1;\nendmodule\n",

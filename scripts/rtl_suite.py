@@ -30,13 +30,13 @@ FORMAT = 2     # bump when a row's fields change: cached rows of another format 
 
 # Refusal classes, first match wins: (class, pattern on the refusal line).
 CLASSES = [
-    ("asynchronous set/reset", r"asynchronous set/reset"),
+    ("asynchronous set/reset", r"asynchronous set/reset|both an asynchronous set and an asynchronous reset"),
     ("power-up value (declaration initialiser)", r"initial value in its declaration"),
     ("`initial` block", r"`initial`"),
     ("tri-state driver", r"tri-state"),
     ("inout port", r"\binout\b"),
     ("both clock edges", r"falling clock edge and others on the rising one|negative-edge"),
-    ("several or derived clocks", r"clocked by several ports|clocked directly by one input port|clock .* also used as data|clocked by logic|takes the clock .* as data"),
+    ("several or derived clocks", r"clocked by several ports|clocked directly by one input port|clock .* also used as data|clocked by logic|takes the clock .* as data|clock is computed from the input port"),
     ("a block testing none of its listed edges (a flip-flop on several clocks)", r"tests none of"),
     ("level-sensitive latch", r"level-sensitive latch"),
     ("undriven net", r"nothing drives it|not driven by anything"),      # before memory: its line names memory words
@@ -46,6 +46,8 @@ CLASSES = [
     ("combinational loop", r"combinational loop"),
     ("$display/$write in the design", r"\$display"),
     ("incomplete sensitivity list", r"sensitivity list"),
+    ("a net assigned in an always block", r"is a net \(a wire or a port without `reg`\) assigned in an always block"),
+    ("`===` against x or z", r"`===` against a value with x or z"),
     ("Yosys could not read the source", r"yosys error"),
 ]
 

@@ -940,6 +940,16 @@ def test_a_latch_enabled_by_the_clock_itself_is_refused_for_that_reason(tmp_path
     assert "between clock edges" not in err and "assign every signal" not in err
 
 
+def test_a_latch_cell_in_a_design_without_a_clock_is_refused_in_those_words(tmp_path, capsys):
+    """ISPRAS'24 dlatchsr (a latch with set and clear, no clock): the message spoke of "clock edges" and
+    "input CLR, EN, SET" (public RTL pass 8)."""
+    src = verilog(tmp_path, "module dlsr(input CLR, input EN, input SET, input D, output reg Q);\n"
+                            "  always @* if (CLR) Q = 0; else if (SET) Q = 1; else if (EN) Q = D;\nendmodule\n")
+    rc, _, err = run(capsys, "synth", src)
+    assert rc == 2 and "its enable follows inputs CLR, EN, SET, so it can close at any moment (the design has no " \
+        "clock)" in err and "clock edges" not in err and "if the latch is not meant" in err
+
+
 def test_a_latch_that_can_close_between_edges_is_refused(tmp_path, capsys):
     """An asynchronous reset forcing the machine into a code the case leaves out would close the latch
     between edges, holding whatever it had then: refused, naming the reset."""

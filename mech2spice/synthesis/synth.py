@@ -985,13 +985,15 @@ def _check_dlatches(g: nx.DiGraph, clock: str | None, sampled: tuple = ()) -> No
                 "the clock and its output follows its input within the cycle, which no latch of the network does "
                 "(each captures once a cycle, on the pulse, and holds that to the next); where the value is read "
                 "only once the latch has closed, a flip-flop on the clock edge that closes it holds the same value")
-        why = f"its enable follows input {', '.join(ports)}" if ports else "the design has no clock" \
-            if clock is None and not sampled else _closes_when_forced(g, plain, cone, enable)
+        unclocked = clock is None and not sampled
+        why = f"its enable follows input{'s' * (len(ports) > 1)} {', '.join(ports)}" if ports \
+            else "the design has no clock" if unclocked else _closes_when_forced(g, plain, cone, enable)
         if why:
+            when = "at any moment (the design has no clock)" if unclocked and ports else "between clock edges"
             raise Mech2SpiceError(
-                f"{what}: {why}, so it can close between clock edges and hold what it had at that moment, which "
-                "no latch of the network does (each captures once a cycle, on the pulse); assign every signal on "
-                "every path of combinational always blocks")
+                f"{what}: {why}, so it can close {when} and hold what it had at that moment, which no latch of the "
+                "network does (each captures once a cycle, on the pulse); if the latch is not meant, assign every "
+                "signal on every path of combinational always blocks")
         word = re.sub(r"\[\d+\]' \(", "' (", what)          # one warning per variable, not per bit
         if word not in warned:
             warned.add(word)

@@ -192,14 +192,26 @@ def _read_command(netlist: Netlist) -> str:
         else "read_verilog"
 
 
-def _read_source(netlist: Netlist, rel: str) -> list[str]:
-    read, top = _read_command(netlist), netlist.top
+def _reading(netlist: Netlist, path: Path, tmp: str) -> str:
+    """The Yosys command that reads the source (`path`, maybe a rewritten copy) in a script run in `tmp`, as
+    synthesis reads it: -defer (each module elaborated once, at its instance's parameters), and -I the
+    original's folder, where its `include files are (a copy in a scratch folder has none beside it)."""
+    rel = Path(os.path.relpath(Path(path).resolve(), Path(tmp).resolve())).as_posix()
+    read = f"{_read_command(netlist)} -defer"
+    original = Path(netlist.source).resolve().parent if netlist.source else Path(path).resolve().parent
+    folder = Path(os.path.relpath(original, Path(tmp).resolve())).as_posix()
+    if re.fullmatch(r"[\w./+-]+", folder):          # Yosys takes -I's folder unquoted
+        read += f" -I {folder}"
+    return f'{read} {ids.yosys_path(rel, "Verilog file")}'
+
+
+def _read_source(netlist: Netlist, reading: str) -> list[str]:
+    """`reading` (`_reading`), then the source as the proof compares it."""
     # `memory`: the source's memories as flip-flops and multiplexers, as synthesis maps them (sat has no
     # model for $mem cells); its memory_dff folds a read register into the port only as synthesis does.
     # sampled clocks: the source's flip-flops sampled as synthesis samples them, both sides on one global clock
     sample = list(yosys.SAMPLE_CLOCKS) if netlist.sampled else []
-    # -defer: as synthesis reads it (each module elaborated once, at its instance's parameters)
-    return [f'{read} -defer {ids.yosys_path(rel, "Verilog file")}', _hierarchy(top), yosys.COMB_AS_STAR, "proc", yosys.DROP_PRINTS,
+    return [reading, _hierarchy(netlist.top), yosys.COMB_AS_STAR, "proc", yosys.DROP_PRINTS,
             "flatten", maps.MAP_POW, "memory", "opt_clean", *sample, f"rename -top {PREFIX}src"]
 
 
@@ -212,11 +224,11 @@ def _hierarchy(top: str) -> str:
         return "hierarchy -check -auto-top"
 
 
-def _script(rel: str, netlist: Netlist, regs: list, resets=(), mode: str = "induct",
+def _script(reading: str, netlist: Netlist, regs: list, resets=(), mode: str = "induct",
             steps: int | None = None) -> str:
     """Read source and network, expose the matched registers on both, build the miter and prove it."""
     steps = steps or INDUCTION_STEPS
-    lines = _read_source(netlist, rel)
+    lines = _read_source(netlist, reading)
     if regs:
         lines.append(f"cd {PREFIX}src")
         for k, (_, wire, bit) in enumerate(regs):
@@ -446,12 +458,12 @@ def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUD
     t0 = time.time()
     with tempfile.TemporaryDirectory(prefix="mech2spice_verify_") as tmp:
         maps.write_maps(tmp)
-        rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
+        reading = _reading(netlist, path, tmp)
         expose = [(f"{PREFIX}r{k}", q) for k, (q, _, _) in enumerate(regs)]
         names = proof_ports(netlist)
         (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", expose, names))
         (Path(tmp) / "wrap.v").write_text(_wrapper(netlist, names, len(regs)))
-        step, cut = _run_yosys(_script(rel, netlist, regs, resets, "induct"), tmp, budget_s)
+        step, cut = _run_yosys(_script(reading, netlist, regs, resets, "induct"), tmp, budget_s)
         closed = not cut and _PROVED.search(step.stdout) is not None
         tried = max(map(int, _TRYING.findall(step.stdout)), default=0)
         if not cut and not closed and not _GAVE_UP.search(step.stdout):
@@ -459,7 +471,7 @@ def _prove(path: Path, netlist: Netlist, regs: list, budget_s: float = PROOF_BUD
         left = budget_s - (time.time() - t0)
         steps = tried if closed else INDUCTION_STEPS
         steps = max(steps, 1)
-        base, cut = _run_yosys(_script(rel, netlist, regs, resets, "base", steps), tmp, left) \
+        base, cut = _run_yosys(_script(reading, netlist, regs, resets, "base", steps), tmp, left) \
             if left > 1 else (yosys.YosysResult(-1, "", ""), True)
     depth = steps if _PROVED.search(base.stdout) else 0
     if cut:
@@ -556,7 +568,7 @@ def _abc_top(netlist: Netlist, names: dict[str, str], resets) -> str:
     return "\n".join(lines)
 
 
-def _aiger_script(rel: str, netlist: Netlist) -> str:
+def _aiger_script(reading: str, netlist: Netlist) -> str:
     """The miter of the sat runs as 2-valued AIGER for ABC.  Where sat reads an `x` of the source as "either
     value agrees" (-ignore_gold_x), here every x constant and undriven net of the source is a free input in
     every cycle ($anyseq): the network must agree for every choice, a stronger claim.  Every register without
@@ -565,7 +577,7 @@ def _aiger_script(rel: str, netlist: Netlist) -> str:
     (async2sync), as for sat."""
     # Tri-state buses as synthesis resolves them (a write_aiger wire has one driver; conflict checks dropped,
     # as synthesis drops them), before setundef makes "no driver enabled" a free value.
-    lines = _read_source(netlist, rel) + [
+    lines = _read_source(netlist, reading) + [
         "tribuf -formal", "delete n:$tribuf_conflict*", "setundef -undriven -anyseq", "read_verilog wrap.v", "read_verilog gate.v", "read_verilog top.v",
         "proc", "opt_clean", f"miter -equiv -flatten {PREFIX}gold {PREFIX}gate {PREFIX}miter",
         f"hierarchy -top {PREFIX}top", "flatten", "async2sync", "dffunmap", "techmap", "setundef -zero -init",
@@ -639,12 +651,12 @@ def _abc_prove(path: Path, netlist: Netlist, budget_s: float, resets=()) -> dict
     t0 = time.time()
     with tempfile.TemporaryDirectory(prefix="mech2spice_abc_") as tmp:
         maps.write_maps(tmp)
-        rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
+        reading = _reading(netlist, path, tmp)
         names = proof_ports(netlist)
         (Path(tmp) / "gate.v").write_text(write_verilog(netlist, f"{PREFIX}gate", (), names))
         (Path(tmp) / "wrap.v").write_text(_wrapper(netlist, names, 0))
         (Path(tmp) / "top.v").write_text(_abc_top(netlist, names, resets))
-        built, cut = _run_yosys(_aiger_script(rel, netlist), tmp, budget_s)
+        built, cut = _run_yosys(_aiger_script(reading, netlist), tmp, budget_s)
         if cut or built.returncode != 0 or not (Path(tmp) / "m.aig").exists():
             why = "the budget ran out writing the miter" if cut else f"yosys: {yosys.error_line(built)}"
             return {"applies": False, "detail": f"ABC not used: {why}"}
@@ -974,10 +986,7 @@ def design_resets(path, netlist: Netlist) -> list[dict]:
     import json as _json
     path = Path(path)
     with tempfile.TemporaryDirectory(prefix="mech2spice_resets_") as tmp:
-        rel = Path(os.path.relpath(path.resolve(), Path(tmp).resolve())).as_posix()
-        read = _read_command(netlist)
-        script = "\n".join([f'{read} {ids.yosys_path(rel, "Verilog file")}',
-                            _hierarchy(netlist.top), yosys.COMB_AS_STAR, "proc", "flatten", "opt_dff", f"rename -top {PREFIX}src",
+        script = "\n".join([_reading(netlist, path, tmp), _hierarchy(netlist.top), yosys.COMB_AS_STAR, "proc", "flatten", "opt_dff", f"rename -top {PREFIX}src",
                             "write_json resets.json", ""])
         result, cut = _run_yosys(script, tmp, 60)
         if cut or result.returncode != 0:

@@ -499,6 +499,20 @@ def test_agreement_on_mostly_undefined_outputs_says_so(tmp_path, capsys, monkeyp
     assert "q 200/200" in verdict and "MOST compared bits were undefined" in verdict
 
 
+def test_a_source_that_includes_a_file_and_holds_a_memory_is_proved(tmp_path, capsys):
+    """A memory makes verify hand the proof a rewritten copy in a scratch folder (memory_guard), where the
+    source's `include was not found: "Can't open include file" (jamesbowman/j1, ultraembedded spi_lite; public
+    RTL pass 9).  The proof reads it with -I the original's folder, as synthesis does."""
+    (tmp_path / "defs.vh").write_text("`define W 4\n")
+    src = tmp_path / "inc_mem.v"
+    src.write_text('`include "defs.vh"\nmodule inc_mem(input clk, input we, input [1:0] wa, input [1:0] ra, '
+                   'input [`W-1:0] wd, output [`W-1:0] rd);\n  reg [`W-1:0] store [0:3];\n'
+                   '  always @(posedge clk) if (we) store[wa] <= wd;\n  assign rd = store[ra];\nendmodule\n')
+    code, out, err = _run(capsys, src, "--cycles", 200, "--json")
+    res = json.loads(out)
+    assert code == 0 and res["equivalence"]["status"] == "proved" and res["cosim"]["agree"], err
+
+
 COUNT_BESIDE_REGISTER = """\
 module pnc(input clk, input rst, input en, input [15:0] d, output reg [15:0] q, output reg [3:0] cnt);
   always @(posedge clk) q <= rst ? 16'd0 : d;

@@ -154,6 +154,13 @@ def test_two_unrelated_modules_without_top_are_refused(tmp_path, capsys):
     marked = verilog(tmp_path, TWO_MODULES.replace("module bar", "(* top *) module bar"), "marked.v")
     rc, out, _ = run(capsys, "synth", marked, "--json")
     assert rc == 0 and json.loads(out)["top"] == "bar"          # chosen in the source
+    # both marked: Yosys took the first without a word (public RTL pass 9)
+    both = verilog(tmp_path, TWO_MODULES.replace("module foo", "(* top *) module foo")
+                   .replace("module bar", "(* top *) module bar"), "both.v")
+    refused(capsys, "synth", both, needle=f"{both}: several modules are marked (* top *): foo (line 1), bar "
+                                          "(line 4); choose one with --top")
+    rc, out, _ = run(capsys, "synth", both, "--top", "foo", "--json")
+    assert rc == 0 and json.loads(out)["top"] == "foo"
 
 
 def test_one_top_with_submodules_needs_no_top(tmp_path, capsys):

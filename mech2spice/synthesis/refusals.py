@@ -22,7 +22,7 @@ from pathlib import Path
 from ..errors import Mech2SpiceError
 
 #: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
-VERSION = 6
+VERSION = 7
 
 
 def check(tmp: Path, path: Path, source: str, top: str | None) -> tuple[dict[str, list[str]], list[AliasRead]]:
@@ -72,11 +72,14 @@ def single_top(tmp: Path, path: Path) -> str | None:
                 marked.append(name)
             attrs = {}
     roots = [name for name in modules if name not in used]
+    listed = lambda names: ", ".join(f"{r} (line {modules[r]})" if modules.get(r) else r for r in names)  # noqa: E731
+    if len(marked) > 1:                 # Yosys took the first: which one is the design is the user's to say
+        raise Mech2SpiceError(f"{path}: several modules are marked (* top *): {listed(marked)}; choose one with "
+                              "--top (synthesize(top=...) in the API)")
     if marked:
         return marked[0]
     if len(roots) > 1:
-        listed = ", ".join(f"{r} (line {modules[r]})" if modules[r] else r for r in roots)
-        raise Mech2SpiceError(f"{path}: several top-level modules: {listed}; choose one with --top "
+        raise Mech2SpiceError(f"{path}: several top-level modules: {listed(roots)}; choose one with --top "
                               "(synthesize(top=...) in the API)")
     return roots[0] if roots else None
 

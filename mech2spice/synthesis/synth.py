@@ -630,6 +630,8 @@ def _yosys_run(path: Path, top: str | None, source: str, sampled: bool = False) 
             for known in (_non_constant_init(msg, path), _yosys_task(msg, path, source), _untested_edge(msg, path, source)):
                 if known is not None:
                     raise Mech2SpiceError(known)
+            if top is not None and top.startswith("\\") and "not found" in msg:    # `\my.top ` as written
+                msg += f"; an escaped name is given without its backslash and trailing space (--top {top[1:]})"
             raise Mech2SpiceError(f"yosys error: {msg}" if str(path) in msg
                                   else f"yosys error: {path}: {msg}")
         released, aliased = refusals.check(Path(tmp), path, source, top)

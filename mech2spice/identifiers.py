@@ -103,6 +103,16 @@ def yosys(name: str) -> str:
     return name if internal else "\\" + name
 
 
+def yosys_module(name: str) -> str:
+    """A module's name from the source as one Yosys script argument: as `yosys`, but a name starting with `$`
+    is the user's escaped identifier (`\\$add `), not one of Yosys's own, so it is escaped too; Yosys's JSON
+    already writes such a module as `\\$add` (its backslash kept, to tell it from its own names)."""
+    if name.startswith("\\$"):
+        name = name[1:]
+    plain = yosys(name)
+    return "\\" + plain if plain.startswith("$") else plain
+
+
 def yosys_path(path: str, what: str = "file") -> str:
     """A file path as a quoted Yosys script argument; a quote or a control character cannot be quoted."""
     text = str(path)

@@ -219,7 +219,7 @@ def _hierarchy(top: str) -> str:
     """Yosys's `hierarchy` selecting the top module: by name, or, for a name a Yosys script cannot hold
     (ids.yosys), by the rule synthesis found it with (-auto-top; a --top is always a plain name)."""
     try:
-        return f"hierarchy -check -top {ids.yosys(top)}"
+        return f"hierarchy -check -top {ids.yosys_module(top)}"
     except Mech2SpiceError:
         return "hierarchy -check -auto-top"
 

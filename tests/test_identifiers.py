@@ -307,3 +307,15 @@ def test_top_names_a_module_whose_name_is_escaped(tmp_path, capsys):
         assert cli.main(["synth", str(src), "--top", top]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and needle in err, (top, err)
+
+
+def test_a_module_named_with_a_dollar_is_a_users_name(tmp_path, capsys):
+    """`module \\$add (...)`: Yosys's JSON writes it `\\$add` (to tell it from its own `$add` cells), verify's
+    proof named it `\\\\$add` and did not find it, and `--top '$add'` was refused as "invalid" without a reason
+    (public RTL pass 9).  Its name is `$add` everywhere now, escaped for Yosys and for Icarus."""
+    src = tmp_path / "d.v"
+    src.write_text("module \\$add (input [3:0] a, input [3:0] b, output [3:0] y);\n  assign y = a ^ b;\nendmodule\n")
+    for argv in ([], ["--top", "$add"]):
+        assert cli.main(["verify", str(src), "--json", *argv]) == 0
+        res = json.loads(capsys.readouterr().out)
+        assert res["top"] == "$add" and res["equivalence"]["status"] == "proved" and res["cosim"]["agree"]

@@ -156,10 +156,10 @@ def synthesize(path, top: str | None = None, *, max_fanout: int | None = None) -
     _check_source(path, source)
     skipped = _warn_translate_off(path, source)
     if top is not None:                 # any Verilog name, escaped ones too; one the script cannot hold is refused
-        if not isinstance(top, str) or not top or top.startswith("$"):
+        if not isinstance(top, str) or not top:
             raise Mech2SpiceError(f"invalid top module name {top!r}")
         try:
-            identifiers.yosys(top)
+            identifiers.yosys_module(top)
         except Mech2SpiceError as err:
             raise Mech2SpiceError(f"invalid top module name: {err}") from None
     name, module, found, released, sv, aliased = _run_yosys(path, top, source)
@@ -432,7 +432,7 @@ def _find_top(tmp: str, rel: str, include: str | None, sv: bool, path: Path) -> 
         if yosys.run_script("\n".join(_read_flow(rel, include, reading) + [""]), tmp).returncode == 0:
             top = refusals.single_top(Path(tmp), path)
             try:
-                return top if top is None else (identifiers.yosys(top) and top)
+                return top if top is None else (identifiers.yosys_module(top) and top)
             except Mech2SpiceError:
                 return None
     return None
@@ -446,7 +446,7 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
     cycle (`yosys.SAMPLE_CLOCKS`)."""
     return "\n".join([                             # ast.txt, *.il: for refusals.py
         *_read_flow(source, include, sv),
-        f"hierarchy -check -top {identifiers.yosys(top)}" if top else "hierarchy -check -auto-top",
+        f"hierarchy -check -top {identifiers.yosys_module(top)}" if top else "hierarchy -check -auto-top",
         # hierarchy has made each wired-OR/AND net (`wor`, `wand`) an OR/AND of its drivers; left on the wire,
         # the mark would make synth's own `hierarchy` do it again after the mapping, unmapped
         "setattr -unset wor -unset wand w:*",
@@ -467,7 +467,7 @@ def _flow(source: str, top: str | None, include: str | None = None, sv: bool | N
         *(("memory", "opt_clean", "clk2fflogic t:$*dff*", *yosys.SAMPLE_CLOCKS[1:]) if sampled else ()),
         # -nofsm: a state register keeps the source's encoding, so the network powers up in a state the source
         # has and every register keeps its name (verify starts it on Icarus); docs/rtl.md, "State machines"
-        "synth -flatten -nofsm" + (f" -top {identifiers.yosys(top)}" if top else ""),   # (memories: `memory` + `memory_map` in it)
+        "synth -flatten -nofsm" + (f" -top {identifiers.yosys_module(top)}" if top else ""),   # (memories: `memory` + `memory_map` in it)
         "dffunmap",                                 # enables/resets -> plain flip-flops + logic
         "abc -g NOR", "opt_clean",
         "abc -g NOR", "opt_clean",                  # a 2nd pass trims e.g. comparator4 39 -> 36
@@ -714,7 +714,7 @@ def _read_inside(tmp: Path, top: str, ports: set[str]) -> set[str]:
     plain = sorted(p for p in ports if _PLAIN_NAME.fullmatch(p)) if _PLAIN_NAME.fullmatch(top) else []
     if not plain:
         return set(ports)
-    mod = identifiers.yosys(top)
+    mod = identifiers.yosys_module(top)
     script = ["read_rtlil drivers.il"] + [f"tee -q -o readers{k}.txt select -list {mod}/w:{identifiers.yosys(p)} %co* "
                                           f"{mod}/t:* %i" for k, p in enumerate(plain)]
     result = yosys.run_script("\n".join(script) + "\n", tmp)
@@ -725,6 +725,12 @@ def _read_inside(tmp: Path, top: str, ports: set[str]) -> set[str]:
 
 
 def _pick_top(modules: dict, top: str | None, path: Path) -> tuple[str, dict]:
+    """(the top's name as the source spells it, its Yosys JSON module)."""
+    name, module = _top_module(modules, top, path)
+    return (name[1:] if name.startswith("\\$") else name), module    # JSON keeps `\$add`'s backslash
+
+
+def _top_module(modules: dict, top: str | None, path: Path) -> tuple[str, dict]:
     if top is not None and top in modules:
         return top, modules[top]
     for name, mod in modules.items():

@@ -17,15 +17,12 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    from numba import njit, prange
-    AVAILABLE = True
-except ImportError:            # pragma: no cover - exercised only without numba
-    AVAILABLE = False
-    prange = range
+from ._jit import AVAILABLE, njit      # numba's njit with a cache concurrent processes cannot corrupt
 
-    def njit(*a, **k):
-        return lambda f: f
+try:
+    from numba import prange
+except ImportError:            # pragma: no cover - exercised only without numba
+    prange = range
 
 DONE, SETTLED, DIVERGED = 0, 1, 2
 _FLAGS = dict(cache=True, fastmath={"contract"})     # FMA contraction only: no reassociation of sums

@@ -9,14 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    from numba import njit
-    AVAILABLE = True
-except ImportError:            # pragma: no cover - exercised only without numba
-    AVAILABLE = False
-
-    def njit(*a, **k):
-        return lambda f: f
+from ._jit import AVAILABLE, njit      # numba's njit with a cache concurrent processes cannot corrupt
 
 
 @njit(cache=True, fastmath=False)

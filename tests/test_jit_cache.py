@@ -1,0 +1,116 @@
+"""numba's on-disk cache written by two processes at once (mech2spice/backends/_jit.py).
+
+Two processes compile different signatures of one cached kernel and save at the same moment, their saves
+paced so that one's index lands with the other's data (the interleaving numba issues #4807 and #10128
+describe).  With numba's own cache a third process then runs the 1-D array's machine code on a 2-D array: a
+wrong answer here, a segmentation fault in the envelope kernel (session 28's clean clone).  With the guarded
+cache every later process gets its own signature's code.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+pytest.importorskip("numba")
+
+KERNEL = """
+import os
+if os.environ.get("GUARD") == "1":
+    from mech2spice.backends._jit import njit
+else:
+    from numba import njit
+
+@njit(cache=True)
+def total(a):
+    return a.sum() + a.ndim * 1000.0
+"""
+
+# One process: compiles `total` for a 1-D (role a) or 2-D (role b) array, its save paced after a barrier at
+# the save's own read of the index, so that b's index is written after a's and a's data after b's.
+WORKER = """
+import os, sys, time
+import numpy as np
+from numba.core import caching
+
+role, here = sys.argv[1], os.path.dirname(os.path.abspath(__file__))
+index_at, data_at = {"a": (0.0, 1.0), "b": (0.3, 0.5)}[role]
+cls = caching.IndexDataCacheFile
+load_index, save_index, save_data = cls._load_index, cls._save_index, cls._save_data
+state = {"reads": 0}
+
+def paced_load_index(self):
+    out = load_index(self)
+    state["reads"] += 1
+    if state["reads"] == 2:              # the save's read (the first is the load's, before compiling)
+        open(os.path.join(here, "ready." + role), "w").close()
+        other, end = os.path.join(here, "ready." + ("b" if role == "a" else "a")), time.time() + 3
+        while not os.path.exists(other) and time.time() < end:      # under the guard's lock: times out
+            time.sleep(0.01)
+        state["t0"] = time.time()
+    return out
+
+def at(offset):
+    time.sleep(max(0.0, state["t0"] + offset - time.time()))
+
+cls._load_index = paced_load_index
+cls._save_index = lambda self, overloads: (at(index_at), save_index(self, overloads))[1]
+cls._save_data = lambda self, name, data: (at(data_at), save_data(self, name, data))[1]
+sys.path.insert(0, here)
+import kern
+print(kern.total(np.ones(3) if role == "a" else np.ones((2, 2))))
+"""
+
+CHECK = """
+import os, sys
+import numpy as np
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import kern
+print(kern.total(np.ones(3)), kern.total(np.ones((2, 2))), sum(kern.total.stats.cache_hits.values()))
+"""
+
+
+def _race(folder, guard: bool) -> list[str]:
+    """Both workers at once on a fresh cache, then a third process's answers and its cache hits."""
+    for name, text in (("kern.py", KERNEL), ("worker.py", WORKER), ("check.py", CHECK)):
+        (folder / name).write_text(textwrap.dedent(text))
+    env = dict(os.environ, GUARD="1" if guard else "0", NUMBA_CACHE_DIR=str(folder / "cache"))
+    workers = [subprocess.Popen([sys.executable, str(folder / "worker.py"), role], env=env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for role in "ab"]
+    for w in workers:
+        out, err = w.communicate(timeout=120)
+        assert w.returncode == 0, err[-2000:]
+    done = subprocess.run([sys.executable, str(folder / "check.py")], env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done.stdout.split()
+
+
+def test_two_processes_saving_at_once_leave_each_signature_its_own_code(tmp_path):
+    plain, guarded = tmp_path / "plain", tmp_path / "guarded"
+    plain.mkdir(), guarded.mkdir()
+    # the harness really interleaves: numba's own cache hands the 2-D call the 1-D code (2 + 1000, not 4 + 2000)
+    assert _race(plain, guard=False)[:2] == ["1003.0", "1002.0"], \
+        "numba's own cache no longer mixes signatures here: check whether _jit.py's guard is still needed"
+    one_d, two_d, hits = _race(guarded, guard=True)
+    assert (one_d, two_d) == ("1003.0", "2004.0")
+    assert hits == "2"                  # both signatures loaded from the cache the workers wrote
+
+
+def test_a_data_file_of_another_signature_is_compiled_again_not_called(tmp_path):
+    """A cache corrupted before the guard (or by another numba) is recompiled on its first guarded load."""
+    _race(tmp_path, guard=False)
+    env = dict(os.environ, GUARD="1", NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    first, second = (subprocess.run([sys.executable, str(tmp_path / "check.py")], env=env, capture_output=True,
+                                    text=True, timeout=120).stdout.split() for _ in range(2))
+    assert first == ["1003.0", "2004.0", "0"]        # nothing taken from the unkeyed files
+    assert second == ["1003.0", "2004.0", "2"]       # what the first wrote is loaded
+
+
+def test_every_cached_kernel_is_guarded():
+    from mech2spice.backends import _jit, kernel_cache
+    kernels = kernel_cache.dispatchers()
+    assert kernels and not [name for name, d in kernels.items() if not _jit.guarded(d)]

@@ -122,6 +122,12 @@ def yosys_path(path: str, what: str = "file") -> str:
     return f'"{text}"'
 
 
+def yosys_include(folder: str | None) -> str:
+    """` -I folder` for a read_verilog command, or nothing: Yosys takes -I's folder unquoted, so a folder with
+    another character is left out (the source's `include of a file there then fails with Yosys's own line)."""
+    return f" -I {folder}" if folder is not None and re.fullmatch(r"[\w./+-]+", folder) else ""
+
+
 # --------------------------------------------------------------------------- ngspice and VACASK netlists
 
 class SpiceNamer:

@@ -197,12 +197,9 @@ def _reading(netlist: Netlist, path: Path, tmp: str) -> str:
     synthesis reads it: -defer (each module elaborated once, at its instance's parameters), and -I the
     original's folder, where its `include files are (a copy in a scratch folder has none beside it)."""
     rel = Path(os.path.relpath(Path(path).resolve(), Path(tmp).resolve())).as_posix()
-    read = f"{_read_command(netlist)} -defer"
     original = Path(netlist.source).resolve().parent if netlist.source else Path(path).resolve().parent
     folder = Path(os.path.relpath(original, Path(tmp).resolve())).as_posix()
-    if re.fullmatch(r"[\w./+-]+", folder):          # Yosys takes -I's folder unquoted
-        read += f" -I {folder}"
-    return f'{read} {ids.yosys_path(rel, "Verilog file")}'
+    return f'{_read_command(netlist)} -defer{ids.yosys_include(folder)} {ids.yosys_path(rel, "Verilog file")}'
 
 
 def _read_source(netlist: Netlist, reading: str) -> list[str]:

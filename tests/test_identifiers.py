@@ -319,3 +319,19 @@ def test_a_module_named_with_a_dollar_is_a_users_name(tmp_path, capsys):
         assert cli.main(["verify", str(src), "--json", *argv]) == 0
         res = json.loads(capsys.readouterr().out)
         assert res["top"] == "$add" and res["equivalence"]["status"] == "proved" and res["cosim"]["agree"]
+
+
+def test_an_include_folder_is_given_to_yosys_only_where_it_can_be_read(tmp_path):
+    """-I takes its folder unquoted (Yosys keeps quotes as part of the name): one helper decides for synthesis
+    and verify's proof alike; a folder it can hold is searched by Yosys."""
+    assert ids.yosys_include(None) == "" and ids.yosys_include("a b") == "" and ids.yosys_include('a"b') == ""
+    headers = tmp_path / "v1.0+hdr"
+    headers.mkdir()
+    (headers / "w.vh").write_text("localparam W = 3;\n")
+    (tmp_path / "t.v").write_text('`include "w.vh"\nmodule t(input [W-1:0] a, output [W-1:0] y);\n'
+                                  "assign y = ~a;\nendmodule\n")
+    option = ids.yosys_include("v1.0+hdr")
+    assert option == " -I v1.0+hdr"
+    from mech2spice.synthesis import yosys
+    done = yosys.run_script(f"read_verilog{option} t.v\nhierarchy -top t\n", str(tmp_path))
+    assert done.returncode == 0, yosys.error_line(done)

@@ -412,8 +412,7 @@ def _read_flow(source: str, include: str | None, sv: bool | None) -> list[str]:
     it, every module was first elaborated at its defaults, where a library module's constant functions can
     take Yosys minutes or never end (verilog-lfsr's lfsr_mask at its default width 31, public RTL pass 8)."""
     read = "read_verilog -sv" if (source.endswith(".sv") if sv is None else sv) else "read_verilog"
-    if include is not None and re.fullmatch(r"[\w./+-]+", include):     # Yosys takes -I's folder unquoted
-        read += f" -I {include}"
+    read += identifiers.yosys_include(include)
     return [f'tee -o ast.txt {read} -defer -dump_ast1 {identifiers.yosys_path(source)}',   # not -q: its errors must reach the log
             "write_rtlil read.il"]
 

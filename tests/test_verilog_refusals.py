@@ -119,6 +119,31 @@ def test_two_drivers_of_one_net_are_refused_with_their_lines(tmp_path, capsys, b
     refused(capsys, "synth", src, needle=f"{src}, {needle}")
 
 
+GENERATE_AND_ESCAPED = """module coll(input clk, input a, input b, output y, output z);
+  generate
+    if (1) begin : x
+      reg y;
+      always @(posedge clk) y <= a;
+    end
+  endgenerate
+  reg \\x.y ;
+  always @(posedge clk) \\x.y <= b;
+  assign y = x.y;
+  assign z = \\x.y ;
+endmodule
+"""
+
+
+def test_an_escaped_name_equal_to_a_generate_members_is_refused_as_that(tmp_path, capsys):
+    """Public RTL pass 9: two registers to Icarus, one net with two drivers once Yosys names both `x.y`; the
+    refusal used to say the source drove one net twice."""
+    src = verilog(tmp_path, GENERATE_AND_ESCAPED)
+    refused(capsys, "synth", src, needle=f"{src}, line 8: the escaped identifier '\\x.y ' has the name Yosys gives "
+                                         "'y' of generate block 'x' (line 3)")
+    apart = verilog(tmp_path, GENERATE_AND_ESCAPED.replace("\\x.y ", "\\x_y "), name="apart.v")
+    assert run(capsys, "synth", apart, "--json")[0] == 0      # the generate member alone is an ordinary register
+
+
 def test_two_registers_and_an_instance_beside_an_assign_are_refused(tmp_path, capsys):
     src = verilog(tmp_path, "module t(input clk, input a, input b, output reg [1:0] y);\n"
                             "  always @(posedge clk) y[0] <= a;\n  always @(posedge clk) y[0] <= b;\n"

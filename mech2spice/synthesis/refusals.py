@@ -22,7 +22,7 @@ from pathlib import Path
 from ..errors import Mech2SpiceError
 
 #: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
-VERSION = 8
+VERSION = 9
 
 
 def check(tmp: Path, path: Path, source: str, top: str | None) -> tuple[dict[str, list[str]], list[AliasRead]]:
@@ -453,12 +453,30 @@ def _releases(ctype: str, conns: dict, port: str, k: int, released: dict) -> boo
     return (port, k) in released.get(_name(ctype), ())
 
 
+def _refuse_name_collision(wire: str, path: Path, source: str) -> None:
+    """Refuse a net that is two of the source's names: an escaped identifier `\\x.y ` and the member y of generate
+    block x, both `x.y` to Yosys (public RTL pass 9).  They are two registers to a simulator, one net with two
+    drivers once read."""
+    scope, dot, member = wire.rpartition(".")
+    if not dot:
+        return
+    escaped = re.search(r"\\" + re.escape(wire) + r"\s", source)
+    label = re.search(r"\bbegin\s*:\s*" + re.escape(scope.rpartition(".")[2]) + r"(?![\w$])", source)
+    if escaped and label:
+        at, block_at = (source.count("\n", 0, m.start()) + 1 for m in (escaped, label))
+        raise Mech2SpiceError(
+            f"{path}, line {at}: the escaped identifier '\\{wire} ' has the name Yosys gives '{member}' "
+            f"of generate block '{scope}' (line {block_at}): read, the two are one net with two drivers; "
+            "rename the escaped identifier")
+
+
 def _refuse_drivers(module: str, mod: _Module, nets: _Nets, net, who: dict, written: dict, path: Path,
                     source: str) -> None:
     """Name the bit where two drivers meet (the most writes: own drivers plus `assign`s into it) and the
     lines that drive it."""
     bits = [b for b in nets.parent if nets.find(b) == net] or [net]
     bit = max(bits, key=lambda b: (written[b], b[0].startswith("\\"), mod.wires[b[0]][3] != "input"))
+    _refuse_name_collision(_name(bit[0]), path, source)
     lines = {src_line(src, path) for src in who.values()} | set(_assign_lines(source, module, _name(bit[0])))
     lines = sorted(x for x in lines if x)
     where = f"{path}, line {lines[-1]}" if lines else f"{path}, module {module}"

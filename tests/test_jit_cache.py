@@ -73,8 +73,18 @@ print(kern.total(np.ones(3)), kern.total(np.ones((2, 2))), sum(kern.total.stats.
 """
 
 
-def _race(folder, guard: bool) -> list[str]:
-    """Both workers at once on a fresh cache, then a third process's answers and its cache hits."""
+def _check(folder, guard: bool) -> list[str]:
+    """A third process's answers for both signatures, and how many it loaded from the cache."""
+    env = dict(os.environ, GUARD="1" if guard else "0", NUMBA_CACHE_DIR=str(folder / "cache"))
+    done = subprocess.run([sys.executable, str(folder / "check.py")], env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done.stdout.split()
+
+
+def _race(folder, guard: bool) -> None:
+    """Both workers at once on a fresh cache."""
+    folder.mkdir()
     for name, text in (("kern.py", KERNEL), ("worker.py", WORKER), ("check.py", CHECK)):
         (folder / name).write_text(textwrap.dedent(text))
     env = dict(os.environ, GUARD="1" if guard else "0", NUMBA_CACHE_DIR=str(folder / "cache"))
@@ -83,31 +93,20 @@ def _race(folder, guard: bool) -> list[str]:
     for w in workers:
         out, err = w.communicate(timeout=120)
         assert w.returncode == 0, err[-2000:]
-    done = subprocess.run([sys.executable, str(folder / "check.py")], env=env, capture_output=True, text=True,
-                          timeout=120)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return done.stdout.split()
 
 
 def test_two_processes_saving_at_once_leave_each_signature_its_own_code(tmp_path):
+    """Also: a cache corrupted before the guard (or by another numba) is compiled again on its first guarded load."""
     plain, guarded = tmp_path / "plain", tmp_path / "guarded"
-    plain.mkdir(), guarded.mkdir()
+    _race(plain, guard=False)
     # the harness really interleaves: numba's own cache hands the 2-D call the 1-D code (2 + 1000, not 4 + 2000)
-    assert _race(plain, guard=False)[:2] == ["1003.0", "1002.0"], \
+    assert _check(plain, guard=False)[:2] == ["1003.0", "1002.0"], \
         "numba's own cache no longer mixes signatures here: check whether _jit.py's guard is still needed"
-    one_d, two_d, hits = _race(guarded, guard=True)
-    assert (one_d, two_d) == ("1003.0", "2004.0")
-    assert hits == "2"                  # both signatures loaded from the cache the workers wrote
-
-
-def test_a_data_file_of_another_signature_is_compiled_again_not_called(tmp_path):
-    """A cache corrupted before the guard (or by another numba) is recompiled on its first guarded load."""
-    _race(tmp_path, guard=False)
-    env = dict(os.environ, GUARD="1", NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    first, second = (subprocess.run([sys.executable, str(tmp_path / "check.py")], env=env, capture_output=True,
-                                    text=True, timeout=120).stdout.split() for _ in range(2))
-    assert first == ["1003.0", "2004.0", "0"]        # nothing taken from the unkeyed files
-    assert second == ["1003.0", "2004.0", "2"]       # what the first wrote is loaded
+    # that corrupted cache, read through the guard: nothing taken from its unkeyed files, then what it wrote
+    assert _check(plain, guard=True) == ["1003.0", "2004.0", "0"]
+    assert _check(plain, guard=True) == ["1003.0", "2004.0", "2"]
+    _race(guarded, guard=True)
+    assert _check(guarded, guard=True) == ["1003.0", "2004.0", "2"]     # both loaded from what the workers wrote
 
 
 def test_every_cached_kernel_is_guarded():

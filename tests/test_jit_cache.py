@@ -29,36 +29,40 @@ def total(a):
     return a.sum() + a.ndim * 1000.0
 """
 
-# One process: compiles `total` for a 1-D (role a) or 2-D (role b) array, its save paced after a barrier at
-# the save's own read of the index, so that b's index is written after a's and a's data after b's.
+# One process: compiles `total` for a 1-D (role a) or 2-D (role b) array.  Both meet at the start of their
+# saves (before the guard's lock, so a slow start cannot spoil the interleaving), then read the index at once,
+# and b writes its index after a's while a writes its data after b's.
 WORKER = """
 import os, sys, time
 import numpy as np
 from numba.core import caching
 
 role, here = sys.argv[1], os.path.dirname(os.path.abspath(__file__))
-index_at, data_at = {"a": (0.0, 1.0), "b": (0.3, 0.5)}[role]
-cls = caching.IndexDataCacheFile
-load_index, save_index, save_data = cls._load_index, cls._save_index, cls._save_data
-state = {"reads": 0}
+index_at, data_at = {"a": (0.5, 2.0), "b": (1.0, 1.5)}[role]
+state = {}
 
-def paced_load_index(self):
-    out = load_index(self)
-    state["reads"] += 1
-    if state["reads"] == 2:              # the save's read (the first is the load's, before compiling)
+def met(save):
+    def paced(self, key, data):
         open(os.path.join(here, "ready." + role), "w").close()
-        other, end = os.path.join(here, "ready." + ("b" if role == "a" else "a")), time.time() + 3
-        while not os.path.exists(other) and time.time() < end:      # under the guard's lock: times out
+        other, end = os.path.join(here, "ready." + ("b" if role == "a" else "a")), time.time() + 60
+        while not os.path.exists(other) and time.time() < end:
             time.sleep(0.01)
         state["t0"] = time.time()
-    return out
+        return save(self, key, data)
+    return paced
 
-def at(offset):
-    time.sleep(max(0.0, state["t0"] + offset - time.time()))
+def at(offset, call):
+    def paced(self, *args):
+        time.sleep(max(0.0, state["t0"] + offset - time.time()))
+        return call(self, *args)
+    return paced
 
-cls._load_index = paced_load_index
-cls._save_index = lambda self, overloads: (at(index_at), save_index(self, overloads))[1]
-cls._save_data = lambda self, name, data: (at(data_at), save_data(self, name, data))[1]
+cls = caching.IndexDataCacheFile
+cls._save_index, cls._save_data = at(index_at, cls._save_index), at(data_at, cls._save_data)
+cls.save = met(cls.save)
+if os.environ.get("GUARD") == "1":
+    from mech2spice.backends import _jit
+    _jit.LockedIndexDataCacheFile.save = met(_jit.LockedIndexDataCacheFile.save)
 sys.path.insert(0, here)
 import kern
 print(kern.total(np.ones(3) if role == "a" else np.ones((2, 2))))

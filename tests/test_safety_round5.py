@@ -41,6 +41,42 @@ def test_a_net_assigned_in_an_always_block_is_refused_with_its_line(tmp_path):
     assert synthesize(good).outputs == {"out": 1}
 
 
+FUNCTION_ASSIGNS_ITS_INPUT = """module f #(parameter N = 8, W = clogb2(N)) (input [W-1:0] a, output [W-1:0] y,
+                                         output [3:0] ones_a);
+  function integer clogb2;
+    input [31:0] depth;
+    for (clogb2 = 0; depth > 0; clogb2 = clogb2 + 1)
+      depth = depth >> 1;
+  endfunction
+  function [3:0] ones;
+    input [3:0] v;
+    integer i;
+    begin
+      ones = 0;
+      for (i = 0; i < 4; i = i + 1) begin
+        ones = ones + v[0];
+        v = v >> 1;
+      end
+    end
+  endfunction
+  assign y = ~a;
+  assign ones_a = ones(a);
+endmodule
+"""
+
+
+def test_a_function_that_assigns_its_own_input_is_verilog_and_is_built(tmp_path):
+    """Public RTL pass 10: a function's inputs are its variables (IEEE 1364 10.4.1), and a clog2 that shifts its
+    `depth` in a parameter's default was refused as a net assigned in an always block (Yosys warns about the
+    function's variables as it does about nets).  Built, and equal to Icarus on every input."""
+    from mech2spice import verify
+    src = tmp_path / "f.v"
+    src.write_text(FUNCTION_ASSIGNS_ITS_INPUT)
+    result = verify.verify(str(src), backend="logic")
+    assert result["verdict"] == "pass" and result["equivalence"]["status"] == "proved"
+    assert result["cosim"]["exhaustive"] and result["cosim"]["mismatches"] == []
+
+
 # ------------------------------------------------------------------ an output port nothing drives
 
 UNUSED_FLAGS = """module alu(input [1:0] a, input [1:0] b, output [2:0] s, output carry, output [1:0] flags);

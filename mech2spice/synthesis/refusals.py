@@ -22,7 +22,7 @@ from pathlib import Path
 from ..errors import Mech2SpiceError
 
 #: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
-VERSION = 9
+VERSION = 10
 
 
 def check(tmp: Path, path: Path, source: str, top: str | None) -> tuple[dict[str, list[str]], list[AliasRead]]:

@@ -675,7 +675,9 @@ def _refuse_net_in_block(result, rel: str, path: Path) -> None:
     multiclock_reader_writer.v): IEEE 1364 10.2 and 1800 10.4 allow it to variables only, Icarus and every
     simulator refuse the file, and Yosys alone builds logic from it (with a warning), so the network would
     stand for a source nothing can check it against."""
-    m = _NET_IN_BLOCK.search(result.stdout + "\n" + result.stderr)
+    # a function's own variables (`name$func$...`): a function may assign its inputs, Yosys warns all the same
+    m = next((m for m in _NET_IN_BLOCK.finditer(result.stdout + "\n" + result.stderr) if "$func$" not in m["net"]),
+             None)
     if m:
         where = f"{path}, line {m['line']}" if m["file"] == rel else str(path)
         raise Mech2SpiceError(f"{where}: '{m['net']}' is a net (a wire or a port without `reg`) assigned in an "

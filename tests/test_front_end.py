@@ -235,6 +235,44 @@ def test_memory_writes_are_guarded_on_their_own_line_and_initial_writes_are_not(
     assert guarded(vector).count("begin if (") == 1 and "if ((i) >= 0 && (i) <= 1) m[i]" in guarded(vector)
 
 
+# Public RTL pass 10: two modules, each with its own memory `mem` (16 and 4 words), and a module whose vector
+# `v` shares its name with another module's memory.  The guard took every memory's bounds file-wide: the top's
+# writes above word 3 were dropped (the 4-word memory's bounds), in the text Icarus read too (a false pass), and
+# `v[3:0] = a` became a guard around a range (a syntax error).
+TWO_MEMORIES = """module top(input clk, input we, input [3:0] wa, input [3:0] ra, input [7:0] d, output [7:0] q,
+           output [7:0] q2);
+  reg [7:0] mem [0:15];
+  always @(posedge clk) if (we) mem[wa] <= d;
+  assign q = mem[ra];
+  little s(.clk(clk), .we(we), .wa(wa[1:0]), .ra(ra[1:0]), .d(d), .q(q2));
+endmodule
+
+module little(input clk, input we, input [1:0] wa, input [1:0] ra, input [7:0] d, output [7:0] q);
+  reg [7:0] mem [0:3];
+  reg [7:0] v;
+  always @(posedge clk) if (we) mem[wa] <= d;
+  always @(*) begin v = 8'h00; v[3:0] = ra; end
+  assign q = mem[ra] ^ v;
+endmodule
+"""
+
+
+def test_each_module_guards_its_own_memories(tmp_path):
+    from mech2spice.backends.logic import ClockedLogic
+    from mech2spice.synthesis.memory_guard import guarded
+    out = guarded(TWO_MEMORIES)
+    assert "begin if ((wa) >= 0 && (wa) <= 15) mem[wa] <= d; end" in out.split("module little")[0]
+    assert "begin if ((wa) >= 0 && (wa) <= 3) mem[wa] <= d; end" in out.split("module little")[1]
+    assert "v[3:0] = ra;" in out and out.count("begin if (") == 2
+    sel = "module t(input clk, input s, input [1:0] a, input [1:0] b, input d);\n  reg m [0:3];\n" \
+          "  always @(posedge clk) m[s ? a : b] <= d;\nendmodule\n"
+    assert "begin if ((s ? a : b) >= 0 && (s ? a : b) <= 3)" in guarded(sel)        # a ternary is an index
+    nl = synthesize(_file(tmp_path, TWO_MEMORIES, "two.v"))
+    logic = ClockedLogic(nl)
+    logic.tick({"we": 1, "wa": 9, "ra": 0, "d": 0xAB})                 # word 9 of the 16-word memory
+    assert logic.evaluate({"we": 0, "wa": 0, "ra": 9, "d": 0})["q"] == 0xAB
+
+
 @needs_icarus
 @pytest.mark.parametrize("text", [PLAIN, MEM2REG], ids=["mem", "mem2reg"])
 def test_an_out_of_range_write_changes_no_word_as_on_icarus(tmp_path, text, monkeypatch):

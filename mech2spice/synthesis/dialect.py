@@ -182,6 +182,20 @@ def _edge_test(term: str, edges: dict[str, str]) -> str | None:
     return None
 
 
+_BLOCK_LABEL = re.compile(r"\b(begin|end)(\s*:\s*)([A-Za-z_][\w$]*)")
+
+
+def _relabelled(branch: str, k: int, text: str) -> str:
+    """The k-th copy of a branch with its named blocks renamed (`begin : rb` -> `begin : rb__copy2`): two blocks
+    of one name in one scope are an error (Icarus: "'rb' has already been declared")."""
+    def rename(m):
+        name = f"{m[3]}__copy{k}"
+        while re.search(rf"(?<![\w$]){re.escape(name)}(?![\w$])", text):
+            name += "_"
+        return f"{m[1]}{m[2]}{name}"
+    return _BLOCK_LABEL.sub(rename, branch)
+
+
 def _split_reset_ors(text: str) -> str:
     """An edge block whose first `if` ORs its asynchronous resets (`if (reset || clear)` under `posedge reset
     or posedge clear`, or `if (sync_clear || reset)`) as one `if` per reset, then the rest, each taking the
@@ -208,10 +222,13 @@ def _split_reset_ors(text: str) -> str:
         rest = [c for k, c in zip(order, conds) if k not in resets]
         conds = conds[:len(resets)] + ([" || ".join(rest)] if rest else [])
         b0, b1 = c1 + 1, statement_or_block_end(blanked, c1 + 1)
+        label = re.match(r"\s*:\s*[A-Za-z_][\w$]*", blanked[b1:]) if blanked[:b1].endswith("end") else None
+        b1 += label.end() if label else 0          # SystemVerilog's `end : rb` belongs to the branch
         branch = bare[b0:b1].replace("\n", " ").strip()
         flat = [" ".join(c.split()) for c in conds]
         edits.append((c0, c1, flat[0] + "\n" * blanked[c0:c1].count("\n")))
-        edits.append((b1, b1, "".join(f" else if ({c}) {branch}" for c in flat[1:])))
+        edits.append((b1, b1, "".join(f" else if ({c}) {_relabelled(branch, k, text)}"
+                                      for k, c in enumerate(flat[1:], 2))))
     for a, b, new in sorted(edits, reverse=True):
         text = text[:a] + new + text[b:]
     return text

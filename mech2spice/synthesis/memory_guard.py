@@ -81,17 +81,38 @@ def _bounds(a: str, b: str) -> tuple[str, str]:
     return f"(({a}) < ({b}) ? ({a}) : ({b}))", f"(({a}) < ({b}) ? ({b}) : ({a}))"
 
 
+def _modules(blanked: str) -> list[tuple[int, int]]:
+    """(start, end) of each module: a memory is a name in the module that declares it (another module's
+    vector of the same name is no memory, public RTL pass 10)."""
+    ends = [m.end() for m in re.finditer(r"\bendmodule\b", blanked)]
+    spans = []
+    for m in re.finditer(r"(?<![\w$`])(?:macro)?module\b", blanked):
+        end = next((e for e in ends if e > m.start()), len(blanked))
+        spans.append((m.start(), end))
+    return spans or [(0, len(blanked))]
+
+
 def guarded(text: str) -> str:
     """`text` with every procedural memory write guarded by its address range (module docstring); the
     text itself when it writes no memory at a non-literal index.  Lines are kept."""
     blanked = blank(text)
-    memories = _memories(blanked)
+    edits = []
+    for start, end in _modules(blanked):
+        edits += _guards(blanked, start, end)
+    for at, new in sorted(edits, reverse=True):
+        text = text[:at] + new + text[at:]
+    return text
+
+
+def _guards(blanked: str, start: int, end: int) -> list[tuple[int, str]]:
+    """The insertions that guard the memory writes of the module at blanked[start:end]."""
+    memories = _memories(blanked[start:end])
     if not memories:
-        return text
+        return []
     initial = _initial_spans(blanked)
     names = "|".join(re.escape(n) for n in sorted(memories, key=len, reverse=True))
     edits = []
-    for m in re.finditer(rf"(?<![\w$.])(?P<name>{names})\s*\[", blanked):
+    for m in re.compile(rf"(?<![\w$.])(?P<name>{names})\s*\[").finditer(blanked, start, end):
         if any(s <= m.start() < e for s, e in initial) or not _STATEMENT_START.search(blanked[max(0, m.start() - 80):m.start()]):
             continue
         close = _matching(blanked, m.end() - 1)
@@ -99,14 +120,12 @@ def guarded(text: str) -> str:
             continue
         index = blanked[m.end():close - 1].strip()
         rest = re.match(r"(?:\s*\[[^\]]*\])*\s*(<=|=)(?!=)", blanked[close:])
-        if rest is None or re.fullmatch(r"\d+", index):
-            continue
-        end = _statement_end(blanked, close + rest.end())
-        if end < 0:
+        if rest is None or re.fullmatch(r"\d+", index) or (":" in index and "?" not in index):
+            continue                                   # a literal word, or a range: a vector's, not a word's
+        stop = _statement_end(blanked, close + rest.end())
+        if stop < 0:
             continue
         lo, hi = _bounds(*memories[m["name"]])
         guard = f"({index}) >= {lo} && ({index}) <= {hi}"
-        edits += [(m.start(), f"begin if ({guard}) "), (end, " end")]
-    for at, new in sorted(edits, reverse=True):
-        text = text[:at] + new + text[at:]
-    return text
+        edits += [(m.start(), f"begin if ({guard}) "), (stop, " end")]
+    return edits

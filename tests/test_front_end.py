@@ -160,6 +160,31 @@ def test_severity_tasks_in_always_blocks_only_print_and_are_left_out(tmp_path, c
     assert res["verdict"] == "pass" and nl.latches()
 
 
+# Public RTL pass 10: formats Yosys does not read, and a real argument it rounds (refused as a real in logic)
+PRINTS = """module p #(parameter CLK_FREQ = 50000000) (input clk, input a, output reg q);
+  initial $display("clock period = %.0f ns",
+                   1000000000.0 / CLK_FREQ);
+  always @(posedge clk) begin
+    q <= a;
+    $display("t=%0t a=%b x=%f (%s)", $time, a, 1.5, "a ) in a string");
+    $write("%e %g %v\\n", 2.5, 0.25, a);
+  end
+endmodule
+"""
+
+
+@needs_icarus
+def test_prints_with_formats_yosys_cannot_read_are_left_out(tmp_path, capsys):
+    path = _file(tmp_path, PRINTS, "p.v")
+    text = dialect.standard_text(Path(path), PRINTS)
+    assert text.count("\n") == PRINTS.count("\n") and "%" not in text and "$display;" in text and "$write;" in text
+    nl = synthesize(path)
+    err = capsys.readouterr().err
+    assert [f"line {n}: a print" in err for n in (2, 6, 7)] == [True] * 3, err
+    res = verify.verify(path, vectors=200)
+    assert res["verdict"] == "pass" and nl.outputs == {"q": 1}
+
+
 @pytest.mark.parametrize("body, match", [
     ("  always @(posedge clk) begin q <= a; $finish; end", r"line 2: a system task \(`\$finish`\) in an `always` "
                                                            r"block: it stops the simulation"),

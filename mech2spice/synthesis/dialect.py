@@ -77,7 +77,24 @@ def standard_text(path, text: str) -> str:
     """The text every tool reads (synthesis, the proof, Icarus), line numbers kept: the VIS dialect as
     SystemVerilog (module docstring), then memory writes guarded by their address range
     (memory_guard.py: a no-op under Verilog's rules that Yosys needs); refuses `$ND` naming the file and line."""
-    return memory_guard.guarded(_split_reset_ors(_severity_as_print(_vis_as_standard(path, text))))
+    return memory_guard.guarded(_split_reset_ors(_prints_emptied(_severity_as_print(_vis_as_standard(path, text)))))
+
+
+_PRINT = re.compile(r"\$(?:display|write)\s*\(")
+
+
+def _prints_emptied(text: str) -> str:
+    """Every `$display(...)`/`$write(...)` as `$display`/`$write` without arguments, lines kept.  A print
+    computes nothing the design's outputs read, and synthesis leaves it out with a warning (its line kept by
+    the call); but Yosys reads its arguments first, refusing most formats (`%f`, `%e`, `%g`, `%t` of a
+    non-time, a precision `%.0f`) and rounding a real argument, which was refused as a real in logic
+    (public RTL pass 10: `initial $display("period = %.0f ns", 1e9 / CLK_FREQ)`)."""
+    blanked = blank(text)
+    for m in reversed(list(_PRINT.finditer(blanked))):
+        close = closing_paren(blanked, m.end() - 1)
+        if close < len(text):
+            text = text[:m.end() - 1] + "\n" * blanked.count("\n", m.end() - 1, close) + text[close + 1:]
+    return text
 
 
 _SEVERITY = re.compile(r"\$(?:error|warning|info)\b")

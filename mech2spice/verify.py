@@ -1136,12 +1136,21 @@ def compare(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], c
             m = {("cycle" if clocked else "vector"): k, "inputs": _as_ports(netlist, x[k]), "bit": bit,
                  "icarus": want, "backend": have, "amplitude": amp,
                  "margin": None if amp is None else float(levels.margin(amp, have if have is not None else levels.band_of(amp)))}
+            if clocked:
+                m["inputs_at_read"] = _inputs_at_read(netlist, x, k)
             mismatches.append(m)
     return mismatches
 
 
+def _inputs_at_read(netlist: Netlist, x: np.ndarray, k: int) -> dict:
+    """The inputs on when cycle k's outputs are read: cycle k+1's, applied after edge k (the last cycle's own).
+    `inputs` (cycle k's) are what edge k captured; a path from an input to an output sees these."""
+    return _as_ports(netlist, x[min(k + 1, len(x) - 1)])
+
+
 def cosim_trace(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict], clocked: bool) -> list[dict]:
-    """Every compared value, per vector / cycle k: {cycle or vector: k, inputs (port -> int), source (Icarus,
+    """Every compared value, per vector / cycle k: {cycle or vector: k, inputs (port -> int; clocked: those
+    edge k captured, and inputs_at_read, those on at the read: `_inputs_at_read`), source (Icarus,
     port -> "01xz" MSB first), network (the backend, port -> "01x", x an invalid bit), amplitudes (physical
     backends: output bit -> u_R)}; what `verify --vcd` writes."""
     out = []
@@ -1149,6 +1158,8 @@ def cosim_trace(netlist: Netlist, x: np.ndarray, ref: list[dict], got: list[dict
         step = {("cycle" if clocked else "vector"): k, "inputs": _as_ports(netlist, x[k]),
                 "source": _port_values(netlist, r),
                 "network": _port_values(netlist, {b: g["bits"].get(b) for b in output_bits(netlist)})}
+        if clocked:
+            step["inputs_at_read"] = _inputs_at_read(netlist, x, k)
         if g.get("amplitudes"):
             step["amplitudes"] = {b: float(a) for b, a in g["amplitudes"].items()}
         out.append(step)
@@ -1345,7 +1356,8 @@ def _mismatch_text(m: dict) -> str:
     where = f"cycle {m['cycle']}" if "cycle" in m else f"vector {m['vector']}"
     amp = "" if m["amplitude"] is None else f", amplitude {m['amplitude']:.4f} u_R, margin {m['margin']:+.3f}"
     got = "invalid" if m["backend"] is None else m["backend"]
-    return f"{where} {m['inputs']}: {m['bit']} Icarus {m['icarus']}, network {got}{amp}"
+    read = f", read with {m['inputs_at_read']}" if "inputs_at_read" in m else ""
+    return f"{where} {m['inputs']}{read}: {m['bit']} Icarus {m['icarus']}, network {got}{amp}"
 
 
 def _bits_text(bits: list[str]) -> str:

@@ -35,6 +35,10 @@ def verify_waveform(netlist: Netlist, result: dict) -> tuple[Waveform, dict]:
     _ports(wave, [top], netlist, [s["inputs"] for s in trace] + [None] * pad,
            [s["source"] for s in trace] + [None] * pad, [s["network"] for s in trace] + [None] * pad,
            [{b for (k, b) in wrong if k == i} for i in range(n)] + [None] * pad)
+    if trace and "inputs_at_read" in trace[0]:          # clocked: what a path from an input saw at the read
+        for port, width in netlist.inputs.items():
+            wave.add_wire([top, "inputs_at_read"], ids.vcd(port), width,
+                          [s["inputs_at_read"][port] for s in trace] + [None] * pad)
     for bit in trace[0].get("amplitudes") or {} if trace else {}:
         port, _, index = bit.rpartition("[")
         values = [s["amplitudes"][bit] for s in trace]

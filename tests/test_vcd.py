@@ -217,6 +217,9 @@ def _check_verify_vcd(vcd: Path, res: dict, inputs: dict, outputs: dict) -> vcdv
         t = step[key]
         for port, w in inputs.items():
             assert int(_value(v, f"{top}.inputs", ids.vcd(port), w, t), 2) == step["inputs"][port] % (1 << w)
+            if res["clocked"]:
+                assert int(_value(v, f"{top}.inputs_at_read", ids.vcd(port), w, t), 2) == \
+                       step["inputs_at_read"][port] % (1 << w)
         for port, w in outputs.items():
             name = ids.vcd(port)
             assert _value(v, f"{top}.source", name, w, t) == step["source"][port], (port, t)
@@ -276,6 +279,25 @@ def test_verify_vcd_of_a_broken_clocked_mapping_has_the_replayed_sequence(tmp_pa
     assert code == 1 and eq["status"] == "counterexample" and eq["replay"]["reproduced"], err
     assert len(eq["replay"]["trace"]) == len(eq["counterexample"]) >= 2
     _check_verify_vcd(vcd, res, {"rst": 1, "en": 1}, {"q": 4})
+
+
+@needs_icarus
+def test_a_clocked_cycle_names_the_inputs_it_captured_and_those_it_was_read_with(tmp_path, capsys):
+    """A cycle's outputs are read after its edge with the next cycle's inputs on: a register shows `inputs`
+    (what the edge captured), a path from an input shows `inputs_at_read`.  A mismatch listed only `inputs`,
+    which made a bus Icarus read as z look driven (public RTL suite, cal_bus)."""
+    src = tmp_path / "t.v"
+    src.write_text("module t(input clk, input [2:0] a, output [2:0] y, output reg [2:0] q);\n"
+                   "  assign y = a;\n  always @(posedge clk) q <= a;\nendmodule\n")
+    vcd = tmp_path / "t.vcd"
+    code, out, err = _verify(capsys, src, "--cycles", 40, "--vcd", vcd, "--json")
+    res = json.loads(out)
+    assert code == 0, err
+    trace = res["cosim"]["trace"]
+    assert [int(s["source"]["q"], 2) for s in trace] == [s["inputs"]["a"] for s in trace]
+    assert [int(s["source"]["y"], 2) for s in trace] == [s["inputs_at_read"]["a"] for s in trace]
+    assert [s["inputs_at_read"] for s in trace[:-1]] == [s["inputs"] for s in trace[1:]]
+    _check_verify_vcd(vcd, res, {"a": 3}, {"y": 3, "q": 3})
 
 
 @needs_icarus

@@ -925,9 +925,15 @@ def _run_tool(cmd: list[str], cwd: str, name: str) -> subprocess.CompletedProces
     except subprocess.TimeoutExpired:
         raise Mech2SpiceError(f"{name} did not finish within {ICARUS_TIMEOUT_S} s") from None
     if proc.returncode != 0:
-        first = next((ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()), "")
-        raise Mech2SpiceError(f"{name} failed on the source design: {first.strip()}")
+        raise Mech2SpiceError(f"{name} failed on the source design: {_first_error(proc.stderr + proc.stdout)}")
     return proc
+
+
+def _first_error(log: str) -> str:
+    """The line that says why a tool stopped: its first `error` line, else its first line (Icarus writes
+    `sorry:` notices and warnings before the error that stops it, public RTL pass 10)."""
+    lines = [ln.strip() for ln in log.splitlines() if ln.strip()]
+    return next((ln for ln in lines if re.search(r"\berror\b", ln, re.I)), lines[0] if lines else "")
 
 
 # --------------------------------------------------------------------------- vectors

@@ -603,3 +603,17 @@ def test_a_register_synthesis_fixed_from_an_undefined_start_is_proved(tmp_path, 
                    "  always @(posedge clk) begin d <= m[a]; done <= 1; end\nendmodule\n")
     res = V.equivalence(src, synthesize(src), budget_s=100, engine=engine)
     assert res["status"] == "proved", res
+
+
+def test_icarus_refusing_the_source_is_quoted_at_its_error_not_its_first_notice(tmp_path, capsys):
+    """Public RTL pass 10 (pConst/basic_verilog leave_one_hot.sv): Icarus writes a `sorry:` notice before the
+    error that stops it, and verify quoted the notice."""
+    src = tmp_path / "t.sv"
+    src.write_text("module t (input [3:0] in, output logic [3:0] out);\n  genvar i;\n"
+                   "  for (i = 1; i < 4; i++) begin : g\n    always_comb out[i] = in[i] & ~in[i-1];\n  end\n"
+                   "  assign out[0] = in[0];\nendmodule\n")
+    code = cli.main(["verify", str(src)])
+    last = capsys.readouterr().err.splitlines()[-1]          # after the progress lines
+    assert code == 2 and last.startswith("mech2spice: error: iverilog -g2012 failed on the source design: ")
+    assert last.endswith(f"{src}:6: error: reg out; cannot be driven by primitives or continuous assignment.")
+    assert V._first_error("\n a: warning: w\nb: sorry: s\n") == "a: warning: w"      # no error line: the first

@@ -195,6 +195,15 @@ def test_one_top_with_submodules_needs_no_top(tmp_path, capsys):
     assert logic(capsys, src, {"a": 2}) == {"y": 1}
 
 
+def test_an_interface_beside_the_module_is_no_top_candidate(tmp_path, capsys):
+    """Public RTL pass 10: a SystemVerilog `interface` in the file was listed as a second top-level module."""
+    src = verilog(tmp_path, "module m(input logic clk, input logic d, output logic q);\n"
+                            "  always_ff @(posedge clk) q <= d;\nendmodule\n\n"
+                            "interface bus_if(input logic clk);\n  logic valid;\nendinterface\n", "m.sv")
+    rc, out, err = run(capsys, "synth", src, "--json")
+    assert rc == 0 and json.loads(out)["top"] == "m", err
+
+
 @pytest.mark.parametrize("design", sorted(p.name for p in (ROOT / "verilog").glob("*.v")))
 def test_every_shipped_design_synthesises_as_before(capsys, design):
     """The new checks refuse none of verilog/ (the three refused here were refused before, for their own reason;

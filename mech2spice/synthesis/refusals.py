@@ -57,7 +57,7 @@ def _name(rtlil_id: str) -> str:
 
 def single_top(tmp: Path, path: Path) -> str | None:
     """The top module of a source read without --top (read.il and ast.txt in `tmp`): the one marked (* top *),
-    else the one module no other instantiates; several such are refused (Yosys would pick one by itself).
+    else the one module (not an interface or a blackbox) no other instantiates; several such are refused (Yosys would pick one by itself).
     None where there is no candidate (every module instantiated: Yosys's -auto-top decides)."""
     used = instantiated((tmp / "ast.txt").read_text())
     modules, marked, attrs = {}, [], {}
@@ -66,7 +66,7 @@ def single_top(tmp: Path, path: Path) -> str | None:
             attrs[m[1]] = m[2]
         elif m := re.match(r"module (\S+)$", line):
             name = _name(m[1])
-            if attrs.get("blackbox", "0") == "0":
+            if attrs.get("blackbox", "0") == "0" and attrs.get("is_interface", "0") == "0":    # an interface: no design
                 modules[name] = src_line(attrs.get("src", "").strip('"'), path)
             if attrs.get("top", "0") != "0":
                 marked.append(name)

@@ -41,7 +41,8 @@ if TYPE_CHECKING:
 INDUCTION_STEPS = 20          # sat -tempinduct -maxsteps: base case (BMC) and induction depth
 PROOF_BUDGET_S = 120          # default wall-clock budget of the whole proof (--proof-time)
 MAX_EXHAUSTIVE_BITS = 20      # --exhaustive refuses wider inputs (2^20 vectors)
-ICARUS_TIMEOUT_S = 600
+ICARUS_TIMEOUT_S = 600        # iverilog's compile; a co-simulation's run is --cosim-time's
+COSIM_BUDGET_S = 600          # default wall-clock budget of each Icarus run of the co-simulation (--cosim-time)
 RESET_HIGH = ("rst", "reset")
 RESET_LOW = ("rst_n", "rstn", "reset_n", "resetn")
 RESET_AGAIN = 1 / 16          # after the first cycle a reset port is asserted this often (resets mid-run)
@@ -725,7 +726,8 @@ def _testbench(netlist: Netlist, n: int, clocked: bool, first_read: bool = False
         if netlist.sampled:
             return _apply_sampled(netlist, f"{mem}[{index}]", wait)
         return f"{{{', '.join(ins)}}} = {mem}[{index}];" if ins else ";"
-    show = f'$display("{tag} ' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + ");"
+    # flushed: a run cut at its budget (`_run_cut`) leaves every row it printed
+    show = f'$display("{tag} ' + " ".join(["%b"] * len(outs)) + '", ' + ", ".join(outs) + "); $fflush;"
     if start:
         after = ["    #2;"] if netlist.sampled else []        # sampled: after the clocks' first values
         lines += ["  initial begin"] + after + [f"    {st}" for st in start] + ["  end"]
@@ -813,8 +815,11 @@ def _reg_names(path) -> list[str]:
 
 
 def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings: list | None = None,
-           info: dict | None = None, first_read: bool = False, start=None) -> list[dict[str, str]]:
-    """Run the source on Icarus: per vector (or cycle), output bit -> '0', '1', 'x' or 'z'.  `warnings`, if
+           info: dict | None = None, first_read: bool = False, start=None,
+           budget_s: float | None = None) -> list[dict[str, str]]:
+    """Run the source on Icarus: per vector (or cycle), output bit -> '0', '1', 'x' or 'z'.  `budget_s`: the
+    run's wall-clock budget; where it runs out, the vectors (cycles) read so far, and `info["cut"]` says so
+    (at least one, else an error); None: every vector, or an error after ICARUS_TIMEOUT_S.  `warnings`, if
     given, receives iverilog's lines on output ports it coerced to inout: ports the source never drives
     (an `assign internal = port` written backwards), which read z on Icarus while Yosys joins the two nets;
     `info`, if given, the generation iverilog compiled with (`generations`) and, with `start`
@@ -836,7 +841,10 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
             if info is not None and start:
                 bound = sum(any(w in ways for w in entry) for entry in start)
                 info["started"] = {"register_bits": bound, "not_found": len(start) - bound}
-        out = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout
+        if budget_s is None:
+            out, cut = _run_tool([vvp, "-n", "sim.vvp"], tmp, "vvp").stdout, False
+        else:
+            out, cut = _run_cut([vvp, "-n", "sim.vvp"], tmp, budget_s)
     if info is not None:
         info["icarus_generation"] = gen
     if warnings is not None:
@@ -845,9 +853,30 @@ def icarus(path, netlist: Netlist, vectors: np.ndarray, clocked: bool, warnings:
     # after the tag: a source's `$write` without a newline puts its text before it on the same line
     rows = [ln[ln.index(tag) + len(tag):].split() for ln in out.splitlines() if tag in ln]
     rows = [r for r in rows if len(r) == len(netlist.outputs) and all(re.fullmatch(r"[01xzXZ]+", s) for s in r)]
-    if len(rows) != len(vectors) + (first_read and clocked):
+    if cut:
+        if not rows:
+            raise Mech2SpiceError(f"Icarus read no {'cycle' if clocked else 'vector'} of the co-simulation within "
+                                  f"its budget ({budget_s:g} s, --cosim-time)")
+        if info is not None:
+            info["cut"] = {"read": len(rows), "of": len(vectors), "budget_s": budget_s}
+    elif len(rows) != len(vectors) + (first_read and clocked):
         raise Mech2SpiceError(f"Icarus printed {len(rows)} result lines for {len(vectors)} vectors")
     return [_bits_of(netlist, r) for r in rows]
+
+
+def _run_cut(cmd: list[str], cwd: str, budget_s: float) -> tuple[str, bool]:
+    """A simulation's stdout, and whether its budget ran out first: then what it printed in whole lines so far
+    (the testbench flushes each row).  A failure is an error, as `_run_tool`'s."""
+    try:
+        proc = subprocess.run(cmd, cwd=cwd, capture_output=True, timeout=budget_s)
+    except subprocess.TimeoutExpired as e:
+        printed = (e.stdout or b"").decode("utf-8", "replace")
+        return printed[:printed.rfind("\n") + 1], True
+    text = proc.stdout.decode("utf-8", "replace")
+    if proc.returncode != 0:
+        raise Mech2SpiceError(f"vvp failed on the source design: "
+                              f"{_first_error(proc.stderr.decode('utf-8', 'replace') + text)}")
+    return text, False
 
 
 def generations(path: Path) -> tuple[str, ...]:
@@ -1182,9 +1211,11 @@ def undefined_by_port(netlist: Netlist, ref: list[dict]) -> dict:
 
 
 def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool, seed: int, params=None,
-          progress=False, reset=None, resets: list[dict] | None = None, keep_trace: bool = False) -> dict:
+          progress=False, reset=None, resets: list[dict] | None = None, keep_trace: bool = False,
+          budget_s: float = COSIM_BUDGET_S) -> dict:
     """Icarus against the backend on the same vectors (clocked: cycles after a reset): the mismatches;
-    `keep_trace`: also every compared value ("trace", `cosim_trace`)."""
+    `keep_trace`: also every compared value ("trace", `cosim_trace`).  `budget_s`: each Icarus run's; where it
+    runs out, the vectors it read are the ones compared (`cut`: {read, of, budget_s})."""
     t0 = time.time()
     clocked = netlist.clocked
     physical = _physical(backend)
@@ -1201,7 +1232,8 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
             x = x[np.random.default_rng(seed).permutation(len(x))[:n]]
             complete = False
     warnings, info = [], {}
-    ref = icarus(path, netlist, x, clocked, warnings, info)
+    ref = icarus(path, netlist, x, clocked, warnings, info, budget_s=budget_s)
+    x, complete = x[:len(ref)], complete and len(ref) == len(x)       # cut at the budget: what Icarus read
     got = run_backend(netlist, x, clocked, backend, params, progress)
     levels = None if params is None else params.levels
     mismatches = compare(netlist, x, ref, got, clocked, levels)
@@ -1211,7 +1243,7 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
                                                     or _undefined_ports(netlist, ref)) else []
     compared = None
     if start:
-        mismatches, compared = _from_power_up(path, netlist, x, got, levels, start, mismatches, info)
+        mismatches, compared = _from_power_up(path, netlist, x, got, levels, start, mismatches, info, budget_s)
     if keep_trace:
         info["trace"] = cosim_trace(netlist, x, compared or ref, got, clocked)
     out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
@@ -1260,7 +1292,7 @@ def _undefined_ports(netlist: Netlist, ref: list[dict], every: bool = False) -> 
     return found
 
 
-def _from_power_up(path, netlist: Netlist, x, got, levels, start, mismatches, info):
+def _from_power_up(path, netlist: Netlist, x, got, levels, start, mismatches, info, budget_s=COSIM_BUDGET_S):
     """Icarus again, each register the source leaves without a power-up value started where the network
     starts it (x on Icarus until written, and an `if (x)` takes the else branch: a run from no state any
     circuit has).  That run is one the source allows: where it agrees, the as-written mismatches were
@@ -1268,7 +1300,11 @@ def _from_power_up(path, netlist: Netlist, x, got, levels, start, mismatches, in
     Returns (mismatches, the Icarus run they are counted on, None for the as-written one).
     `info["power_up_start"]` says what was done."""
     sub = {}
-    ref = icarus(path, netlist, x, True, info=sub, start=start)
+    ref = icarus(path, netlist, x, True, info=sub, start=start, budget_s=budget_s)
+    if len(ref) < len(x):                       # this run's budget ran out first: the as-written run stands
+        info["power_up_start"] = {**sub["started"], "cut": sub["cut"], "mismatches": None,
+                                  "as_written_mismatches": len(mismatches)}
+        return mismatches, None
     again = compare(netlist, x, ref, got, True, levels)
     info["power_up_start"] = {**sub["started"], "mismatches": len(again), "as_written_mismatches": len(mismatches)}
     if sub["started"]["register_bits"] and (not again or not mismatches):
@@ -1282,8 +1318,9 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
            exhaustive: bool = False, seed: int = 0, params=None, progress=False, log=None,
            netlist: Netlist | None = None, reset=None, equivalence_check: bool = True,
            proof_time: float = PROOF_BUDGET_S, keep_trace: bool = False, proof_engine: str = "auto",
-           max_fanout: int | None = None) -> dict:
-    """Equivalence and co-simulation of one design; `netlist` replaces the synthesised one (tests), which
+           max_fanout: int | None = None, cosim_time: float = COSIM_BUDGET_S) -> dict:
+    """Equivalence and co-simulation of one design; `cosim_time`: each Icarus run's budget (`cosim`);
+    `netlist` replaces the synthesised one (tests), which
     is otherwise built with `simulate`'s buffer trees (`max_fanout`, default network.MAX_FANOUT);
     `keep_trace`: the co-simulation's compared values too (cosim.trace, for --vcd); `proof_engine`: auto, abc
     or sat (`equivalence`)."""
@@ -1308,7 +1345,7 @@ def verify(path, top: str | None = None, backend: str = "logic", vectors: int | 
             log(f"equivalence: {out['equivalence']['status']} ({out['equivalence']['wall_s']:.1f} s)")
         log(f"co-simulation against Icarus on {backend}")
         out["cosim"] = cosim(src, nl, backend, vectors, exhaustive, seed, params, progress, reset, resets,
-                             keep_trace)
+                             keep_trace, budget_s=cosim_time)
     eq = out.get("equivalence", {}).get("status", "proved")
     out["verdict"] = "pass" if eq == "proved" and out["cosim"]["agree"] else \
         "fail" if eq == "counterexample" or not out["cosim"]["agree"] else "unknown"
@@ -1425,6 +1462,9 @@ def text(result: dict) -> str:
                     if co.get("driven_by_nothing") else "")
                  + (f"; valid {co['valid']}, stable {co['stable']}, min margin {co['min_margin']:+.3f}"
                     if "valid" in co and co["min_margin"] is not None else ""))
+    if co.get("cut"):
+        lines.append(f"  Icarus's budget ({co['cut']['budget_s']:g} s, --cosim-time) ran out: {co['cut']['read']} of "
+                     f"{co['cut']['of']} {'cycles' if 'cycles' in co else 'vectors'} read, and compared")
     lines += [f"  source: {w} (Yosys joins the nets, so the proof is of that reading)"
               for w in co.get("source_warnings", [])]
     if co.get("power_up_start"):

@@ -6,6 +6,7 @@ import json
 import re
 import os
 import shutil
+import sys
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -617,3 +618,25 @@ def test_icarus_refusing_the_source_is_quoted_at_its_error_not_its_first_notice(
     assert code == 2 and last.startswith("mech2spice: error: iverilog -g2012 failed on the source design: ")
     assert last.endswith(f"{src}:6: error: reg out; cannot be driven by primitives or continuous assignment.")
     assert V._first_error("\n a: warning: w\nb: sorry: s\n") == "a: warning: w"      # no error line: the first
+
+
+def test_a_cosimulation_past_its_budget_compares_the_cycles_icarus_read(tmp_path, monkeypatch, capsys):
+    """Public RTL pass 10: pConst's 512-bit scrambler takes Icarus ~3.5 s a cycle, so verify's default 1000 cycles
+    ran about an hour with nothing said (and an error at 600 s).  Here vvp stops after five rows: the budget
+    (--cosim-time) ends the run, the five cycles read are compared, and the report says so."""
+    iverilog, vvp = V._icarus_tools()
+    stalled = tmp_path / "stalled_vvp"
+    stalled.write_text(f"#!{sys.executable}\nimport subprocess, sys, time\n"
+                       f"run = subprocess.Popen([{vvp!r}, *sys.argv[1:]], stdout=subprocess.PIPE, text=True)\n"
+                       "for k, line in enumerate(run.stdout):\n"
+                       "    sys.stdout.write(line)\n    sys.stdout.flush()\n"
+                       "    if k == 4:\n        run.kill()\n        time.sleep(120)\n")
+    stalled.chmod(0o755)
+    monkeypatch.setattr(V, "_icarus_tools", lambda: (iverilog, str(stalled)))
+    code = cli.main(["verify", str(ROOT / "verilog" / "counter4.v"), "--cycles", "40", "--cosim-time", "4",
+                     "--no-equivalence", "--json"])
+    res = json.loads(capsys.readouterr().out)
+    co = res["cosim"]
+    assert code == 0 and res["verdict"] == "pass"
+    assert co["cut"] == {"read": 5, "of": 40, "budget_s": 4.0} and co["cycles"] == 5 and co["agree"]
+    assert "Icarus's budget (4 s, --cosim-time) ran out: 5 of 40 cycles read, and compared" in V.text(res)

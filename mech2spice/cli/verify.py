@@ -7,7 +7,7 @@ from .. import inputs
 from ..backends import BACKENDS
 from ..errors import Mech2SpiceError
 from ..physics.network import MAX_FANOUT
-from ..verify import PROOF_BUDGET_S, check_names, exit_code, junit_xml, reset_ports, text, verify
+from ..verify import COSIM_BUDGET_S, PROOF_BUDGET_S, check_names, exit_code, junit_xml, reset_ports, text, verify
 
 
 def add_parser(subparsers) -> None:
@@ -38,6 +38,10 @@ def add_parser(subparsers) -> None:
     s.add_argument("--proof-time", type=inputs.number(1, 86400), metavar="S", default=PROOF_BUDGET_S,
                    help=f"wall-clock budget of the proof in seconds (default {PROOF_BUDGET_S}); when it runs out the "
                         "equivalence is 'unknown' with the depth reached")
+    s.add_argument("--cosim-time", type=inputs.number(1, 86400), metavar="S", default=COSIM_BUDGET_S,
+                   help=f"wall-clock budget of each Icarus run of the co-simulation in seconds (default "
+                        f"{COSIM_BUDGET_S}); when it runs out, the cycles (vectors) Icarus read are the ones compared, "
+                        "and the report says how many")
     s.add_argument("--proof-engine", choices=("auto", "abc", "sat"), default="auto",
                    help="the equivalence proof's engine: auto (default: Berkeley ABC's pdr/iprove first with 3/4 of "
                         "the budget when berkeley-abc is installed, then Yosys sat), abc, or sat (docs/verify.md)")
@@ -109,7 +113,7 @@ def cmd_verify(args) -> int:
     res = verify(args.design, backend=args.backend, vectors=args.cycles or args.vectors, exhaustive=args.exhaustive,
                  seed=args.seed, params=params, progress=_progress(args), log=_log(args), netlist=nl,
                  reset=args.reset, equivalence_check=not args.no_equivalence, proof_time=args.proof_time,
-                 keep_trace=args.vcd is not None, proof_engine=args.proof_engine)
+                 keep_trace=args.vcd is not None, proof_engine=args.proof_engine, cosim_time=args.cosim_time)
     if args.junit:
         inputs.write_text(args.junit, junit_xml(res))
     if args.vcd is not None:

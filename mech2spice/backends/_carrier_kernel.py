@@ -17,7 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._jit import AVAILABLE, njit      # numba's njit with a cache concurrent processes cannot corrupt
+from . import _jit
+from ._jit import njit      # numba's njit with a cache concurrent processes cannot corrupt
+
+AVAILABLE = _jit.AVAILABLE     # carrier.py reads it
 
 try:
     from numba import prange

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._jit import AVAILABLE, njit      # numba's njit with a cache concurrent processes cannot corrupt
+from . import _jit
+from ._jit import njit      # numba's njit with a cache concurrent processes cannot corrupt
+
+AVAILABLE = _jit.AVAILABLE     # rk4.py reads it, studies/performance.py sets it False
 
 
 @njit(cache=True, fastmath=False)

@@ -503,7 +503,7 @@ def test_a_rom_read_by_readmem_is_constant_logic_equal_to_icarus(tmp_path, capsy
 @pytest.mark.parametrize("literal, needle", [
     ('"nope.hex"', "which is not a file in the design's folder"),
     ('"../rom.hex"', "is not a plain relative path inside the design's folder"),
-    ("name", "its file name is not a string literal"),
+    ("name", "its file name is neither a string literal nor a parameter"),
     ('"bad.hex"', "'bad.hex', line 2: 'g4' is not a hex word"),
     ('"float.hex"', "a ROM word has no z"),
     ('"bytes.hex"', "is not text"),
@@ -516,6 +516,30 @@ def test_a_readmem_file_no_tool_reads_the_same_way_is_refused_with_its_line(tmp_
                             f"  initial $readmemh({literal}, mem);\n  assign q = mem[a];\nendmodule\n")
     assert refused(capsys, "synth", src, needle=f"line 3: `$readmemh`/`$readmemb` in an `initial` block: ")
     assert refused(capsys, "synth", src, needle=needle)
+
+
+ROM_BY_PARAMETER = """module rom #(parameter ROM_FILE = "font.mem", parameter W = 4) (input [1:0] a, output [W-1:0] q);
+  reg [W-1:0] mem [0:3];
+  initial $readmemb(ROM_FILE, mem);
+  assign q = mem[a];
+endmodule
+"""
+
+
+def test_a_rom_named_by_a_parameter_is_read_at_its_default(tmp_path, capsys):
+    """Public RTL pass 10 (teamname/vgatest's font_rom.v): `$readmemb(ROM_DATA_FILE, MY_ROM)` with the name a
+    parameter's string default was refused as not a string literal.  Where nothing can override the default,
+    that file is the ROM, for every tool; an override (a `.ROM_FILE(...)` connection) is still refused."""
+    (tmp_path / "font.mem").write_text("1010\n0101\n1111\n0000\n")
+    src = verilog(tmp_path, ROM_BY_PARAMETER)
+    assert [evaluate(synthesize(src), {"a": k})["q"] for k in range(4)] == [0b1010, 0b0101, 0b1111, 0]
+    res = _verify(capsys, src)
+    assert res["verdict"] == "pass" and res["cosim"]["exhaustive"] and not res["cosim"]["mismatches"]
+    (tmp_path / "font.mem").write_text("0001\n")                    # the cache key holds the file's bytes
+    assert evaluate(synthesize(src), {"a": 0})["q"] == 1
+    over = verilog(tmp_path, ROM_BY_PARAMETER + "module top(input [1:0] a, output [3:0] q);\n"
+                   '  rom #(.ROM_FILE("other.mem")) r(.a(a), .q(q));\nendmodule\n', "over.v")
+    refused(capsys, "synth", over, needle="nor a parameter whose string default nothing can override")
 
 
 POWERS = """module powers(input [3:0] a, input [2:0] b, input signed [3:0] sa, input signed [2:0] sb,

@@ -105,10 +105,26 @@ def readmem_calls(text: str) -> list[tuple[int, int, str | None]]:
     out = []
     for m in _READMEM.finditer(kept):
         lit = _LITERAL.match(kept, m.end())
+        named = _NAMED.match(kept, m.end())
         paren = kept.find("(", m.end())
         end = min(len(kept), closing_paren(kept, paren) + 1) if paren >= 0 else m.end()
-        out.append((m.start(), end, lit.group(1) if lit else None))
+        out.append((m.start(), end, lit.group(1) if lit else _parameter_file(kept, named[1]) if named else None))
     return out
+
+
+_NAMED = re.compile(r"\s*\(\s*([A-Za-z_][\w$]*)\s*,")
+
+
+def _parameter_file(kept: str, name: str) -> str | None:
+    """The file a `$readmem` names by a parameter (`$readmemb(ROM_FILE, rom)`, `parameter ROM_FILE = "font.mem"`):
+    its string default, where one declaration gives it and nothing can override it (no `defparam`, no
+    `.ROM_FILE(` connection anywhere, no positional parameter list); else None (refused, as any other name
+    a tool learns only by elaborating the design)."""
+    defaults = re.findall(rf'\b(?:parameter|localparam)\b[^;]*?(?<![\w$]){re.escape(name)}\s*=\s*"((?:\\.|[^"\\\n])*)"',
+                          kept)
+    overridable = re.search(r"\bdefparam\b", kept) or re.search(rf"\.\s*{re.escape(name)}\s*\(", kept) \
+        or re.search(r"#\s*\(\s*(?!parameter\b|localparam\b)[^.\s)]", kept)    # `u #(8, "x.mem")`: positional
+    return defaults[0] if len(defaults) == 1 and not overridable else None
 
 
 def readmem_problem(name: str | None, folder, hexadecimal: bool | None = True) -> str | None:
@@ -118,7 +134,8 @@ def readmem_problem(name: str | None, folder, hexadecimal: bool | None = True) -
     relative path (`link_readmem_files`): so a path inside the design's folder."""
     from pathlib import Path, PurePosixPath
     if name is None:
-        return "its file name is not a string literal (a tool reads the name when it builds the design)"
+        return ("its file name is neither a string literal nor a parameter whose string default nothing can "
+                "override (a tool reads the name when it builds the design)")
     rel = PurePosixPath(name)
     if not name or rel.is_absolute() or ".." in rel.parts or "\\" in name or not name.isprintable():
         return (f"the file name {name!r} is not a plain relative path inside the design's folder, which is "

@@ -488,3 +488,17 @@ def test_yosys_stage_names_the_step_and_the_module():
     assert yosys.stage(log + "Generating RTLIL representation for module `$paramod\\lib\\N=s32'101'.\n") \
         == yosys.stage(log)
     assert yosys.stage("") == "starting"
+
+
+def test_an_internal_assertion_of_yosys_is_named_as_yosys_s_defect(tmp_path, monkeypatch):
+    """Public RTL pass 10: WangXuan95/FPGA-FixedPoint's fxp_add stops Yosys 0.70 at an assertion in its front end
+    (genrtlil.cc), which Icarus does not share; the message read as if the design were refused."""
+    from mech2spice.synthesis.synth import synthesize
+    src = tmp_path / "t.v"
+    src.write_text("module t(input a, output y);\n  assign y = ~a;\nendmodule\n")
+    failed = yosys.YosysResult(1, "ERROR: Assert `arg->is_signed == sig.as_wire()->is_signed' failed in "
+                                  "frontends/ast/genrtlil.cc:2144.\n", "")
+    monkeypatch.setattr(yosys, "run_script", lambda *a, **k: failed)
+    with pytest.raises(Mech2SpiceError, match=r"genrtlil\.cc:2144; this is an internal check of Yosys failing, "
+                                              r"a defect of Yosys's reading, not a refusal of the source"):
+        synthesize(src)

@@ -249,10 +249,8 @@ def processor(quick: bool = False) -> dict:
 def _bench_kernels():
     """Numba microbenchmarks: FMA chains (four dependent FMAs per element per pass, so loads and stores do not
     bound it; FMA contraction only, no reassociation that could fold the chain) and the triad."""
-    from numba import prange
-
-    from ..backends._jit import njit         # cached: the locked, keyed cache
-    flags = dict(fastmath={"contract"}, cache=True)
+    from numba import njit, prange
+    flags = dict(fastmath={"contract"}, cache=False)     # compiled once per run, before the timings (warm calls)
 
     @njit(**flags)
     def fma(x, reps, a, b):

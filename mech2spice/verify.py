@@ -1233,8 +1233,9 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
             complete = False
     warnings, info = [], {}
     ref = icarus(path, netlist, x, clocked, warnings, info, budget_s=budget_s)
-    x, complete = x[:len(ref)], complete and len(ref) == len(x)       # cut at the budget: what Icarus read
-    got = run_backend(netlist, x, clocked, backend, params, progress)
+    # cut at the budget: the rows Icarus read, the last of them (clocked) with the next cycle's inputs on
+    x, complete = x[:len(ref) + 1], complete and len(ref) == len(x)
+    got = run_backend(netlist, x, clocked, backend, params, progress)[:len(ref)]
     levels = None if params is None else params.levels
     mismatches = compare(netlist, x, ref, got, clocked, levels)
     driven = _driven(netlist, ref)
@@ -1246,7 +1247,7 @@ def cosim(path, netlist: Netlist, backend: str, n: int | None, exhaustive: bool,
         mismatches, compared = _from_power_up(path, netlist, x, got, levels, start, mismatches, info, budget_s)
     if keep_trace:
         info["trace"] = cosim_trace(netlist, x, compared or ref, got, clocked)
-    out = {"backend": backend, ("cycles" if clocked else "vectors"): len(x), "exhaustive": complete,
+    out = {"backend": backend, ("cycles" if clocked else "vectors"): len(ref), "exhaustive": complete,
            "seed": seed, "mismatches": mismatches, "agree": not mismatches, "wall_s": time.time() - t0,
            "undefined_bits": sum(v in "xX" for r in driven for v in r.values()),
            "undriven_bits": sum(v in "zZ" for r in driven for v in r.values()),
@@ -1301,10 +1302,11 @@ def _from_power_up(path, netlist: Netlist, x, got, levels, start, mismatches, in
     `info["power_up_start"]` says what was done."""
     sub = {}
     ref = icarus(path, netlist, x, True, info=sub, start=start, budget_s=budget_s)
-    if len(ref) < len(x):                       # this run's budget ran out first: the as-written run stands
+    if len(ref) < len(got):                     # this run's budget ran out first: the as-written run stands
         info["power_up_start"] = {**sub["started"], "cut": sub["cut"], "mismatches": None,
                                   "as_written_mismatches": len(mismatches)}
         return mismatches, None
+    ref = ref[:len(got)]                        # the rows compared (x may hold the next cycle's inputs too)
     again = compare(netlist, x, ref, got, True, levels)
     info["power_up_start"] = {**sub["started"], "mismatches": len(again), "as_written_mismatches": len(mismatches)}
     if sub["started"]["register_bits"] and (not again or not mismatches):

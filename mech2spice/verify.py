@@ -954,7 +954,11 @@ def _run_tool(cmd: list[str], cwd: str, name: str) -> subprocess.CompletedProces
     except subprocess.TimeoutExpired:
         raise Mech2SpiceError(f"{name} did not finish within {ICARUS_TIMEOUT_S} s") from None
     if proc.returncode != 0:
-        raise Mech2SpiceError(f"{name} failed on the source design: {_first_error(proc.stderr + proc.stdout)}")
+        line = _first_error(proc.stderr + proc.stdout)
+        if re.search(r"\bassert(ion)?\b.*\.cc:\d+|\.cc:\d+.*\bassert", line):   # pConst's fifo (public RTL pass 10)
+            line += (" (an internal check of Icarus failing: a defect of Icarus, not a refusal of the source; "
+                     "synth and simulate do not run Icarus)")
+        raise Mech2SpiceError(f"{name} failed on the source design: {line}")
     return proc
 
 

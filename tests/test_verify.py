@@ -644,3 +644,19 @@ def test_a_cosimulation_past_its_budget_compares_the_cycles_icarus_read(tmp_path
     assert co["cut"] == {"read": 5, "of": 40, "budget_s": 4.0} and co["cycles"] == 5 and co["agree"]
     assert co["compared_run"] == "as_written"       # no mismatch to rerun for: cycle 4 read with cycle 5's a on
     assert "Icarus's budget (4 s, --cosim-time) ran out: 5 of 40 cycles read, and compared" in V.text(res)
+
+
+def test_an_internal_assertion_of_icarus_is_named_as_icarus_s_defect(tmp_path, monkeypatch, capsys):
+    """Public RTL pass 10: Icarus 11 aborts on pConst's fifo_single_clock_reg_v1.sv (`assert: elab_lval.cc:689:
+    failed assertion`), which synthesises; the message read as if the source were refused."""
+    iverilog, vvp = V._icarus_tools()
+    aborts = tmp_path / "aborting_iverilog"
+    aborts.write_text(f"#!{sys.executable}\nimport sys\n"
+                      "sys.stderr.write('./x_init.svh:19: assert: elab_lval.cc:689: failed assertion rcl\\n')\n"
+                      "sys.exit(134)\n")
+    aborts.chmod(0o755)
+    monkeypatch.setattr(V, "_icarus_tools", lambda: (str(aborts), vvp))
+    code = cli.main(["verify", str(ROOT / "verilog" / "adder2.v"), "--no-equivalence"])
+    last = capsys.readouterr().err.splitlines()[-1]
+    assert code == 2 and "elab_lval.cc:689: failed assertion rcl (an internal check of Icarus failing: a " \
+                          "defect of Icarus, not a refusal of the source" in last, last

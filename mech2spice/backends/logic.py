@@ -130,19 +130,20 @@ class _Levels:
             rows.setdefault(level[gate], []).append((self.at[gate], a, b))
         self.levels = [np.array(rows[k]).T for k in sorted(rows)]
         self.outputs = [(self.at[o], self.at[next(iter(g.predecessors(o)))]) for o in output_bits(netlist)]
-        self.ones = [self.at[n] for n in g if g.nodes[n]["kind"] == "const" and n == "const1"]
+        self.latches = netlist.latches()
 
     def evaluate(self, values: dict, state: dict | None) -> dict[str, int]:
         """What evaluate_bits(netlist, values, state) gives."""
         netlist, at = self.netlist, self.at
         val = np.zeros(len(self.nodes) + 1, dtype=bool)
-        latches = netlist.latches()
-        held = state if state is not None and len(state) == len(latches) else {**power_up(netlist), **(state or {})}
+        held = state if state is not None and len(state) == len(self.latches) else \
+            {**power_up(netlist), **(state or {})}
         for name, v in _input_bit_values(netlist, values).items():
             val[at[name]] = bool(v)
-        for q in latches:
+        for q in self.latches:
             val[at[q]] = bool(held[q])
-        val[self.ones] = True
+        if "const1" in at:
+            val[at["const1"]] = True
         for gate, a, b in self.levels:
             val[gate] = ~(val[a] | val[b])
         for out, src in self.outputs:

@@ -96,20 +96,20 @@ def guarded(text: str) -> str:
     """`text` with every procedural memory write guarded by its address range (module docstring); the
     text itself when it writes no memory at a non-literal index.  Lines are kept."""
     blanked = blank(text)
-    edits = []
+    edits, initial = [], _initial_spans(blanked)
     for start, end in _modules(blanked):
-        edits += _guards(blanked, start, end)
+        edits += _guards(blanked, start, end, initial)
     for at, new in sorted(edits, reverse=True):
         text = text[:at] + new + text[at:]
     return text
 
 
-def _guards(blanked: str, start: int, end: int) -> list[tuple[int, str]]:
-    """The insertions that guard the memory writes of the module at blanked[start:end]."""
+def _guards(blanked: str, start: int, end: int, initial: list[tuple[int, int]]) -> list[tuple[int, str]]:
+    """The insertions that guard the memory writes of the module at blanked[start:end] (`initial`: the
+    file's `initial` blocks, whose writes stay as written)."""
     memories = _memories(blanked[start:end])
     if not memories:
         return []
-    initial = _initial_spans(blanked)
     names = "|".join(re.escape(n) for n in sorted(memories, key=len, reverse=True))
     edits = []
     for m in re.compile(rf"(?<![\w$.])(?P<name>{names})\s*\[").finditer(blanked, start, end):

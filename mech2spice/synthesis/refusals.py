@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import Mech2SpiceError
+from .verilog_text import line_of
 
 #: Part of the synthesis cache key: bump it when a check changes, so cached designs are checked again.
 VERSION = 10
@@ -463,7 +464,7 @@ def _refuse_name_collision(wire: str, path: Path, source: str) -> None:
     escaped = re.search(r"\\" + re.escape(wire) + r"\s", source)
     label = re.search(r"\bbegin\s*:\s*" + re.escape(scope.rpartition(".")[2]) + r"(?![\w$])", source)
     if escaped and label:
-        at, block_at = (source.count("\n", 0, m.start()) + 1 for m in (escaped, label))
+        at, block_at = (line_of(source, m.start()) for m in (escaped, label))
         raise Mech2SpiceError(
             f"{path}, line {at}: the escaped identifier '\\{wire} ' has the name Yosys gives '{member}' "
             f"of generate block '{scope}' (line {block_at}): read, the two are one net with two drivers; "
